@@ -1,0 +1,91 @@
+"""The exception hierarchy and the stable error codes that cross the wire.
+
+Every error a caller can see is an ``FxisError``. Errors that the service
+reports travel as ``{"code": ..., "message": ...}`` and are raised on the
+client as ``ServiceError`` (or the subclass registered for that code).
+"""
+from __future__ import annotations
+
+
+class Code:
+    """Stable error codes of the wire protocol (docs/protocol.md)."""
+
+    BAD_REQUEST = "BAD_REQUEST"  # malformed message, bad JSON, wrong types
+    UNSUPPORTED_VERSION = "UNSUPPORTED_VERSION"
+    UNKNOWN_OP = "UNKNOWN_OP"
+    UNKNOWN_CAMERA = "UNKNOWN_CAMERA"
+    CAMERA_DOWN = "CAMERA_DOWN"  # the camera's worker is not running
+    NO_FRAMES = "NO_FRAMES"  # the camera has stored nothing yet
+    TIMEOUT = "TIMEOUT"  # the frames waited for did not arrive in time
+    SKEW_EXCEEDED = "SKEW_EXCEEDED"  # no tuple meets max_skew_ms
+    OUT_OF_RANGE = "OUT_OF_RANGE"  # t* too far in the future, or history not held
+    TOO_LARGE = "TOO_LARGE"  # a configured limit was exceeded
+    BUSY = "BUSY"  # too many pending requests
+    INTERNAL = "INTERNAL"
+
+    ALL = frozenset(
+        v for k, v in vars().items() if k.isupper() and isinstance(v, str)
+    )
+
+
+class FxisError(Exception):
+    """Base class of every error raised by fxis_shm."""
+
+
+class ConfigError(FxisError):
+    """A setting is invalid; the message names the setting."""
+
+
+class ProtocolError(FxisError):
+    """A message does not follow docs/protocol.md."""
+
+    def __init__(self, message: str, code: str = Code.BAD_REQUEST):
+        super().__init__(message)
+        self.code = code
+        self.message = message
+
+
+class RequestTimeout(FxisError, TimeoutError):
+    """The service did not answer within the client's timeout."""
+
+
+class RingError(FxisError):
+    """A shared-memory ring is missing, retired or not of the expected layout."""
+
+
+class ServiceError(FxisError):
+    """The service answered with an error reply."""
+
+    def __init__(self, code: str, message: str):
+        super().__init__(f"{code}: {message}")
+        self.code = code
+        self.message = message
+
+
+class CameraDown(ServiceError):
+    pass
+
+
+class UnknownCamera(ServiceError):
+    pass
+
+
+class SkewExceeded(ServiceError):
+    pass
+
+
+class FrameTimeout(ServiceError, TimeoutError):
+    pass
+
+
+_BY_CODE = {
+    Code.CAMERA_DOWN: CameraDown,
+    Code.UNKNOWN_CAMERA: UnknownCamera,
+    Code.SKEW_EXCEEDED: SkewExceeded,
+    Code.TIMEOUT: FrameTimeout,
+}
+
+
+def service_error(code: str, message: str) -> ServiceError:
+    """The exception for an error reply with this code."""
+    return _BY_CODE.get(code, ServiceError)(code, message)

@@ -1,0 +1,68 @@
+"""Names of the shared-memory objects of a service, and removal of leftovers.
+
+Every object a service creates carries the prefix ``fxis.<service>.`` so that
+the objects of one service can be found (and cleaned) without a registry.
+On Linux, POSIX shared memory appears as ``/dev/shm/<name>`` and a named
+semaphore as ``/dev/shm/sem.<name>``.
+"""
+from __future__ import annotations
+
+import os
+import re
+
+import posix_ipc
+
+SHM_DIR = "/dev/shm"
+_NAME_RE = re.compile(r"^[A-Za-z0-9_-]{1,48}$")
+
+
+def check_name(kind: str, name: str) -> str:
+    """Return ``name`` if it is a valid service or camera name, else raise ValueError."""
+    if not isinstance(name, str) or not _NAME_RE.match(name):
+        raise ValueError(
+            f"{kind} name {name!r} is invalid: use 1-48 letters, digits, '_' or '-'"
+        )
+    return name
+
+
+def prefix(service: str) -> str:
+    return f"fxis.{service}."
+
+
+def ring_name(service: str, camera: str) -> str:
+    """posix_ipc name of a camera's ring segment."""
+    return f"/{prefix(service)}{camera}.ring"
+
+
+def semaphore_name(service: str, camera: str) -> str:
+    """posix_ipc name of the semaphore posted on every stored frame."""
+    return f"/{prefix(service)}{camera}.new"
+
+
+def leftovers(service: str) -> list[str]:
+    """Paths under /dev/shm that belong to ``service``."""
+    try:
+        entries = os.listdir(SHM_DIR)
+    except FileNotFoundError:
+        return []
+    shm = prefix(service)
+    sem = "sem." + shm
+    return sorted(
+        os.path.join(SHM_DIR, e) for e in entries if e.startswith(shm) or e.startswith(sem)
+    )
+
+
+def remove_leftovers(service: str) -> list[str]:
+    """Unlink every shared-memory segment and semaphore of ``service``; return what was removed."""
+    removed = []
+    for path in leftovers(service):
+        entry = os.path.basename(path)
+        try:
+            if entry.startswith("sem."):
+                posix_ipc.unlink_semaphore("/" + entry[len("sem."):])
+            else:
+                posix_ipc.unlink_shared_memory("/" + entry)
+        except posix_ipc.ExistentialError:
+            continue
+        removed.append(path)
+    return removed

@@ -1,0 +1,214 @@
+"""The wire codec (docs/protocol.md): a JSON header frame, then raw image buffers.
+
+Pure: lists of byte frames in, validated dicts and arrays out (and back).
+Every malformed message raises ``ProtocolError`` with a stable code and a
+message that says what is wrong.
+"""
+from __future__ import annotations
+
+import json
+from typing import Any, Callable, Sequence
+
+import numpy as np
+
+from .errors import Code, ProtocolError
+from .selection import SYNC_MODES
+from .waitpolicy import WAIT_MODES
+
+VERSION = 1
+CLOCK = "CLOCK_MONOTONIC"
+MAX_HEADER_BYTES = 64 * 1024
+DTYPES = ("uint8", "uint16", "float32")
+
+
+# ---- field checks: each returns the value or raises ProtocolError ----
+
+def _fail(field: str, what: str):
+    raise ProtocolError(f"field {field!r} {what}")
+
+
+def _int(field, v, minimum=None):
+    if isinstance(v, bool) or not isinstance(v, int):
+        _fail(field, f"must be an integer, got {type(v).__name__}")
+    if minimum is not None and v < minimum:
+        _fail(field, f"must be >= {minimum}, got {v}")
+    return v
+
+
+def _number(field, v, positive=True):
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or v != v:
+        _fail(field, f"must be a number, got {type(v).__name__}")
+    if positive and v <= 0:
+        _fail(field, f"must be > 0, got {v}")
+    return v
+
+
+def _name(field, v):
+    if not isinstance(v, str) or not v:
+        _fail(field, "must be a non-empty string")
+    return v
+
+
+def _names(field, v):
+    if not isinstance(v, list) or not v:
+        _fail(field, "must be a non-empty list of camera names")
+    for item in v:
+        _name(field, item)
+    if len(set(v)) != len(v):
+        _fail(field, "names a camera twice")
+    return v
+
+
+def _choice(options):
+    def check(field, v):
+        if v not in options:
+            _fail(field, f"must be one of {list(options)}, got {v!r}")
+        return v
+    return check
+
+
+def _optional(check):
+    def wrapped(field, v):
+        return None if v is None else check(field, v)
+    return wrapped
+
+
+def _request_id(field, v):
+    if isinstance(v, bool) or not isinstance(v, (int, str)):
+        _fail(field, "must be an integer or a string")
+    return v
+
+
+Check = Callable[[str, Any], Any]
+_COMMON: dict[str, tuple[Check, Any]] = {
+    "v": (_int, VERSION),
+    "op": (_name, None),
+    "id": (_optional(_request_id), None),
+}
+_WAITING: dict[str, tuple[Check, Any]] = {
+    "at": (_optional(_int), None),
+    "wait": (_choice(WAIT_MODES), "auto"),
+    "timeout_ms": (_number, 1000),
+}
+# op -> {field: (check, default)}; a default of ... marks a required field
+OPS: dict[str, dict[str, tuple[Check, Any]]] = {
+    "image": {"camera": (_name, ...), **_WAITING},
+    "tuple": {
+        "cameras": (_optional(_names), None),
+        "sync": (_choice(SYNC_MODES), "joint"),
+        "max_skew_ms": (_optional(_number), None),
+        **_WAITING,
+    },
+    "latest": {"cameras": (_optional(_names), None)},
+    "status": {},
+    "time": {},
+}
+
+
+def decode_request(frames: Sequence[bytes], max_header_bytes: int = MAX_HEADER_BYTES) -> dict:
+    """Validate a request (the frames after the routing envelope) and fill in defaults."""
+    if len(frames) != 1:
+        raise ProtocolError(f"a request is exactly one frame (a JSON header), got {len(frames)}")
+    raw = bytes(frames[0])
+    if len(raw) > max_header_bytes:
+        raise ProtocolError(
+            f"request header of {len(raw)} bytes exceeds the limit of {max_header_bytes}",
+            Code.TOO_LARGE,
+        )
+    try:
+        header = json.loads(raw)
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise ProtocolError(f"request header is not valid JSON: {exc}") from None
+    if not isinstance(header, dict):
+        raise ProtocolError(f"request header must be a JSON object, got {type(header).__name__}")
+    if "v" not in header:
+        raise ProtocolError("request header has no 'v' (protocol version)")
+    if header["v"] != VERSION:
+        raise ProtocolError(
+            f"protocol version {header['v']!r} is not supported; this service speaks {VERSION}",
+            Code.UNSUPPORTED_VERSION,
+        )
+    op = _name("op", header.get("op"))
+    if op not in OPS:
+        raise ProtocolError(f"unknown op {op!r}; known: {sorted(OPS)}", Code.UNKNOWN_OP)
+    schema = {**_COMMON, **OPS[op]}
+    unknown = sorted(set(header) - set(schema))
+    if unknown:
+        raise ProtocolError(f"unknown field(s) {unknown} for op {op!r}")
+    request = {}
+    for field, (check, default) in schema.items():
+        if field in header:
+            request[field] = check(field, header[field])
+        elif default is ...:
+            raise ProtocolError(f"op {op!r} needs field {field!r}")
+        else:
+            request[field] = default
+    return request
+
+
+def encode_request(op: str, **fields) -> list[bytes]:
+    header = {"v": VERSION, "op": op, **{k: v for k, v in fields.items() if v is not None}}
+    return [json.dumps(header).encode()]
+
+
+# ---- replies ----
+
+def frame_meta(
+    camera: str, frame_id: int, t_capture: int, t_stored: int, generation: int,
+    image: np.ndarray, buffer: int,
+) -> dict:
+    return {
+        "camera": camera,
+        "frame_id": int(frame_id),
+        "t_capture": int(t_capture),
+        "t_stored": int(t_stored),
+        "generation": int(generation),
+        "shape": list(image.shape),
+        "dtype": image.dtype.name,
+        "buffer": buffer,
+    }
+
+
+def encode_reply(request_id, body: dict, buffers: Sequence = ()) -> list:
+    """A success reply: the header frame, then one frame per buffer (sent as is, not copied)."""
+    header = {"v": VERSION, "id": request_id, "ok": True, "clock": CLOCK, **body}
+    return [json.dumps(header).encode(), *buffers]
+
+
+def encode_error(request_id, code: str, message: str) -> list[bytes]:
+    header = {"v": VERSION, "id": request_id, "ok": False,
+              "error": {"code": code, "message": message}}
+    return [json.dumps(header).encode()]
+
+
+def decode_reply(frames: Sequence) -> tuple[dict, list[np.ndarray]]:
+    """Header and images of a reply; images are built on the received buffers without copying."""
+    if not frames:
+        raise ProtocolError("empty reply")
+    try:
+        header = json.loads(bytes(frames[0]))
+    except (UnicodeDecodeError, ValueError) as exc:
+        raise ProtocolError(f"reply header is not valid JSON: {exc}") from None
+    if not isinstance(header, dict) or header.get("v") != VERSION or "ok" not in header:
+        raise ProtocolError("reply header is not a version-1 reply")
+    buffers = frames[1:]
+    images = []
+    for meta in header.get("frames", ()):
+        images.append(_image(meta, buffers))
+    return header, images
+
+
+def _image(meta: dict, buffers: Sequence) -> np.ndarray:
+    try:
+        buf = buffers[meta["buffer"]]
+        dtype = np.dtype(meta["dtype"])
+        shape = tuple(int(s) for s in meta["shape"])
+    except (KeyError, IndexError, TypeError) as exc:
+        raise ProtocolError(f"frame metadata does not match the buffers: {exc!r}") from None
+    if meta["dtype"] not in DTYPES:
+        raise ProtocolError(f"unsupported dtype {meta['dtype']!r}")
+    expected = int(np.prod(shape)) * dtype.itemsize
+    view = memoryview(buf)
+    if view.nbytes != expected:
+        raise ProtocolError(f"buffer of {view.nbytes} bytes for shape {shape} {dtype.name}")
+    return np.frombuffer(view, dtype=dtype).reshape(shape)

@@ -1,0 +1,361 @@
+"""The per-camera shared-memory ring: one writer (the camera worker), any readers.
+
+Layout of the segment ``/fxis.<service>.<camera>.ring``:
+
+    [header, 1 KiB][slot table: slots x 48 bytes][pad to 4 KiB][slot 0 data][slot 1 data]...
+
+Each slot record holds ``seq``, ``frame_id``, ``t_capture``, ``t_stored``,
+``t_available`` and ``generation``. ``seq`` encodes the global write index w
+of the frame in the slot: ``2w+1`` while the writer fills it, ``2w+2`` once it
+is complete. A reader therefore knows from ``seq`` alone which frame a slot
+holds, and a copy is valid only if ``seq`` had the expected value both before
+and after it (a seqlock); a torn copy is detected and never returned.
+
+The writer never waits for a reader. After every stored frame it posts the
+semaphore ``/fxis.<service>.<camera>.new`` (only when its value is 0, so an
+absent reader cannot make it grow). Segments and semaphores are mode 0600.
+
+Ordering note: the seqlock relies on stores becoming visible in program order,
+which x86-64 guarantees (TSO). See docs/design.md for weaker memory models.
+"""
+from __future__ import annotations
+
+import mmap
+import os
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import posix_ipc
+
+from . import naming
+from .errors import RingError
+from .timesearch import Timeline
+
+MAGIC = b"FXISRNG1"
+LAYOUT_VERSION = 1
+HEADER_BYTES = 1024
+PAGE = 4096
+STATE_INIT, STATE_LIVE, STATE_RETIRED = 0, 1, 2
+_PERIOD_SMOOTHING = 16  # EWMA weight 1/16: follows rate changes within a second at 20 fps
+
+HEADER = np.dtype([
+    ("magic", "S8"), ("version", "<u4"), ("state", "<u4"),
+    ("height", "<u4"), ("width", "<u4"), ("channels", "<u4"), ("slots", "<u4"),
+    ("dtype", "S8"), ("slot_stride", "<u8"), ("data_offset", "<u8"),
+    ("generation", "<u8"), ("writer_pid", "<u8"), ("write_count", "<u8"),
+    ("heartbeat_ns", "<i8"), ("generation_started_ns", "<i8"),
+    ("period_ns", "<i8"), ("nominal_period_ns", "<i8"), ("delay_ns", "<i8"),
+    ("frames_captured", "<u8"), ("frames_dropped", "<u8"), ("hook_errors", "<u8"),
+    ("status_text", "S256"),
+])
+SLOT = np.dtype([
+    ("seq", "<u8"), ("frame_id", "<u8"), ("t_capture", "<i8"),
+    ("t_stored", "<i8"), ("t_available", "<i8"), ("generation", "<u8"),
+])
+assert HEADER.itemsize <= HEADER_BYTES and SLOT.itemsize == 48
+
+
+def _align(n: int, to: int = PAGE) -> int:
+    return (n + to - 1) // to * to
+
+
+@dataclass(frozen=True)
+class FrameLayout:
+    """Shape and type of the frames a ring holds."""
+
+    height: int
+    width: int
+    channels: int = 1
+    dtype: str = "uint8"
+
+    @classmethod
+    def of(cls, image: np.ndarray) -> "FrameLayout":
+        if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] not in (1, 3, 4)):
+            raise ValueError(f"an image must be (h, w) or (h, w, 1|3|4), got {image.shape}")
+        channels = 1 if image.ndim == 2 else image.shape[2]
+        return cls(image.shape[0], image.shape[1], channels, image.dtype.name)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        if self.channels == 1:
+            return (self.height, self.width)
+        return (self.height, self.width, self.channels)
+
+    @property
+    def nbytes(self) -> int:
+        return self.height * self.width * self.channels * np.dtype(self.dtype).itemsize
+
+
+@dataclass(frozen=True)
+class SlotMeta:
+    frame_id: int
+    t_capture: int
+    t_stored: int
+    t_available: int
+    generation: int
+
+
+@dataclass(frozen=True)
+class Snapshot:
+    """The valid frames of a ring at one moment: a timeline plus what identifies each frame."""
+
+    timeline: Timeline  # over t_capture, oldest valid frame first
+    first_write: int  # global write index of the timeline's logical index 0
+    meta: np.ndarray  # copy of the slot table (SLOT records)
+
+    def slot(self, i: int) -> int:
+        return self.timeline.physical(i)
+
+    def seq(self, i: int) -> int:
+        """The seq value the slot of logical index ``i`` must show for a valid copy."""
+        return 2 * (self.first_write + i) + 2
+
+    def frame_meta(self, i: int) -> SlotMeta:
+        rec = self.meta[self.slot(i)]
+        return SlotMeta(int(rec["frame_id"]), int(rec["t_capture"]), int(rec["t_stored"]),
+                        int(rec["t_available"]), int(rec["generation"]))
+
+    @property
+    def newest(self) -> int | None:
+        return self.timeline.at(len(self.timeline) - 1) if len(self.timeline) else None
+
+
+class Overwritten(RingError):
+    """The slot was overwritten before or while it was copied."""
+
+
+class _Mapping:
+    """The numpy views shared by writer and reader over one mapped segment."""
+
+    def _map(self, fd: int, size: int, writable: bool) -> None:
+        prot = mmap.PROT_READ | (mmap.PROT_WRITE if writable else 0)
+        self._mm = mmap.mmap(fd, size, flags=mmap.MAP_SHARED | mmap.MAP_POPULATE, prot=prot)
+        self.header = np.ndarray((), dtype=HEADER, buffer=self._mm)
+        if self.header["magic"] != MAGIC or self.header["version"] != LAYOUT_VERSION:
+            if writable and self.header["magic"] == b"":
+                return  # being created
+            raise RingError("segment is not an fxis ring of layout version 1")
+        self._views()
+
+    def _views(self) -> None:
+        h = self.header
+        self.layout = FrameLayout(int(h["height"]), int(h["width"]), int(h["channels"]),
+                                  h["dtype"].item().decode())
+        self.slots = int(h["slots"])
+        self.table = np.ndarray((self.slots,), dtype=SLOT, buffer=self._mm, offset=HEADER_BYTES)
+        self.seq = np.ndarray((self.slots,), dtype="<u8", buffer=self._mm,
+                              offset=HEADER_BYTES, strides=(SLOT.itemsize,))
+        stride = int(h["slot_stride"])
+        self.data = np.ndarray(
+            (self.slots, self.layout.nbytes), dtype=np.uint8, buffer=self._mm,
+            offset=int(h["data_offset"]), strides=(stride, 1),
+        )
+
+    def slot_image(self, slot: int) -> np.ndarray:
+        return self.data[slot].view(self.layout.dtype).reshape(self.layout.shape)
+
+    def field(self, name: str) -> int:
+        return int(self.header[name])
+
+    def _unmap(self) -> None:
+        for attr in ("header", "table", "seq", "data"):
+            self.__dict__.pop(attr, None)
+        if getattr(self, "_mm", None) is not None:
+            self._mm.close()
+            self._mm = None
+
+
+def segment_size(layout: FrameLayout, slots: int) -> tuple[int, int, int]:
+    """(total size, data offset, slot stride) of a ring."""
+    data_offset = _align(HEADER_BYTES + slots * SLOT.itemsize)
+    stride = _align(layout.nbytes)
+    return data_offset + slots * stride, data_offset, stride
+
+
+class RingWriter(_Mapping):
+    """The camera worker's side: creates (or re-attaches to) the ring and stores frames."""
+
+    def __init__(self, service: str, camera: str, layout: FrameLayout, slots: int,
+                 nominal_period_ns: int = 0):
+        if slots < 2:
+            raise ValueError(f"a ring needs at least 2 slots, got {slots}")
+        self.name = naming.ring_name(service, camera)
+        self.layout = layout
+        self._open_or_create(layout, slots)
+        h = self.header
+        h["generation"] = int(h["generation"]) + 1
+        h["writer_pid"] = os.getpid()
+        h["generation_started_ns"] = h["heartbeat_ns"] = time.monotonic_ns()
+        h["nominal_period_ns"] = nominal_period_ns
+        if int(h["period_ns"]) <= 0:
+            h["period_ns"] = nominal_period_ns
+        self.generation = int(h["generation"])
+        self._count = int(h["write_count"])
+        self._last = None  # (frame_id, t_capture) of the previous stored frame
+        self.semaphore = posix_ipc.Semaphore(
+            naming.semaphore_name(service, camera), posix_ipc.O_CREAT, mode=0o600, initial_value=0
+        )
+        h["state"] = STATE_LIVE
+
+    def _open_or_create(self, layout: FrameLayout, slots: int) -> None:
+        size, data_offset, stride = segment_size(layout, slots)
+        try:
+            shm = posix_ipc.SharedMemory(self.name)
+        except posix_ipc.ExistentialError:
+            shm = None
+        if shm is not None:
+            try:
+                self._map(shm.fd, shm.size, writable=True)
+                compatible = (
+                    getattr(self, "layout", None) == layout and self.slots == slots
+                    and shm.size == size
+                )
+            except RingError:
+                compatible = False
+            finally:
+                shm.close_fd()
+            if compatible:
+                return
+            # Another layout: retire the old segment so readers re-open by name.
+            if getattr(self, "header", None) is not None and self.header["magic"] == MAGIC:
+                self.header["state"] = STATE_RETIRED
+            self._unmap()
+            posix_ipc.unlink_shared_memory(self.name)
+        shm = posix_ipc.SharedMemory(self.name, posix_ipc.O_CREX, mode=0o600, size=size)
+        try:
+            self._map(shm.fd, size, writable=True)
+        finally:
+            shm.close_fd()
+        np.frombuffer(self._mm, dtype=np.uint8)[:] = 0  # touch every page now, not on first frames
+        h = self.header
+        h["version"], h["state"] = LAYOUT_VERSION, STATE_INIT
+        h["height"], h["width"], h["channels"] = layout.height, layout.width, layout.channels
+        h["dtype"], h["slots"] = layout.dtype.encode(), slots
+        h["slot_stride"], h["data_offset"] = stride, data_offset
+        h["magic"] = MAGIC
+        self._views()
+
+    def write(self, image: np.ndarray, frame_id: int, t_capture: int,
+              t_available: int | None = None) -> int:
+        """Store one frame; returns its t_stored. Never blocks on readers."""
+        w = self._count
+        slot = w % self.slots
+        self.seq[slot] = 2 * w + 1
+        np.copyto(self.slot_image(slot), image, casting="no")
+        rec = self.table[slot]
+        t_stored = time.monotonic_ns()
+        rec["frame_id"], rec["t_capture"], rec["t_stored"] = frame_id, t_capture, t_stored
+        rec["t_available"] = t_capture if t_available is None else t_available
+        rec["generation"] = self.generation
+        self.seq[slot] = 2 * w + 2
+        self._count = w + 1
+        h = self.header
+        h["write_count"] = self._count
+        h["heartbeat_ns"] = t_stored
+        self._update_timing(frame_id, t_capture, t_stored)
+        if self.semaphore.value == 0:
+            self.semaphore.release()
+        return t_stored
+
+    def _update_timing(self, frame_id: int, t_capture: int, t_stored: int) -> None:
+        h = self.header
+        if self._last is not None and frame_id > self._last[0] and t_capture > self._last[1]:
+            interval = (t_capture - self._last[1]) // (frame_id - self._last[0])
+            old = int(h["period_ns"])
+            h["period_ns"] = interval if old <= 0 else old + (interval - old) // _PERIOD_SMOOTHING
+        self._last = (frame_id, t_capture)
+        delay = t_stored - t_capture
+        old_delay = int(h["delay_ns"])
+        h["delay_ns"] = delay if old_delay == 0 else old_delay + (delay - old_delay) // _PERIOD_SMOOTHING
+
+    def heartbeat(self) -> None:
+        self.header["heartbeat_ns"] = time.monotonic_ns()
+
+    def count(self, field: str, n: int = 1) -> None:
+        """Add to one of the counters frames_captured, frames_dropped, hook_errors."""
+        self.header[field] = int(self.header[field]) + n
+
+    def set_status(self, text: str) -> None:
+        self.header["status_text"] = text.encode()[:255]
+
+    def close(self) -> None:
+        """Detach; the segment stays for the next generation (the supervisor unlinks it)."""
+        if getattr(self, "header", None) is not None:
+            self.header["writer_pid"] = 0
+        self._unmap()
+        self.semaphore.close()
+
+
+class RingReader(_Mapping):
+    """A read-only view of a camera's ring (the coordinator, or a local client)."""
+
+    def __init__(self, service: str, camera: str, with_semaphore: bool = True):
+        self.name = naming.ring_name(service, camera)
+        try:
+            shm = posix_ipc.SharedMemory(self.name, read_only=True)
+        except posix_ipc.ExistentialError:
+            raise RingError(f"ring {self.name} does not exist (is the camera worker running?)") from None
+        except posix_ipc.PermissionsError:
+            raise RingError(f"ring {self.name} belongs to another user") from None
+        try:
+            if shm.size < HEADER_BYTES:
+                raise RingError(f"ring {self.name} is not initialised yet")
+            self._map(shm.fd, shm.size, writable=False)
+        finally:
+            shm.close_fd()
+        self.semaphore = None
+        if with_semaphore:
+            try:
+                self.semaphore = posix_ipc.Semaphore(naming.semaphore_name(service, camera))
+            except posix_ipc.ExistentialError:
+                self.close()
+                raise RingError(f"semaphore of ring {self.name} does not exist") from None
+
+    @property
+    def retired(self) -> bool:
+        return int(self.header["state"]) == STATE_RETIRED
+
+    def snapshot(self) -> Snapshot:
+        """The frames that are complete now, oldest first."""
+        for _ in range(4):
+            before = self.field("write_count")
+            table = self.table.copy()
+            after = self.field("write_count")
+            if before == after:
+                break
+        count = after
+        lo = max(0, count - self.slots)
+        writes = np.arange(lo, count, dtype=np.uint64)
+        valid = table["seq"][writes % np.uint64(self.slots)] == 2 * writes + 2
+        # Only the oldest end can be invalid (being overwritten); keep the newest valid run.
+        bad = np.flatnonzero(~valid)
+        first = lo + (int(bad[-1]) + 1 if bad.size else 0)
+        timeline = Timeline(table["t_capture"], first % self.slots, count - first)
+        return Snapshot(timeline, first, table)
+
+    def copy(self, snapshot: Snapshot, i: int, out: np.ndarray | None = None) -> np.ndarray:
+        """Copy the frame of logical index ``i``; raises Overwritten if the slot changed."""
+        slot, expected = snapshot.slot(i), snapshot.seq(i)
+        if int(self.seq[slot]) != expected:
+            raise Overwritten(f"slot {slot} of {self.name} was overwritten before the copy")
+        if out is None:
+            out = np.empty(self.layout.shape, dtype=self.layout.dtype)
+        np.copyto(out, self.slot_image(slot))
+        if int(self.seq[slot]) != expected:
+            raise Overwritten(f"slot {slot} of {self.name} was overwritten during the copy")
+        return out
+
+    def wait_for_frame(self, timeout: float) -> bool:
+        """Block until the writer posts a new frame or ``timeout`` seconds pass."""
+        try:
+            self.semaphore.acquire(timeout)
+        except posix_ipc.BusyError:
+            return False
+        return True
+
+    def close(self) -> None:
+        self._unmap()
+        if self.semaphore is not None:
+            self.semaphore.close()
+            self.semaphore = None
