@@ -1,0 +1,15 @@
+"""fxis-shm: multi-camera acquisition into shared-memory rings, served as
+time-synchronized images over ZeroMQ."""
+from .client import Client, Frame, FrameTuple
+from .errors import (
+    CameraDown, ConfigError, FrameTimeout, FxisError, ProtocolError, RequestTimeout,
+    ServiceError, SkewExceeded, UnknownCamera,
+)
+from .stamp import read_stamp
+
+__all__ = [
+    "Client", "Frame", "FrameTuple", "read_stamp",
+    "FxisError", "ConfigError", "ProtocolError", "RequestTimeout", "ServiceError",
+    "CameraDown", "UnknownCamera", "SkewExceeded", "FrameTimeout",
+]
+__version__ = "0.1.0"

@@ -87,15 +87,15 @@ _COMMON: dict[str, tuple[Check, Any]] = {
 }
 _WAITING: dict[str, tuple[Check, Any]] = {
     "at": (_optional(_int), None),
-    "wait": (_choice(WAIT_MODES), "auto"),
-    "timeout_ms": (_number, 1000),
+    "wait": (_optional(_choice(WAIT_MODES)), None),  # None: the service's default
+    "timeout_ms": (_optional(_number), None),
 }
 # op -> {field: (check, default)}; a default of ... marks a required field
 OPS: dict[str, dict[str, tuple[Check, Any]]] = {
     "image": {"camera": (_name, ...), **_WAITING},
     "tuple": {
         "cameras": (_optional(_names), None),
-        "sync": (_choice(SYNC_MODES), "joint"),
+        "sync": (_optional(_choice(SYNC_MODES)), None),
         "max_skew_ms": (_optional(_number), None),
         **_WAITING,
     },

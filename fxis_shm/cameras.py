@@ -1,0 +1,105 @@
+"""The coordinator's view of one camera: its ring (opened, and re-opened when
+the worker replaces it), whether its worker is alive, and its status."""
+from __future__ import annotations
+
+from .errors import RingError
+from .ring import RingReader, Snapshot
+from .waitpolicy import CameraState
+
+# A worker heartbeats at least every 0.1 s; silence this long means it hangs.
+STALE_HEARTBEAT_NS = 2_000_000_000
+
+
+def process_alive(pid: int) -> bool:
+    """True if ``pid`` runs (a zombie, dead but not yet reaped, does not)."""
+    if pid <= 0:
+        return False
+    try:
+        with open(f"/proc/{pid}/stat", "rb") as f:
+            stat = f.read()
+    except OSError:
+        return False
+    state = stat[stat.rfind(b")") + 2 : stat.rfind(b")") + 3]
+    return state not in (b"Z", b"X", b"x")
+
+
+class CameraHandle:
+    def __init__(self, service: str, name: str, kind: str):
+        self.service, self.name, self.kind = service, name, kind
+        self.reader: RingReader | None = None
+        self.torn_reads = 0
+        self.last_error = ""
+
+    def ring(self) -> RingReader | None:
+        """The ring, opened or re-opened if the worker created a new one; None if absent."""
+        if self.reader is not None and self.reader.retired:
+            self.reader.close()
+            self.reader = None
+        if self.reader is None:
+            try:
+                self.reader = RingReader(self.service, self.name, with_semaphore=False)
+            except RingError as exc:
+                self.last_error = str(exc)
+                return None
+        return self.reader
+
+    def down_reason(self, now: int) -> str | None:
+        """Why the camera cannot serve now, or None if its worker is alive."""
+        ring = self.ring()
+        if ring is None:
+            return f"camera {self.name!r} has no ring: {self.last_error}"
+        pid = ring.field("writer_pid")
+        if not process_alive(pid):
+            return f"camera {self.name!r} is down: its worker is not running"
+        if now - ring.field("heartbeat_ns") > STALE_HEARTBEAT_NS:
+            return f"camera {self.name!r} is down: its worker has not reported for over 2 s"
+        return None
+
+    def state(self, snapshot: Snapshot, baseline: int) -> CameraState:
+        ring = self.reader
+        return CameraState(
+            count=snapshot.first_write + len(snapshot.timeline),
+            baseline=baseline,
+            newest=snapshot.newest,
+            period_ns=ring.field("period_ns"),
+            delay_ns=max(0, ring.field("delay_ns")),
+        )
+
+    def write_count(self) -> int:
+        ring = self.ring()
+        return ring.field("write_count") if ring is not None else 0
+
+    def status(self, now: int) -> dict:
+        ring = self.ring()
+        down = self.down_reason(now)
+        info = {"kind": self.kind, "alive": down is None, "torn_reads": self.torn_reads}
+        if down:
+            info["reason"] = down
+        if ring is None:
+            return info
+        snap = ring.snapshot()
+        period = ring.field("period_ns")
+        newest_stored = (
+            int(snap.meta[snap.slot(len(snap.timeline) - 1)]["t_stored"]) if len(snap.timeline) else None
+        )
+        info.update(
+            shape=list(ring.layout.shape),
+            dtype=ring.layout.dtype,
+            fps=round(1e9 / period, 3) if period > 0 else None,
+            frames_stored=ring.field("write_count"),
+            frames_dropped=ring.field("frames_dropped"),
+            last_frame_age_ms=round((now - newest_stored) / 1e6, 3) if newest_stored else None,
+            ring_slots=ring.slots,
+            generation=ring.field("generation"),
+            writer_pid=ring.field("writer_pid"),
+            delay_ms=round(ring.field("delay_ns") / 1e6, 3),
+            hook_errors=ring.field("hook_errors"),
+            note=ring.header["status_text"].item().decode(errors="replace"),
+        )
+        return info
+
+    def close(self) -> None:
+        if self.reader is not None:
+            self.reader.close()
+            self.reader = None
+

@@ -1,0 +1,166 @@
+"""The Python client: synchronized tuples and single frames as NumPy arrays.
+
+It uses a DEALER socket and tags every request with an id, so a timed-out
+request leaves the client usable (a reply that arrives late is recognised by
+its id and discarded), and a restarted service is reconnected to by itself.
+"""
+from __future__ import annotations
+
+import itertools
+import time
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from typing import Iterator
+
+import numpy as np
+import zmq
+
+from . import protocol
+from .errors import ProtocolError, RequestTimeout, service_error
+
+DEFAULT_ENDPOINT = "tcp://127.0.0.1:5555"
+
+
+@dataclass
+class Frame:
+    """One image and what the service knows of it. Times are ns of the service's CLOCK_MONOTONIC."""
+
+    image: np.ndarray
+    camera: str
+    frame_id: int
+    t_capture: int
+    t_stored: int
+    generation: int
+    timing: dict = field(default_factory=dict, repr=False)
+
+
+class FrameTuple(Mapping):
+    """One frame per camera, chosen together for the request time ``t_request``."""
+
+    def __init__(self, frames: dict[str, Frame], t_request: int | None, timing: dict):
+        self._frames = frames
+        self.t_request = t_request
+        self.timing = timing
+
+    def __getitem__(self, camera: str) -> Frame:
+        return self._frames[camera]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._frames)
+
+    def __len__(self) -> int:
+        return len(self._frames)
+
+    @property
+    def skew_ns(self) -> int:
+        """Max minus min capture time over the tuple."""
+        times = [f.t_capture for f in self._frames.values()]
+        return max(times) - min(times)
+
+    def __repr__(self) -> str:
+        ids = {c: f.frame_id for c, f in self._frames.items()}
+        return f"FrameTuple({ids}, skew_ns={self.skew_ns})"
+
+
+class Client:
+    """``Client(endpoint, timeout)``: every call raises RequestTimeout after ``timeout`` seconds."""
+
+    def __init__(self, endpoint: str = DEFAULT_ENDPOINT, timeout: float = 2.0,
+                 context: zmq.Context | None = None):
+        self.endpoint = endpoint
+        self.timeout = timeout
+        self._ids = itertools.count(1)
+        self._ctx = context or zmq.Context.instance()
+        self._sock = self._ctx.socket(zmq.DEALER)
+        self._sock.setsockopt(zmq.LINGER, 0)
+        self._sock.connect(endpoint)
+        self._clock_offset: int | None = None  # service clock minus local clock
+
+    def __enter__(self) -> "Client":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+    def close(self) -> None:
+        self._sock.close()
+
+    # ---- operations ----
+
+    def image(self, camera: str, at: int | None = None, wait: str | None = None,
+              timeout_ms: float | None = None) -> Frame:
+        """The frame of ``camera`` nearest to ``at`` (default: the moment the request arrives)."""
+        header, images = self._call("image", self._extra_wait(at), camera=camera, at=at,
+                                    wait=wait, timeout_ms=timeout_ms)
+        return self._frames(header, images)[0]
+
+    def tuple(self, cameras: list[str] | None = None, at: int | None = None,
+              sync: str | None = None, wait: str | None = None,
+              max_skew_ms: float | None = None, timeout_ms: float | None = None) -> FrameTuple:
+        """One frame per camera (default: all), nearest to ``at`` and to each other."""
+        header, images = self._call("tuple", self._extra_wait(at), cameras=cameras, at=at,
+                                    sync=sync, wait=wait, max_skew_ms=max_skew_ms,
+                                    timeout_ms=timeout_ms)
+        return self._tuple(header, images)
+
+    def latest(self, cameras: list[str] | None = None) -> FrameTuple:
+        """The newest stored frame of each camera, without waiting."""
+        return self._tuple(*self._call("latest", 0.0, cameras=cameras))
+
+    def status(self) -> dict:
+        return self._call("status", 0.0)[0]
+
+    def time(self) -> int:
+        """The service's clock now (ns of its CLOCK_MONOTONIC)."""
+        return self._call("time", 0.0)[0]["now"]
+
+    # ---- plumbing ----
+
+    def _extra_wait(self, at: int | None) -> float:
+        """Seconds a request for a future ``at`` waits on the service before its timeout starts."""
+        if at is None:
+            return 0.0
+        if self._clock_offset is None:
+            sent = time.monotonic_ns()
+            now = self.time()
+            self._clock_offset = now - (sent + time.monotonic_ns()) // 2
+        return max(0.0, (at - self._clock_offset - time.monotonic_ns()) / 1e9)
+
+    def _call(self, op: str, extra_wait: float, **fields) -> tuple[dict, list[np.ndarray]]:
+        request_id = next(self._ids)
+        self._sock.send_multipart([b""] + protocol.encode_request(op, id=request_id, **fields))
+        deadline = time.monotonic() + self.timeout + extra_wait
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0 or not self._sock.poll(remaining * 1000, zmq.POLLIN):
+                raise RequestTimeout(
+                    f"no reply to {op!r} from {self.endpoint} within {self.timeout + extra_wait:.3g} s "
+                    "(is the service running?)"
+                )
+            frames = self._sock.recv_multipart(copy=False)
+            if frames and len(frames[0].bytes) == 0:
+                frames = frames[1:]
+            header, images = protocol.decode_reply([f.buffer for f in frames])
+            if header.get("id") != request_id:
+                continue  # the late reply to an earlier request that timed out
+            if not header["ok"]:
+                err = header.get("error") or {}
+                raise service_error(err.get("code", "UNKNOWN"), err.get("message", ""))
+            return header, images
+
+    @staticmethod
+    def _frames(header: dict, images: list[np.ndarray]) -> list[Frame]:
+        timing = header.get("timing", {})
+        try:
+            return [
+                Frame(img, m["camera"], m["frame_id"], m["t_capture"], m["t_stored"],
+                      m["generation"], timing)
+                for m, img in zip(header["frames"], images)
+            ]
+        except KeyError as exc:
+            raise ProtocolError(f"frame metadata lacks {exc}") from None
+
+    def _tuple(self, header: dict, images: list[np.ndarray]) -> FrameTuple:
+        frames = self._frames(header, images)
+        return FrameTuple({f.camera: f for f in frames}, header.get("t_request"),
+                          header.get("timing", {}))

@@ -1,0 +1,164 @@
+"""The service configuration: defaults, a TOML file, and command-line flags.
+
+Every problem raises ConfigError with a message that names the setting.
+"""
+from __future__ import annotations
+
+import sys
+from dataclasses import dataclass, field, replace
+from typing import Any
+
+from .errors import ConfigError
+from .naming import check_name
+from .options import parse_options, split_key_values
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
+
+DEFAULT_ENDPOINT = "tcp://127.0.0.1:5555"
+DEFAULT_PUB = "tcp://127.0.0.1:5556"
+DEFAULT_SLOTS = 20
+DEFAULT_CAMERAS = ("cam0=synthetic", "cam1=synthetic")
+# Request defaults that the config may change (see coordinator.DEFAULTS)
+SERVICE_SETTINGS = {
+    "sync": str, "wait": str, "timeout_ms": float, "max_skew_ms": float,
+    "horizon_ms": float, "sync_tolerance_ms": float, "max_pending": int,
+}
+
+
+@dataclass(frozen=True)
+class CameraSpec:
+    name: str
+    kind: str
+    options: dict[str, Any]
+
+
+@dataclass(frozen=True)
+class ServiceConfig:
+    name: str = "fxis"
+    endpoint: str = DEFAULT_ENDPOINT
+    pub: str = DEFAULT_PUB
+    slots: int = DEFAULT_SLOTS
+    cameras: tuple[CameraSpec, ...] = ()
+    settings: dict[str, Any] = field(default_factory=dict)
+    restart_limit: int = 5  # restarts of one process before the supervisor gives up on it
+    log_level: str = "INFO"
+
+
+def _camera(name: str, kind: str, raw: dict) -> CameraSpec:
+    from fxis_shm.workers.backends import backend_class
+
+    try:
+        check_name("camera", name)
+    except ValueError as exc:
+        raise ConfigError(str(exc)) from None
+    cls = backend_class(kind)
+    return CameraSpec(name, kind, parse_options(name, kind, cls.OPTIONS, raw))
+
+
+def parse_camera_flag(flag: str) -> CameraSpec:
+    """``NAME=KIND[:key=value,...]`` as given to ``--camera``."""
+    name, sep, rest = flag.partition("=")
+    if not sep or not name:
+        raise ConfigError(f"--camera {flag!r}: expected NAME=KIND[:key=value,...]")
+    kind, _, options = rest.partition(":")
+    return _camera(name.strip(), kind.strip(), split_key_values(name, options))
+
+
+def _check_endpoint(setting: str, endpoint: Any) -> str:
+    if not isinstance(endpoint, str) or not endpoint.startswith(("tcp://", "ipc://")):
+        raise ConfigError(f"{setting} {endpoint!r}: expected tcp://HOST:PORT or ipc://PATH")
+    return endpoint
+
+
+def _check_int(setting: str, value: Any, minimum: int) -> int:
+    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
+        raise ConfigError(f"{setting} must be an integer >= {minimum}, got {value!r}")
+    return value
+
+
+def load_toml(path: str) -> dict:
+    try:
+        with open(path, "rb") as f:
+            return tomllib.load(f)
+    except OSError as exc:
+        raise ConfigError(f"--config {path}: {exc.strerror}") from None
+    except tomllib.TOMLDecodeError as exc:
+        raise ConfigError(f"--config {path}: not valid TOML: {exc}") from None
+
+
+def build_config(file_values: dict | None = None, flags: dict | None = None) -> ServiceConfig:
+    """Defaults, overridden by the TOML file's values, overridden by flags.
+
+    ``flags`` may hold name, endpoint, pub, slots (None = not given) and
+    cameras (a list of --camera strings: they add cameras, or replace
+    cameras of the same name).
+    """
+    file_values = dict(file_values or {})
+    flags = {k: v for k, v in (flags or {}).items() if v not in (None, [], ())}
+    known = {"name", "endpoint", "pub", "slots", "cameras", "restart_limit", "log_level",
+             *SERVICE_SETTINGS}
+    unknown = sorted(set(file_values) - known)
+    if unknown:
+        raise ConfigError(f"unknown setting(s) {unknown} in the config file; known: {sorted(known)}")
+    cameras: dict[str, CameraSpec] = {}
+    file_cameras = file_values.pop("cameras", {})
+    if not isinstance(file_cameras, dict):
+        raise ConfigError("cameras must be a table of [cameras.NAME] sections")
+    for name, raw in file_cameras.items():
+        if not isinstance(raw, dict) or "kind" not in raw:
+            raise ConfigError(f"[cameras.{name}] needs kind = \"...\"")
+        raw = dict(raw)
+        cameras[name] = _camera(name, raw.pop("kind"), raw)
+    for flag in flags.pop("cameras", []):
+        spec = parse_camera_flag(flag)
+        cameras[spec.name] = spec
+    if not cameras:
+        cameras = {s.name: s for s in map(parse_camera_flag, DEFAULT_CAMERAS)}
+    values = {**file_values, **flags}
+    settings = {}
+    for key, kind in SERVICE_SETTINGS.items():
+        if key in values:
+            settings[key] = _setting(key, kind, values.pop(key))
+    config = replace(ServiceConfig(), cameras=tuple(cameras.values()), settings=settings)
+    if "name" in values:
+        try:
+            config = replace(config, name=check_name("service", values["name"]))
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
+    if "endpoint" in values:
+        config = replace(config, endpoint=_check_endpoint("endpoint", values["endpoint"]))
+    if "pub" in values:
+        config = replace(config, pub=_check_endpoint("pub", values["pub"]))
+    if config.endpoint == config.pub:
+        raise ConfigError(f"endpoint and pub are both {config.endpoint}; they need their own")
+    if "slots" in values:
+        config = replace(config, slots=_check_int("slots", values["slots"], 2))
+    if "restart_limit" in values:
+        config = replace(config, restart_limit=_check_int("restart_limit", values["restart_limit"], 0))
+    if "log_level" in values:
+        level = str(values["log_level"]).upper()
+        if level not in ("DEBUG", "INFO", "WARNING", "ERROR"):
+            raise ConfigError(f"log_level must be DEBUG, INFO, WARNING or ERROR, got {values['log_level']!r}")
+        config = replace(config, log_level=level)
+    return config
+
+
+def _setting(key: str, kind: type, value: Any):
+    from .selection import SYNC_MODES
+    from .waitpolicy import WAIT_MODES
+
+    choices = {"sync": SYNC_MODES, "wait": WAIT_MODES}.get(key)
+    if choices is not None:
+        if value not in choices:
+            raise ConfigError(f"{key} must be one of {', '.join(choices)}, got {value!r}")
+        return value
+    try:
+        number = kind(value)
+    except (TypeError, ValueError):
+        raise ConfigError(f"{key} must be a number, got {value!r}") from None
+    if isinstance(value, bool) or number <= 0:
+        raise ConfigError(f"{key} must be a number > 0, got {value!r}")
+    return number

@@ -1,0 +1,243 @@
+"""The supervisor behind ``fxis run``: starts the camera workers and the
+coordinator, watches and restarts them, and cleans up everything on exit.
+
+Start-up: take the service's lock (refuse if another supervisor holds it),
+remove what a crashed earlier run left in /dev/shm, start every camera worker
+and wait for its readiness handshake, then the coordinator. Shutdown: ask
+(SIGTERM), wait, kill; then unlink every segment and semaphore of the service.
+"""
+from __future__ import annotations
+
+import fcntl
+import json
+import logging
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+
+from . import naming
+from .config import ServiceConfig
+
+log = logging.getLogger("supervisor")
+
+READY_TIMEOUT_S = 20.0
+STOP_GRACE_S = 3.0
+BACKOFF_FIRST_S, BACKOFF_MAX_S = 0.5, 10.0
+STABLE_AFTER_S = 30.0  # a child that ran this long has its backoff reset
+
+
+class StartError(Exception):
+    """A child could not start; the message says which and why."""
+
+
+def lock_path(service: str) -> str:
+    return os.path.join(os.environ.get("XDG_RUNTIME_DIR") or tempfile.gettempdir(),
+                        f"fxis-{service}.lock")
+
+
+class ServiceLock:
+    """An flock held for the supervisor's lifetime; the kernel drops it if the supervisor dies."""
+
+    def __init__(self, service: str):
+        self.path = lock_path(service)
+        self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o600)
+        try:
+            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            owner = os.pread(self._fd, 32, 0).decode(errors="replace").strip()
+            os.close(self._fd)
+            raise StartError(
+                f"service {service!r} is already running (supervisor pid {owner or '?'}); "
+                "stop it first, or pick another --name"
+            ) from None
+        os.ftruncate(self._fd, 0)
+        os.pwrite(self._fd, str(os.getpid()).encode(), 0)
+
+    def release(self) -> None:
+        try:
+            os.unlink(self.path)
+        except FileNotFoundError:
+            pass
+        os.close(self._fd)
+
+
+def service_running(service: str) -> bool:
+    try:
+        ServiceLock(service).release()
+    except StartError:
+        return True
+    return False
+
+
+class Child:
+    """One supervised process and its restart bookkeeping."""
+
+    def __init__(self, role: str, label: str, spec: dict, log_level: str):
+        self.role, self.label, self.spec = role, label, spec
+        self.log_level = log_level
+        self.proc: subprocess.Popen | None = None
+        self.restarts = 0
+        self.backoff = BACKOFF_FIRST_S
+        self.restart_at: float | None = None
+        self.started_at = 0.0
+        self._ready_fd: int | None = None
+
+    def start(self) -> None:
+        read_fd, write_fd = os.pipe()
+        spec = {**self.spec, "ready_fd": write_fd, "log_level": self.log_level}
+        try:
+            self.proc = subprocess.Popen(
+                [sys.executable, "-m", f"fxis_shm.workers.{self.role}", json.dumps(spec)],
+                pass_fds=(write_fd,), stdin=subprocess.DEVNULL,
+            )
+        finally:
+            os.close(write_fd)
+        self._ready_fd = read_fd
+        self.started_at = time.monotonic()
+        self.restart_at = None
+
+    def wait_ready(self, timeout: float = READY_TIMEOUT_S) -> None:
+        """Block until the child's handshake; raise StartError if it failed or timed out."""
+        import select
+
+        fd, self._ready_fd = self._ready_fd, None
+        try:
+            ready, _, _ = select.select([fd], [], [], timeout)
+            line = os.read(fd, 4096).decode(errors="replace").strip() if ready else ""
+        finally:
+            os.close(fd)
+        if line == "ok":
+            return
+        if line.startswith("error "):
+            raise StartError(f"{self.label}: {line[len('error '):]}")
+        if not ready:
+            raise StartError(f"{self.label} did not become ready within {timeout:.0f} s")
+        raise StartError(f"{self.label} exited during start-up (exit code {self.proc.wait(1)})")
+
+    def exited(self) -> int | None:
+        return None if self.proc is None else self.proc.poll()
+
+    def terminate(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+
+    def kill(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.kill()
+
+
+class Supervisor:
+    def __init__(self, config: ServiceConfig, out=sys.stdout):
+        self.config = config
+        self.out = out
+        self.stop = threading.Event()
+        origin = time.monotonic_ns()
+        self.cameras = [
+            Child("camera", f"camera {c.name!r}", {
+                "service": config.name, "camera": c.name, "kind": c.kind,
+                "options": c.options, "slots": config.slots, "time_origin_ns": origin,
+            }, config.log_level)
+            for c in config.cameras
+        ]
+        self.coordinator = Child("coordinator", "coordinator", {
+            "service": config.name, "endpoint": config.endpoint, "pub": config.pub,
+            "cameras": {c.name: {"kind": c.kind} for c in config.cameras},
+            "settings": config.settings,
+        }, config.log_level)
+
+    @property
+    def children(self) -> list[Child]:
+        return [*self.cameras, self.coordinator]
+
+    def run(self) -> int:
+        """Serve until SIGINT/SIGTERM; returns the process exit code."""
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, lambda *_: self.stop.set())
+        lock = ServiceLock(self.config.name)
+        try:
+            removed = naming.remove_leftovers(self.config.name)
+            if removed:
+                log.warning("removed %d leftovers of an earlier run: %s", len(removed), " ".join(removed))
+            try:
+                self._start_all()
+            except StartError as exc:
+                print(f"fxis: {exc}", file=sys.stderr)
+                return 1
+            self._announce()
+            return self._watch()
+        finally:
+            self._stop_all()
+            naming.remove_leftovers(self.config.name)
+            lock.release()
+
+    def _start_all(self) -> None:
+        for child in self.cameras:
+            child.start()
+        for child in self.cameras:
+            child.wait_ready()
+        self.coordinator.start()
+        self.coordinator.wait_ready()
+
+    def _announce(self) -> None:
+        c = self.config
+        lines = [f"fxis: service {c.name!r} is serving {len(c.cameras)} camera(s)"]
+        for cam in c.cameras:
+            opts = ", ".join(f"{k}={v}" for k, v in cam.options.items())
+            lines.append(f"  {cam.name:<10} {cam.kind:<10} {opts}")
+        lines.append(f"  requests on {c.endpoint}, publishing on {c.pub}, rings of {c.slots} slots")
+        lines.append("  Ctrl-C stops the service.")
+        print("\n".join(lines), file=self.out, flush=True)
+
+    def _watch(self) -> int:
+        while not self.stop.wait(0.1):
+            for child in self.children:
+                code = child.exited()
+                if code is not None and child.restart_at is None:
+                    if not self._schedule_restart(child, code):
+                        if child is self.coordinator:
+                            print("fxis: the coordinator keeps failing; stopping", file=sys.stderr)
+                            return 1
+                if child.restart_at is not None and time.monotonic() >= child.restart_at:
+                    self._restart(child)
+        return 0
+
+    def _schedule_restart(self, child: Child, code: int) -> bool:
+        if time.monotonic() - child.started_at > STABLE_AFTER_S:
+            child.backoff = BACKOFF_FIRST_S
+        if child.restarts >= self.config.restart_limit:
+            log.error("%s exited with code %s; restart limit of %d reached, leaving it down",
+                      child.label, code, self.config.restart_limit)
+            child.restart_at = float("inf")
+            return False
+        log.warning("%s exited with code %s; restarting in %.1f s", child.label, code, child.backoff)
+        child.restart_at = time.monotonic() + child.backoff
+        child.backoff = min(child.backoff * 2, BACKOFF_MAX_S)
+        return True
+
+    def _restart(self, child: Child) -> None:
+        child.restarts += 1
+        child.start()
+        try:
+            child.wait_ready()
+            log.info("%s restarted (restart %d)", child.label, child.restarts)
+        except StartError as exc:
+            log.error("restart failed: %s", exc)
+            child.kill()
+
+    def _stop_all(self) -> None:
+        for child in self.children:
+            child.terminate()
+        deadline = time.monotonic() + STOP_GRACE_S
+        for child in self.children:
+            if child.proc is None:
+                continue
+            try:
+                child.proc.wait(max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                log.warning("%s did not stop within %.0f s; killing it", child.label, STOP_GRACE_S)
+                child.kill()
+                child.proc.wait()

@@ -1,0 +1,4 @@
+"""Process entry points (camera worker, coordinator) and camera backends.
+
+Installed as ``fxis_shm.workers``.
+"""

@@ -1,0 +1,55 @@
+"""The camera plug-in base: a backend implements open, grab and close."""
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from dataclasses import dataclass
+from typing import Any, ClassVar, Mapping
+
+import numpy as np
+
+from fxis_shm.options import Option
+from fxis_shm.ring import FrameLayout
+
+
+@dataclass
+class Capture:
+    """One frame as a camera delivered it. ``image`` belongs to the camera and
+    is valid until the next ``grab``; the worker copies it into the ring."""
+
+    image: np.ndarray
+    frame_id: int
+    t_capture: int  # ns of CLOCK_MONOTONIC
+
+
+class Camera(ABC):
+    """A source of frames, run inside its own camera worker process."""
+
+    kind: ClassVar[str]
+    OPTIONS: ClassVar[Mapping[str, Option]]
+
+    def __init__(self, name: str, options: Mapping[str, Any], time_origin_ns: int):
+        self.name = name
+        self.options = dict(options)
+        self.time_origin_ns = time_origin_ns
+        self.frames_dropped = 0  # frames the camera lost before delivering them
+
+    @abstractmethod
+    def open(self) -> None:
+        """Connect and start acquiring; raise with a clear message if the camera refuses."""
+
+    @abstractmethod
+    def grab(self, timeout: float) -> Capture | None:
+        """The next frame, or None if none arrived within ``timeout`` seconds."""
+
+    def close(self) -> None:
+        """Stop acquiring and release the device."""
+
+    @property
+    def layout(self) -> FrameLayout | None:
+        """The frame layout if known before the first frame."""
+        return None
+
+    @property
+    def nominal_period_ns(self) -> int:
+        """The frame period the camera is set to, 0 if unknown."""
+        return 0
