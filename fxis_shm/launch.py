@@ -1,0 +1,77 @@
+"""Run a whole service (``fxis run``) as a child process, for tests, benchmarks
+and scripts: ready when it answers ``status``, stopped with SIGTERM on exit.
+
+    with ServiceProcess(["--camera", "a=synthetic"], name="demo") as svc:
+        with svc.client() as c:
+            c.tuple()
+"""
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+from .client import Client
+from .errors import RequestTimeout
+
+
+def free_tcp_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class ServiceProcess:
+    def __init__(self, args: list[str] = (), name: str | None = None,
+                 endpoint: str | None = None, pub: str | None = None,
+                 ready_timeout: float = 30.0, stderr=None):
+        self.name = name or f"t{os.getpid()}x{time.monotonic_ns() % 10**6}"
+        self.endpoint = endpoint or f"tcp://127.0.0.1:{free_tcp_port()}"
+        self.pub = pub or f"tcp://127.0.0.1:{free_tcp_port()}"
+        self.args = ["--name", self.name, "--endpoint", self.endpoint, "--pub", self.pub, *args]
+        self.ready_timeout = ready_timeout
+        self.stderr = stderr
+        self.proc: subprocess.Popen | None = None
+
+    def start(self) -> "ServiceProcess":
+        self.proc = subprocess.Popen(
+            [sys.executable, "-m", "fxis_shm.cli", "run", *self.args],
+            stdout=subprocess.DEVNULL, stderr=self.stderr, stdin=subprocess.DEVNULL,
+        )
+        deadline = time.monotonic() + self.ready_timeout
+        with self.client(timeout=0.5) as client:
+            while True:
+                if self.proc.poll() is not None:
+                    raise RuntimeError(f"fxis run exited with code {self.proc.returncode} during start-up")
+                try:
+                    client.status()
+                    return self
+                except RequestTimeout:
+                    if time.monotonic() > deadline:
+                        self.stop()
+                        raise RuntimeError(f"service did not answer within {self.ready_timeout} s")
+
+    def client(self, timeout: float = 2.0) -> Client:
+        return Client(self.endpoint, timeout=timeout)
+
+    def stop(self, timeout: float = 10.0) -> int:
+        """SIGTERM, wait, then kill; returns the exit code."""
+        if self.proc is None:
+            return 0
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        return self.proc.returncode
+
+    def __enter__(self) -> "ServiceProcess":
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()
