@@ -222,7 +222,8 @@ class Coordinator:
             deadline=max(t_received, t_star) + timeout,
             baseline={c: self.cameras[c].write_count() for c in cameras},
         )
-        if not self._advance(p, time.monotonic_ns()):
+        # First evaluation at the arrival time: a request that need not wait records no wait.
+        if not self._advance(p, t_received):
             self.pending.append(p)
 
     def _advance(self, p: Pending, now: int) -> bool:

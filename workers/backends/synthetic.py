@@ -62,9 +62,8 @@ class SyntheticCamera(Camera):
         lay = self.layout
         y, x = np.mgrid[0 : lay.height, 0 : lay.width + 256]
         planes = [(x + 2 * y), (2 * x + y), (x + 3 * y)][: lay.channels]
-        self._pattern = np.ascontiguousarray(np.stack(planes, axis=-1).squeeze(-1) & 255).astype(np.uint8)
-        if lay.channels == 1:
-            self._pattern = self._pattern.reshape(lay.height, lay.width + 256)
+        pattern = (np.stack(planes, axis=-1) & 255).astype(np.uint8)
+        self._pattern = pattern[..., 0] if lay.channels == 1 else pattern
         self._image = np.empty(lay.shape, np.uint8)
         self._k = self._index_at(time.monotonic_ns())
 

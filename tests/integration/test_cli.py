@@ -1,0 +1,63 @@
+"""The fxis commands against a real service."""
+import json
+
+import cv2
+import posix_ipc
+import pytest
+
+from fxis_shm import naming, read_stamp
+
+from .test_lifecycle import fxis
+
+pytestmark = pytest.mark.integration
+
+
+def test_status_prints_a_table(two_cameras):
+    result = fxis("status", "--endpoint", two_cameras.endpoint)
+    assert result.returncode == 0, result.stderr
+    header, *rows = result.stdout.splitlines()[1:]
+    assert header.split()[:4] == ["camera", "kind", "alive", "shape"]
+    assert [r.split()[:4] for r in rows] == [["cam0", "synthetic", "yes", "48x64"],
+                                             ["cam1", "synthetic", "yes", "48x64"]]
+
+
+def test_status_json(two_cameras):
+    result = fxis("status", "--endpoint", two_cameras.endpoint, "--json")
+    assert json.loads(result.stdout)["service"] == two_cameras.name
+
+
+def test_status_without_a_service_fails_clearly():
+    result = fxis("status", "--endpoint", "tcp://127.0.0.1:9", "--timeout", "0.3")
+    assert result.returncode == 1 and "no reply" in result.stderr
+
+
+def test_grab_saves_pngs_and_metadata(two_cameras, tmp_path):
+    result = fxis("grab", "--endpoint", two_cameras.endpoint, "--out", str(tmp_path))
+    assert result.returncode == 0, result.stderr
+    meta = json.loads((tmp_path / "tuple.json").read_text())
+    assert set(meta["frames"]) == {"cam0", "cam1"}
+    for name, frame in meta["frames"].items():
+        image = cv2.imread(str(tmp_path / frame["file"]), cv2.IMREAD_UNCHANGED)
+        assert image.shape == tuple(frame["shape"])
+        assert read_stamp(image) == frame["frame_id"]
+
+
+def test_clean_removes_leftovers():
+    name = "cleantest"
+    posix_ipc.SharedMemory(f"/fxis.{name}.x.ring", posix_ipc.O_CREX, size=4096).close_fd()
+    result = fxis("clean", "--name", name)
+    assert result.returncode == 0 and "removed" in result.stdout
+    assert naming.leftovers(name) == []
+    assert "nothing" in fxis("clean", "--name", name).stdout
+
+
+def test_clean_refuses_while_running(two_cameras):
+    result = fxis("clean", "--name", two_cameras.name)
+    assert result.returncode == 1 and "running" in result.stderr
+    assert naming.leftovers(two_cameras.name)
+
+
+def test_help_lists_commands():
+    result = fxis("--help")
+    for command in ("run", "status", "grab", "clean"):
+        assert command in result.stdout
