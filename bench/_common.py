@@ -34,13 +34,13 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescript
     """Shows defaults and keeps the description's line breaks."""
 
 
-def add_service_args(p: argparse.ArgumentParser) -> None:
+def add_service_args(p: argparse.ArgumentParser, endpoint_note: str = "") -> None:
     """--endpoint, --out, --timeout, --seed: the same meaning in every benchmark."""
     g = p.add_argument_group("service and output")
     g.add_argument("--endpoint", metavar="URL",
                    help="measure the service already running at this endpoint (e.g. "
-                        "tcp://127.0.0.1:5555) instead of launching one; the camera flags must "
-                        "then describe that service (they are checked against its status)")
+                        "tcp://127.0.0.1:5555, on this host) instead of launching one"
+                        + (f"; {endpoint_note}" if endpoint_note else ""))
     g.add_argument("--out", default=DEFAULT_OUT, metavar="DIR",
                    help="folder for the JSON and PNG files (created if missing; files are overwritten)")
     g.add_argument("--timeout", type=float, default=3.0, metavar="S",

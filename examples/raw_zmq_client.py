@@ -69,7 +69,7 @@ def main(endpoint):
               f"overhead {(t['sent'] - t['waited']) / 1e6:.3f} ms")
         for meta in reply["frames"]:
             img = images[meta["camera"]]
-            stamp = int(img[0].view(np.uint8)[:8].view("<u8")[0])  # synthetic cameras stamp row 0
+            stamp = int.from_bytes(img[0].tobytes()[:8], "little")  # synthetic cameras stamp row 0
             print(f"  {meta['camera']}: frame {meta['frame_id']} eps "
                   f"{(reply['t_request'] - meta['t_capture']) / 1e6:+.3f} ms {img.shape} {img.dtype}"
                   + (f" stamp ok={stamp == meta['frame_id']}" if status["cameras"][meta["camera"]]["kind"] == "synthetic" else ""))

@@ -1,0 +1,27 @@
+"""Building Timelines for the tests: logical sequences stored in a circular vector."""
+from __future__ import annotations
+
+from fxis_shm.timesearch import Timeline
+
+MS = 1_000_000  # ns
+POISON = -(10**15)  # fills unused slots: a search that reads one goes wrong visibly
+
+
+def ring(logical_times, n: int | None = None, start: int = 0) -> Timeline:
+    """A Timeline of ``n`` slots whose valid frames, oldest first, are ``logical_times``,
+    the oldest stored at physical index ``start`` (wrapping around)."""
+    n = len(logical_times) if n is None else n
+    slots = [POISON] * n
+    for i, t in enumerate(logical_times):
+        slots[(start + i) % n] = t
+    return Timeline(slots, start % n if n else 0, len(logical_times))
+
+
+def periodic(period_ns: int, count: int, phase_ns: int = 0, first: int = 0) -> list[int]:
+    """Capture times of frames ``first .. first+count-1`` of a free-running camera."""
+    return [phase_ns + k * period_ns for k in range(first, first + count)]
+
+
+def brute_nearest(times, t_star: int) -> int:
+    """Index of the frame nearest to t_star; the newest (largest index) wins ties."""
+    return min(range(len(times)), key=lambda i: (abs(times[i] - t_star), -i))
