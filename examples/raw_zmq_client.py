@@ -73,6 +73,10 @@ def main(endpoint):
             print(f"  {meta['camera']}: frame {meta['frame_id']} eps "
                   f"{(reply['t_request'] - meta['t_capture']) / 1e6:+.3f} ms {img.shape} {img.dtype}"
                   + (f" stamp ok={stamp == meta['frame_id']}" if status["cameras"][meta["camera"]]["kind"] == "synthetic" else ""))
+    name = next(iter(status["cameras"]))
+    reply, images = c.call("image", camera=name, wait="none")
+    print(f"image {name}: frame {reply['frames'][0]['frame_id']} {images[name].shape}; latest:",
+          {m["camera"]: m["frame_id"] for m in c.call("latest")[0]["frames"]})
     try:
         c.call("image", camera="no-such-camera")
     except RuntimeError as exc:

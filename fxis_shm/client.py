@@ -90,7 +90,7 @@ class Client:
     def image(self, camera: str, at: int | None = None, wait: str | None = None,
               timeout_ms: float | None = None) -> Frame:
         """The frame of ``camera`` nearest to ``at`` (default: the moment the request arrives)."""
-        header, images = self._call("image", self._extra_wait(at), camera=camera, at=at,
+        header, images = self._call("image", self._extra_wait(at, timeout_ms), camera=camera, at=at,
                                     wait=wait, timeout_ms=timeout_ms)
         return self._frames(header, images)[0]
 
@@ -98,7 +98,7 @@ class Client:
               sync: str | None = None, wait: str | None = None,
               max_skew_ms: float | None = None, timeout_ms: float | None = None) -> FrameTuple:
         """One frame per camera (default: all), nearest to ``at`` and to each other."""
-        header, images = self._call("tuple", self._extra_wait(at), cameras=cameras, at=at,
+        header, images = self._call("tuple", self._extra_wait(at, timeout_ms), cameras=cameras, at=at,
                                     sync=sync, wait=wait, max_skew_ms=max_skew_ms,
                                     timeout_ms=timeout_ms)
         return self._tuple(header, images)
@@ -116,15 +116,17 @@ class Client:
 
     # ---- plumbing ----
 
-    def _extra_wait(self, at: int | None) -> float:
-        """Seconds a request for a future ``at`` waits on the service before its timeout starts."""
+    def _extra_wait(self, at: int | None, timeout_ms: float | None = None) -> float:
+        """Seconds the service may legitimately spend on a request beyond the client's
+        own timeout: waiting for a future ``at``, and a ``timeout_ms`` longer than ours."""
+        extra = max(0.0, (timeout_ms or 0) / 1000 - self.timeout / 2)
         if at is None:
-            return 0.0
+            return extra
         if self._clock_offset is None:
             sent = time.monotonic_ns()
             now = self.time()
             self._clock_offset = now - (sent + time.monotonic_ns()) // 2
-        return max(0.0, (at - self._clock_offset - time.monotonic_ns()) / 1e9)
+        return extra + max(0.0, (at - self._clock_offset - time.monotonic_ns()) / 1e9)
 
     def _call(self, op: str, extra_wait: float, **fields) -> tuple[dict, list[np.ndarray]]:
         request_id = next(self._ids)

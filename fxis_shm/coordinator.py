@@ -103,6 +103,7 @@ class Coordinator:
             for sock in sockets:
                 sock.setsockopt(zmq.LINGER, 0)
             self.router.setsockopt(zmq.SNDHWM, 100)
+            self.router.setsockopt(zmq.ROUTER_MANDATORY, 1)  # report unsendable replies
             self._bind(self.router, self.endpoint, "request endpoint")
             self._bind(self.pub, self.pub_endpoint, "publish endpoint")
             watch = FrameWatch(ctx, self.service, list(self.cameras))
@@ -183,7 +184,7 @@ class Coordinator:
             if op in ("image", "tuple"):
                 self._start_waiting_request(envelope, request, t_received)
                 return
-            body_ = getattr(self, f"_op_{op}")(request)
+            body_ = getattr(self, f"_op_{op}")(request, t_received)
             self._reply(envelope, request, body_)
         except Reject as exc:
             self._send(envelope, protocol.encode_error(request["id"], exc.code, exc.message))
@@ -238,7 +239,7 @@ class Coordinator:
             if waits:
                 if now >= p.deadline:
                     raise Reject(Code.TIMEOUT,
-                                 f"no new frame from {sorted(waits)} within "
+                                 f"the frames awaited from {sorted(waits)} did not arrive within "
                                  f"{(p.deadline - max(p.t_received, p.t_star)) / 1e6:.0f} ms")
                 give_ups = [t for t in waits.values() if t is not None]
                 p.wake_at = min([p.deadline, now + _LIVENESS_CHECK_NS, *give_ups])
@@ -266,9 +267,7 @@ class Coordinator:
         for attempt in range(_COPY_ATTEMPTS):
             if attempt:
                 snaps = self._snapshots(p.cameras, time.monotonic_ns())
-            empty = [c for c in p.cameras if not len(snaps[c].timeline)]
-            if empty:
-                raise Reject(Code.NO_FRAMES, f"camera(s) {empty} have stored no frame yet")
+            self._check_history(p, snaps)
             sel = select(mode, {c: snaps[c].timeline for c in p.cameras}, p.t_star,
                          self._radius(p.cameras), int(self.settings["sync_tolerance_ms"] * 1e6))
             t_searched = time.monotonic_ns()
@@ -294,6 +293,21 @@ class Coordinator:
             body.update(skew_ns=sel.skew_ns, sync=mode)
         self._reply(p.envelope, p.request, body, images)
 
+    def _check_history(self, p: Pending, snaps: dict) -> None:
+        """NO_FRAMES for an empty ring; OUT_OF_RANGE for a t* older than a ring holds."""
+        empty = [c for c in p.cameras if not len(snaps[c].timeline)]
+        if empty:
+            raise Reject(Code.NO_FRAMES, f"camera(s) {empty} have stored no frame yet")
+        for cam in p.cameras:
+            oldest = snaps[cam].timeline.at(0)
+            period = self.cameras[cam].reader.field("period_ns")
+            if p.t_star < oldest - period:
+                held = len(snaps[cam].timeline)
+                raise Reject(Code.OUT_OF_RANGE,
+                             f"t* is {(oldest - p.t_star) / 1e6:.1f} ms older than the oldest frame of "
+                             f"camera {cam!r}; its ring holds {held} frames, the oldest from "
+                             f"{(p.t_received - oldest) / 1e6:.1f} ms before the request")
+
     def _radius(self, cameras: list[str]) -> int:
         periods = [self.cameras[c].reader.field("period_ns") for c in cameras]
         return max(periods + [0])
@@ -313,9 +327,9 @@ class Coordinator:
             images.append(image)
         return frames, images
 
-    def _op_latest(self, request: dict) -> dict:
+    def _op_latest(self, request: dict, t_received: int) -> dict:
         cameras = self._cameras_of(request)
-        now = time.monotonic_ns()
+        now = t_received
         for attempt in range(_COPY_ATTEMPTS):
             snaps = self._snapshots(cameras, now)
             empty = [c for c in cameras if not len(snaps[c].timeline)]
@@ -331,7 +345,7 @@ class Coordinator:
         timing = {"received": now, "copied": time.monotonic_ns()}
         return {"op": "latest", "frames": frames, "timing": timing, "_images": images}
 
-    def _op_status(self, request: dict) -> dict:
+    def _op_status(self, request: dict, t_received: int) -> dict:
         now = time.monotonic_ns()
         return {
             "op": "status",
@@ -346,7 +360,7 @@ class Coordinator:
             "cameras": {name: cam.status(now) for name, cam in self.cameras.items()},
         }
 
-    def _op_time(self, request: dict) -> dict:
+    def _op_time(self, request: dict, t_received: int) -> dict:
         return {"op": "time", "now": time.monotonic_ns()}
 
     # ---- replies ----
@@ -363,6 +377,6 @@ class Coordinator:
             self.router.send_multipart(envelope + frames, copy=False, flags=zmq.NOBLOCK)
         except zmq.Again:
             log.warning("dropped a reply: the client is not reading its replies")
-        except zmq.ZMQError as exc:
-            log.warning("could not send a reply: %s", exc)
+        except zmq.ZMQError as exc:  # EHOSTUNREACH: the client went away
+            log.info("could not send a reply: %s", exc)
 

@@ -7,6 +7,7 @@ message that says what is wrong.
 from __future__ import annotations
 
 import json
+import math
 from typing import Any, Callable, Sequence
 
 import numpy as np
@@ -38,6 +39,8 @@ def _int(field, v, minimum=None):
 def _number(field, v, positive=True):
     if isinstance(v, bool) or not isinstance(v, (int, float)) or v != v:
         _fail(field, f"must be a number, got {type(v).__name__}")
+    if v in (math.inf, -math.inf):
+        _fail(field, f"must be finite, got {v}")
     if positive and v <= 0:
         _fail(field, f"must be > 0, got {v}")
     return v
@@ -193,6 +196,8 @@ def decode_reply(frames: Sequence) -> tuple[dict, list[np.ndarray]]:
         raise ProtocolError("reply header is not a version-1 reply")
     buffers = frames[1:]
     images = []
+    if not isinstance(header.get("frames", []), list):
+        raise ProtocolError("reply field 'frames' must be a list")
     for meta in header.get("frames", ()):
         images.append(_image(meta, buffers))
     return header, images
@@ -200,14 +205,19 @@ def decode_reply(frames: Sequence) -> tuple[dict, list[np.ndarray]]:
 
 def _image(meta: dict, buffers: Sequence) -> np.ndarray:
     try:
-        buf = buffers[meta["buffer"]]
+        index, shape = meta["buffer"], meta["shape"]
+        if type(index) is not int or index < 0:
+            raise IndexError(f"buffer index {index!r}")
+        if not isinstance(shape, list) or any(type(s) is not int or s < 0 for s in shape):
+            raise ValueError(f"shape {shape!r}")
+        buf = buffers[index]
         dtype = np.dtype(meta["dtype"])
-        shape = tuple(int(s) for s in meta["shape"])
-    except (KeyError, IndexError, TypeError) as exc:
+        shape = tuple(shape)
+    except (KeyError, IndexError, TypeError, ValueError) as exc:
         raise ProtocolError(f"frame metadata does not match the buffers: {exc!r}") from None
     if meta["dtype"] not in DTYPES:
         raise ProtocolError(f"unsupported dtype {meta['dtype']!r}")
-    expected = int(np.prod(shape)) * dtype.itemsize
+    expected = math.prod(shape) * dtype.itemsize
     view = memoryview(buf)
     if view.nbytes != expected:
         raise ProtocolError(f"buffer of {view.nbytes} bytes for shape {shape} {dtype.name}")

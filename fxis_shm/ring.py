@@ -211,7 +211,7 @@ class RingWriter(_Mapping):
                     getattr(self, "layout", None) == layout and self.slots == slots
                     and shm.size == size
                 )
-            except RingError:
+            except (RingError, ValueError, TypeError):  # not a ring, or truncated
                 compatible = False
             finally:
                 shm.close_fd()
@@ -220,8 +220,11 @@ class RingWriter(_Mapping):
             # Another layout: retire the old segment so readers re-open by name.
             if getattr(self, "header", None) is not None and self.header["magic"] == MAGIC:
                 self.header["state"] = STATE_RETIRED
-            self._unmap()
             posix_ipc.unlink_shared_memory(self.name)
+        old = getattr(self, "header", None)
+        generation = int(old["generation"]) if old is not None and old["magic"] == MAGIC else 0
+        del old
+        self._unmap()
         shm = posix_ipc.SharedMemory(self.name, posix_ipc.O_CREX, mode=0o600, size=size)
         try:
             self._map(shm.fd, size, writable=True)
@@ -232,6 +235,7 @@ class RingWriter(_Mapping):
         h["version"], h["state"] = LAYOUT_VERSION, STATE_INIT
         h["height"], h["width"], h["channels"] = layout.height, layout.width, layout.channels
         h["dtype"], h["slots"] = layout.dtype.encode(), slots
+        h["generation"] = generation  # continues across a layout change: never repeats
         h["slot_stride"], h["data_offset"] = stride, data_offset
         h["magic"] = MAGIC
         self._views()

@@ -1,7 +1,7 @@
 """The synchronization layer on a real service: no spikes, no needless waits."""
 import pytest
 
-from fxis_shm import SkewExceeded, read_stamp
+from fxis_shm import ServiceError, SkewExceeded, read_stamp
 
 from ..conftest import wait_until
 from .conftest import SMALL
@@ -84,3 +84,10 @@ def test_max_skew_is_enforced_with_the_best_skew_in_the_message(paper_cameras):
         with pytest.raises(SkewExceeded, match=r"skew of 1\.\d+ ms"):
             client.tuple(max_skew_ms=0.5)
         assert client.tuple(max_skew_ms=1.5).skew_ns <= 1_500_000
+
+
+def test_t_star_older_than_the_rings_is_refused(paper_cameras):
+    with paper_cameras.client() as client:
+        with pytest.raises(ServiceError, match="older than the oldest frame") as err:
+            client.tuple(at=client.time() - 10_000_000_000)
+    assert err.value.code == "OUT_OF_RANGE"
