@@ -157,8 +157,8 @@ def _setting(key: str, kind: type, value: Any):
         return value
     try:
         number = kind(value)
-    except (TypeError, ValueError):
+    except (TypeError, ValueError, OverflowError):
         raise ConfigError(f"{key} must be a number, got {value!r}") from None
-    if isinstance(value, bool) or number <= 0:
-        raise ConfigError(f"{key} must be a number > 0, got {value!r}")
+    if isinstance(value, bool) or not 0 < number < float("inf"):
+        raise ConfigError(f"{key} must be a finite number > 0, got {value!r}")
     return number

@@ -96,7 +96,7 @@ def select_joint(
         index = {cam: _closest_in(timelines[cam], idx, t_star) for cam, idx in per_cam.items()}
         sel = Selection(index, {cam: timelines[cam].at(i) for cam, i in index.items()})
         key = (sel.max_abs_error_ns(t_star), sel.skew_ns)
-        if best is None or key < best[0]:
+        if best is None or key <= best[0]:  # later windows are newer: newest wins ties
             best = (key, sel)
     return best[1]
 

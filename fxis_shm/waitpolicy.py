@@ -43,6 +43,8 @@ def waiting_for(
 ) -> dict[str, int | None]:
     """Cameras the request must still wait for, each mapped to the moment it
     stops waiting for that camera (None: until the request's own deadline)."""
+    if mode not in WAIT_MODES:
+        raise ValueError(f"unknown wait mode {mode!r}; use one of {WAIT_MODES}")
     waits: dict[str, int | None] = {}
     for name, cam in cameras.items():
         if mode == NONE:
@@ -51,8 +53,6 @@ def waiting_for(
             if cam.count <= cam.baseline:
                 waits[name] = None
             continue
-        if mode != AUTO:
-            raise ValueError(f"unknown wait mode {mode!r}; use one of {WAIT_MODES}")
         if cam.newest is None:
             waits[name] = None
         elif cam.period_ns > 0 and t_star > cam.newest + cam.period_ns // 2:

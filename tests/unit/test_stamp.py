@@ -1,0 +1,96 @@
+"""The frame-id stamp in the first and last pixel rows (fxis_shm.stamp)."""
+from __future__ import annotations
+
+import numpy as np
+import pytest
+
+from fxis_shm.stamp import STAMP_BYTES, read_stamp, write_stamp
+
+LAYOUTS = [
+    pytest.param((48, 64), np.uint8, id="mono8"),
+    pytest.param((48, 64, 3), np.uint8, id="bgr8"),
+    pytest.param((48, 64), np.uint16, id="mono16"),
+    pytest.param((1, 16), np.uint8, id="one-row"),
+    pytest.param((2, 8), np.uint16, id="exactly-16-bytes-a-row"),
+    pytest.param((3, 6, 3), np.uint8, id="bgr8-18-bytes-a-row"),
+]
+IDS = [0, 1, 255, 256, 2**32 + 5, 2**40, 2**63, 2**64 - 1]
+
+
+def patterned(shape, dtype) -> np.ndarray:
+    """A non-uniform image, so that a stamp cannot pass by accident."""
+    return (np.arange(int(np.prod(shape))) * 7 % 251).astype(dtype).reshape(shape)
+
+
+def stamped(shape, dtype, frame_id) -> np.ndarray:
+    image = patterned(shape, dtype)
+    write_stamp(image, frame_id)
+    return image
+
+
+@pytest.mark.parametrize("shape, dtype", LAYOUTS)
+@pytest.mark.parametrize("frame_id", IDS)
+def test_a_stamp_reads_back(shape, dtype, frame_id):
+    assert read_stamp(stamped(shape, dtype, frame_id)) == frame_id
+
+
+@pytest.mark.parametrize("shape, dtype", LAYOUTS)
+def test_only_the_first_stamp_bytes_of_the_first_and_last_rows_change(shape, dtype):
+    before = patterned(shape, dtype)
+    after = stamped(shape, dtype, 2**40)
+    changed = (before != after).reshape(shape[0], -1)
+    untouched = np.ones_like(changed)
+    per_row = STAMP_BYTES // np.dtype(dtype).itemsize  # elements of a row that hold the stamp
+    untouched[[0, -1], :per_row] = False
+    assert not changed[untouched].any()
+
+
+def test_restamping_replaces_the_id():
+    image = stamped((8, 32), np.uint8, 1)
+    write_stamp(image, 2)
+    assert read_stamp(image) == 2
+
+
+@pytest.mark.parametrize("shape, dtype", [s for s in LAYOUTS if s.values[0][0] > 1])
+@pytest.mark.parametrize("split", ["top-row-only", "half", "all-but-bottom-row"])
+def test_a_torn_image_does_not_read_as_either_frame(shape, dtype, split):
+    older, newer = stamped(shape, dtype, 41), stamped(shape, dtype, 42)
+    rows = {"top-row-only": 1, "half": shape[0] // 2, "all-but-bottom-row": shape[0] - 1}[split]
+    torn = np.concatenate([older[:rows], newer[rows:]])
+    assert read_stamp(torn) not in (41, 42)
+
+
+@pytest.mark.parametrize(
+    "image",
+    [
+        pytest.param(np.zeros((8, 32), np.uint8), id="never-stamped"),
+        pytest.param(np.full((8, 32), 255, np.uint8), id="all-ones"),
+        pytest.param(np.zeros((8, 15), np.uint8), id="too-narrow"),
+        pytest.param(np.zeros(64, np.uint8), id="one-dimensional"),
+    ],
+)
+def test_an_image_without_a_valid_stamp_reads_as_none(image):
+    assert read_stamp(image) is None
+
+
+def test_a_corrupted_complement_reads_as_none():
+    image = stamped((8, 32), np.uint8, 1234)
+    image[[0, -1], STAMP_BYTES - 1] ^= 1  # both rows still agree, but not with the id
+    assert read_stamp(image) is None
+
+
+def test_a_stamp_in_a_non_contiguous_view_is_not_read():
+    # every other column: the row's bytes are not the bytes the stamp was written to
+    image = stamped((8, 64), np.uint8, 77)[:, ::2]
+    assert read_stamp(image) is None
+
+
+@pytest.mark.parametrize(
+    "shape, dtype",
+    [((8, 15), np.uint8), ((8, 7), np.uint16), ((8, 5, 3), np.uint8), ((0, 64), np.uint8)],
+)
+def test_an_image_too_small_for_a_stamp_is_refused(shape, dtype):
+    image = np.zeros(shape, dtype)
+    with pytest.raises(ValueError):
+        write_stamp(image, 1)
+    assert not image.any()
