@@ -21,6 +21,7 @@ DEFAULT_ENDPOINT = "tcp://127.0.0.1:5555"
 DEFAULT_PUB = "tcp://127.0.0.1:5556"
 DEFAULT_SLOTS = 20
 DEFAULT_CAMERAS = ("cam0=synthetic", "cam1=synthetic")
+ZERO_ALLOWED = {"sync_tolerance_ms"}  # 0: always the least skew, however far from t*
 # Request defaults that the config may change (see coordinator.DEFAULTS)
 SERVICE_SETTINGS = {
     "sync": str, "wait": str, "timeout_ms": float, "max_skew_ms": float,
@@ -159,6 +160,10 @@ def _setting(key: str, kind: type, value: Any):
         number = kind(value)
     except (TypeError, ValueError, OverflowError):
         raise ConfigError(f"{key} must be a number, got {value!r}") from None
-    if isinstance(value, bool) or not 0 < number < float("inf"):
-        raise ConfigError(f"{key} must be a finite number > 0, got {value!r}")
+    if kind is int and number != value:
+        raise ConfigError(f"{key} must be a whole number, got {value!r}")
+    lowest_ok = 0 <= number if key in ZERO_ALLOWED else 0 < number
+    if isinstance(value, bool) or not (lowest_ok and number < float("inf")):
+        bound = ">= 0" if key in ZERO_ALLOWED else "> 0"
+        raise ConfigError(f"{key} must be a finite number {bound}, got {value!r}")
     return number

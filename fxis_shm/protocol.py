@@ -28,9 +28,15 @@ def _fail(field: str, what: str):
     raise ProtocolError(f"field {field!r} {what}")
 
 
+INT64_MAX = 2**63 - 1
+MAX_TIMEOUT_MS = 3_600_000.0  # one hour: longer waits are surely a mistake
+
+
 def _int(field, v, minimum=None):
     if isinstance(v, bool) or not isinstance(v, int):
         _fail(field, f"must be an integer, got {type(v).__name__}")
+    if not -INT64_MAX <= v <= INT64_MAX:
+        _fail(field, "must fit in a signed 64-bit integer")
     if minimum is not None and v < minimum:
         _fail(field, f"must be >= {minimum}, got {v}")
     return v
@@ -43,6 +49,13 @@ def _number(field, v, positive=True):
         _fail(field, f"must be finite, got {v}")
     if positive and v <= 0:
         _fail(field, f"must be > 0, got {v}")
+    return v
+
+
+def _timeout(field, v):
+    _number(field, v)
+    if v > MAX_TIMEOUT_MS:
+        _fail(field, f"must be at most {MAX_TIMEOUT_MS:.0f} ms, got {v}")
     return v
 
 
@@ -91,7 +104,7 @@ _COMMON: dict[str, tuple[Check, Any]] = {
 _WAITING: dict[str, tuple[Check, Any]] = {
     "at": (_optional(_int), None),
     "wait": (_optional(_choice(WAIT_MODES)), None),  # None: the service's default
-    "timeout_ms": (_optional(_number), None),
+    "timeout_ms": (_optional(_timeout), None),
 }
 # op -> {field: (check, default)}; a default of ... marks a required field
 OPS: dict[str, dict[str, tuple[Check, Any]]] = {

@@ -3,7 +3,7 @@
 - ``next`` (the paper's): wait until every camera of the request has stored a
   frame after the request arrived.
 - ``auto`` (the default): wait for a camera only while its next frame could be
-  closer to t* than its newest stored one, i.e. while t* > newest + period/2,
+  closer to t* than its newest stored one, i.e. while t* >= newest + period/2,
   and stop waiting for it once that frame is overdue (dropped); a t* whose
   nearest frame is already stored never waits.
 - ``none``: answer from what is stored.
@@ -55,7 +55,7 @@ def waiting_for(
             continue
         if cam.newest is None:
             waits[name] = None
-        elif cam.period_ns > 0 and t_star > cam.newest + cam.period_ns // 2:
+        elif cam.period_ns > 0 and t_star >= cam.newest + cam.period_ns // 2:  # a tie goes to the newer frame
             until = give_up_time(t_star, cam)
             if now < until:
                 waits[name] = until

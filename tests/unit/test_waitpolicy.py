@@ -27,7 +27,8 @@ def waits(mode, t_star, now, **cameras):
         (NEWEST - 10 * PERIOD, False),  # long past
         (NEWEST - 1, False),
         (NEWEST, False),  # the newest frame is exactly t*
-        (NEWEST + PERIOD // 2, False),  # halfway: not *after* newest + period/2
+        (NEWEST + PERIOD // 2 - 1, False),  # the newest frame stays the nearest
+        (NEWEST + PERIOD // 2, True),  # halfway: the tie goes to the next (newer) frame
         (NEWEST + PERIOD // 2 + 1, True),  # the next frame will be nearer
         (NEWEST + PERIOD, True),
         (NEWEST + 10 * PERIOD, True),  # well into the future
