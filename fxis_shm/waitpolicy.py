@@ -33,9 +33,10 @@ class CameraState:
 
 
 def give_up_time(t_star: int, cam: CameraState) -> int:
-    """When the frame nearest to t* is overdue: captured by t*+period/2,
-    stored by then plus the delay, with half a period of slack for jitter."""
-    return t_star + cam.period_ns + cam.delay_ns
+    """When the frame nearest to t* is overdue (dropped): it is captured by
+    t* + period/2 and stored a delay later; a full period of slack covers a
+    worker delayed by load, which is far commoner than a dropped frame."""
+    return t_star + cam.period_ns * 3 // 2 + cam.delay_ns
 
 
 def waiting_for(

@@ -37,14 +37,14 @@ def waits(mode, t_star, now, **cameras):
 def test_auto_waits_only_while_the_next_frame_could_be_nearer(t_star, waiting):
     now = NEWEST + 1  # just after the newest frame was stored
     result = waits(AUTO, t_star, now, cam=camera())
-    assert result == ({"cam": t_star + PERIOD} if waiting else {})
+    assert result == ({"cam": t_star + PERIOD * 3 // 2} if waiting else {})
 
 
 @pytest.mark.parametrize("delay_ns", [0, 3 * MS])
 def test_auto_gives_up_once_the_next_frame_is_overdue(delay_ns):
     cam = camera(delay_ns=delay_ns)
     t_star = NEWEST + PERIOD  # the frame nearest t* is the next one
-    give_up = t_star + PERIOD + delay_ns
+    give_up = t_star + PERIOD * 3 // 2 + delay_ns
     assert give_up_time(t_star, cam) == give_up
     assert waits(AUTO, t_star, give_up - 1, cam=cam) == {"cam": give_up}
     assert waits(AUTO, t_star, give_up, cam=cam) == {}
@@ -77,7 +77,7 @@ def test_auto_waits_only_for_the_cameras_that_are_behind():
         unknown_rate=camera(period_ns=0),
         slow=camera(period_ns=4 * PERIOD, delay_ns=MS),  # half a period (100 ms) covers t*
     )
-    assert result == {"behind": t_star + PERIOD, "empty": None}
+    assert result == {"behind": t_star + PERIOD * 3 // 2, "empty": None}
 
 
 # ---- next and none ----
