@@ -21,7 +21,8 @@ def _run(args) -> int:
     try:
         file_values = load_toml(args.config) if args.config else {}
         config = build_config(file_values, {
-            "name": args.name, "endpoint": args.endpoint, "pub": args.pub, "slots": args.slots,
+            "name": args.name, "endpoint": args.endpoint, "pub": args.pub, "events": args.events,
+            "slots": args.slots,
             "cameras": args.camera, "restart_limit": args.restart_limit,
             "log_level": args.log_level,
         })
@@ -117,6 +118,7 @@ def parser() -> argparse.ArgumentParser:
                      help="a camera, e.g. left=synthetic:fps=30,phase_ms=5 (repeatable)")
     run.add_argument("--endpoint", help=f"request/reply endpoint (default {DEFAULT_ENDPOINT})")
     run.add_argument("--pub", help="publish endpoint (default tcp://127.0.0.1:5556)")
+    run.add_argument("--events", help="endpoint receiving request events (default tcp://127.0.0.1:5557)")
     run.add_argument("--slots", type=int, help="frames held per camera ring (default 20)")
     run.add_argument("--config", metavar="FILE.toml", help="settings file (flags override it)")
     run.add_argument("--restart-limit", type=int, help="restarts of a crashed process before giving up (default 5)")

@@ -19,6 +19,7 @@ else:  # pragma: no cover
 
 DEFAULT_ENDPOINT = "tcp://127.0.0.1:5555"
 DEFAULT_PUB = "tcp://127.0.0.1:5556"
+DEFAULT_EVENTS = "tcp://127.0.0.1:5557"
 DEFAULT_SLOTS = 20
 DEFAULT_CAMERAS = ("cam0=synthetic", "cam1=synthetic")
 ZERO_ALLOWED = {"sync_tolerance_ms"}  # 0: always the least skew, however far from t*
@@ -26,6 +27,7 @@ ZERO_ALLOWED = {"sync_tolerance_ms"}  # 0: always the least skew, however far fr
 SERVICE_SETTINGS = {
     "sync": str, "wait": str, "timeout_ms": float, "max_skew_ms": float,
     "horizon_ms": float, "sync_tolerance_ms": float, "max_pending": int,
+    "max_sequence_frames": int,
 }
 
 
@@ -41,6 +43,7 @@ class ServiceConfig:
     name: str = "fxis"
     endpoint: str = DEFAULT_ENDPOINT
     pub: str = DEFAULT_PUB
+    events: str = DEFAULT_EVENTS
     slots: int = DEFAULT_SLOTS
     cameras: tuple[CameraSpec, ...] = ()
     settings: dict[str, Any] = field(default_factory=dict)
@@ -99,7 +102,7 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
     """
     file_values = dict(file_values or {})
     flags = {k: v for k, v in (flags or {}).items() if v not in (None, [], ())}
-    known = {"name", "endpoint", "pub", "slots", "cameras", "restart_limit", "log_level",
+    known = {"name", "endpoint", "pub", "events", "slots", "cameras", "restart_limit", "log_level",
              *SERVICE_SETTINGS}
     unknown = sorted(set(file_values) - known)
     if unknown:
@@ -133,8 +136,11 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
         config = replace(config, endpoint=_check_endpoint("endpoint", values["endpoint"]))
     if "pub" in values:
         config = replace(config, pub=_check_endpoint("pub", values["pub"]))
-    if config.endpoint == config.pub:
-        raise ConfigError(f"endpoint and pub are both {config.endpoint}; they need their own")
+    if "events" in values:
+        config = replace(config, events=_check_endpoint("events", values["events"]))
+    endpoints = {"endpoint": config.endpoint, "pub": config.pub, "events": config.events}
+    if len(set(endpoints.values())) < len(endpoints):
+        raise ConfigError(f"endpoint, pub and events need an address each; got {endpoints}")
     if "slots" in values:
         config = replace(config, slots=_check_int("slots", values["slots"], 2))
     if "restart_limit" in values:

@@ -26,12 +26,14 @@ def free_tcp_port() -> int:
 
 class ServiceProcess:
     def __init__(self, args: list[str] = (), name: str | None = None,
-                 endpoint: str | None = None, pub: str | None = None,
+                 endpoint: str | None = None, pub: str | None = None, events: str | None = None,
                  ready_timeout: float = 30.0, stderr=None):
         self.name = name or f"t{os.getpid()}x{time.monotonic_ns() % 10**6}"
         self.endpoint = endpoint or f"tcp://127.0.0.1:{free_tcp_port()}"
         self.pub = pub or f"tcp://127.0.0.1:{free_tcp_port()}"
-        self.args = ["--name", self.name, "--endpoint", self.endpoint, "--pub", self.pub, *args]
+        self.events = events or f"tcp://127.0.0.1:{free_tcp_port()}"
+        self.args = ["--name", self.name, "--endpoint", self.endpoint, "--pub", self.pub,
+                     "--events", self.events, *args]
         self.ready_timeout = ready_timeout
         self.stderr = stderr
         self.proc: subprocess.Popen | None = None

@@ -8,17 +8,20 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import dataclass
 from typing import Any, Callable, Sequence
 
 import numpy as np
 
 from .errors import Code, ProtocolError
 from .selection import SYNC_MODES
+from .sequences import DIRECTIONS, KINDS as SEQUENCE_KINDS
 from .waitpolicy import WAIT_MODES
 
 VERSION = 1
 CLOCK = "CLOCK_MONOTONIC"
 MAX_HEADER_BYTES = 64 * 1024
+RESERVED_TOPICS = ("frames/", "tuples", "fxis.")  # stream topics the service publishes itself
 DTYPES = ("uint8", "uint16", "float32")
 
 
@@ -56,6 +59,25 @@ def _timeout(field, v):
     _number(field, v)
     if v > MAX_TIMEOUT_MS:
         _fail(field, f"must be at most {MAX_TIMEOUT_MS:.0f} ms, got {v}")
+    return v
+
+
+def _count(field, v):
+    return _int(field, v, minimum=1)
+
+
+def _nonzero(field, v):
+    _number(field, v, positive=False)
+    if v == 0:
+        _fail(field, "must not be 0")
+    return v
+
+
+def _topic(field, v):
+    if not isinstance(v, str) or not v or len(v) > 256:
+        _fail(field, "must be a non-empty string of at most 256 characters")
+    if v.startswith(RESERVED_TOPICS):
+        _fail(field, f"must not start with a reserved prefix {RESERVED_TOPICS}")
     return v
 
 
@@ -116,16 +138,57 @@ OPS: dict[str, dict[str, tuple[Check, Any]]] = {
         **_WAITING,
     },
     "latest": {"cameras": (_optional(_names), None)},
+    "sequence": {
+        "camera": (_optional(_name), None),
+        "cameras": (_optional(_names), None),
+        "kind": (_choice(SEQUENCE_KINDS), ...),
+        "count": (_optional(_count), None),
+        "direction": (_choice(DIRECTIONS), "before"),
+        "interval_ms": (_optional(_nonzero), None),
+        "start": (_optional(_int), None),
+        "end": (_optional(_int), None),
+        "sync": (_optional(_choice(SYNC_MODES)), None),
+        "at": (_optional(_int), None),
+        "timeout_ms": (_optional(_timeout), None),
+    },
     "status": {},
     "time": {},
 }
+EVENT_OPS = ("image", "tuple", "latest", "sequence", "time")
+EVENT_TOPIC = b"fxis.request"  # the topic of request events published to the service
+
+
+def _check_sequence(req: dict) -> None:
+    if req["camera"] is not None and req["cameras"] is not None:
+        raise ProtocolError("give either 'camera' (a list of frames) or 'cameras' (a list of tuples), not both")
+    needs = {"consecutive": ("count",), "interval": ("count", "interval_ms"), "range": ("start", "end")}
+    for field in needs[req["kind"]]:
+        if req[field] is None:
+            raise ProtocolError(f"a {req['kind']} sequence needs field {field!r}")
+    if req["kind"] == "range" and req["start"] > req["end"]:
+        raise ProtocolError(f"'start' ({req['start']}) is after 'end' ({req['end']})")
+
+
+CROSS_CHECKS = {"sequence": _check_sequence}
 
 
 def decode_request(frames: Sequence[bytes], max_header_bytes: int = MAX_HEADER_BYTES) -> dict:
     """Validate a request (the frames after the routing envelope) and fill in defaults."""
     if len(frames) != 1:
         raise ProtocolError(f"a request is exactly one frame (a JSON header), got {len(frames)}")
-    raw = bytes(frames[0])
+    return _decode_header(frames[0], max_header_bytes, OPS)
+
+
+def decode_event(frames: Sequence[bytes], max_header_bytes: int = MAX_HEADER_BYTES) -> dict:
+    """Validate a request event ([EVENT_TOPIC, header]): a request plus its ``reply_topic``."""
+    if len(frames) != 2 or bytes(frames[0]) != EVENT_TOPIC:
+        raise ProtocolError(f"a request event is two frames: {EVENT_TOPIC!r} and a JSON header")
+    schemas = {op: {**OPS[op], "reply_topic": (_topic, ...)} for op in EVENT_OPS}
+    return _decode_header(frames[1], max_header_bytes, schemas)
+
+
+def _decode_header(frame: bytes, max_header_bytes: int, schemas: dict) -> dict:
+    raw = bytes(frame)
     if len(raw) > max_header_bytes:
         raise ProtocolError(
             f"request header of {len(raw)} bytes exceeds the limit of {max_header_bytes}",
@@ -145,9 +208,9 @@ def decode_request(frames: Sequence[bytes], max_header_bytes: int = MAX_HEADER_B
             Code.UNSUPPORTED_VERSION,
         )
     op = _name("op", header.get("op"))
-    if op not in OPS:
-        raise ProtocolError(f"unknown op {op!r}; known: {sorted(OPS)}", Code.UNKNOWN_OP)
-    schema = {**_COMMON, **OPS[op]}
+    if op not in schemas:
+        raise ProtocolError(f"unknown op {op!r}; known: {sorted(schemas)}", Code.UNKNOWN_OP)
+    schema = {**_COMMON, **schemas[op]}
     unknown = sorted(set(header) - set(schema))
     if unknown:
         raise ProtocolError(f"unknown field(s) {unknown} for op {op!r}")
@@ -159,12 +222,53 @@ def decode_request(frames: Sequence[bytes], max_header_bytes: int = MAX_HEADER_B
             raise ProtocolError(f"op {op!r} needs field {field!r}")
         else:
             request[field] = default
+    if op in CROSS_CHECKS:
+        CROSS_CHECKS[op](request)
     return request
 
 
 def encode_request(op: str, **fields) -> list[bytes]:
     header = {"v": VERSION, "op": op, **{k: v for k, v in fields.items() if v is not None}}
     return [json.dumps(header).encode()]
+
+
+def encode_event(op: str, reply_topic: str, **fields) -> list[bytes]:
+    return [EVENT_TOPIC, *encode_request(op, reply_topic=reply_topic, **fields)]
+
+
+# ---- stream topics ----
+# "frames/<camera>|" and "tuples|", optionally decimated: "frames/<camera>@<hz>|", "tuples@<hz>|".
+# The closing "|" keeps ZeroMQ's prefix matching from mixing a stream with its decimated forms.
+
+@dataclass(frozen=True)
+class StreamTopic:
+    kind: str  # "frames" or "tuples"
+    camera: str | None
+    rate_hz: float | None
+
+    def __str__(self) -> str:
+        base = "tuples" if self.kind == "tuples" else f"frames/{self.camera}"
+        return base + (f"@{self.rate_hz:g}" if self.rate_hz else "") + "|"
+
+
+def parse_stream_topic(topic: str) -> StreamTopic | None:
+    """The stream a subscription names, or None if it names none."""
+    if not topic.endswith("|"):
+        return None
+    base, _, rate = topic[:-1].partition("@")
+    rate_hz = None
+    if rate:
+        try:
+            rate_hz = float(rate)
+        except ValueError:
+            return None
+        if not 0 < rate_hz < 1e6:
+            return None
+    if base == "tuples":
+        return StreamTopic("tuples", None, rate_hz)
+    if base.startswith("frames/") and len(base) > len("frames/"):
+        return StreamTopic("frames", base[len("frames/"):], rate_hz)
+    return None
 
 
 # ---- replies ----

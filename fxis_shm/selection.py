@@ -27,10 +27,16 @@ class Selection:
 
     index: Mapping[str, int]
     t: Mapping[str, int]
+    least_skew_ns: int | None = None  # the least skew any candidate tuple had (joint only)
 
     @property
     def skew_ns(self) -> int:
         return max(self.t.values()) - min(self.t.values())
+
+    @property
+    def best_skew_ns(self) -> int:
+        """The least skew available near t* (for a joint selection; else this tuple's)."""
+        return self.skew_ns if self.least_skew_ns is None else self.least_skew_ns
 
     def max_abs_error_ns(self, t_star: int) -> int:
         return max(abs(t_star - t) for t in self.t.values())
@@ -94,7 +100,7 @@ def select_joint(
         for _, cam, i in events[l : r + 1]:
             per_cam.setdefault(cam, []).append(i)
         index = {cam: _closest_in(timelines[cam], idx, t_star) for cam, idx in per_cam.items()}
-        sel = Selection(index, {cam: timelines[cam].at(i) for cam, i in index.items()})
+        sel = Selection(index, {cam: timelines[cam].at(i) for cam, i in index.items()}, best_skew)
         key = (sel.max_abs_error_ns(t_star), sel.skew_ns)
         if best is None or key <= best[0]:  # later windows are newer: newest wins ties
             best = (key, sel)

@@ -145,6 +145,7 @@ class Supervisor:
         ]
         self.coordinator = Child("coordinator", "coordinator", {
             "service": config.name, "endpoint": config.endpoint, "pub": config.pub,
+            "events": config.events,
             "cameras": {c.name: {"kind": c.kind} for c in config.cameras},
             "settings": config.settings,
         }, config.log_level)
@@ -188,7 +189,8 @@ class Supervisor:
         for cam in c.cameras:
             opts = ", ".join(f"{k}={v}" for k, v in cam.options.items())
             lines.append(f"  {cam.name:<10} {cam.kind:<10} {opts}")
-        lines.append(f"  requests on {c.endpoint}, publishing on {c.pub}, rings of {c.slots} slots")
+        lines.append(f"  requests on {c.endpoint}, publishing on {c.pub}, request events on {c.events}")
+        lines.append(f"  rings of {c.slots} slots in /dev/shm/fxis.{c.name}.*")
         lines.append("  Ctrl-C stops the service.")
         print("\n".join(lines), file=self.out, flush=True)
 

@@ -1,0 +1,206 @@
+"""Building replies from the rings: snapshots, selection and the copies out.
+
+Raises Reject (an error reply) or NotReady (the frames are not there yet).
+"""
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from typing import Callable
+
+from . import protocol, sequences
+from .cameras import CameraHandle
+from .errors import Code
+from .ring import Overwritten
+from .selection import INDEPENDENT, select
+from .timesearch import Timeline
+
+COPY_ATTEMPTS = 3
+
+
+class Reject(Exception):
+    """Ends a request with an error reply."""
+
+    def __init__(self, code: str, message: str):
+        super().__init__(message)
+        self.code, self.message = code, message
+
+
+class NotReady(Exception):
+    """Frames the request needs are not stored yet: keep waiting."""
+
+
+@dataclass
+class Pending:
+    """A request on its way to a reply; ``respond`` sends the reply frames."""
+
+    respond: Callable[[list], None]
+    request: dict
+    cameras: list[str]
+    t_received: int
+    t_star: int
+    deadline: int = 0
+    baseline: dict[str, int] = field(default_factory=dict)
+    ready_at: dict[str, int] = field(default_factory=dict)
+    wake_at: int = 0
+
+    @property
+    def op(self) -> str:
+        return self.request["op"]
+
+
+class Answers:
+    def __init__(self, cameras: dict[str, CameraHandle], settings: dict):
+        self.cameras = cameras
+        self.settings = settings
+
+    def setting(self, request: dict, key: str):
+        value = request.get(key)
+        return self.settings[key] if value is None else value
+
+    def period(self, cam: str) -> int:
+        return self.cameras[cam].reader.field("period_ns")
+
+    # ---- reading the rings ----
+
+    def snapshots(self, names: list[str], now: int) -> dict:
+        snaps = self.snapshots_allowing_empty(names, now)
+        empty = [c for c in names if not len(snaps[c].timeline)]
+        if empty:
+            raise Reject(Code.NO_FRAMES, f"camera(s) {empty} have stored no frame yet")
+        return snaps
+
+    def snapshots_allowing_empty(self, names: list[str], now: int) -> dict:
+        snaps = {}
+        for cam in names:
+            handle = self.cameras[cam]
+            reason = handle.down_reason(now)
+            if reason:
+                raise Reject(Code.CAMERA_DOWN, reason)
+            snaps[cam] = handle.reader.snapshot()
+        return snaps
+
+    def copy(self, snaps: dict, picks: list[tuple[str, int]]) -> tuple[list, list, dict]:
+        """Copy each distinct (camera, logical index) once: metadata, images, and each pick's position."""
+        frames, images, position = [], [], {}
+        for cam, i in picks:
+            if (cam, i) in position:
+                continue
+            handle = self.cameras[cam]
+            try:
+                image = handle.reader.copy(snaps[cam], i)
+            except Overwritten:
+                handle.torn_reads += 1
+                raise
+            meta = snaps[cam].frame_meta(i)
+            position[(cam, i)] = len(frames)
+            frames.append(protocol.frame_meta(cam, meta.frame_id, meta.t_capture, meta.t_stored,
+                                              meta.generation, image, len(images)))
+            images.append(image)
+        return frames, images, position
+
+    def with_retries(self, names: list[str], now: int, build: Callable[[dict], tuple]):
+        """Run ``build(snapshots)``, re-snapshotting if a chosen slot was overwritten meanwhile."""
+        for attempt in range(COPY_ATTEMPTS):
+            snaps = self.snapshots(names, now if attempt == 0 else time.monotonic_ns())
+            try:
+                return build(snaps)
+            except Overwritten:
+                continue
+        raise Reject(Code.INTERNAL, f"frames were overwritten {COPY_ATTEMPTS} times while being copied")
+
+    # ---- the ops ----
+
+    def check_history(self, cam: str, snap, t_earliest: int, t_received: int) -> None:
+        oldest = snap.timeline.at(0)
+        if t_earliest < oldest - self.period(cam):
+            raise Reject(Code.OUT_OF_RANGE,
+                         f"asks for frames {(oldest - t_earliest) / 1e6:.1f} ms older than the oldest "
+                         f"frame of camera {cam!r}; its ring holds {len(snap.timeline)} frames, the "
+                         f"oldest from {(t_received - oldest) / 1e6:.1f} ms before the request")
+
+    def select_frames(self, mode: str, timelines: dict, t: int, tolerance_ns: int | None = None):
+        radius = max(self.period(c) for c in timelines)
+        if tolerance_ns is None:
+            tolerance_ns = int(self.settings["sync_tolerance_ms"] * 1e6)
+        return select(mode, timelines, t, radius, tolerance_ns)
+
+    def frames_near(self, p: Pending, snaps: dict) -> tuple[dict, list]:
+        """image and tuple: one frame per camera near t*."""
+        for cam in p.cameras:
+            self.check_history(cam, snaps[cam], p.t_star, p.t_received)
+        mode = INDEPENDENT if p.op == "image" else self.setting(p.request, "sync")
+        timelines = {c: snaps[c].timeline for c in p.cameras}
+        sel = self.select_frames(mode, timelines, p.t_star)
+        max_skew = self.setting(p.request, "max_skew_ms")
+        if p.op == "tuple" and max_skew is not None and sel.skew_ns > max_skew * 1e6:
+            if sel.best_skew_ns <= max_skew * 1e6:  # the least-skew tuple meets the limit
+                sel = self.select_frames(mode, timelines, p.t_star, tolerance_ns=0)
+        searched = time.monotonic_ns()
+        if p.op == "tuple" and max_skew is not None and sel.skew_ns > max_skew * 1e6:
+            raise Reject(Code.SKEW_EXCEEDED,
+                         f"the best tuple near t* has a skew of {sel.best_skew_ns / 1e6:.3f} ms, "
+                         f"more than max_skew_ms={max_skew}")
+        frames, images, _ = self.copy(snaps, list(sel.index.items()))
+        body = {"op": p.op, "t_request": p.t_star, "frames": frames,
+                "timing": {"searched": searched}}
+        if p.op == "tuple":
+            body.update(skew_ns=sel.skew_ns, sync=mode)
+        return body, images
+
+    def latest(self, p: Pending, snaps: dict) -> tuple[dict, list]:
+        frames, images, _ = self.copy(snaps, [(c, len(snaps[c].timeline) - 1) for c in p.cameras])
+        return {"op": "latest", "frames": frames, "timing": {}}, images
+
+    def sequence_spec(self, p: Pending) -> sequences.SequenceSpec:
+        r = p.request
+        return sequences.SequenceSpec(
+            kind=r["kind"], t_star=p.t_star, count=r["count"] or 1, direction=r["direction"],
+            interval_ns=int((r["interval_ms"] or 0) * 1e6),
+            start=r["start"] or 0, end=r["end"] or 0,
+        )
+
+    def sequence(self, p: Pending, snaps: dict) -> tuple[dict, list]:
+        spec = self.sequence_spec(p)
+        ref = p.cameras[0]
+        for cam in p.cameras:
+            self.check_history(cam, snaps[cam], sequences.earliest_needed(spec, self.period(cam)),
+                               p.t_received)
+        mode = self.setting(p.request, "sync")
+        timelines = {c: snaps[c].timeline for c in p.cameras}
+        groups: list[dict[str, int]] = []
+        if spec.kind == sequences.INTERVAL:
+            targets = sequences.target_times(spec)
+            for t in targets:
+                groups.append(dict(self.select_frames(mode, timelines, t).index))
+        else:
+            try:
+                indices = sequences.reference_indices(spec, timelines[ref])
+            except sequences.NotYet as exc:
+                raise NotReady(str(exc)) from None
+            except sequences.NotHeld as exc:
+                raise Reject(Code.OUT_OF_RANGE, f"camera {ref!r}: {exc}") from None
+            targets = [timelines[ref].at(i) for i in indices]
+            for i, t in zip(indices, targets):
+                only_this = {ref: _single(timelines[ref], i)}
+                chosen = self.select_frames(mode, {**timelines, **only_this}, t).index
+                groups.append({**chosen, ref: i})
+        self.check_size(len(groups) * len(p.cameras))
+        searched = time.monotonic_ns()
+        frames, images, position = self.copy(snaps, [(c, g[c]) for g in groups for c in p.cameras])
+        body = {
+            "op": "sequence", "t_request": p.t_star, "targets": targets, "frames": frames,
+            "groups": [[position[(c, g[c])] for c in p.cameras] for g in groups],
+            "timing": {"searched": searched},
+        }
+        return body, images
+
+    def check_size(self, n_frames: int) -> None:
+        limit = self.settings["max_sequence_frames"]
+        if n_frames > limit:
+            raise Reject(Code.TOO_LARGE, f"the sequence names {n_frames} frames; the limit is {limit}")
+
+
+def _single(tl: Timeline, i: int) -> Timeline:
+    """A timeline holding only frame ``i`` of ``tl``."""
+    return Timeline(tl.times, tl.physical(i), 1)

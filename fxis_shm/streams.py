@@ -1,0 +1,114 @@
+"""Streams on the PUB socket: each camera's frames and synchronized tuples as
+they arrive, optionally decimated to a rate.
+
+Only streams someone subscribes to are encoded (the XPUB socket reports the
+subscriptions). Every message carries the same metadata as a reply plus a
+per-stream ``seq``, so a subscriber that fell behind (its bounded queue lost
+messages) can tell what it missed from seq and frame_id gaps.
+"""
+from __future__ import annotations
+
+import logging
+from dataclasses import dataclass
+
+from . import protocol
+from .answers import Answers, Reject
+from .protocol import StreamTopic, parse_stream_topic
+from .ring import Overwritten
+from .selection import JOINT
+
+log = logging.getLogger("streams")
+
+
+@dataclass
+class _StreamState:
+    topic: StreamTopic
+    seq: int = 0
+    last_write: int = -1  # frames: write index of the last frame published
+    last_t: int | None = None  # t_capture (frames) or reference time (tuples) last published
+    last_key: tuple = ()  # tuples: the frames of the last tuple published
+    last_t_max: int = 0  # tuples: the newest capture time in the last tuple published
+
+
+class Streams:
+    def __init__(self, answers: Answers, publish):
+        self.answers = answers
+        self.publish = publish
+        self.active: dict[str, _StreamState] = {}
+
+    def subscription(self, topic: str, subscribed: bool) -> None:
+        stream = parse_stream_topic(topic)
+        if stream is None or (stream.camera and stream.camera not in self.answers.cameras):
+            return  # not a stream (an event reply topic, or a prefix): nothing to produce
+        if subscribed:
+            self.active.setdefault(topic, _StreamState(stream))
+            log.info("stream %s subscribed", topic)
+        else:
+            self.active.pop(topic, None)
+            log.info("stream %s unsubscribed", topic)
+
+    def status(self) -> dict:
+        return {topic: {"published": s.seq} for topic, s in self.active.items()}
+
+    def on_frames(self, updated: set[str], now: int) -> None:
+        if not self.active:
+            return
+        copies: dict = {}  # (camera, write index) -> (meta, image), shared by every stream this round
+        for topic, state in self.active.items():
+            try:
+                if state.topic.kind == "frames" and state.topic.camera in updated:
+                    self._frames(topic, state, now, copies)
+                elif state.topic.kind == "tuples":
+                    self._tuple(topic, state, now, copies)
+            except (Reject, Overwritten) as exc:
+                log.debug("stream %s skipped a round: %s", topic, exc)
+
+    def _interval_ok(self, state: _StreamState, t: int, cam_period: int) -> bool:
+        rate = state.topic.rate_hz
+        if state.last_t is None or not rate:
+            return True
+        return t >= state.last_t + int(1e9 / rate) - cam_period // 2
+
+    def _copy(self, snap, cam: str, i: int, copies: dict):
+        key = (cam, snap.first_write + i)
+        if key not in copies:
+            frames, images, _ = self.answers.copy({cam: snap}, [(cam, i)])
+            copies[key] = (frames[0], images[0])
+        return copies[key]
+
+    def _send(self, topic: str, state: _StreamState, metas: list, images: list, extra: dict) -> None:
+        state.seq += 1
+        frames = [{**m, "buffer": n} for n, m in enumerate(metas)]
+        body = {"stream": topic[:-1], "seq": state.seq, "frames": frames, **extra}
+        self.publish(topic, protocol.encode_reply(None, body, images))
+
+    def _frames(self, topic: str, state: _StreamState, now: int, copies: dict) -> None:
+        cam = state.topic.camera
+        snap = self.answers.snapshots([cam], now)[cam]
+        period = self.answers.period(cam)
+        first_new = max(0, state.last_write + 1 - snap.first_write)
+        for i in range(first_new, len(snap.timeline)):
+            t = snap.timeline.at(i)
+            if not self._interval_ok(state, t, period):
+                continue
+            meta, image = self._copy(snap, cam, i, copies)
+            self._send(topic, state, [meta], [image], {})
+            state.last_t = t
+        state.last_write = snap.first_write + len(snap.timeline) - 1
+
+    def _tuple(self, topic: str, state: _StreamState, now: int, copies: dict) -> None:
+        cams = list(self.answers.cameras)
+        snaps = self.answers.snapshots(cams, now)
+        t_ref = min(snaps[c].newest for c in cams)  # every camera has frames up to here
+        period = max(self.answers.period(c) for c in cams)
+        if not self._interval_ok(state, t_ref, period):
+            return
+        sel = self.answers.select_frames(self.answers.settings["sync"] or JOINT,
+                                   {c: snaps[c].timeline for c in cams}, t_ref)
+        key = tuple(snaps[c].first_write + sel.index[c] for c in cams)
+        if key == state.last_key or (state.last_key and max(sel.t.values()) <= state.last_t_max):
+            return
+        pairs = [self._copy(snaps[c], c, sel.index[c], copies) for c in cams]
+        self._send(topic, state, [m for m, _ in pairs], [img for _, img in pairs],
+                   {"t_request": t_ref, "skew_ns": sel.skew_ns})
+        state.last_key, state.last_t, state.last_t_max = key, t_ref, max(sel.t.values())
