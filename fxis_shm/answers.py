@@ -14,6 +14,7 @@ from .errors import Code
 from .ring import Overwritten
 from .selection import INDEPENDENT, select
 from .timesearch import Timeline
+from .waitpolicy import AUTO, waiting_for
 
 COPY_ATTEMPTS = 3
 
@@ -181,6 +182,7 @@ class Answers:
             except sequences.NotHeld as exc:
                 raise Reject(Code.OUT_OF_RANGE, f"camera {ref!r}: {exc}") from None
             targets = [timelines[ref].at(i) for i in indices]
+            self._others_caught_up(p, snaps, targets[-1] if targets else p.t_star)
             for i, t in zip(indices, targets):
                 only_this = {ref: _single(timelines[ref], i)}
                 chosen = self.select_frames(mode, {**timelines, **only_this}, t).index
@@ -194,6 +196,14 @@ class Answers:
             "timing": {"searched": searched},
         }
         return body, images
+
+    def _others_caught_up(self, p: Pending, snaps: dict, t_last: int) -> None:
+        """NotReady while another camera's frame for the last reference time may still come."""
+        now = time.monotonic_ns()
+        for cam in p.cameras[1:]:
+            state = self.cameras[cam].state(snaps[cam], 0)
+            if waiting_for(AUTO, t_last, now, {cam: state}):
+                raise NotReady(f"camera {cam!r} has not stored its frame near the last reference time")
 
     def check_size(self, n_frames: int) -> None:
         limit = self.settings["max_sequence_frames"]

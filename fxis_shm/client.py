@@ -75,6 +75,7 @@ class Client:
         self._sock.setsockopt(zmq.LINGER, 0)
         self._sock.connect(endpoint)
         self._clock_offset: int | None = None  # service clock minus local clock
+        self._periods: float | None = None  # longest frame period, for sequences that wait
 
     def __enter__(self) -> "Client":
         return self
@@ -92,7 +93,7 @@ class Client:
         """The frame of ``camera`` nearest to ``at`` (default: the moment the request arrives)."""
         header, images = self._call("image", self._extra_wait(at, timeout_ms), camera=camera, at=at,
                                     wait=wait, timeout_ms=timeout_ms)
-        return self._frames(header, images)[0]
+        return frames_of(header, images)[0]
 
     def tuple(self, cameras: list[str] | None = None, at: int | None = None,
               sync: str | None = None, wait: str | None = None,
@@ -101,11 +102,41 @@ class Client:
         header, images = self._call("tuple", self._extra_wait(at, timeout_ms), cameras=cameras, at=at,
                                     sync=sync, wait=wait, max_skew_ms=max_skew_ms,
                                     timeout_ms=timeout_ms)
-        return self._tuple(header, images)
+        return tuple_of(header, images)
 
     def latest(self, cameras: list[str] | None = None) -> FrameTuple:
         """The newest stored frame of each camera, without waiting."""
-        return self._tuple(*self._call("latest", 0.0, cameras=cameras))
+        return tuple_of(*self._call("latest", 0.0, cameras=cameras))
+
+    def sequence(self, kind: str, *, camera: str | None = None, cameras: list[str] | None = None,
+                 count: int | None = None, direction: str = "before",
+                 interval_ms: float | None = None, start: int | None = None, end: int | None = None,
+                 at: int | None = None, sync: str | None = None,
+                 timeout_ms: float | None = None) -> list:
+        """Several frames of one ``camera`` (a list of Frame) or tuples of ``cameras``
+        (default all; a list of FrameTuple):
+
+        - ``kind="consecutive"``: ``count`` frames ``before``, ``after`` or ``around`` t*;
+        - ``kind="interval"``: the frames nearest to t* + i*interval_ms, i = 0..count-1;
+        - ``kind="range"``: every frame captured in [start, end] (ns).
+        """
+        fields = dict(camera=camera, cameras=cameras, kind=kind, count=count, direction=direction,
+                      interval_ms=interval_ms, start=start, end=end, at=at, sync=sync,
+                      timeout_ms=timeout_ms)
+        last = end if kind == "range" else at
+        if kind == "interval" and at is not None and count and interval_ms and interval_ms > 0:
+            last = at + int((count - 1) * interval_ms * 1e6)
+        extra = self._extra_wait(last, timeout_ms)
+        if kind == "consecutive" and direction != "before" and count:
+            extra += count * self._longest_period_s()
+        header, images = self._call("sequence", extra, **fields)
+        return sequence_of(header, images, single=camera is not None)
+
+    def _longest_period_s(self) -> float:
+        if self._periods is None:
+            cams = self.status()["cameras"].values()
+            self._periods = max((1 / c["fps"] for c in cams if c.get("fps")), default=1.0)
+        return self._periods
 
     def status(self) -> dict:
         return self._call("status", 0.0)[0]
@@ -150,19 +181,32 @@ class Client:
                 raise service_error(err.get("code", "UNKNOWN"), err.get("message", ""))
             return header, images
 
-    @staticmethod
-    def _frames(header: dict, images: list[np.ndarray]) -> list[Frame]:
-        timing = header.get("timing", {})
-        try:
-            return [
-                Frame(img, m["camera"], m["frame_id"], m["t_capture"], m["t_stored"],
-                      m["generation"], timing)
-                for m, img in zip(header["frames"], images)
-            ]
-        except KeyError as exc:
-            raise ProtocolError(f"frame metadata lacks {exc}") from None
 
-    def _tuple(self, header: dict, images: list[np.ndarray]) -> FrameTuple:
-        frames = self._frames(header, images)
-        return FrameTuple({f.camera: f for f in frames}, header.get("t_request"),
-                          header.get("timing", {}))
+
+# ---- decoding replies and stream messages into Frames ----
+
+def frames_of(header: dict, images: list[np.ndarray]) -> list[Frame]:
+    timing = header.get("timing", {})
+    try:
+        return [
+            Frame(img, m["camera"], m["frame_id"], m["t_capture"], m["t_stored"],
+                  m["generation"], timing)
+            for m, img in zip(header["frames"], images)
+        ]
+    except KeyError as exc:
+        raise ProtocolError(f"frame metadata lacks {exc}") from None
+
+
+def tuple_of(header: dict, images: list[np.ndarray]) -> FrameTuple:
+    frames = frames_of(header, images)
+    return FrameTuple({f.camera: f for f in frames}, header.get("t_request"), header.get("timing", {}))
+
+
+def sequence_of(header: dict, images: list[np.ndarray], single: bool) -> list:
+    frames = frames_of(header, images)
+    groups = header.get("groups", [])
+    timing = header.get("timing", {})
+    if single:
+        return [frames[g[0]] for g in groups]
+    return [FrameTuple({frames[i].camera: frames[i] for i in g}, t, timing)
+            for g, t in zip(groups, header.get("targets", [None] * len(groups)))]

@@ -1,0 +1,165 @@
+"""Publish/subscribe: receive streams and event answers, publish request events.
+
+    with Subscriber("tcp://127.0.0.1:5556") as sub:
+        sub.tuples(rate_hz=5)               # synchronized tuples, 5 per second
+        for message in sub:                 # raises RequestTimeout after ``timeout``
+            print(message.seq, message.tuple.skew_ns)
+
+    with EventPublisher("tcp://127.0.0.1:5557") as events, Subscriber() as answers:
+        answers.topic("robot1/pairs")
+        handshake(events, answers, "robot1/pairs")   # PUB/SUB connect asynchronously
+        events.request("tuple", "robot1/pairs", at=t_star)
+        pair = answers.receive().tuple
+"""
+from __future__ import annotations
+
+import itertools
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import zmq
+
+from . import protocol
+from .client import FrameTuple, frames_of, sequence_of, tuple_of
+from .errors import ProtocolError, RequestTimeout, service_error
+from .protocol import StreamTopic
+
+DEFAULT_PUB = "tcp://127.0.0.1:5556"
+DEFAULT_EVENTS = "tcp://127.0.0.1:5557"
+
+
+@dataclass
+class Message:
+    """One published message: a stream item or the answer to a request event."""
+
+    topic: str
+    header: dict
+    images: list[np.ndarray]
+
+    @property
+    def seq(self) -> int | None:
+        """Per-stream message number; a gap means messages were lost."""
+        return self.header.get("seq")
+
+    @property
+    def ok(self) -> bool:
+        return bool(self.header.get("ok"))
+
+    def raise_for_error(self) -> None:
+        if not self.ok:
+            err = self.header.get("error") or {}
+            raise service_error(err.get("code", "UNKNOWN"), err.get("message", ""))
+
+    @property
+    def frames(self):
+        self.raise_for_error()
+        return frames_of(self.header, self.images)
+
+    @property
+    def tuple(self) -> FrameTuple:
+        self.raise_for_error()
+        return tuple_of(self.header, self.images)
+
+    def sequence(self, single: bool = False) -> list:
+        self.raise_for_error()
+        return sequence_of(self.header, self.images, single)
+
+
+class Subscriber:
+    """A SUB socket with a bounded queue; iterate it or call ``receive``."""
+
+    def __init__(self, endpoint: str = DEFAULT_PUB, timeout: float = 2.0, queue: int = 16,
+                 context: zmq.Context | None = None):
+        self.endpoint = endpoint
+        self.timeout = timeout
+        self._sock = (context or zmq.Context.instance()).socket(zmq.SUB)
+        self._sock.setsockopt(zmq.LINGER, 0)
+        self._sock.setsockopt(zmq.RCVHWM, queue)
+        self._sock.connect(endpoint)
+
+    def topic(self, topic: str) -> str:
+        self._sock.setsockopt(zmq.SUBSCRIBE, topic.encode())
+        return topic
+
+    def frames(self, camera: str, rate_hz: float | None = None) -> str:
+        """Subscribe to every frame of ``camera`` (or ``rate_hz`` of them per second)."""
+        return self.topic(str(StreamTopic("frames", camera, rate_hz)))
+
+    def tuples(self, rate_hz: float | None = None) -> str:
+        """Subscribe to synchronized tuples of all cameras as they complete."""
+        return self.topic(str(StreamTopic("tuples", None, rate_hz)))
+
+    def unsubscribe(self, topic: str) -> None:
+        self._sock.setsockopt(zmq.UNSUBSCRIBE, topic.encode())
+
+    def receive(self, timeout: float | None = None, latest: bool = False) -> Message:
+        """The next message; with ``latest``, skip to the newest one queued."""
+        timeout = self.timeout if timeout is None else timeout
+        if not self._sock.poll(timeout * 1000, zmq.POLLIN):
+            raise RequestTimeout(f"no message from {self.endpoint} within {timeout:.3g} s")
+        frames = self._sock.recv_multipart(copy=False)
+        while latest and self._sock.poll(0, zmq.POLLIN):
+            frames = self._sock.recv_multipart(copy=False)
+        if len(frames) < 2:
+            raise ProtocolError("a published message needs a topic and a header")
+        header, images = protocol.decode_reply([f.buffer for f in frames[1:]])
+        return Message(frames[0].bytes.decode(errors="replace"), header, images)
+
+    def __iter__(self):
+        while True:
+            yield self.receive()
+
+    def close(self) -> None:
+        self._sock.close()
+
+    def __enter__(self) -> "Subscriber":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class EventPublisher:
+    """Publishes request events; the service answers each on its ``reply_topic``."""
+
+    def __init__(self, endpoint: str = DEFAULT_EVENTS, context: zmq.Context | None = None):
+        self.endpoint = endpoint
+        self._ids = itertools.count(1)
+        self._sock = (context or zmq.Context.instance()).socket(zmq.PUB)
+        self._sock.setsockopt(zmq.LINGER, 0)
+        self._sock.connect(endpoint)
+
+    def request(self, op: str, reply_topic: str, **fields) -> int:
+        """Publish one request event (op image, tuple, latest, sequence or time); returns its id."""
+        request_id = next(self._ids)
+        self._sock.send_multipart(protocol.encode_event(op, reply_topic, id=request_id, **fields))
+        return request_id
+
+    def close(self) -> None:
+        self._sock.close()
+
+    def __enter__(self) -> "EventPublisher":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def handshake(events: EventPublisher, answers: Subscriber, reply_topic: str,
+              timeout: float = 5.0) -> None:
+    """Wait until events reach the service and its answers reach ``answers``
+    (subscribed to ``reply_topic``): PUB/SUB connections form asynchronously
+    and drop what is sent before."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        probe = events.request("time", reply_topic)
+        try:
+            while True:
+                message = answers.receive(timeout=0.1)
+                if message.topic == reply_topic and message.header.get("id") == probe:
+                    return
+        except RequestTimeout:
+            continue
+    raise RequestTimeout(f"no answer on {reply_topic!r} within {timeout} s: is the service "
+                         f"listening on {events.endpoint} and publishing to {answers.endpoint}?")
