@@ -12,6 +12,7 @@ import json
 import math
 import os
 import platform
+import subprocess
 import sys
 import time
 from typing import Iterable, Iterator, Sequence
@@ -47,6 +48,13 @@ def add_service_args(p: argparse.ArgumentParser, endpoint_note: str = "") -> Non
                    help="client timeout per request, seconds (no request can hang longer)")
     g.add_argument("--seed", type=int, default=None,
                    help="seed of the random sleeps (default: random; the seed used is saved in the JSON)")
+
+
+def usage_error(p: argparse.ArgumentParser, message: str) -> int:
+    """What ``p.error`` prints, but returned as exit status 2 rather than raised."""
+    p.print_usage(sys.stderr)
+    print(f"{p.prog}: error: {message}", file=sys.stderr)
+    return EXIT_USAGE
 
 
 def positive_int(text: str) -> int:
@@ -144,7 +152,34 @@ REQUEST_ERRORS = (FxisError,)
 
 def host_info() -> dict:
     return {"python": platform.python_version(), "machine": platform.machine(),
-            "cpus": os.cpu_count(), "platform": platform.platform()}
+            "cpus": os.cpu_count(), "platform": platform.platform(), "code": code_version()}
+
+
+def code_line(code: dict) -> str:
+    """One line naming the measured code, for the printed report."""
+    if not code["commit"]:
+        return "code: not in a git checkout"
+    modified = code["modified"] or []
+    return (f"code: commit {code['commit'][:10]}" +
+            (f" with uncommitted changes to {', '.join(modified)}" if modified else " (clean)"))
+
+
+def code_version() -> dict:
+    """The git commit of the measured code and the files that differ from it (None outside git)."""
+    repo = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
+
+    def git(*args):
+        try:
+            done = subprocess.run(["git", "-C", repo, *args], capture_output=True, text=True,
+                                  timeout=5, check=True)
+        except (OSError, subprocess.SubprocessError):
+            return None
+        return done.stdout
+
+    commit = git("rev-parse", "HEAD")
+    changed = git("status", "--porcelain", "--untracked-files=no")
+    return {"commit": commit.strip() if commit else None,
+            "modified": [line[3:] for line in changed.splitlines()] if changed is not None else None}
 
 
 # ---- numbers ---------------------------------------------------------------------------------
