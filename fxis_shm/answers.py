@@ -41,7 +41,6 @@ class Pending:
     t_received: int
     t_star: int
     deadline: int = 0
-    baseline: dict[str, int] = field(default_factory=dict)
     ready_at: dict[str, int] = field(default_factory=dict)
     wake_at: int = 0
 
@@ -120,8 +119,12 @@ class Answers:
                          f"frame of camera {cam!r}; its ring holds {len(snap.timeline)} frames, the "
                          f"oldest from {(t_received - oldest) / 1e6:.1f} ms before the request")
 
+    def radius(self, cameras) -> int:
+        """How far from t* a tuple's frames may lie: the longest frame period."""
+        return max(self.period(c) for c in cameras)
+
     def select_frames(self, mode: str, timelines: dict, t: int, tolerance_ns: int | None = None):
-        radius = max(self.period(c) for c in timelines)
+        radius = self.radius(timelines)
         if tolerance_ns is None:
             tolerance_ns = int(self.settings["sync_tolerance_ms"] * 1e6)
         return select(mode, timelines, t, radius, tolerance_ns)
@@ -130,7 +133,7 @@ class Answers:
         """image and tuple: one frame per camera near t*."""
         for cam in p.cameras:
             self.check_history(cam, snaps[cam], p.t_star, p.t_received)
-        mode = INDEPENDENT if p.op == "image" else self.setting(p.request, "sync")
+        mode = self.sync_mode(p)
         timelines = {c: snaps[c].timeline for c in p.cameras}
         sel = self.select_frames(mode, timelines, p.t_star)
         max_skew = self.setting(p.request, "max_skew_ms")
@@ -148,6 +151,9 @@ class Answers:
         if p.op == "tuple":
             body.update(skew_ns=sel.skew_ns, sync=mode)
         return body, images
+
+    def sync_mode(self, p: Pending) -> str:
+        return INDEPENDENT if p.op == "image" else self.setting(p.request, "sync")
 
     def latest(self, p: Pending, snaps: dict) -> tuple[dict, list]:
         frames, images, _ = self.copy(snaps, [(c, len(snaps[c].timeline) - 1) for c in p.cameras])
@@ -201,7 +207,7 @@ class Answers:
         """NotReady while another camera's frame for the last reference time may still come."""
         now = time.monotonic_ns()
         for cam in p.cameras[1:]:
-            state = self.cameras[cam].state(snaps[cam], 0)
+            state = self.cameras[cam].state(snaps[cam])
             if waiting_for(AUTO, t_last, now, {cam: state}):
                 raise NotReady(f"camera {cam!r} has not stored its frame near the last reference time")
 

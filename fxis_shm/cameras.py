@@ -55,19 +55,15 @@ class CameraHandle:
             return f"camera {self.name!r} is down: its worker has not reported for over 2 s"
         return None
 
-    def state(self, snapshot: Snapshot, baseline: int) -> CameraState:
+    def state(self, snapshot: Snapshot) -> CameraState:
         ring = self.reader
+        n = len(snapshot.timeline)
         return CameraState(
-            count=snapshot.first_write + len(snapshot.timeline),
-            baseline=baseline,
             newest=snapshot.newest,
             period_ns=ring.field("period_ns"),
             delay_ns=max(0, ring.field("delay_ns")),
+            newest_stored=snapshot.frame_meta(n - 1).t_stored if n else None,
         )
-
-    def write_count(self) -> int:
-        ring = self.ring()
-        return ring.field("write_count") if ring is not None else 0
 
     def status(self, now: int) -> dict:
         ring = self.ring()

@@ -22,7 +22,7 @@ from .cameras import CameraHandle
 from .errors import Code, ProtocolError
 from .framewatch import FrameWatch
 from .streams import Streams
-from .waitpolicy import AUTO, waiting_for
+from .waitpolicy import AUTO, NEXT, NONE, waiting_for, waiting_for_selection
 
 log = logging.getLogger("coordinator")
 
@@ -236,7 +236,6 @@ class Coordinator:
             self._check_sequence(p)
         timeout = int(self.answers.setting(request, "timeout_ms") * 1e6)
         p.deadline = max(t_received, self._latest_needed(p, 0)) + timeout
-        p.baseline = {c: self.cameras[c].write_count() for c in cameras}
         return p
 
     def _check_sequence(self, p: Pending) -> None:
@@ -257,10 +256,11 @@ class Coordinator:
     def _advance(self, p: Pending, now: int) -> bool:
         """Answer ``p`` if it can be answered now; True once it got its reply."""
         try:
-            waits = self._waits(p, now)
+            waits, states = self._waits(p, now)
             for cam in p.cameras:
-                if cam not in waits:
-                    p.ready_at.setdefault(cam, now)
+                if cam not in waits:  # ready now, or when a frame that raced the request landed
+                    stored = states[cam].newest_stored if cam in states else None
+                    p.ready_at.setdefault(cam, max(now, stored or now))
             if not waits:
                 try:
                     self._answer(p, now)
@@ -283,19 +283,32 @@ class Coordinator:
             p.respond(protocol.encode_error(p.request["id"], Code.INTERNAL, repr(exc)))
         return True
 
-    def _waits(self, p: Pending, now: int) -> dict:
+    def _waits(self, p: Pending, now: int) -> tuple[dict, dict]:
+        """Cameras still waited for (see waitpolicy), and the camera states seen."""
         if p.op == "latest":
-            return {}
+            return {}, {}
         snaps = self.answers.snapshots_allowing_empty(p.cameras, now)
-        mode = self.answers.setting(p.request, "wait") if p.op in ("image", "tuple") else AUTO
-        waits = {}
-        for cam in p.cameras:
-            state = self.cameras[cam].state(snaps[cam], p.baseline[cam])
-            t_needed = self._latest_needed(p, state.period_ns)
-            if mode == "next" and t_needed > now:  # the paper's policy, for a future t*: also reach t*
+        states = {c: self.cameras[c].state(snaps[c]) for c in p.cameras}
+        if p.op == "sequence":
+            waits = {}
+            for cam, state in states.items():
+                t_needed = self._latest_needed(p, state.period_ns)
                 waits.update(waiting_for(AUTO, t_needed, now, {cam: state}))
-            waits.update(waiting_for(mode, t_needed, now, {cam: state}))
-        return waits
+            return waits, states
+        mode = self.answers.setting(p.request, "wait")
+        if mode == NEXT:
+            waits = waiting_for(NEXT, p.t_star, now, states, t_arrival=p.t_received)
+            if p.t_star > now:  # a future t*: also reach the frames around it
+                waits.update(waiting_for(AUTO, p.t_star, now, states))
+            return waits, states
+        if mode == NONE:
+            return {}, states
+        sync = self.answers.sync_mode(p)
+        return waiting_for_selection(
+            p.t_star, now, {c: snaps[c].timeline for c in p.cameras}, states,
+            lambda timelines: self.answers.select_frames(sync, timelines, p.t_star),
+            self.answers.radius(p.cameras),
+        ), states
 
     def _answer(self, p: Pending, t_waited: int) -> None:
         build = {"image": self.answers.frames_near, "tuple": self.answers.frames_near,

@@ -193,6 +193,7 @@ class RingWriter(_Mapping):
         self.generation = int(h["generation"])
         self._count = int(h["write_count"])
         self._last = None  # (frame_id, t_capture) of the previous stored frame
+        self._samples = 0
         self.semaphore = posix_ipc.Semaphore(
             naming.semaphore_name(service, camera), posix_ipc.O_CREAT, mode=0o600, initial_value=0
         )
@@ -263,15 +264,19 @@ class RingWriter(_Mapping):
         return t_stored
 
     def _update_timing(self, frame_id: int, t_capture: int, t_stored: int) -> None:
+        """Running estimates of the frame period and the capture-to-storage delay:
+        a plain mean over this generation's first samples (so one slow start-up
+        frame does not linger), then an exponential average."""
         h = self.header
+        self._samples += 1
+        weight = min(self._samples, _PERIOD_SMOOTHING)
         if self._last is not None and frame_id > self._last[0] and t_capture > self._last[1]:
             interval = (t_capture - self._last[1]) // (frame_id - self._last[0])
             old = int(h["period_ns"])
-            h["period_ns"] = interval if old <= 0 else old + (interval - old) // _PERIOD_SMOOTHING
+            h["period_ns"] = interval if old <= 0 else old + (interval - old) // weight
         self._last = (frame_id, t_capture)
-        delay = t_stored - t_capture
         old_delay = int(h["delay_ns"])
-        h["delay_ns"] = delay if old_delay == 0 else old_delay + (delay - old_delay) // _PERIOD_SMOOTHING
+        h["delay_ns"] = old_delay + (t_stored - t_capture - old_delay) // weight
 
     def heartbeat(self) -> None:
         self.header["heartbeat_ns"] = time.monotonic_ns()

@@ -2,18 +2,24 @@
 
 - ``next`` (the paper's): wait until every camera of the request has stored a
   frame after the request arrived.
-- ``auto`` (the default): wait for a camera only while its next frame could be
-  closer to t* than its newest stored one, i.e. while t* >= newest + period/2,
-  and stop waiting for it once that frame is overdue (dropped); a t* whose
-  nearest frame is already stored never waits.
+- ``auto`` (the default): wait only for frames the answer would use. Each
+  camera's coming frames are predicted from its period (newest + k*period);
+  the request's own selection runs over stored plus predicted frames, and the
+  request waits for exactly the cameras whose chosen frame is still to come,
+  each until that frame is overdue (then taken as dropped). For one camera this
+  is: wait while t* >= newest + period/2. A t* whose best frames are already
+  stored never waits.
 - ``none``: answer from what is stored.
 
-Pure: the camera states and ``now`` are passed in; nothing reads a clock.
+Pure: the camera states, timelines and ``now`` are passed in; nothing reads a clock.
 """
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Mapping
+from typing import Callable, Mapping
+
+from .selection import Selection
+from .timesearch import Timeline
 
 AUTO = "auto"
 NEXT = "next"
@@ -25,25 +31,33 @@ WAIT_MODES = (AUTO, NEXT, NONE)
 class CameraState:
     """What the wait policy needs to know of one camera at one moment."""
 
-    count: int  # frames stored so far (the ring's write counter)
-    baseline: int  # frames stored when the request arrived
     newest: int | None  # t_capture of the newest stored frame, None if none
     period_ns: int  # measured frame period, 0 if not known yet
     delay_ns: int = 0  # typical time from capture to storage
+    newest_stored: int | None = None  # t_stored of the newest stored frame
+
+
+def overdue_time(t_frame: int, cam: CameraState) -> int:
+    """When a frame due at ``t_frame`` counts as dropped: it is stored a delay after
+    capture; a full period of slack covers a worker delayed by load, which is far
+    commoner than a dropped frame."""
+    return t_frame + cam.period_ns + cam.delay_ns
 
 
 def give_up_time(t_star: int, cam: CameraState) -> int:
-    """When the frame nearest to t* is overdue (dropped): it is captured by
-    t* + period/2 and stored a delay later; a full period of slack covers a
-    worker delayed by load, which is far commoner than a dropped frame."""
-    return t_star + cam.period_ns * 3 // 2 + cam.delay_ns
+    """When the frame nearest to t* (captured by t* + period/2) is overdue."""
+    return overdue_time(t_star + cam.period_ns // 2, cam)
 
 
 def waiting_for(
-    mode: str, t_star: int, now: int, cameras: Mapping[str, CameraState]
+    mode: str, t_star: int, now: int, cameras: Mapping[str, CameraState], t_arrival: int = 0
 ) -> dict[str, int | None]:
     """Cameras the request must still wait for, each mapped to the moment it
-    stops waiting for that camera (None: until the request's own deadline)."""
+    stops waiting for that camera (None: until the request's own deadline).
+
+    The per-camera rules: ``auto`` waits while t* >= newest + period/2 (the next
+    frame would be nearer, or as near and newer); ``next`` while no frame was
+    stored at or after ``t_arrival``."""
     if mode not in WAIT_MODES:
         raise ValueError(f"unknown wait mode {mode!r}; use one of {WAIT_MODES}")
     waits: dict[str, int | None] = {}
@@ -51,13 +65,47 @@ def waiting_for(
         if mode == NONE:
             continue
         if mode == NEXT:
-            if cam.count <= cam.baseline:
+            if cam.newest_stored is None or cam.newest_stored < t_arrival:
                 waits[name] = None
-            continue
-        if cam.newest is None:
+        elif cam.newest is None:
             waits[name] = None
         elif cam.period_ns > 0 and t_star >= cam.newest + cam.period_ns // 2:  # a tie goes to the newer frame
             until = give_up_time(t_star, cam)
             if now < until:
                 waits[name] = until
+    return waits
+
+
+def with_predictions(tl: Timeline, cam: CameraState, now: int, up_to: int) -> tuple[Timeline, list[int]]:
+    """``tl`` extended by the frames the camera should still deliver up to ``up_to``
+    (skipping those already overdue); also returns the predicted times."""
+    stored = [tl.at(i) for i in range(len(tl))]
+    predicted = []
+    if cam.newest is not None and cam.period_ns > 0:
+        t = cam.newest + cam.period_ns
+        while t <= up_to:
+            if now < overdue_time(t, cam):
+                predicted.append(t)
+            t += cam.period_ns
+    times = stored + predicted
+    return Timeline(times, 0, len(times)), predicted
+
+
+def waiting_for_selection(
+    t_star: int, now: int, timelines: Mapping[str, Timeline], cameras: Mapping[str, CameraState],
+    choose: Callable[[dict[str, Timeline]], Selection], radius_ns: int,
+) -> dict[str, int | None]:
+    """``auto`` for a request answered by ``choose``: the cameras whose frame in the
+    best selection over stored and predicted frames is not stored yet."""
+    waits: dict[str, int | None] = {n: None for n, c in cameras.items() if c.newest is None}
+    if waits:
+        return waits
+    extended, stored_count = {}, {}
+    for name, tl in timelines.items():
+        extended[name], _ = with_predictions(tl, cameras[name], now, t_star + radius_ns)
+        stored_count[name] = len(tl)
+    chosen = choose(extended)
+    for name, i in chosen.index.items():
+        if i >= stored_count[name]:
+            waits[name] = overdue_time(extended[name].at(i), cameras[name])
     return waits

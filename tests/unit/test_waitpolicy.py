@@ -3,20 +3,29 @@ from __future__ import annotations
 
 import pytest
 
-from fxis_shm.waitpolicy import AUTO, NEXT, NONE, CameraState, give_up_time, waiting_for
+from fxis_shm.selection import select_independent, select_joint
+from fxis_shm.timesearch import Timeline
+from fxis_shm.waitpolicy import (
+    AUTO, NEXT, NONE, CameraState, give_up_time, waiting_for, waiting_for_selection,
+    with_predictions,
+)
 from .timeline_helpers import MS
 
 PERIOD = 50 * MS
 NEWEST = 1000 * MS  # capture time of the newest stored frame
 
 
-def camera(newest=NEWEST, period_ns=PERIOD, count=10, baseline=10, delay_ns=0) -> CameraState:
-    return CameraState(count=count, baseline=baseline, newest=newest, period_ns=period_ns,
-                       delay_ns=delay_ns)
+ARRIVAL = NEWEST + 10 * MS  # when the request arrived
+
+
+def camera(newest=NEWEST, period_ns=PERIOD, delay_ns=0, stored=None) -> CameraState:
+    if stored is None and newest is not None:
+        stored = newest + delay_ns
+    return CameraState(newest=newest, period_ns=period_ns, delay_ns=delay_ns, newest_stored=stored)
 
 
 def waits(mode, t_star, now, **cameras):
-    return waiting_for(mode, t_star, now, cameras)
+    return waiting_for(mode, t_star, now, cameras, t_arrival=ARRIVAL)
 
 
 # ---- auto ----
@@ -57,7 +66,7 @@ def test_auto_never_waits_for_a_t_star_in_the_past_whatever_the_clock():
 
 
 def test_auto_waits_until_the_deadline_for_a_camera_that_has_stored_nothing():
-    cam = camera(newest=None, count=0, baseline=0)
+    cam = camera(newest=None)
     assert waits(AUTO, NEWEST, NEWEST, cam=cam) == {"cam": None}
     assert waits(AUTO, NEWEST - 10 * PERIOD, NEWEST + 10**12, cam=cam) == {"cam": None}
     assert waits(AUTO, NEWEST, NEWEST, cam=camera(newest=None, period_ns=0)) == {"cam": None}
@@ -83,21 +92,82 @@ def test_auto_waits_only_for_the_cameras_that_are_behind():
 # ---- next and none ----
 
 @pytest.mark.parametrize(
-    "count, baseline, waiting",
-    [(10, 10, True), (9, 10, True), (11, 10, False), (0, 0, True), (1, 0, False)],
+    "stored, waiting",
+    [(ARRIVAL - 1, True), (None, True), (ARRIVAL, False), (ARRIVAL + 5 * MS, False)],
 )
-def test_next_waits_until_a_frame_arrives_after_the_request(count, baseline, waiting):
-    cam = camera(count=count, baseline=baseline)
+def test_next_waits_until_a_frame_is_stored_after_the_request_arrived(stored, waiting):
+    cam = camera(newest=None if stored is None else NEWEST, stored=stored)
     for t_star in (NEWEST - 10 * PERIOD, NEWEST, NEWEST + 10 * PERIOD):  # t* does not matter
-        assert waits(NEXT, t_star, NEWEST, cam=cam) == ({"cam": None} if waiting else {})
+        assert waits(NEXT, t_star, ARRIVAL, cam=cam) == ({"cam": None} if waiting else {})
 
 
-@pytest.mark.parametrize(
-    "cam",
-    [camera(), camera(newest=None, count=0, baseline=0), camera(count=3, baseline=5)],
-)
+@pytest.mark.parametrize("cam", [camera(), camera(newest=None), camera(stored=ARRIVAL - 1)])
 def test_none_never_waits(cam):
     assert waits(NONE, NEWEST + 10 * PERIOD, NEWEST, cam=cam) == {}
+
+
+# ---- auto, deciding with the request's own selection ----
+
+def flat(times):
+    return Timeline(list(times), 0, len(times))
+
+
+def grid(phase, up_to=NEWEST):
+    """Frames every PERIOD at ``phase`` after a multiple of PERIOD, up to ``up_to``."""
+    return [t for t in range(phase, up_to + 1, PERIOD)][-20:]
+
+
+def test_predictions_extend_the_timeline_and_skip_overdue_frames():
+    tl = flat(grid(0))
+    cam = camera(newest=tl.at(len(tl) - 1))
+    extended, predicted = with_predictions(tl, cam, now=NEWEST, up_to=NEWEST + 2 * PERIOD)
+    assert predicted == [NEWEST + PERIOD, NEWEST + 2 * PERIOD]
+    assert len(extended) == len(tl) + 2 and extended.at(len(tl)) == NEWEST + PERIOD
+    _, late = with_predictions(tl, cam, now=NEWEST + 2 * PERIOD + 1, up_to=NEWEST + 2 * PERIOD)
+    assert late == [NEWEST + 2 * PERIOD]  # the first predicted frame is overdue: dropped
+
+
+@pytest.mark.parametrize("offset, waiting", [(0, False), (PERIOD // 2 - 1, False), (PERIOD // 2, True),
+                                             (PERIOD - 1, True)])
+def test_one_camera_waits_as_the_per_camera_rule_says(offset, waiting):
+    tl = flat(grid(0))
+    cam = camera(newest=NEWEST)
+    t_star = NEWEST + offset
+    got = waiting_for_selection(t_star, NEWEST, {"c": tl}, {"c": cam},
+                                lambda tls: select_independent(tls, t_star), PERIOD)
+    assert ("c" in got) == waiting == bool(waits(AUTO, t_star, NEWEST, c=cam))
+
+
+def joint_waits(phases, t_star, now, newest_up_to):
+    timelines = {f"c{p}": flat(grid(p * MS, newest_up_to)) for p in phases}
+    states = {n: camera(newest=tl.at(len(tl) - 1)) for n, tl in timelines.items()}
+    choose = lambda tls: select_joint(tls, t_star, PERIOD)  # noqa: E731
+    return waiting_for_selection(t_star, now, timelines, states, choose, PERIOD)
+
+
+def test_joint_waits_for_a_partner_frame_the_per_camera_rule_ignores():
+    # phases 0 and 20 ms; stored: c0 up to 1000, c20 up to 1020 ms; t* = 1044.
+    # Least-skew tuples (20 ms): {1000, 1020} (44 ms from t*) or {1050, 1070} (26 ms):
+    # the nearer one needs both next frames, though per camera c20's newest (1020)
+    # is nearer to t* than its next (1070).
+    got = joint_waits([0, 20], t_star=1044 * MS, now=1044 * MS, newest_up_to=1044 * MS)
+    assert got == {"c0": 1050 * MS + PERIOD, "c20": 1070 * MS + PERIOD}
+    assert waiting_for(AUTO, 1044 * MS, 1044 * MS, {"c20": camera(newest=1020 * MS)}) == {}
+
+
+def test_joint_does_not_wait_for_frames_it_would_not_use():
+    # phases 0, 10, 30 ms; stored up to 1031 ms; t* = 1026. The best tuple is
+    # {1000, 1010, 1030}, all stored; per camera, c0 would wait for 1050.
+    got = joint_waits([0, 10, 30], t_star=1026 * MS, now=1031 * MS, newest_up_to=1031 * MS)
+    assert got == {}
+    assert "c0" in waiting_for(AUTO, 1026 * MS, 1031 * MS, {"c0": camera(newest=1000 * MS)})
+
+
+def test_an_empty_camera_waits_until_the_deadline():
+    states = {"a": camera(newest=None), "b": camera()}
+    got = waiting_for_selection(NEWEST, NEWEST, {"a": flat([]), "b": flat(grid(0))}, states,
+                                lambda tls: select_joint(tls, NEWEST, PERIOD), PERIOD)
+    assert got == {"a": None}
 
 
 @pytest.mark.parametrize("cameras", [{"cam": camera()}, {}])
