@@ -112,6 +112,8 @@ def service(endpoint: str | None, run_args: list[str], log_path: str,
             info["log"] = log_path
         info["endpoint"] = endpoint
         client = stack.enter_context(Client(endpoint, timeout=timeout))
+        status = client.status()  # the service says where it publishes and takes events
+        info["pub"], info["events"] = status.get("pub"), status.get("events")
         yield client, info
 
 

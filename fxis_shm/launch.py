@@ -16,6 +16,7 @@ import time
 
 from .client import Client
 from .errors import RequestTimeout
+from .tether import die_with_parent
 
 
 def free_tcp_port() -> int:
@@ -42,6 +43,7 @@ class ServiceProcess:
         self.proc = subprocess.Popen(
             [sys.executable, "-m", "fxis_shm.cli", "run", *self.args],
             stdout=subprocess.DEVNULL, stderr=self.stderr, stdin=subprocess.DEVNULL,
+            preexec_fn=die_with_parent,  # a killed launcher takes its service along
         )
         deadline = time.monotonic() + self.ready_timeout
         with self.client(timeout=0.5) as client:

@@ -13,7 +13,9 @@
 """
 from __future__ import annotations
 
+import collections
 import itertools
+import secrets
 import time
 from dataclasses import dataclass
 
@@ -77,9 +79,14 @@ class Subscriber:
         self._sock.setsockopt(zmq.LINGER, 0)
         self._sock.setsockopt(zmq.RCVHWM, queue)
         self._sock.connect(endpoint)
+        self._topics: set[str] = set()
+        self._held: collections.deque[Message] = collections.deque()
 
     def topic(self, topic: str) -> str:
+        """Subscribe to exactly ``topic`` (ZeroMQ matches prefixes; messages on
+        longer topics that merely start with it are skipped here)."""
         self._sock.setsockopt(zmq.SUBSCRIBE, topic.encode())
+        self._topics.add(topic)
         return topic
 
     def frames(self, camera: str, rate_hz: float | None = None) -> str:
@@ -92,19 +99,32 @@ class Subscriber:
 
     def unsubscribe(self, topic: str) -> None:
         self._sock.setsockopt(zmq.UNSUBSCRIBE, topic.encode())
+        self._topics.discard(topic)
 
     def receive(self, timeout: float | None = None, latest: bool = False) -> Message:
-        """The next message; with ``latest``, skip to the newest one queued."""
+        """The next message on a subscribed topic; with ``latest``, the newest one queued."""
+        if self._held and not latest:
+            return self._held.popleft()
         timeout = self.timeout if timeout is None else timeout
-        if not self._sock.poll(timeout * 1000, zmq.POLLIN):
-            raise RequestTimeout(f"no message from {self.endpoint} within {timeout:.3g} s")
-        frames = self._sock.recv_multipart(copy=False)
-        while latest and self._sock.poll(0, zmq.POLLIN):
+        deadline = time.monotonic() + timeout
+        found = None
+        while found is None or (latest and self._sock.poll(0, zmq.POLLIN)):
+            wait_ms = 0 if found is not None else max(0.0, deadline - time.monotonic()) * 1000
+            if not self._sock.poll(wait_ms, zmq.POLLIN):
+                if found is not None:
+                    break
+                raise RequestTimeout(f"no message from {self.endpoint} within {timeout:.3g} s")
             frames = self._sock.recv_multipart(copy=False)
-        if len(frames) < 2:
+            if frames and frames[0].bytes.decode(errors="replace") in self._topics:
+                found = frames
+        if len(found) < 2:
             raise ProtocolError("a published message needs a topic and a header")
-        header, images = protocol.decode_reply([f.buffer for f in frames[1:]])
-        return Message(frames[0].bytes.decode(errors="replace"), header, images)
+        header, images = protocol.decode_reply([f.buffer for f in found[1:]])
+        return Message(found[0].bytes.decode(errors="replace"), header, images)
+
+    def hold(self, message: Message) -> None:
+        """Put back a message read too early: the next ``receive`` returns it first."""
+        self._held.append(message)
 
     def __iter__(self):
         while True:
@@ -125,13 +145,15 @@ class EventPublisher:
 
     def __init__(self, endpoint: str = DEFAULT_EVENTS, context: zmq.Context | None = None):
         self.endpoint = endpoint
-        self._ids = itertools.count(1)
+        self._prefix = secrets.token_hex(4)  # ids stay unique across publishers sharing a topic
+        self._ids = (f"{self._prefix}-{n}" for n in itertools.count(1))
         self._sock = (context or zmq.Context.instance()).socket(zmq.PUB)
         self._sock.setsockopt(zmq.LINGER, 0)
         self._sock.connect(endpoint)
 
-    def request(self, op: str, reply_topic: str, **fields) -> int:
-        """Publish one request event (op image, tuple, latest, sequence or time); returns its id."""
+    def request(self, op: str, reply_topic: str, **fields) -> str:
+        """Publish one request event (op image, tuple, latest, sequence or time); returns its
+        id ("<publisher>-<n>"), which the answer's ``header["id"]`` repeats."""
         request_id = next(self._ids)
         self._sock.send_multipart(protocol.encode_event(op, reply_topic, id=request_id, **fields))
         return request_id
@@ -152,14 +174,30 @@ def handshake(events: EventPublisher, answers: Subscriber, reply_topic: str,
     (subscribed to ``reply_topic``): PUB/SUB connections form asynchronously
     and drop what is sent before."""
     deadline = time.monotonic() + timeout
+    probes = set()
     while time.monotonic() < deadline:
-        probe = events.request("time", reply_topic)
+        probes.add(events.request("time", reply_topic))
         try:
             while True:
                 message = answers.receive(timeout=0.1)
-                if message.topic == reply_topic and message.header.get("id") == probe:
+                if message.topic == reply_topic and message.header.get("id") in probes:
+                    _drain_probe_answers(answers, probes)
                     return
         except RequestTimeout:
             continue
     raise RequestTimeout(f"no answer on {reply_topic!r} within {timeout} s: is the service "
                          f"listening on {events.endpoint} and publishing to {answers.endpoint}?")
+
+
+
+def _drain_probe_answers(answers: Subscriber, probes: set, settle_s: float = 0.05) -> None:
+    """Consume answers to earlier probes that are already on their way; anything
+    else seen meanwhile is kept for the subscriber's next ``receive``."""
+    while True:
+        try:
+            message = answers.receive(timeout=settle_s)
+        except RequestTimeout:
+            return
+        if message.header.get("id") not in probes:
+            answers.hold(message)
+            return

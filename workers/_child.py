@@ -2,7 +2,6 @@
 the readiness handshake, and stopping on SIGTERM or when the supervisor dies."""
 from __future__ import annotations
 
-import ctypes
 import json
 import logging
 import os
@@ -11,8 +10,7 @@ import sys
 import threading
 from typing import Callable
 
-_PR_SET_PDEATHSIG = 1
-
+from fxis_shm.tether import die_with_parent
 
 class Ready:
     """The readiness pipe: one line, ``ok`` or ``error <message>``, then closed."""
@@ -37,15 +35,6 @@ class Ready:
         self._send("error " + message)
 
 
-def _die_with_parent() -> None:
-    """Ask the kernel to SIGTERM us if the supervisor dies, even by kill -9."""
-    try:
-        libc = ctypes.CDLL(None, use_errno=True)
-        libc.prctl(_PR_SET_PDEATHSIG, signal.SIGTERM, 0, 0, 0)
-    except (OSError, AttributeError):
-        pass
-
-
 def child_main(role: str, run: Callable[[dict, Ready, threading.Event], None]) -> None:
     """Entry point of a child: ``python -m fxis_shm.workers.X '<json spec>'``."""
     spec = json.loads(sys.argv[1])
@@ -59,7 +48,7 @@ def child_main(role: str, run: Callable[[dict, Ready, threading.Event], None]) -
     parent = os.getppid()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the supervisor's to handle
-    _die_with_parent()
+    die_with_parent()  # even after kill -9 of the supervisor
     if os.getppid() != parent:
         return
     ready = Ready(spec.get("ready_fd"))
