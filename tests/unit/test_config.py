@@ -12,6 +12,7 @@ from fxis_shm.options import (
 SYNTHETIC_DEFAULTS = {
     "fps": 20.0, "width": 1360, "height": 1024, "pixel_format": "mono8",
     "phase_ms": 0.0, "jitter_ms": 0.0, "drop": 0.0, "seed": 0,
+    "pattern": "stripes", "shift_px": 0,
 }
 
 
@@ -69,6 +70,8 @@ def test_flags_that_were_not_given_change_nothing(flags):
          "r_1", {"phase_ms": -12.5, "jitter_ms": 0.25, "drop": 0.1, "seed": 42}),
         (" left = synthetic : fps = 30 , width = 64 ,", "left", {"fps": 30.0, "width": 64}),
         ("left=synthetic:fps=1e2", "left", {"fps": 100.0}),
+        ("right=synthetic:pattern=chessboard,shift_px=-24", "right",
+         {"pattern": "chessboard", "shift_px": -24}),
     ],
 )
 def test_a_camera_flag_gives_typed_options(flag, name, options):
@@ -218,6 +221,8 @@ def test_build_config_rejects_a_bad_camera_flag_among_good_ones():
         ({"cameras": {"cam0": {"kind": "synthetic", "width": 64.5}}}, "'width'"),
         ({"cameras": {"cam0": {"kind": "synthetic", "drop": 2}}}, "'drop'"),
         ({"cameras": {"cam0": {"kind": "synthetic", "pixel_format": "rgb"}}}, "'pixel_format'"),
+        ({"cameras": {"cam0": {"kind": "synthetic", "pattern": "checkers"}}}, "'pattern'"),
+        ({"cameras": {"cam0": {"kind": "synthetic", "shift_px": 2.5}}}, "'shift_px'"),
         ({"cameras": {"cam0": {"kind": "synthetic", "shutter": 1}}}, "shutter"),
         ({"cameras": {"cam0": {"fps": 20}}}, "[cameras.cam0]"),
         ({"cameras": {"cam0": "synthetic"}}, "[cameras.cam0]"),

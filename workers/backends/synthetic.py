@@ -6,6 +6,19 @@ same fps and phase capture together (like hardware-triggered cameras), and a
 phase offset is exactly the one configured. Deadlines are absolute, so the
 period never drifts. Each image is a pattern that moves with k, with k stamped
 into its first and last row (``fxis_shm.stamp.read_stamp`` reads it back).
+
+Two patterns, both drawn once by ``open`` so that a frame costs one copy:
+
+- ``stripes``: diagonal stripes that move 4 px per frame, so consecutive
+  frames differ everywhere;
+- ``chessboard``: a black and white board of 9x6 inner corners on a white
+  margin, which ``cv2.findChessboardCorners`` finds. It sways slowly
+  (1 px per frame, at most ``square/4`` px either side of its rest position).
+
+``shift_px`` moves the picture left by that many pixels. Two cameras with the
+same fps and phase capture frames with the same k and see the same sway, so
+``left`` with shift_px=0 and ``right`` with shift_px=d form a stereo pair
+whose disparity (x in left minus x in right) is exactly d pixels.
 """
 from __future__ import annotations
 
@@ -21,7 +34,15 @@ from fxis_shm.stamp import write_stamp
 
 from .base import Camera, Capture
 
-_SHIFT_PER_FRAME = 4  # pixels the pattern moves per frame, so consecutive frames differ everywhere
+_SHIFT_PER_FRAME = 4  # pixels the stripes move per frame, so consecutive frames differ everywhere
+BOARD_CORNERS = (9, 6)  # inner corners per row and per column (cv2's pattern size)
+_MIN_SQUARE_PX = 6  # smaller squares are not found reliably
+
+
+def board_square_px(width: int, height: int) -> int:
+    """Side of a chessboard square: about min(width, height)/12 for a 4:3 image,
+    and small enough for a margin either side of the board in any aspect."""
+    return min(width // 16, height // 12)
 
 
 class SyntheticCamera(Camera):
@@ -35,6 +56,12 @@ class SyntheticCamera(Camera):
         "jitter_ms": Option(number(float, 0), 0.0, "uniform timing noise of the capture time, +/- ms"),
         "drop": Option(number(float, 0, 1), 0.0, "probability that a frame is lost"),
         "seed": Option(number(int, 0), 0, "seed of the jitter and drop noise (0: random)"),
+        "pattern": Option(choice("stripes", "chessboard"), "stripes",
+                          "stripes (moving, every frame differs) or chessboard (9x6 inner corners, "
+                          "for cv2.findChessboardCorners)"),
+        "shift_px": Option(number(int, -16384, 16384), 0,
+                           "moves the picture left by this many pixels: the disparity of a stereo "
+                           "pair made of cameras with different shift_px"),
     }
 
     def __init__(self, name, options, time_origin_ns):
@@ -48,6 +75,19 @@ class SyntheticCamera(Camera):
         self._jitter_ns = round(o["jitter_ms"] * 1e6)
         self._rng = random.Random(o["seed"] or None)
         self._k = 0
+        if o["pattern"] == "chessboard":
+            self._check_board_fits()
+
+    def _check_board_fits(self) -> None:
+        w, h, shift = self.options["width"], self.options["height"], self.options["shift_px"]
+        square = board_square_px(w, h)
+        if square < _MIN_SQUARE_PX:
+            raise ValueError(f"pattern=chessboard needs at least {16 * _MIN_SQUARE_PX}x"
+                             f"{12 * _MIN_SQUARE_PX} pixels, got {w}x{h}")
+        room = (w - (BOARD_CORNERS[0] + 1) * square) // 2 - square  # keeps a square of margin
+        if abs(shift) + square // 4 > room:
+            raise ValueError(f"shift_px={shift} moves the chessboard out of a {w}x{h} image; "
+                             f"|shift_px| must be at most {room - square // 4}")
 
     @property
     def layout(self) -> FrameLayout:
@@ -60,12 +100,39 @@ class SyntheticCamera(Camera):
 
     def open(self) -> None:
         lay = self.layout
-        y, x = np.mgrid[0 : lay.height, 0 : lay.width + 256]
-        planes = [(x + 2 * y), (2 * x + y), (x + 3 * y)][: lay.channels]
-        pattern = (np.stack(planes, axis=-1) & 255).astype(np.uint8)
-        self._pattern = pattern[..., 0] if lay.channels == 1 else pattern
+        if self.options["pattern"] == "chessboard":
+            board = self._draw_board(lay.width, lay.height)
+            self._pattern = board if lay.channels == 1 else np.repeat(board[..., None], lay.channels, -1)
+        else:
+            y, x = np.mgrid[0 : lay.height, 0 : lay.width + 256]
+            planes = [(x + 2 * y), (2 * x + y), (x + 3 * y)][: lay.channels]
+            pattern = (np.stack(planes, axis=-1) & 255).astype(np.uint8)
+            self._pattern = pattern[..., 0] if lay.channels == 1 else pattern
         self._image = np.empty(lay.shape, np.uint8)
         self._k = self._index_at(time.monotonic_ns())
+
+    def _draw_board(self, width: int, height: int) -> np.ndarray:
+        """A canvas ``2 * sway`` px wider than the image: frame k shows a window of it."""
+        square = board_square_px(width, height)
+        self._sway = square // 4
+        cols, rows = BOARD_CORNERS[0] + 1, BOARD_CORNERS[1] + 1  # squares
+        canvas = np.full((height, width + 2 * self._sway), 255, np.uint8)
+        x0 = self._sway + (width - cols * square) // 2 - self.options["shift_px"]
+        y0 = (height - rows * square) // 2
+        for r in range(rows):
+            for c in range(r % 2, cols, 2):  # the top-left square is black
+                canvas[y0 + r * square : y0 + (r + 1) * square,
+                       x0 + c * square : x0 + (c + 1) * square] = 0
+        return canvas
+
+    def _window(self, k: int) -> int:
+        """Left edge of frame k's window into the pattern."""
+        if self.options["pattern"] == "chessboard":
+            if not self._sway:
+                return 0
+            p = k % (4 * self._sway)  # a triangle wave over 0..2*sway, 1 px per frame
+            return p if p <= 2 * self._sway else 4 * self._sway - p
+        return (k * _SHIFT_PER_FRAME + self.options["shift_px"]) % 256
 
     def _due(self, k: int) -> int:
         return self.time_origin_ns + self._phase_ns + int(k * self._period)
@@ -101,7 +168,7 @@ class SyntheticCamera(Camera):
             return Capture(self._render(k), k, t_capture)
 
     def _render(self, k: int) -> np.ndarray:
-        shift = (k * _SHIFT_PER_FRAME) % 256
-        np.copyto(self._image, self._pattern[:, shift : shift + self.options["width"]])
+        x = self._window(k)
+        np.copyto(self._image, self._pattern[:, x : x + self.options["width"]])
         write_stamp(self._image, k)
         return self._image
