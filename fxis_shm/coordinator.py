@@ -307,7 +307,7 @@ class Coordinator:
         return waiting_for_selection(
             p.t_star, now, {c: snaps[c].timeline for c in p.cameras}, states,
             lambda timelines: self.answers.select_frames(sync, timelines, p.t_star),
-            self.answers.radius(p.cameras),
+            self.answers.radius(p.cameras), int(self.settings["sync_tolerance_ms"] * 1e6),
         ), states
 
     def _answer(self, p: Pending, t_waited: int) -> None:

@@ -163,6 +163,21 @@ def test_joint_does_not_wait_for_frames_it_would_not_use():
     assert "c0" in waiting_for(AUTO, 1026 * MS, 1031 * MS, {"c0": camera(newest=1000 * MS)})
 
 
+def test_no_wait_for_a_tuple_that_only_looks_less_skewed():
+    # Seen in bench/latency.py (phases 0, 10, 30 ms, jitter 0.3 ms), t* = 1026.4:
+    # stored {c0 999.7, c10 1009.6, c30 1030.2} (skew 30.5, 26.7 from t*) against
+    # predicted {c30 1030.2, c0 1049.7, c10 1059.6} (skew 29.4 without jitter, 33.2 from t*).
+    t_star = 1026_400_000
+    timelines = {"c0": flat([999_700_000]), "c10": flat([1_009_600_000]), "c30": flat([1_030_200_000])}
+    states = {n: camera(newest=tl.at(0)) for n, tl in timelines.items()}
+    choose = lambda tls: select_joint(tls, t_star, PERIOD, tolerance_ns=MS)  # noqa: E731
+    now = 1031 * MS
+    assert waiting_for_selection(t_star, now, timelines, states, choose, PERIOD, MS) == {}
+    # without a tolerance, the strictly less skewed tuple is worth waiting for
+    strict = lambda tls: select_joint(tls, t_star, PERIOD, tolerance_ns=0)  # noqa: E731
+    assert set(waiting_for_selection(t_star, now, timelines, states, strict, PERIOD, 0)) == {"c0", "c10"}
+
+
 def test_an_empty_camera_waits_until_the_deadline():
     states = {"a": camera(newest=None), "b": camera()}
     got = waiting_for_selection(NEWEST, NEWEST, {"a": flat([]), "b": flat(grid(0))}, states,
