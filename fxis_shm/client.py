@@ -62,7 +62,22 @@ class FrameTuple(Mapping):
         return f"FrameTuple({ids}, skew_ns={self.skew_ns})"
 
 
-class Client:
+class SocketOwner:
+    """Closes its one ZeroMQ socket (``self._sock``) on ``close`` and on leaving a ``with``."""
+
+    _sock: zmq.Socket
+
+    def close(self) -> None:
+        self._sock.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class Client(SocketOwner):
     """``Client(endpoint, timeout)``: every call raises RequestTimeout after ``timeout`` seconds."""
 
     def __init__(self, endpoint: str = DEFAULT_ENDPOINT, timeout: float = 2.0,
@@ -76,15 +91,6 @@ class Client:
         self._sock.connect(endpoint)
         self._clock_offset: int | None = None  # service clock minus local clock
         self._periods: float | None = None  # longest frame period, for sequences that wait
-
-    def __enter__(self) -> "Client":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
-
-    def close(self) -> None:
-        self._sock.close()
 
     # ---- operations ----
 

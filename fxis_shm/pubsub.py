@@ -23,7 +23,7 @@ import numpy as np
 import zmq
 
 from . import protocol
-from .client import FrameTuple, frames_of, sequence_of, tuple_of
+from .client import FrameTuple, SocketOwner, frames_of, sequence_of, tuple_of
 from .errors import ProtocolError, RequestTimeout, service_error
 from .protocol import StreamTopic
 
@@ -68,7 +68,7 @@ class Message:
         return sequence_of(self.header, self.images, single)
 
 
-class Subscriber:
+class Subscriber(SocketOwner):
     """A SUB socket with a bounded queue; iterate it or call ``receive``."""
 
     def __init__(self, endpoint: str = DEFAULT_PUB, timeout: float = 2.0, queue: int = 16,
@@ -130,17 +130,9 @@ class Subscriber:
         while True:
             yield self.receive()
 
-    def close(self) -> None:
-        self._sock.close()
-
-    def __enter__(self) -> "Subscriber":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
 
 
-class EventPublisher:
+class EventPublisher(SocketOwner):
     """Publishes request events; the service answers each on its ``reply_topic``."""
 
     def __init__(self, endpoint: str = DEFAULT_EVENTS, context: zmq.Context | None = None):
@@ -158,14 +150,6 @@ class EventPublisher:
         self._sock.send_multipart(protocol.encode_event(op, reply_topic, id=request_id, **fields))
         return request_id
 
-    def close(self) -> None:
-        self._sock.close()
-
-    def __enter__(self) -> "EventPublisher":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
 
 
 def handshake(events: EventPublisher, answers: Subscriber, reply_topic: str,
