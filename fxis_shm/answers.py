@@ -123,10 +123,19 @@ class Answers:
         """How far from t* a tuple's frames may lie: the longest frame period."""
         return max(self.period(c) for c in cameras)
 
+    def tolerance(self, cameras) -> int:
+        """The sync tolerance: tuples this much more skewed than the least count as
+        equally synchronized. Capped at a quarter of the shortest frame period, so it
+        never lets a tuple of another skew class (a period apart) through."""
+        periods = [self.period(c) for c in cameras if self.period(c) > 0]
+        cap = min(periods) // 4 if periods else None
+        tolerance = int(self.settings["sync_tolerance_ms"] * 1e6)
+        return tolerance if cap is None else min(tolerance, cap)
+
     def select_frames(self, mode: str, timelines: dict, t: int, tolerance_ns: int | None = None):
         radius = self.radius(timelines)
         if tolerance_ns is None:
-            tolerance_ns = int(self.settings["sync_tolerance_ms"] * 1e6)
+            tolerance_ns = self.tolerance(timelines)
         return select(mode, timelines, t, radius, tolerance_ns)
 
     def frames_near(self, p: Pending, snaps: dict) -> tuple[dict, list]:

@@ -32,7 +32,7 @@ DEFAULTS = {
     "timeout_ms": 1000.0,
     "max_skew_ms": None,
     "horizon_ms": 10_000.0,
-    "sync_tolerance_ms": 1.0,
+    "sync_tolerance_ms": 2.0,  # above cameras' jitter range, far below a frame period
     "max_pending": 1000,
     "max_sequence_frames": 500,
 }
@@ -307,7 +307,7 @@ class Coordinator:
         return waiting_for_selection(
             p.t_star, now, {c: snaps[c].timeline for c in p.cameras}, states,
             lambda timelines: self.answers.select_frames(sync, timelines, p.t_star),
-            self.answers.radius(p.cameras), int(self.settings["sync_tolerance_ms"] * 1e6),
+            self.answers.radius(p.cameras), self.answers.tolerance(p.cameras),
         ), states
 
     def _answer(self, p: Pending, t_waited: int) -> None:

@@ -42,18 +42,28 @@ def test_streams_are_produced_only_while_subscribed(svc):
     wait_until(lambda: streams(svc) == {}, what="the stream to stop after the subscriber left")
 
 
-def test_frame_stream_is_gapless_and_decimation_keeps_the_rate(svc):
+def dropped(svc, camera):
+    with svc.client() as client:
+        return client.status()["cameras"][camera]["frames_dropped"]
+
+
+def test_frame_stream_carries_every_stored_frame_and_decimation_keeps_the_rate(svc):
     with Subscriber(svc.pub) as full, Subscriber(svc.pub) as slow:
         full.frames("b")
         slow.frames("b", rate_hz=10)
+        full.receive()
+        drops_before = dropped(svc, "b")
         got = [full.receive() for _ in range(20)]
+        drops_after = dropped(svc, "b")
         decimated = [slow.receive() for _ in range(3)]
-    ids = [m.frames[0].frame_id for m in got]
-    assert ids == list(range(ids[0], ids[0] + 20))
     seqs = [m.seq for m in got]
-    assert seqs == list(range(seqs[0], seqs[0] + 20))
+    assert seqs == list(range(seqs[0], seqs[0] + 20))  # no message lost on the way
+    ids = [m.frames[0].frame_id for m in got]
+    assert ids == sorted(set(ids))
+    # an id gap is a frame the camera itself lost (a loaded machine), and is counted as such
+    assert ids[-1] - ids[0] - 19 <= drops_after - drops_before
     steps = {b.frames[0].frame_id - a.frames[0].frame_id for a, b in zip(decimated, decimated[1:])}
-    assert steps == {5}  # 50 fps decimated to 10 per second
+    assert steps <= {4, 5, 6}  # 50 fps decimated to 10 per second, within a frame
 
 
 def test_tuple_stream_is_synchronized(svc):
