@@ -122,10 +122,13 @@ def measure_streams(info: dict, client, seconds: float, timeout: float) -> dict:
         stop.set()
         for t in threads:
             t.join(timeout + 1)
+        # The stalled subscriber's backlog: what it had queued when the run stopped
+        # (the stream goes on, so read up to the last message the live ones saw).
+        last = max((r["seqs"][-1] for r in live if r["seqs"]), default=0)
         backlog = []
-        while True:
+        while not backlog or backlog[-1] < last:
             try:
-                backlog.append(stalled.receive(timeout=0.5).seq)
+                backlog.append(stalled.receive(timeout=1.0).seq)
             except RequestTimeout:
                 break
     finally:
