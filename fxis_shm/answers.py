@@ -43,6 +43,8 @@ class Pending:
     deadline: int = 0
     ready_at: dict[str, int] = field(default_factory=dict)
     wake_at: int = 0
+    triggered: frozenset = frozenset()  # software-triggered cameras this request triggered
+    t_trigger: int | None = None
 
     @property
     def op(self) -> str:
@@ -141,25 +143,41 @@ class Answers:
     def frames_near(self, p: Pending, snaps: dict) -> tuple[dict, list]:
         """image and tuple: one frame per camera near t*."""
         for cam in p.cameras:
-            self.check_history(cam, snaps[cam], p.t_star, p.t_received)
+            if cam not in p.triggered:  # a triggered frame is captured after t* by design
+                self.check_history(cam, snaps[cam], p.t_star, p.t_received)
         mode = self.sync_mode(p)
-        timelines = {c: snaps[c].timeline for c in p.cameras}
+        usable = {c: self.usable_frames(p, c, snaps[c]) for c in p.cameras}
+        timelines = {c: tl for c, (tl, _) in usable.items()}
         sel = self.select_frames(mode, timelines, p.t_star)
         max_skew = self.setting(p.request, "max_skew_ms")
         if p.op == "tuple" and max_skew is not None and sel.skew_ns > max_skew * 1e6:
             if sel.best_skew_ns <= max_skew * 1e6:  # the least-skew tuple meets the limit
                 sel = self.select_frames(mode, timelines, p.t_star, tolerance_ns=0)
         searched = time.monotonic_ns()
+        picks = [(c, usable[c][1] + i) for c, i in sel.index.items()]  # back to snapshot indices
         if p.op == "tuple" and max_skew is not None and sel.skew_ns > max_skew * 1e6:
             raise Reject(Code.SKEW_EXCEEDED,
                          f"the best tuple near t* has a skew of {sel.best_skew_ns / 1e6:.3f} ms, "
                          f"more than max_skew_ms={max_skew}")
-        frames, images, _ = self.copy(snaps, list(sel.index.items()))
+        frames, images, _ = self.copy(snaps, picks)
         body = {"op": p.op, "t_request": p.t_star, "frames": frames,
                 "timing": {"searched": searched}}
         if p.op == "tuple":
             body.update(skew_ns=sel.skew_ns, sync=mode)
         return body, images
+
+    def usable_frames(self, p: Pending, cam: str, snap) -> tuple[Timeline, int]:
+        """The camera's frames a request may use, and the snapshot index of the first:
+        for a camera the request triggered, only those stored after the trigger."""
+        tl = snap.timeline
+        if cam not in p.triggered:
+            return tl, 0
+        first = len(tl)
+        while first > 0 and snap.frame_meta(first - 1).t_stored >= p.t_trigger:
+            first -= 1
+        if first == len(tl):
+            raise NotReady(f"camera {cam!r} has not stored its triggered frame yet")
+        return Timeline(tl.times, tl.physical(first), len(tl) - first), first
 
     def sync_mode(self, p: Pending) -> str:
         return INDEPENDENT if p.op == "image" else self.setting(p.request, "sync")

@@ -2,8 +2,11 @@
 the worker replaces it), whether its worker is alive, and its status."""
 from __future__ import annotations
 
+import posix_ipc
+
+from . import naming
 from .errors import RingError
-from .ring import RingReader, Snapshot
+from .ring import FLAG_TRIGGERED, RingReader, Snapshot
 from .waitpolicy import CameraState
 
 # A worker heartbeats at least every 0.1 s; silence this long means it hangs.
@@ -29,6 +32,7 @@ class CameraHandle:
         self.reader: RingReader | None = None
         self.torn_reads = 0
         self.last_error = ""
+        self._trigger: posix_ipc.Semaphore | None = None
 
     def ring(self) -> RingReader | None:
         """The ring, opened or re-opened if the worker created a new one; None if absent."""
@@ -54,6 +58,17 @@ class CameraHandle:
         if now - ring.field("heartbeat_ns") > STALE_HEARTBEAT_NS:
             return f"camera {self.name!r} is down: its worker has not reported for over 2 s"
         return None
+
+    @property
+    def triggered(self) -> bool:
+        """True if the camera captures on software triggers rather than free-running."""
+        return bool(self.reader.field("flags") & FLAG_TRIGGERED)
+
+    def fire_trigger(self) -> None:
+        """Ask the camera's worker to trigger one capture now."""
+        if self._trigger is None:
+            self._trigger = posix_ipc.Semaphore(naming.trigger_name(self.service, self.name))
+        self._trigger.release()
 
     def state(self, snapshot: Snapshot) -> CameraState:
         ring = self.reader
@@ -89,12 +104,16 @@ class CameraHandle:
             generation=ring.field("generation"),
             writer_pid=ring.field("writer_pid"),
             delay_ms=round(ring.field("delay_ns") / 1e6, 3),
+            trigger="software" if self.triggered else "free",
             hook_errors=ring.field("hook_errors"),
             note=ring.header["status_text"].item().decode(errors="replace"),
         )
         return info
 
     def close(self) -> None:
+        if self._trigger is not None:
+            self._trigger.close()
+            self._trigger = None
         if self.reader is not None:
             self.reader.close()
             self.reader = None

@@ -53,13 +53,14 @@ class ServiceConfig:
 
 def _camera(name: str, kind: str, raw: dict) -> CameraSpec:
     from fxis_shm.workers.backends import backend_class
+    from fxis_shm.workers.processing import PROCESS_OPTIONS
 
     try:
         check_name("camera", name)
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
     cls = backend_class(kind)
-    return CameraSpec(name, kind, parse_options(name, kind, cls.OPTIONS, raw))
+    return CameraSpec(name, kind, parse_options(name, kind, {**cls.OPTIONS, **PROCESS_OPTIONS}, raw))
 
 
 def parse_camera_flag(flag: str) -> CameraSpec:

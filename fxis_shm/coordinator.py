@@ -236,7 +236,19 @@ class Coordinator:
             self._check_sequence(p)
         timeout = int(self.answers.setting(request, "timeout_ms") * 1e6)
         p.deadline = max(t_received, self._latest_needed(p, 0)) + timeout
+        if p.op in ("image", "tuple") and request.get("at") is None:
+            self._trigger(p)
         return p
+
+    def _trigger(self, p: Pending) -> None:
+        """Trigger the request's software-triggered cameras at once (t* = the trigger)."""
+        triggered = [c for c in p.cameras if self.cameras[c].ring() is not None and self.cameras[c].triggered]
+        if not triggered:
+            return
+        p.t_trigger = p.t_star = time.monotonic_ns()
+        for cam in triggered:
+            self.cameras[cam].fire_trigger()
+        p.triggered = frozenset(triggered)
 
     def _check_sequence(self, p: Pending) -> None:
         r = p.request
@@ -296,6 +308,12 @@ class Coordinator:
                 waits.update(waiting_for(AUTO, t_needed, now, {cam: state}))
             return waits, states
         mode = self.answers.setting(p.request, "wait")
+        if p.triggered:  # the triggered frames, and the others' frames around the trigger
+            free = {c: s for c, s in states.items() if c not in p.triggered}
+            waits = waiting_for(AUTO, p.t_star, now, free)
+            waits.update(waiting_for(NEXT, p.t_star, now,
+                                     {c: states[c] for c in p.triggered}, t_arrival=p.t_trigger))
+            return waits, states
         if mode == NEXT:
             waits = waiting_for(NEXT, p.t_star, now, states, t_arrival=p.t_received)
             if p.t_star > now:  # a future t*: also reach the frames around it

@@ -39,6 +39,11 @@ def semaphore_name(service: str, camera: str) -> str:
     return f"/{prefix(service)}{camera}.new"
 
 
+def trigger_name(service: str, camera: str) -> str:
+    """posix_ipc semaphore the coordinator posts to trigger a software-triggered camera."""
+    return f"/{prefix(service)}{camera}.trigger"
+
+
 def leftovers(service: str) -> list[str]:
     """Paths under /dev/shm that belong to ``service``."""
     try:

@@ -37,10 +37,11 @@ LAYOUT_VERSION = 1
 HEADER_BYTES = 1024
 PAGE = 4096
 STATE_INIT, STATE_LIVE, STATE_RETIRED = 0, 1, 2
+FLAG_TRIGGERED = 1  # the camera captures when triggered (trigger=software), not free-running
 _PERIOD_SMOOTHING = 16  # EWMA weight 1/16: follows rate changes within a second at 20 fps
 
 HEADER = np.dtype([
-    ("magic", "S8"), ("version", "<u4"), ("state", "<u4"),
+    ("magic", "S8"), ("version", "<u4"), ("state", "<u4"), ("flags", "<u4"), ("_pad", "<u4"),
     ("height", "<u4"), ("width", "<u4"), ("channels", "<u4"), ("slots", "<u4"),
     ("dtype", "S8"), ("slot_stride", "<u8"), ("data_offset", "<u8"),
     ("generation", "<u8"), ("writer_pid", "<u8"), ("write_count", "<u8"),
@@ -284,6 +285,9 @@ class RingWriter(_Mapping):
     def count(self, field: str, n: int = 1) -> None:
         """Add to one of the counters frames_captured, frames_dropped, hook_errors."""
         self.header[field] = int(self.header[field]) + n
+
+    def set_flags(self, flags: int) -> None:
+        self.header["flags"] = flags
 
     def set_status(self, text: str) -> None:
         self.header["status_text"] = text.encode()[:255]

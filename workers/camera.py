@@ -1,67 +1,133 @@
 """The camera worker process: one camera, one ring. It owns the ring's writer
-side and stores every frame the camera delivers; it never waits for readers."""
+side and stores every frame the camera delivers (after the camera's processing
+hook, if it has one); it never waits for readers."""
 from __future__ import annotations
 
 import logging
 import threading
 import time
 
-from fxis_shm.ring import FrameLayout, RingWriter
+import posix_ipc
 
+from fxis_shm import naming
+from fxis_shm.ring import FLAG_TRIGGERED, FrameLayout, RingWriter
+
+from . import processing
 from ._child import Ready, child_main
 from .backends import backend_class
 
 log = logging.getLogger("camera")
 _GRAB_TIMEOUT_S = 0.1  # also the heartbeat interval while no frames come
+_RESULT_POLL_S = 0.005  # how often results of processing processes are collected
 _FIRST_FRAME_TIMEOUT_S = 10.0
 
 
 def run(spec: dict, ready: Ready, stop: threading.Event) -> None:
     name = spec["camera"]
     camera = backend_class(spec["kind"])(name, spec["options"], spec["time_origin_ns"])
+    process = processing.pipeline(spec["options"])
     camera.open()
     try:
-        first = None
-        layout = camera.layout
-        if layout is None:  # the first frame fixes the layout
-            first = _first_frame(camera, stop)
-            layout = FrameLayout.of(first.image)
+        first, layout, hook_errors = _layout(camera, process, stop)
         ring = RingWriter(spec["service"], name, layout, spec["slots"], camera.nominal_period_ns)
-        log.info("camera %s (%s) streaming %s into %s, generation %d",
-                 name, spec["kind"], layout, ring.name, ring.generation)
+        ring.count("hook_errors", hook_errors)
+        ring.set_flags(FLAG_TRIGGERED if camera.supports_trigger else 0)
+        triggers = _TriggerListener(spec["service"], camera, stop) if camera.supports_trigger else None
+        log.info("camera %s (%s) streaming %s into %s, generation %d", name, spec["kind"], layout,
+                 ring.name, ring.generation)
         ready.ok()
         try:
-            _stream(camera, ring, stop, first)
+            _stream(camera, process, ring, stop, first)
         finally:
+            if triggers:
+                triggers.close()
             ring.close()
     finally:
+        process.close()
         camera.close()
 
 
-def _first_frame(camera, stop):
+def _layout(camera, process, stop) -> tuple:
+    """The ring's layout: the camera's, or that of the first frame its hook returns
+    (frames the hook fails on are counted and skipped, as later ones are).
+    Returns (the first frame to store or None, the layout, hook errors so far)."""
+    if process.hook is None and camera.layout is not None:
+        return None, camera.layout, 0
     deadline = time.monotonic() + _FIRST_FRAME_TIMEOUT_S
+    errors, last_error = 0, "no frame"
     while not stop.is_set() and time.monotonic() < deadline:
         capture = camera.grab(_GRAB_TIMEOUT_S)
-        if capture is not None:
-            return capture
-    raise TimeoutError(f"camera {camera.name!r} delivered no frame in {_FIRST_FRAME_TIMEOUT_S:.0f} s")
-
-
-def _stream(camera, ring: RingWriter, stop: threading.Event, capture=None) -> None:
-    dropped = camera.frames_dropped
-    while not stop.is_set():
         if capture is None:
-            capture = camera.grab(_GRAB_TIMEOUT_S)
+            continue
+        t_available = time.monotonic_ns()
+        image, error = (capture.image, None) if process.hook is None else \
+            processing.run_hook(process.hook, capture.image)
+        if error:
+            errors, last_error = errors + 1, f"the process hook failed: {error}"
+            continue
+        if image is not None:
+            first = processing.Processed(image, capture.frame_id, capture.t_capture, t_available)
+            return first, FrameLayout.of(image), errors
+    raise TimeoutError(f"camera {camera.name!r} gave no frame to store in "
+                       f"{_FIRST_FRAME_TIMEOUT_S:.0f} s ({last_error})")
+
+
+def _stream(camera, process, ring: RingWriter, stop: threading.Event, first=None) -> None:
+    dropped = camera.frames_dropped
+    if first is not None:
+        _store(ring, first)
+    while not stop.is_set():
+        capture = camera.grab(_RESULT_POLL_S if process.in_flight else _GRAB_TIMEOUT_S)
         if capture is None:
             ring.heartbeat()
         else:
-            t_available = time.monotonic_ns()
-            ring.write(capture.image, capture.frame_id, capture.t_capture, t_available)
             ring.count("frames_captured")
+            if not process.submit(capture, time.monotonic_ns()):
+                ring.count("frames_dropped")  # every processing process is busy
+        for item in process.ready():
+            _store(ring, item)
         if camera.frames_dropped != dropped:
             ring.count("frames_dropped", camera.frames_dropped - dropped)
             dropped = camera.frames_dropped
-        capture = None
+
+
+def _store(ring: RingWriter, item: processing.Processed) -> None:
+    if item.error is None and item.image is not None and FrameLayout.of(item.image) != ring.layout:
+        item.error = f"returned {FrameLayout.of(item.image)}, but the ring holds {ring.layout}"
+    if item.error is not None:
+        ring.count("hook_errors")
+        ring.set_status(f"process hook: {item.error}")
+        log.warning("frame %d not stored: process hook %s", item.frame_id, item.error)
+    elif item.image is not None:  # None: the hook skipped the frame
+        ring.write(item.image, item.frame_id, item.t_capture, item.t_available)
+
+
+class _TriggerListener:
+    """Fires the camera's software trigger each time the coordinator posts its semaphore."""
+
+    def __init__(self, service: str, camera, stop: threading.Event):
+        self._sem = posix_ipc.Semaphore(naming.trigger_name(service, camera.name),
+                                        posix_ipc.O_CREAT, mode=0o600, initial_value=0)
+        self._stop = stop
+        self._thread = threading.Thread(target=self._listen, args=(camera,), daemon=True,
+                                        name="trigger")
+        self._thread.start()
+
+    def _listen(self, camera) -> None:
+        while not self._stop.is_set():
+            try:
+                self._sem.acquire(0.2)
+            except posix_ipc.BusyError:
+                continue
+            try:
+                camera.trigger()
+            except Exception:
+                log.exception("software trigger of camera %r failed", camera.name)
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join(1.0)
+        self._sem.close()
 
 
 if __name__ == "__main__":

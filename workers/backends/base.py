@@ -53,3 +53,12 @@ class Camera(ABC):
     def nominal_period_ns(self) -> int:
         """The frame period the camera is set to, 0 if unknown."""
         return 0
+
+    @property
+    def supports_trigger(self) -> bool:
+        """True if the camera captures on ``trigger()`` (trigger=software) rather than free-running."""
+        return False
+
+    def trigger(self) -> None:
+        """Capture one frame now; called from another thread than ``grab``."""
+        raise NotImplementedError(f"camera {self.name!r} is not software-triggered")

@@ -22,6 +22,7 @@ whose disparity (x in left minus x in right) is exactly d pixels.
 """
 from __future__ import annotations
 
+import queue
 import random
 import time
 from fractions import Fraction
@@ -62,6 +63,8 @@ class SyntheticCamera(Camera):
         "shift_px": Option(number(int, -16384, 16384), 0,
                            "moves the picture left by this many pixels: the disparity of a stereo "
                            "pair made of cameras with different shift_px"),
+        "trigger": Option(choice("free", "software"), "free",
+                          "free-running, or one frame per software trigger, captured at the trigger"),
     }
 
     def __init__(self, name, options, time_origin_ns):
@@ -75,6 +78,7 @@ class SyntheticCamera(Camera):
         self._jitter_ns = round(o["jitter_ms"] * 1e6)
         self._rng = random.Random(o["seed"] or None)
         self._k = 0
+        self._triggers: queue.SimpleQueue[int] = queue.SimpleQueue()  # trigger times, ns
         if o["pattern"] == "chessboard":
             self._check_board_fits()
 
@@ -96,7 +100,14 @@ class SyntheticCamera(Camera):
 
     @property
     def nominal_period_ns(self) -> int:
-        return round(self._period)
+        return 0 if self.supports_trigger else round(self._period)
+
+    @property
+    def supports_trigger(self) -> bool:
+        return self.options["trigger"] == "software"
+
+    def trigger(self) -> None:
+        self._triggers.put(time.monotonic_ns())
 
     def open(self) -> None:
         lay = self.layout
@@ -145,6 +156,8 @@ class SyntheticCamera(Camera):
         return max(k, 0)
 
     def grab(self, timeout: float) -> Capture | None:
+        if self.supports_trigger:
+            return self._grab_triggered(timeout)
         give_up = time.monotonic_ns() + int(timeout * 1e9)
         while True:
             now = time.monotonic_ns()
@@ -166,6 +179,15 @@ class SyntheticCamera(Camera):
                 self.frames_dropped += 1
                 continue
             return Capture(self._render(k), k, t_capture)
+
+    def _grab_triggered(self, timeout: float) -> Capture | None:
+        try:
+            t_trigger = self._triggers.get(timeout=timeout)
+        except queue.Empty:
+            return None
+        k = self._k
+        self._k += 1
+        return Capture(self._render(k), k, t_trigger)
 
     def _render(self, k: int) -> np.ndarray:
         x = self._window(k)

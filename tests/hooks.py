@@ -1,0 +1,31 @@
+"""Processing hooks used by the tests (``process=tests.hooks:NAME``)."""
+import time
+
+import cv2
+import numpy as np
+
+from fxis_shm.stamp import read_stamp, write_stamp
+
+
+def half_size(image):
+    """A new layout: half the size, with the frame id stamped again."""
+    frame_id = read_stamp(image)
+    small = np.ascontiguousarray(cv2.resize(image, (image.shape[1] // 2, image.shape[0] // 2)))
+    write_stamp(small, frame_id)
+    return small
+
+
+def even_frames_only(image):
+    return image if read_stamp(image) % 2 == 0 else None
+
+
+def fail_every_third(image):
+    if read_stamp(image) % 3 == 0:
+        raise RuntimeError("this hook fails on every third frame")
+    return image
+
+
+def slow_60ms(image):
+    """Slower than a 20 fps frame period (50 ms): needs 2 processes."""
+    time.sleep(0.06)
+    return image
