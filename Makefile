@@ -13,7 +13,7 @@ $(VENV)/.installed: pyproject.toml scripts/install-system-packages.sh
 	bash scripts/install-system-packages.sh
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[test,bench]"
+	$(BIN)/python -m pip install --quiet -e ".[test,bench,aravis,genicam]"
 	touch $@
 
 demo: setup

@@ -91,6 +91,26 @@ def _grab(args) -> int:
     return 0
 
 
+def _cameras(args) -> int:
+    from .workers.backends import discover_all
+
+    found, unavailable = discover_all()
+    if args.json:
+        print(json.dumps({"cameras": found, "unavailable": unavailable}, indent=2))
+        return 0
+    if found:
+        rows = [["kind", "id (device=...)", "model", "format"]] + [
+            [c["kind"], str(c["id"]), str(c.get("model", "-")), str(c.get("format", "-"))] for c in found]
+        widths = [max(len(r[i]) for r in rows) for i in range(4)]
+        for row in rows:
+            print("  ".join(v.ljust(w) for v, w in zip(row, widths)).rstrip())
+    else:
+        print("no cameras found")
+    for kind, why in unavailable.items():
+        print(f"({kind}: not available: {why})")
+    return 0
+
+
 def _clean(args) -> int:
     from .supervisor import service_running
 
@@ -140,6 +160,10 @@ def parser() -> argparse.ArgumentParser:
     grab.add_argument("--cameras", help="comma-separated cameras (default all)")
     grab.add_argument("--at", type=int, help="t* in ns of the service's CLOCK_MONOTONIC (default now)")
     grab.set_defaults(func=_grab)
+
+    cameras = sub.add_parser("cameras", help="list the cameras the installed backends can reach")
+    cameras.add_argument("--json", action="store_true", help="print the list as JSON")
+    cameras.set_defaults(func=_cameras)
 
     clean = sub.add_parser("clean", help="remove shared memory left by a crashed service")
     clean.add_argument("--name", default="fxis", help="service name (default fxis)")

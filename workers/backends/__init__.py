@@ -8,7 +8,22 @@ from fxis_shm.errors import ConfigError
 
 BACKENDS = {
     "synthetic": "fxis_shm.workers.backends.synthetic:SyntheticCamera",
+    "aravis": "fxis_shm.workers.backends.aravis:AravisCamera",  # GigE Vision, USB3 Vision
+    "genicam": "fxis_shm.workers.backends.genicam:GenicamCamera",  # any GenTL producer
+    "opencv": "fxis_shm.workers.backends.opencv:OpenCVCamera",  # cv2.VideoCapture
 }
+
+
+def discover_all() -> tuple[list[dict], dict[str, str]]:
+    """Every camera reachable through the installed backends, and why a backend
+    could not look (its optional dependency is missing, say)."""
+    found, unavailable = [], {}
+    for kind in BACKENDS:
+        try:
+            found += [{"kind": kind, **cam} for cam in backend_class(kind).discover()]
+        except Exception as exc:  # a missing SDK binding must not hide the other backends
+            unavailable[kind] = f"{type(exc).__name__}: {exc}"
+    return found, unavailable
 
 
 def backend_class(kind: str):

@@ -54,6 +54,13 @@ class Camera(ABC):
         """The frame period the camera is set to, 0 if unknown."""
         return 0
 
+    @classmethod
+    def discover(cls) -> list[dict]:
+        """Cameras this backend can reach: dicts with at least "id" (what --camera
+        takes as device=...), "model" and "format". Raises if the backend's SDK
+        binding is not installed."""
+        return []
+
     @property
     def supports_trigger(self) -> bool:
         """True if the camera captures on ``trigger()`` (trigger=software) rather than free-running."""

@@ -1,0 +1,58 @@
+"""Camera timestamps onto the service clock (CLOCK_MONOTONIC, ns).
+
+- ``wall_to_monotonic``: a host timestamp taken on the wall clock (Aravis gives
+  those) mapped with the offset read at conversion time, right after the frame
+  arrived: a step of the wall clock (NTP, an operator) only affects a frame in
+  flight at that instant, never the frames after it.
+- ``DeviceClockFit``: a camera's own clock (ticks; PTP-synchronized cameras
+  share it) mapped by a continuously fitted drift and offset. Each frame gives a
+  pair (device ticks at capture, host time at arrival); arrival = capture +
+  transfer delay >= capture, so the fit runs through the lower envelope of the
+  pairs (the least delayed frames), not their mean.
+
+Pure: the clocks are read by the caller and passed in.
+"""
+from __future__ import annotations
+
+import collections
+
+
+def wall_to_monotonic(wall_ns: int, monotonic_now_ns: int, wall_now_ns: int) -> int:
+    """``wall_ns`` on CLOCK_MONOTONIC, given both clocks read at (almost) the same moment."""
+    return wall_ns + (monotonic_now_ns - wall_now_ns)
+
+
+class DeviceClockFit:
+    """Maps device ticks onto host monotonic ns: host = offset + drift * ticks * tick_ns."""
+
+    def __init__(self, tick_ns: float = 1.0, window: int = 256):
+        self.tick_ns = tick_ns
+        self._pairs: collections.deque[tuple[int, int]] = collections.deque(maxlen=window)
+        self.drift = 1.0
+        self.offset = 0.0
+
+    def __len__(self) -> int:
+        return len(self._pairs)
+
+    def add(self, device_ticks: int, host_ns: int) -> None:
+        """One frame: its device timestamp and the host time it arrived."""
+        if self._pairs and device_ticks <= self._pairs[-1][0]:
+            self._pairs.clear()  # the device clock went back: the camera restarted
+        self._pairs.append((device_ticks, host_ns))
+        self._refit()
+
+    def _refit(self) -> None:
+        d0, h0 = self._pairs[0]
+        if len(self._pairs) >= 2:
+            d1, h1 = self._pairs[-1]
+            span = (d1 - d0) * self.tick_ns
+            # drift from the ends of the window (long baseline, jitter averages out)
+            self.drift = (h1 - h0) / span if span > 0 else 1.0
+        # offset through the least delayed frame of the window
+        self.offset = min(h - self.drift * (d - d0) * self.tick_ns for d, h in self._pairs) \
+            - self.drift * d0 * self.tick_ns
+
+    def to_host(self, device_ticks: int) -> int:
+        if not self._pairs:
+            raise ValueError("no frames fitted yet")
+        return int(round(self.offset + self.drift * device_ticks * self.tick_ns))
