@@ -279,6 +279,15 @@ class RingWriter(_Mapping):
         old_delay = int(h["delay_ns"])
         h["delay_ns"] = old_delay + (t_stored - t_capture - old_delay) // weight
 
+    def new_generation(self) -> int:
+        """The camera came back after an outage: later frames carry a new generation."""
+        h = self.header
+        self.generation = int(h["generation"]) + 1
+        h["generation"] = self.generation
+        h["generation_started_ns"] = time.monotonic_ns()
+        self._last, self._samples = None, 0
+        return self.generation
+
     def heartbeat(self) -> None:
         self.header["heartbeat_ns"] = time.monotonic_ns()
 

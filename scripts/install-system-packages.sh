@@ -1,16 +1,25 @@
 #!/usr/bin/env bash
-# System packages the service and its tests need, installed when missing.
+# System packages the service and its tests need, installed when missing:
+# - python3-venv, if this Python cannot make a virtualenv;
+# - Aravis (GigE Vision / USB3 Vision) with its GObject introspection data, and
+#   the headers PyGObject compiles against (the "aravis" extra);
+# - aravis-tools, whose arv-fake-gv-camera-0.8 is the GigE Vision camera
+#   emulator the backend tests run against; iproute2 for loopback addresses.
 # Runs as root (or with sudo); does nothing when everything is present.
 set -euo pipefail
 
-packages=()
-python3 -c "import venv, ensurepip" 2>/dev/null || packages+=(python3-venv)
+wanted=(gir1.2-aravis-0.8 aravis-tools libgirepository1.0-dev libcairo2-dev pkg-config iproute2)
+python3 -c "import venv, ensurepip" 2>/dev/null || wanted+=(python3-venv)
 
-if [ ${#packages[@]} -eq 0 ]; then
+missing=()
+for pkg in "${wanted[@]}"; do
+  dpkg-query -W -f='${Status}' "$pkg" 2>/dev/null | grep -q "install ok installed" || missing+=("$pkg")
+done
+if [ ${#missing[@]} -eq 0 ]; then
   exit 0
 fi
 sudo=""
 [ "$(id -u)" -eq 0 ] || sudo="sudo"
-echo "installing system packages: ${packages[*]}"
+echo "installing system packages: ${missing[*]}"
 $sudo apt-get update -qq
-DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq "${packages[@]}"
+DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}"

@@ -15,11 +15,13 @@ from fxis_shm.ring import FLAG_TRIGGERED, FrameLayout, RingWriter
 from . import processing
 from ._child import Ready, child_main
 from .backends import backend_class
+from .backends.base import CameraLost
 
 log = logging.getLogger("camera")
 _GRAB_TIMEOUT_S = 0.1  # also the heartbeat interval while no frames come
 _RESULT_POLL_S = 0.005  # how often results of processing processes are collected
 _FIRST_FRAME_TIMEOUT_S = 10.0
+_RECONNECT_FIRST_S, _RECONNECT_MAX_S = 0.5, 10.0
 
 
 def run(spec: dict, ready: Ready, stop: threading.Event) -> None:
@@ -77,7 +79,12 @@ def _stream(camera, process, ring: RingWriter, stop: threading.Event, first=None
     if first is not None:
         _store(ring, first)
     while not stop.is_set():
-        capture = camera.grab(_RESULT_POLL_S if process.in_flight else _GRAB_TIMEOUT_S)
+        try:
+            capture = camera.grab(_RESULT_POLL_S if process.in_flight else _GRAB_TIMEOUT_S)
+        except CameraLost as exc:
+            _reconnect(camera, ring, stop, str(exc))
+            dropped = camera.frames_dropped
+            continue
         if capture is None:
             ring.heartbeat()
         else:
@@ -89,6 +96,37 @@ def _stream(camera, process, ring: RingWriter, stop: threading.Event, first=None
         if camera.frames_dropped != dropped:
             ring.count("frames_dropped", camera.frames_dropped - dropped)
             dropped = camera.frames_dropped
+
+
+def _reconnect(camera, ring: RingWriter, stop: threading.Event, reason: str) -> None:
+    """Reopen a lost camera with backoff, heartbeating meanwhile so the service
+    knows the worker lives; the frames after the outage get a new generation."""
+    backoff = _RECONNECT_FIRST_S
+    log.warning("camera %s lost: %s", camera.name, reason)
+    while not stop.is_set():
+        ring.set_status(f"camera lost ({reason}); retrying every {backoff:.1f} s")
+        try:
+            camera.close()
+        except Exception:
+            log.debug("closing the lost camera failed", exc_info=True)
+        _sleep_heartbeating(ring, stop, backoff)
+        try:
+            camera.open()
+        except Exception as exc:
+            reason = f"{type(exc).__name__}: {exc}"
+            backoff = min(backoff * 2, _RECONNECT_MAX_S)
+            continue
+        generation = ring.new_generation()
+        ring.set_status("")
+        log.info("camera %s is back (generation %d)", camera.name, generation)
+        return
+
+
+def _sleep_heartbeating(ring: RingWriter, stop: threading.Event, seconds: float) -> None:
+    deadline = time.monotonic() + seconds
+    while not stop.is_set() and time.monotonic() < deadline:
+        ring.heartbeat()
+        stop.wait(min(_GRAB_TIMEOUT_S, max(0.0, deadline - time.monotonic())))
 
 
 def _store(ring: RingWriter, item: processing.Processed) -> None:

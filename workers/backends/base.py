@@ -11,6 +11,11 @@ from fxis_shm.options import Option
 from fxis_shm.ring import FrameLayout
 
 
+class CameraLost(Exception):
+    """The camera stopped answering (unplugged, powered off, network gone). The
+    worker reports it, closes the camera and reopens it with backoff."""
+
+
 @dataclass
 class Capture:
     """One frame as a camera delivered it. ``image`` belongs to the camera and
@@ -39,7 +44,9 @@ class Camera(ABC):
 
     @abstractmethod
     def grab(self, timeout: float) -> Capture | None:
-        """The next frame, or None if none arrived within ``timeout`` seconds."""
+        """The next complete frame, or None if none arrived within ``timeout`` seconds.
+        Raises CameraLost if the camera is gone; incomplete frames are not returned
+        but counted in ``frames_dropped``."""
 
     def close(self) -> None:
         """Stop acquiring and release the device."""
