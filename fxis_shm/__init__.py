@@ -5,10 +5,11 @@ from .errors import (
     CameraDown, ConfigError, FrameTimeout, FxisError, ProtocolError, RequestTimeout,
     ServiceError, SkewExceeded, UnknownCamera,
 )
+from .security import ClientKeys
 from .stamp import read_stamp
 
 __all__ = [
-    "Client", "Frame", "FrameTuple", "read_stamp",
+    "Client", "ClientKeys", "Frame", "FrameTuple", "read_stamp",
     "FxisError", "ConfigError", "ProtocolError", "RequestTimeout", "ServiceError",
     "CameraDown", "UnknownCamera", "SkewExceeded", "FrameTimeout",
 ]

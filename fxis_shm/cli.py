@@ -24,7 +24,8 @@ def _run(args) -> int:
             "name": args.name, "endpoint": args.endpoint, "pub": args.pub, "events": args.events,
             "slots": args.slots,
             "cameras": args.camera, "restart_limit": args.restart_limit,
-            "log_level": args.log_level,
+            "log_level": args.log_level, "curve_secret": args.curve_secret,
+            "curve_clients": args.curve_clients, "insecure_bind": args.insecure_bind or None,
         })
     except ConfigError as exc:
         print(f"fxis run: {exc}", file=sys.stderr)
@@ -91,6 +92,14 @@ def _grab(args) -> int:
     return 0
 
 
+def _keys(args) -> int:
+    from .security import create_keys
+
+    public, secret = create_keys(args.out, args.name)
+    print(f"wrote {public} (public: give it to the other side) and {secret} (secret: keep it)")
+    return 0
+
+
 def _cameras(args) -> int:
     from .workers.backends import discover_all
 
@@ -143,6 +152,10 @@ def parser() -> argparse.ArgumentParser:
     run.add_argument("--config", metavar="FILE.toml", help="settings file (flags override it)")
     run.add_argument("--restart-limit", type=int, help="restarts of a crashed process before giving up (default 5)")
     run.add_argument("--log-level", help="DEBUG, INFO (default), WARNING or ERROR")
+    run.add_argument("--curve-secret", metavar="FILE", help="the service's NAME.key_secret: CurveZMQ on every socket")
+    run.add_argument("--curve-clients", metavar="DIR", help="folder of the public keys (.key) of the clients allowed in")
+    run.add_argument("--insecure-bind", action="store_true",
+                     help="allow endpoints reachable from other hosts without CurveZMQ (prints a warning)")
     run.set_defaults(func=_run)
 
     def client_args(sp):
@@ -160,6 +173,11 @@ def parser() -> argparse.ArgumentParser:
     grab.add_argument("--cameras", help="comma-separated cameras (default all)")
     grab.add_argument("--at", type=int, help="t* in ns of the service's CLOCK_MONOTONIC (default now)")
     grab.set_defaults(func=_grab)
+
+    keys = sub.add_parser("keys", help="make a CurveZMQ key pair (for a service or a client)")
+    keys.add_argument("--out", required=True, metavar="DIR", help="folder to write NAME.key and NAME.key_secret into")
+    keys.add_argument("--name", default="fxis", help="file name of the pair (default fxis)")
+    keys.set_defaults(func=_keys)
 
     cameras = sub.add_parser("cameras", help="list the cameras the installed backends can reach")
     cameras.add_argument("--json", action="store_true", help="print the list as JSON")

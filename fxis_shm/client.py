@@ -17,6 +17,7 @@ import zmq
 
 from . import protocol
 from .errors import ProtocolError, RequestTimeout, service_error
+from .security import ClientKeys
 
 DEFAULT_ENDPOINT = "tcp://127.0.0.1:5555"
 
@@ -62,6 +63,17 @@ class FrameTuple(Mapping):
         return f"FrameTuple({ids}, skew_ns={self.skew_ns})"
 
 
+def connected_socket(context: zmq.Context | None, kind: int, endpoint: str,
+                     keys: ClientKeys | None = None) -> zmq.Socket:
+    """A client socket: LINGER 0 (closing never blocks), CURVE if keys are given."""
+    sock = (context or zmq.Context.instance()).socket(kind)
+    sock.setsockopt(zmq.LINGER, 0)
+    if keys is not None:
+        keys.apply(sock)
+    sock.connect(endpoint)
+    return sock
+
+
 class SocketOwner:
     """Closes its one ZeroMQ socket (``self._sock``) on ``close`` and on leaving a ``with``."""
 
@@ -81,14 +93,13 @@ class Client(SocketOwner):
     """``Client(endpoint, timeout)``: every call raises RequestTimeout after ``timeout`` seconds."""
 
     def __init__(self, endpoint: str = DEFAULT_ENDPOINT, timeout: float = 2.0,
-                 context: zmq.Context | None = None):
+                 context: zmq.Context | None = None, keys: ClientKeys | None = None):
+        """``keys``: for a service with CurveZMQ, its public key and this client's pair
+        (``ClientKeys.from_files("server.key", "me.key_secret")``)."""
         self.endpoint = endpoint
         self.timeout = timeout
         self._ids = itertools.count(1)
-        self._ctx = context or zmq.Context.instance()
-        self._sock = self._ctx.socket(zmq.DEALER)
-        self._sock.setsockopt(zmq.LINGER, 0)
-        self._sock.connect(endpoint)
+        self._sock = connected_socket(context, zmq.DEALER, endpoint, keys)
         self._clock_offset: int | None = None  # service clock minus local clock
         self._periods: float | None = None  # longest frame period, for sequences that wait
 
@@ -167,8 +178,14 @@ class Client(SocketOwner):
 
     def _call(self, op: str, extra_wait: float, **fields) -> tuple[dict, list[np.ndarray]]:
         request_id = next(self._ids)
-        self._sock.send_multipart([b""] + protocol.encode_request(op, id=request_id, **fields))
         deadline = time.monotonic() + self.timeout + extra_wait
+        # A DEALER with no connected peer (service down, or our keys refused) would
+        # block in send: wait for it to become writable within our own deadline.
+        if not self._sock.poll(self.timeout * 1000, zmq.POLLOUT):
+            raise RequestTimeout(f"could not send {op!r} to {self.endpoint} within {self.timeout:.3g} s "
+                                 "(is the service running, and are our keys accepted?)")
+        self._sock.send_multipart([b""] + protocol.encode_request(op, id=request_id, **fields),
+                                  flags=zmq.NOBLOCK)
         while True:
             remaining = deadline - time.monotonic()
             if remaining <= 0 or not self._sock.poll(remaining * 1000, zmq.POLLIN):

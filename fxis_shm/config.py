@@ -4,6 +4,7 @@ Every problem raises ConfigError with a message that names the setting.
 """
 from __future__ import annotations
 
+import os
 import sys
 from dataclasses import dataclass, field, replace
 from typing import Any
@@ -49,6 +50,16 @@ class ServiceConfig:
     settings: dict[str, Any] = field(default_factory=dict)
     restart_limit: int = 5  # restarts of one process before the supervisor gives up on it
     log_level: str = "INFO"
+    curve_secret: str | None = None  # the service's NAME.key_secret: CURVE on every socket
+    curve_clients: str | None = None  # folder of the public keys of the clients allowed in
+    insecure_bind: bool = False  # allow non-loopback endpoints without CURVE
+
+    @property
+    def exposed(self) -> list[str]:
+        """Endpoints reachable from other hosts."""
+        from .security import is_loopback
+
+        return [e for e in (self.endpoint, self.pub, self.events) if not is_loopback(e)]
 
 
 def _camera(name: str, kind: str, raw: dict) -> CameraSpec:
@@ -104,6 +115,7 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
     file_values = dict(file_values or {})
     flags = {k: v for k, v in (flags or {}).items() if v not in (None, [], ())}
     known = {"name", "endpoint", "pub", "events", "slots", "cameras", "restart_limit", "log_level",
+             "curve_secret", "curve_clients", "insecure_bind",
              *SERVICE_SETTINGS}
     unknown = sorted(set(file_values) - known)
     if unknown:
@@ -146,6 +158,7 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
         config = replace(config, slots=_check_int("slots", values["slots"], 2))
     if "restart_limit" in values:
         config = replace(config, restart_limit=_check_int("restart_limit", values["restart_limit"], 0))
+    config = _security(config, values)
     if "log_level" in values:
         level = str(values["log_level"]).upper()
         if level not in ("DEBUG", "INFO", "WARNING", "ERROR"):
@@ -174,3 +187,30 @@ def _setting(key: str, kind: type, value: Any):
         bound = ">= 0" if key in ZERO_ALLOWED else "> 0"
         raise ConfigError(f"{key} must be a finite number {bound}, got {value!r}")
     return number
+
+
+def _security(config: ServiceConfig, values: dict) -> ServiceConfig:
+    secret, clients = values.get("curve_secret"), values.get("curve_clients")
+    if bool(secret) != bool(clients):
+        raise ConfigError("curve_secret and curve_clients go together: the service's secret key "
+                          "file and the folder of the client public keys it accepts")
+    if secret:
+        from .security import load_pair
+
+        try:
+            load_pair(secret)
+        except (OSError, ValueError) as exc:
+            raise ConfigError(f"curve_secret {secret}: {exc}") from None
+        if not os.path.isdir(clients) or not any(f.endswith(".key") for f in os.listdir(clients)):
+            raise ConfigError(f"curve_clients {clients}: not a folder holding client .key files")
+        config = replace(config, curve_secret=secret, curve_clients=clients)
+    insecure = values.get("insecure_bind", False)
+    if not isinstance(insecure, bool):
+        raise ConfigError(f"insecure_bind must be true or false, got {insecure!r}")
+    config = replace(config, insecure_bind=insecure)
+    if config.exposed and not secret and not insecure:
+        raise ConfigError(
+            f"{', '.join(config.exposed)} can be reached from other hosts, and images would travel "
+            "unauthenticated: give curve_secret and curve_clients (see fxis keys), or insecure_bind "
+            "to do it anyway")
+    return config

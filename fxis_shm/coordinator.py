@@ -15,12 +15,14 @@ import time
 from typing import Callable
 
 import zmq
+from zmq.auth.thread import ThreadAuthenticator
 
 from . import protocol, sequences
 from .answers import Answers, NotReady, Pending, Reject
 from .cameras import CameraHandle
 from .errors import Code, ProtocolError
 from .framewatch import FrameWatch
+from .security import load_pair, make_server
 from .streams import Streams
 from .waitpolicy import AUTO, NEXT, NONE, waiting_for, waiting_for_selection
 
@@ -38,6 +40,16 @@ DEFAULTS = {
 }
 _LIVENESS_CHECK_NS = 100_000_000  # waiting requests notice a dead camera this fast
 _PUB_QUEUE = 16  # messages queued per subscriber; beyond, that subscriber loses messages
+
+
+class _Stopping:
+    """Gives the authenticator thread the close() the shutdown loop calls."""
+
+    def __init__(self, auth):
+        self.auth = auth
+
+    def close(self) -> None:
+        self.auth.stop()
 
 
 def split_envelope(frames: list) -> tuple[list, list]:
@@ -63,6 +75,9 @@ class Coordinator:
         self.endpoint = spec["endpoint"]
         self.pub_endpoint = spec["pub"]
         self.events_endpoint = spec.get("events")
+        self.curve = None
+        if spec.get("curve_secret"):
+            self.curve = (load_pair(spec["curve_secret"]), spec["curve_clients"])
         self.settings = {**DEFAULTS, **spec.get("settings", {})}
         self.cameras = {
             name: CameraHandle(self.service, name, cam["kind"])
@@ -80,6 +95,11 @@ class Coordinator:
         ctx = zmq.Context()
         closing = []
         try:
+            if self.curve is not None:  # only clients whose public keys are in the folder
+                auth = ThreadAuthenticator(ctx, log=logging.getLogger("auth"))
+                auth.start()
+                auth.configure_curve(domain="*", location=self.curve[1])
+                closing.append(_Stopping(auth))
             self.router = self._socket(ctx, zmq.ROUTER, self.endpoint, "request endpoint", closing)
             self.router.setsockopt(zmq.ROUTER_MANDATORY, 1)  # report unsendable replies
             self.pub = self._socket(ctx, zmq.XPUB, self.pub_endpoint, "publish endpoint", closing)
@@ -116,11 +136,12 @@ class Coordinator:
                 cam.close()
             ctx.term()
 
-    @staticmethod
-    def _socket(ctx, kind, endpoint: str, what: str, closing: list):
+    def _socket(self, ctx, kind, endpoint: str, what: str, closing: list):
         sock = ctx.socket(kind)
         closing.append(sock)
         sock.setsockopt(zmq.LINGER, 0)
+        if self.curve is not None:
+            make_server(sock, *self.curve[0])
         sock.setsockopt(zmq.SNDHWM, _PUB_QUEUE if kind == zmq.XPUB else 100)
         try:
             sock.bind(endpoint)
@@ -255,9 +276,11 @@ class Coordinator:
         if r["count"] is not None:
             self.answers.check_size(r["count"] * len(p.cameras))
             slots = min((h.reader.slots for h in map(self.cameras.get, p.cameras) if h.ring()), default=None)
-            if r["kind"] == "consecutive" and slots is not None and r["count"] > slots:
+            if r["kind"] == "consecutive" and slots is not None and r["count"] >= slots:
+                # the oldest slot is always the next one overwritten: one fewer is guaranteed
                 raise Reject(Code.OUT_OF_RANGE,
-                             f"asks for {r['count']} consecutive frames; the rings hold {slots}")
+                             f"asks for {r['count']} consecutive frames; rings of {slots} slots "
+                             f"hold at most {slots - 1} consecutive frames that can always be read")
 
     def _latest_needed(self, p: Pending, period_ns: int) -> int:
         """The latest capture time the request needs frames up to."""

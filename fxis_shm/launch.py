@@ -28,7 +28,7 @@ def free_tcp_port() -> int:
 class ServiceProcess:
     def __init__(self, args: list[str] = (), name: str | None = None,
                  endpoint: str | None = None, pub: str | None = None, events: str | None = None,
-                 ready_timeout: float = 30.0, stderr=None):
+                 ready_timeout: float = 30.0, stderr=None, client_keys=None):
         self.name = name or f"t{os.getpid()}x{time.monotonic_ns() % 10**6}"
         self.endpoint = endpoint or f"tcp://127.0.0.1:{free_tcp_port()}"
         self.pub = pub or f"tcp://127.0.0.1:{free_tcp_port()}"
@@ -37,6 +37,7 @@ class ServiceProcess:
                      "--events", self.events, *args]
         self.ready_timeout = ready_timeout
         self.stderr = stderr
+        self.client_keys = client_keys  # for a service with CurveZMQ
         self.proc: subprocess.Popen | None = None
 
     def start(self) -> "ServiceProcess":
@@ -59,7 +60,7 @@ class ServiceProcess:
                         raise RuntimeError(f"service did not answer within {self.ready_timeout} s")
 
     def client(self, timeout: float = 2.0) -> Client:
-        return Client(self.endpoint, timeout=timeout)
+        return Client(self.endpoint, timeout=timeout, keys=self.client_keys)
 
     def stop(self, timeout: float = 10.0) -> int:
         """SIGTERM, wait, then kill; returns the exit code."""

@@ -23,7 +23,8 @@ import numpy as np
 import zmq
 
 from . import protocol
-from .client import FrameTuple, SocketOwner, frames_of, sequence_of, tuple_of
+from .client import FrameTuple, SocketOwner, connected_socket, frames_of, sequence_of, tuple_of
+from .security import ClientKeys
 from .errors import ProtocolError, RequestTimeout, service_error
 from .protocol import StreamTopic
 
@@ -72,12 +73,14 @@ class Subscriber(SocketOwner):
     """A SUB socket with a bounded queue; iterate it or call ``receive``."""
 
     def __init__(self, endpoint: str = DEFAULT_PUB, timeout: float = 2.0, queue: int = 16,
-                 context: zmq.Context | None = None):
+                 context: zmq.Context | None = None, keys: ClientKeys | None = None):
         self.endpoint = endpoint
         self.timeout = timeout
         self._sock = (context or zmq.Context.instance()).socket(zmq.SUB)
         self._sock.setsockopt(zmq.LINGER, 0)
-        self._sock.setsockopt(zmq.RCVHWM, queue)
+        self._sock.setsockopt(zmq.RCVHWM, queue)  # set before connecting, so it applies
+        if keys is not None:
+            keys.apply(self._sock)
         self._sock.connect(endpoint)
         self._topics: set[str] = set()
         self._held: collections.deque[Message] = collections.deque()
@@ -135,13 +138,12 @@ class Subscriber(SocketOwner):
 class EventPublisher(SocketOwner):
     """Publishes request events; the service answers each on its ``reply_topic``."""
 
-    def __init__(self, endpoint: str = DEFAULT_EVENTS, context: zmq.Context | None = None):
+    def __init__(self, endpoint: str = DEFAULT_EVENTS, context: zmq.Context | None = None,
+                 keys: ClientKeys | None = None):
         self.endpoint = endpoint
         self._prefix = secrets.token_hex(4)  # ids stay unique across publishers sharing a topic
         self._ids = (f"{self._prefix}-{n}" for n in itertools.count(1))
-        self._sock = (context or zmq.Context.instance()).socket(zmq.PUB)
-        self._sock.setsockopt(zmq.LINGER, 0)
-        self._sock.connect(endpoint)
+        self._sock = connected_socket(context, zmq.PUB, endpoint, keys)
 
     def request(self, op: str, reply_topic: str, **fields) -> str:
         """Publish one request event (op image, tuple, latest, sequence or time); returns its

@@ -146,6 +146,7 @@ class Supervisor:
         self.coordinator = Child("coordinator", "coordinator", {
             "service": config.name, "endpoint": config.endpoint, "pub": config.pub,
             "events": config.events,
+            "curve_secret": config.curve_secret, "curve_clients": config.curve_clients,
             "cameras": {c.name: {"kind": c.kind} for c in config.cameras},
             "settings": config.settings,
         }, config.log_level)
@@ -191,6 +192,11 @@ class Supervisor:
             lines.append(f"  {cam.name:<10} {cam.kind:<10} {opts}")
         lines.append(f"  requests on {c.endpoint}, publishing on {c.pub}, request events on {c.events}")
         lines.append(f"  rings of {c.slots} slots in /dev/shm/fxis.{c.name}.*")
+        if c.curve_secret:
+            lines.append(f"  CurveZMQ: only the clients whose keys are in {c.curve_clients}")
+        elif c.exposed:
+            lines.append(f"  WARNING: {', '.join(c.exposed)} reachable from other hosts WITHOUT "
+                         "authentication or encryption (--insecure-bind)")
         lines.append("  Ctrl-C stops the service.")
         print("\n".join(lines), file=self.out, flush=True)
 

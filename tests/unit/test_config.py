@@ -95,6 +95,7 @@ FILE_VALUES = {
     "name": "lab",
     "endpoint": "ipc:///tmp/fxis-lab.sock",
     "pub": "tcp://0.0.0.0:7001",
+    "insecure_bind": True,  # 0.0.0.0 is reachable from other hosts
     "slots": 64,
     "restart_limit": 0,
     "log_level": "debug",
@@ -365,3 +366,11 @@ def test_parse_options_names_the_key_of_a_bad_value(raw):
 )
 def test_boolean_accepts_the_usual_spellings(value, expected):
     assert boolean(value) is expected
+
+
+def test_an_exposed_endpoint_needs_curve_keys_or_insecure_bind():
+    with pytest.raises(ConfigError, match="other hosts"):
+        build_config({"pub": "tcp://0.0.0.0:7001"})
+    assert build_config({"pub": "tcp://0.0.0.0:7001", "insecure_bind": True}).exposed == ["tcp://0.0.0.0:7001"]
+    with pytest.raises(ConfigError, match="go together"):
+        build_config({"curve_secret": "server.key_secret"})

@@ -1,0 +1,84 @@
+"""CurveZMQ: only clients with allowed keys are served; exposed endpoints need keys."""
+import subprocess
+import sys
+import time
+
+import pytest
+
+from fxis_shm import Client, ClientKeys, RequestTimeout
+from fxis_shm.launch import free_tcp_port
+from fxis_shm.pubsub import Subscriber
+
+from .conftest import SMALL
+from .test_lifecycle import fxis
+
+pytestmark = pytest.mark.integration
+
+
+@pytest.fixture
+def keys(tmp_path):
+    folder, allowed = tmp_path / "keys", tmp_path / "allowed"
+    for name in ("server", "alice", "mallory"):
+        assert fxis("keys", "--out", str(folder), "--name", name).returncode == 0
+    allowed.mkdir()
+    (allowed / "alice.key").write_bytes((folder / "alice.key").read_bytes())
+    return folder, allowed
+
+
+def client_keys(folder, name):
+    return ClientKeys.from_files(str(folder / "server.key"), str(folder / f"{name}.key_secret"))
+
+
+def test_only_allowed_clients_are_served(start_service, keys):
+    folder, allowed = keys
+    svc = start_service("--camera", f"a=synthetic:fps=50,{SMALL}",
+                        "--curve-secret", str(folder / "server.key_secret"),
+                        "--curve-clients", str(allowed), client_keys=client_keys(folder, "alice"))
+    alice = Client(svc.endpoint, timeout=3.0, keys=client_keys(folder, "alice"))
+    mallory = Client(svc.endpoint, timeout=0.5, keys=client_keys(folder, "mallory"))
+    stranger = Client(svc.endpoint, timeout=0.5)
+    with alice, mallory, stranger:
+        assert alice.image("a").camera == "a"
+        for intruder in (mallory, stranger):
+            for _ in range(3):  # refused, again and again, never hanging (a DEALER without a peer blocks in send)
+                with pytest.raises(RequestTimeout):
+                    intruder.status()
+            assert alice.tuple()["a"].frame_id >= 0  # undisturbed
+    with Subscriber(svc.pub, keys=client_keys(folder, "alice")) as sub:
+        sub.frames("a")
+        assert sub.receive(timeout=3).frames[0].camera == "a"
+    with Subscriber(svc.pub, timeout=0.5) as eavesdropper:
+        eavesdropper.frames("a")
+        with pytest.raises(RequestTimeout):
+            eavesdropper.receive()
+
+
+def test_an_exposed_endpoint_needs_keys():
+    port = free_tcp_port()
+    result = fxis("run", "--camera", f"a=synthetic:{SMALL}", "--endpoint", f"tcp://0.0.0.0:{port}")
+    assert result.returncode == 2
+    assert "other hosts" in result.stderr and "curve" in result.stderr
+
+
+def test_insecure_bind_warns(tmp_path):
+    port = free_tcp_port()
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "fxis_shm.cli", "run", "--name", f"insecure{port}", "--insecure-bind",
+         "--camera", f"a=synthetic:{SMALL}", "--endpoint", f"tcp://0.0.0.0:{port}",
+         "--pub", f"tcp://127.0.0.1:{free_tcp_port()}", "--events", f"tcp://127.0.0.1:{free_tcp_port()}"],
+        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+    try:
+        banner = []
+        deadline = time.monotonic() + 30
+        while time.monotonic() < deadline:
+            line = proc.stdout.readline()
+            if not line:
+                break
+            banner.append(line)
+            if "Ctrl-C" in line:
+                break
+        text = "".join(banner)
+        assert "WARNING" in text and f"tcp://0.0.0.0:{port}" in text
+    finally:
+        proc.terminate()
+        proc.wait(15)
