@@ -43,6 +43,7 @@ class Pending:
     deadline: int = 0
     ready_at: dict[str, int] = field(default_factory=dict)
     wake_at: int = 0
+    missing: list = field(default_factory=list)  # cameras down, left out of a partial tuple
     triggered: frozenset = frozenset()  # software-triggered cameras this request triggered
     t_trigger: int | None = None
 
@@ -142,8 +143,9 @@ class Answers:
 
     def frames_near(self, p: Pending, snaps: dict) -> tuple[dict, list]:
         """image and tuple: one frame per camera near t*."""
+        explicit = p.request.get("at") is not None  # "now" is never too old: the ring moved on
         for cam in p.cameras:
-            if cam not in p.triggered:  # a triggered frame is captured after t* by design
+            if explicit and cam not in p.triggered:
                 self.check_history(cam, snaps[cam], p.t_star, p.t_received)
         mode = self.sync_mode(p)
         usable = {c: self.usable_frames(p, c, snaps[c]) for c in p.cameras}
@@ -164,6 +166,8 @@ class Answers:
                 "timing": {"searched": searched}}
         if p.op == "tuple":
             body.update(skew_ns=sel.skew_ns, sync=mode)
+            if p.missing:
+                body["missing"] = p.missing
         return body, images
 
     def usable_frames(self, p: Pending, cam: str, snap) -> tuple[Timeline, int]:
@@ -197,9 +201,10 @@ class Answers:
     def sequence(self, p: Pending, snaps: dict) -> tuple[dict, list]:
         spec = self.sequence_spec(p)
         ref = p.cameras[0]
-        for cam in p.cameras:
-            self.check_history(cam, snaps[cam], sequences.earliest_needed(spec, self.period(cam)),
-                               p.t_received)
+        if spec.kind != sequences.CONSECUTIVE:  # consecutive frames are checked exactly, by index
+            for cam in p.cameras:
+                self.check_history(cam, snaps[cam], sequences.earliest_needed(spec, self.period(cam)),
+                                   p.t_received)
         mode = self.setting(p.request, "sync")
         timelines = {c: snaps[c].timeline for c in p.cameras}
         groups: list[dict[str, int]] = []

@@ -38,10 +38,12 @@ class Frame:
 class FrameTuple(Mapping):
     """One frame per camera, chosen together for the request time ``t_request``."""
 
-    def __init__(self, frames: dict[str, Frame], t_request: int | None, timing: dict):
+    def __init__(self, frames: dict[str, Frame], t_request: int | None, timing: dict,
+                 missing: list[str] = ()):
         self._frames = frames
         self.t_request = t_request
         self.timing = timing
+        self.missing = list(missing)  # cameras left out of a partial tuple (they were down)
 
     def __getitem__(self, camera: str) -> Frame:
         return self._frames[camera]
@@ -114,11 +116,14 @@ class Client(SocketOwner):
 
     def tuple(self, cameras: list[str] | None = None, at: int | None = None,
               sync: str | None = None, wait: str | None = None,
-              max_skew_ms: float | None = None, timeout_ms: float | None = None) -> FrameTuple:
-        """One frame per camera (default: all), nearest to ``at`` and to each other."""
+              max_skew_ms: float | None = None, timeout_ms: float | None = None,
+              partial: bool = False) -> FrameTuple:
+        """One frame per camera (default: all), nearest to ``at`` and to each other.
+        With ``partial``, cameras that are down are left out (``.missing`` names
+        them) instead of failing the request with CameraDown."""
         header, images = self._call("tuple", self._extra_wait(at, timeout_ms), cameras=cameras, at=at,
                                     sync=sync, wait=wait, max_skew_ms=max_skew_ms,
-                                    timeout_ms=timeout_ms)
+                                    timeout_ms=timeout_ms, partial=partial or None)
         return tuple_of(header, images)
 
     def latest(self, cameras: list[str] | None = None) -> FrameTuple:
@@ -222,7 +227,8 @@ def frames_of(header: dict, images: list[np.ndarray]) -> list[Frame]:
 
 def tuple_of(header: dict, images: list[np.ndarray]) -> FrameTuple:
     frames = frames_of(header, images)
-    return FrameTuple({f.camera: f for f in frames}, header.get("t_request"), header.get("timing", {}))
+    return FrameTuple({f.camera: f for f in frames}, header.get("t_request"), header.get("timing", {}),
+                      header.get("missing", ()))
 
 
 def sequence_of(header: dict, images: list[np.ndarray], single: bool) -> list:

@@ -28,7 +28,7 @@ ZERO_ALLOWED = {"sync_tolerance_ms"}  # 0: always the least skew, however far fr
 SERVICE_SETTINGS = {
     "sync": str, "wait": str, "timeout_ms": float, "max_skew_ms": float,
     "horizon_ms": float, "sync_tolerance_ms": float, "max_pending": int,
-    "max_sequence_frames": int,
+    "max_sequence_frames": int, "max_pending_per_client": int,
 }
 
 

@@ -17,7 +17,7 @@ from typing import Callable
 import zmq
 from zmq.auth.thread import ThreadAuthenticator
 
-from . import protocol, sequences
+from . import naming, protocol, sequences
 from .answers import Answers, NotReady, Pending, Reject
 from .cameras import CameraHandle
 from .errors import Code, ProtocolError
@@ -36,10 +36,12 @@ DEFAULTS = {
     "horizon_ms": 10_000.0,
     "sync_tolerance_ms": 2.0,  # above cameras' jitter range, far below a frame period
     "max_pending": 1000,
+    "max_pending_per_client": 100,
     "max_sequence_frames": 500,
 }
 _LIVENESS_CHECK_NS = 100_000_000  # waiting requests notice a dead camera this fast
 _PUB_QUEUE = 16  # messages queued per subscriber; beyond, that subscriber loses messages
+MAX_MESSAGE_BYTES = 1 << 20  # a peer sending more is disconnected by ZeroMQ
 
 
 class _Stopping:
@@ -143,6 +145,7 @@ class Coordinator:
         if self.curve is not None:
             make_server(sock, *self.curve[0])
         sock.setsockopt(zmq.SNDHWM, _PUB_QUEUE if kind == zmq.XPUB else 100)
+        sock.setsockopt(zmq.MAXMSGSIZE, MAX_MESSAGE_BYTES)
         try:
             sock.bind(endpoint)
         except zmq.ZMQError as exc:
@@ -171,7 +174,10 @@ class Coordinator:
                 frames = sock.recv_multipart(zmq.NOBLOCK)
             except zmq.Again:
                 return
-            handle(frames, time.monotonic_ns())
+            try:
+                handle(frames, time.monotonic_ns())
+            except Exception:  # no message may take the service down
+                log.exception("a message could not be handled; dropped")
 
     def _advance_pending(self, updated: set[str]) -> None:
         if not self.pending:
@@ -189,6 +195,7 @@ class Coordinator:
     def _on_request(self, frames: list, t_received: int) -> None:
         envelope, body = split_envelope(frames)
         respond = lambda reply: self._send(envelope, reply)  # noqa: E731
+        respond.client = bytes(envelope[0])  # for the per-client limit
         try:
             request = protocol.decode_request(body)
         except ProtocolError as exc:
@@ -245,9 +252,20 @@ class Coordinator:
         cameras = self._cameras_of(request)
         if len(self.pending) >= self.settings["max_pending"]:
             raise Reject(Code.BUSY, f"{len(self.pending)} requests are waiting already; try again")
+        client = getattr(respond, "client", None)
+        limit = self.settings["max_pending_per_client"]
+        if client is not None and sum(getattr(q.respond, "client", None) == client for q in self.pending) >= limit:
+            raise Reject(Code.BUSY, f"this client has {limit} requests waiting already (the limit)")
+        missing = []
+        if request.get("partial"):  # leave out the cameras that are down, and say which
+            now = time.monotonic_ns()
+            missing = [c for c in cameras if self.cameras[c].down_reason(now)]
+            cameras = [c for c in cameras if c not in missing]
+            if not cameras:
+                raise Reject(Code.CAMERA_DOWN, f"every requested camera is down: {missing}")
         t_star = request.get("at")
         t_star = t_received if t_star is None else t_star
-        p = Pending(respond, request, cameras, t_received, t_star)
+        p = Pending(respond, request, cameras, t_received, t_star, missing=missing)
         horizon = int(self.settings["horizon_ms"] * 1e6)
         if self._latest_needed(p, 0) - t_received > horizon:
             raise Reject(Code.OUT_OF_RANGE,
@@ -373,9 +391,24 @@ class Coordinator:
             "requests_served": self.requests_served,
             "events_dropped": self.events_dropped,
             "streams": self.streams.status(),
+            "supervisor": self._supervisor_state(),
             "settings": self.settings,
-            "cameras": {name: cam.status(now) for name, cam in self.cameras.items()},
+            "cameras": self._camera_status(now),
         }
+
+    def _camera_status(self, now: int) -> dict:
+        processes = (self._supervisor_state() or {}).get("processes", {})
+        cameras = {name: cam.status(now) for name, cam in self.cameras.items()}
+        for name, info in cameras.items():
+            info["restarts"] = processes.get(f"camera:{name}", {}).get("restarts")
+        return cameras
+
+    def _supervisor_state(self) -> dict | None:
+        try:
+            with open(naming.supervisor_state_path(self.service)) as f:
+                return json.load(f)
+        except (OSError, ValueError):
+            return None
 
     def _op_time(self) -> dict:
         return {"op": "time", "now": time.monotonic_ns()}

@@ -44,6 +44,11 @@ def trigger_name(service: str, camera: str) -> str:
     return f"/{prefix(service)}{camera}.trigger"
 
 
+def supervisor_state_path(service: str) -> str:
+    """The supervisor's process table, read by the coordinator for status."""
+    return os.path.join(SHM_DIR, f"{prefix(service)}supervisor.json")
+
+
 def leftovers(service: str) -> list[str]:
     """Paths under /dev/shm that belong to ``service``."""
     try:
@@ -63,11 +68,13 @@ def remove_leftovers(service: str) -> list[str]:
     for path in leftovers(service):
         entry = os.path.basename(path)
         try:
-            if entry.startswith("sem."):
+            if entry.endswith((".json", ".tmp")):
+                os.unlink(path)
+            elif entry.startswith("sem."):
                 posix_ipc.unlink_semaphore("/" + entry[len("sem."):])
             else:
                 posix_ipc.unlink_shared_memory("/" + entry)
-        except posix_ipc.ExistentialError:
+        except (posix_ipc.ExistentialError, FileNotFoundError):
             continue
         removed.append(path)
     return removed

@@ -62,6 +62,12 @@ def _timeout(field, v):
     return v
 
 
+def _boolean(field, v):
+    if not isinstance(v, bool):
+        _fail(field, f"must be true or false, got {type(v).__name__}")
+    return v
+
+
 def _count(field, v):
     return _int(field, v, minimum=1)
 
@@ -135,6 +141,7 @@ OPS: dict[str, dict[str, tuple[Check, Any]]] = {
         "cameras": (_optional(_names), None),
         "sync": (_optional(_choice(SYNC_MODES)), None),
         "max_skew_ms": (_optional(_number), None),
+        "partial": (_optional(_boolean), None),
         **_WAITING,
     },
     "latest": {"cameras": (_optional(_names), None)},
@@ -198,6 +205,8 @@ def _decode_header(frame: bytes, max_header_bytes: int, schemas: dict) -> dict:
         header = json.loads(raw)
     except (UnicodeDecodeError, ValueError) as exc:
         raise ProtocolError(f"request header is not valid JSON: {exc}") from None
+    except RecursionError:
+        raise ProtocolError("request header is nested too deeply") from None
     if not isinstance(header, dict):
         raise ProtocolError(f"request header must be a JSON object, got {type(header).__name__}")
     if "v" not in header:
@@ -307,8 +316,8 @@ def decode_reply(frames: Sequence) -> tuple[dict, list[np.ndarray]]:
         raise ProtocolError("empty reply")
     try:
         header = json.loads(bytes(frames[0]))
-    except (UnicodeDecodeError, ValueError) as exc:
-        raise ProtocolError(f"reply header is not valid JSON: {exc}") from None
+    except (UnicodeDecodeError, ValueError, RecursionError) as exc:
+        raise ProtocolError(f"reply header is not valid JSON: {exc!r}") from None
     if not isinstance(header, dict) or header.get("v") != VERSION or "ok" not in header:
         raise ProtocolError("reply header is not a version-1 reply")
     buffers = frames[1:]

@@ -76,8 +76,10 @@ def service_running(service: str) -> bool:
 class Child:
     """One supervised process and its restart bookkeeping."""
 
-    def __init__(self, role: str, label: str, spec: dict, log_level: str):
-        self.role, self.label, self.spec = role, label, spec
+    def __init__(self, role: str, label: str, spec: dict, log_level: str, key: str):
+        self.role, self.label, self.spec, self.key = role, label, spec, key
+        self.state = "starting"
+        self.last_exit: int | None = None
         self.log_level = log_level
         self.proc: subprocess.Popen | None = None
         self.restarts = 0
@@ -140,7 +142,7 @@ class Supervisor:
             Child("camera", f"camera {c.name!r}", {
                 "service": config.name, "camera": c.name, "kind": c.kind,
                 "options": c.options, "slots": config.slots, "time_origin_ns": origin,
-            }, config.log_level)
+            }, config.log_level, key=f"camera:{c.name}")
             for c in config.cameras
         ]
         self.coordinator = Child("coordinator", "coordinator", {
@@ -149,7 +151,8 @@ class Supervisor:
             "curve_secret": config.curve_secret, "curve_clients": config.curve_clients,
             "cameras": {c.name: {"kind": c.kind} for c in config.cameras},
             "settings": config.settings,
-        }, config.log_level)
+        }, config.log_level, key="coordinator")
+        self.events: list[dict] = []  # the latest exits and restarts, for status
 
     @property
     def children(self) -> list[Child]:
@@ -169,6 +172,9 @@ class Supervisor:
             except StartError as exc:
                 print(f"fxis: {exc}", file=sys.stderr)
                 return 1
+            for child in self.children:
+                child.state = "running"
+            self._write_state()
             self._announce()
             return self._watch()
         finally:
@@ -216,14 +222,19 @@ class Supervisor:
     def _schedule_restart(self, child: Child, code: int) -> bool:
         if time.monotonic() - child.started_at > STABLE_AFTER_S:
             child.backoff = BACKOFF_FIRST_S
+        child.last_exit = code
         if child.restarts >= self.config.restart_limit:
             log.error("%s exited with code %s; restart limit of %d reached, leaving it down",
                       child.label, code, self.config.restart_limit)
             child.restart_at = float("inf")
+            child.state = "given up"
+            self._event(child, f"exited with code {code}; restart limit reached, left down")
             return False
         log.warning("%s exited with code %s; restarting in %.1f s", child.label, code, child.backoff)
         child.restart_at = time.monotonic() + child.backoff
         child.backoff = min(child.backoff * 2, BACKOFF_MAX_S)
+        child.state = "restarting"
+        self._event(child, f"exited with code {code}; restarting")
         return True
 
     def _restart(self, child: Child) -> None:
@@ -232,9 +243,36 @@ class Supervisor:
         try:
             child.wait_ready()
             log.info("%s restarted (restart %d)", child.label, child.restarts)
+            child.state = "running"
+            self._event(child, f"restarted (restart {child.restarts})")
         except StartError as exc:
             log.error("restart failed: %s", exc)
             child.kill()
+            self._event(child, f"restart failed: {exc}")
+
+    def _event(self, child: Child, what: str) -> None:
+        self.events = (self.events + [{"process": child.key, "t": time.monotonic_ns(), "what": what}])[-20:]
+        self._write_state()
+
+    def _write_state(self) -> None:
+        """The process table, for the coordinator's status (written whole, then renamed)."""
+        state = {
+            "pid": os.getpid(),
+            "processes": {
+                c.key: {"pid": c.proc.pid if c.proc else None, "state": c.state,
+                        "restarts": c.restarts, "last_exit": c.last_exit}
+                for c in self.children
+            },
+            "events": self.events,
+        }
+        path = naming.supervisor_state_path(self.config.name)
+        try:
+            with open(path + ".tmp", "w") as f:
+                json.dump(state, f)
+            os.chmod(path + ".tmp", 0o600)
+            os.replace(path + ".tmp", path)
+        except OSError as exc:
+            log.warning("could not write %s: %s", path, exc)
 
     def _stop_all(self) -> None:
         for child in self.children:

@@ -75,7 +75,7 @@ def _layout(camera, process, stop) -> tuple:
 
 
 def _stream(camera, process, ring: RingWriter, stop: threading.Event, first=None) -> None:
-    dropped = camera.frames_dropped
+    dropped, note = camera.frames_dropped, ""
     if first is not None:
         _store(ring, first)
     while not stop.is_set():
@@ -83,7 +83,7 @@ def _stream(camera, process, ring: RingWriter, stop: threading.Event, first=None
             capture = camera.grab(_RESULT_POLL_S if process.in_flight else _GRAB_TIMEOUT_S)
         except CameraLost as exc:
             _reconnect(camera, ring, stop, str(exc))
-            dropped = camera.frames_dropped
+            dropped, note = camera.frames_dropped, ""  # _reconnect cleared the status
             continue
         if capture is None:
             ring.heartbeat()
@@ -96,6 +96,9 @@ def _stream(camera, process, ring: RingWriter, stop: threading.Event, first=None
         if camera.frames_dropped != dropped:
             ring.count("frames_dropped", camera.frames_dropped - dropped)
             dropped = camera.frames_dropped
+        if camera.note != note:  # what the camera says about itself ("end of file", ...)
+            note = camera.note
+            ring.set_status(note)
 
 
 def _reconnect(camera, ring: RingWriter, stop: threading.Event, reason: str) -> None:

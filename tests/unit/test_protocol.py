@@ -42,7 +42,7 @@ def rejected(frames, code=Code.BAD_REQUEST) -> str:
 
 REQUEST_DEFAULTS = {
     "image": {"id": None, "camera": ..., "at": None, "wait": None, "timeout_ms": None},
-    "tuple": {"id": None, "cameras": None, "sync": None, "max_skew_ms": None,
+    "tuple": {"id": None, "cameras": None, "sync": None, "max_skew_ms": None, "partial": None,
               "at": None, "wait": None, "timeout_ms": None},
     "latest": {"id": None, "cameras": None},
     "status": {"id": None},
@@ -382,3 +382,9 @@ def test_frame_metadata_that_does_not_match_the_buffers_is_rejected(meta, buffer
 def test_the_frames_field_of_a_reply_must_be_a_list(frames_field):
     reply = raw({"v": VERSION, "ok": True, "frames": frames_field}) + [b"x" * 16]
     assert "frames" in bad_reply(reply)
+
+
+def test_deeply_nested_json_is_a_bad_request():
+    with pytest.raises(ProtocolError) as info:
+        decode_request([b"[" * 10_000 + b"]" * 10_000])  # within the size limit
+    assert info.value.code == Code.BAD_REQUEST and "nested" in info.value.message

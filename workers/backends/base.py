@@ -31,6 +31,7 @@ class Camera(ABC):
 
     kind: ClassVar[str]
     OPTIONS: ClassVar[Mapping[str, Option]]
+    note: str = ""  # a short line the worker shows as the camera's status note ("" for none)
 
     def __init__(self, name: str, options: Mapping[str, Any], time_origin_ns: int):
         self.name = name
