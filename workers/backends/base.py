@@ -52,15 +52,18 @@ class Camera(ABC):
     def close(self) -> None:
         """Stop acquiring and release the device."""
 
+    _layout: FrameLayout | None = None  # backends set these when the camera is opened
+    _period_ns: int = 0
+
     @property
     def layout(self) -> FrameLayout | None:
         """The frame layout if known before the first frame."""
-        return None
+        return self._layout
 
     @property
     def nominal_period_ns(self) -> int:
         """The frame period the camera is set to, 0 if unknown."""
-        return 0
+        return self._period_ns
 
     @classmethod
     def discover(cls) -> list[dict]:
@@ -72,7 +75,7 @@ class Camera(ABC):
     @property
     def supports_trigger(self) -> bool:
         """True if the camera captures on ``trigger()`` (trigger=software) rather than free-running."""
-        return False
+        return self.options.get("trigger") == "software"
 
     def trigger(self) -> None:
         """Capture one frame now; called from another thread than ``grab``."""

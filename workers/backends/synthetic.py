@@ -102,10 +102,6 @@ class SyntheticCamera(Camera):
     def nominal_period_ns(self) -> int:
         return 0 if self.supports_trigger else round(self._period)
 
-    @property
-    def supports_trigger(self) -> bool:
-        return self.options["trigger"] == "software"
-
     def trigger(self) -> None:
         self._triggers.put(time.monotonic_ns())
 

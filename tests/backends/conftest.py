@@ -1,0 +1,158 @@
+"""Fixtures for backend tests against real protocol peers: GigE Vision camera
+emulators (``arv-fake-gv-camera-0.8``) started per test and killed at teardown,
+a second loopback address for a second emulator, and real ``fxis run`` services.
+
+Tests skip only if Aravis' Python binding or the emulator is not installed.
+"""
+from __future__ import annotations
+
+import itertools
+import os
+import shutil
+import signal
+import socket
+import struct
+import subprocess
+import sys
+import time
+
+import pytest
+
+from fxis_shm.launch import ServiceProcess
+from fxis_shm.tether import die_with_parent
+
+from ..conftest import fxis, start_service  # noqa: F401  (shared with the integration tests)
+
+EMULATOR = "arv-fake-gv-camera-0.8"
+GVCP_PORT = 3956
+SECOND_ADDRESS = "127.0.0.2"
+START_TIMEOUT_S = 10.0
+
+
+def aravis_missing() -> str | None:
+    """Why the Aravis tests cannot run here, or None."""
+    if shutil.which(EMULATOR) is None:
+        return f"{EMULATOR} is not installed (Debian package aravis-tools)"
+    try:
+        from fxis_shm.workers.backends.aravis import load_aravis
+
+        load_aravis()
+    except ImportError as exc:
+        return str(exc)
+    return None
+
+
+@pytest.fixture(scope="session")
+def aravis_available():
+    reason = aravis_missing()
+    if reason:
+        pytest.skip(reason)
+
+
+# ---- a GigE Vision control-channel probe, without Aravis --------------------------------------
+
+_request_ids = itertools.count(1)
+
+
+def gvcp_serial(address: str, timeout: float = 0.2) -> str | None:
+    """The serial number of the GigE Vision device answering on ``address`` (a
+    READMEM of the bootstrap serial-number register), or None if none answers."""
+    req_id = next(_request_ids) % 0xFFFF + 1
+    # header: key 0x42, flags (ack required), READMEM_CMD 0x0084, payload length, request id;
+    # payload: address 0x00D8 (serial number), reserved, count 16
+    packet = struct.pack(">BBHHHIHH", 0x42, 0x01, 0x0084, 8, req_id, 0x00D8, 0, 16)
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        sock.settimeout(timeout)
+        try:
+            sock.sendto(packet, (address, GVCP_PORT))
+            deadline = time.monotonic() + timeout
+            while time.monotonic() < deadline:
+                reply = sock.recv(1024)
+                status, answer, _, ack_id = struct.unpack(">HHHH", reply[:8])
+                if answer == 0x0085 and ack_id == req_id and status == 0:
+                    return reply[12:28].split(b"\0")[0].decode(errors="replace")
+        except (socket.timeout, ConnectionRefusedError, OSError):
+            return None
+    return None
+
+
+class Emulator:
+    """One ``arv-fake-gv-camera-0.8`` process: a GigE Vision camera on ``address``."""
+
+    def __init__(self, address: str, serial: str, loss_per_thousand: int = 0, log_path: str | None = None):
+        self.address, self.serial, self.loss = address, serial, loss_per_thousand
+        self.log_path = log_path
+        self.proc: subprocess.Popen | None = None
+
+    @property
+    def device_id(self) -> str:
+        """The id Aravis gives it (what `fxis cameras` lists and device=... takes)."""
+        return f"Aravis-Fake-{self.serial}"
+
+    def start(self) -> "Emulator":
+        other = gvcp_serial(self.address)
+        if other is not None:
+            raise RuntimeError(f"a GigE Vision device (serial {other!r}) already answers on "
+                               f"{self.address}:{GVCP_PORT}; a leftover emulator? stop it first")
+        args = [EMULATOR, "-i", self.address, "-s", self.serial]
+        if self.loss:
+            args += ["-r", str(self.loss)]
+        log = open(self.log_path, "ab") if self.log_path else subprocess.DEVNULL
+        try:
+            self.proc = subprocess.Popen(args, stdout=log, stderr=log, stdin=subprocess.DEVNULL,
+                                         preexec_fn=die_with_parent)
+        finally:
+            if self.log_path:
+                log.close()
+        deadline = time.monotonic() + START_TIMEOUT_S
+        while gvcp_serial(self.address) != self.serial:
+            if self.proc.poll() is not None:
+                raise RuntimeError(f"{EMULATOR} {' '.join(args[1:])} exited with code {self.proc.returncode}")
+            if time.monotonic() > deadline:
+                self.kill()
+                raise RuntimeError(f"{EMULATOR} on {self.address} did not answer within {START_TIMEOUT_S} s")
+            time.sleep(0.02)
+        return self
+
+    def kill(self) -> None:
+        """SIGKILL: the camera vanishes as if unplugged."""
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGKILL)
+            self.proc.wait(5)
+
+
+@pytest.fixture(scope="session")
+def second_address():
+    """127.0.0.2 on lo for a second emulator; added (root) if missing, removed afterwards."""
+    shown = subprocess.run(["ip", "-o", "-4", "addr", "show", "dev", "lo"], capture_output=True,
+                           text=True, check=True).stdout
+    added = f" {SECOND_ADDRESS}/" not in shown
+    if added:
+        done = subprocess.run(["ip", "addr", "add", f"{SECOND_ADDRESS}/8", "dev", "lo"],
+                              capture_output=True, text=True)
+        if done.returncode != 0:
+            pytest.fail(f"a second emulator needs {SECOND_ADDRESS} on lo: `ip addr add "
+                        f"{SECOND_ADDRESS}/8 dev lo` failed (needs root): {done.stderr.strip()}")
+    yield SECOND_ADDRESS
+    if added:
+        subprocess.run(["ip", "addr", "del", f"{SECOND_ADDRESS}/8", "dev", "lo"], check=False)
+
+
+_serials = itertools.count(1)
+
+
+@pytest.fixture
+def emulator(aravis_available, tmp_path):
+    """Start emulators: ``emulator(address="127.0.0.1", loss_per_thousand=0)``; each gets
+    a serial of its own (GV01, GV02, ... over the session) and is killed at teardown."""
+    started: list[Emulator] = []
+
+    def start(address: str = "127.0.0.1", loss_per_thousand: int = 0) -> Emulator:
+        serial = f"GV{next(_serials):02d}"
+        emu = Emulator(address, serial, loss_per_thousand, str(tmp_path / f"emulator-{serial}.log"))
+        started.append(emu)
+        return emu.start()
+
+    yield start
+    for emu in started:
+        emu.kill()

@@ -1,0 +1,225 @@
+"""The aravis backend against real GigE Vision camera emulators (arv-fake-gv-camera-0.8),
+through real ``fxis run`` services.
+
+The emulator draws Mono8 frame k as pixel(x, y) = (x + y + k) % 255, where k is its
+16-bit block id; it counts from 65400, so its ids wrap (65535 -> 1) after 135 frames.
+The backend unwraps them (+65535 per wrap), which leaves the id unchanged modulo 255:
+every Mono8 image the service returns must equal ``ramp(frame_id)``, which proves both
+that it is complete (a buffer with missing packets holds parts of older frames) and that
+it is the frame its metadata names.
+"""
+import json
+import os
+import sys
+
+import numpy as np
+import pytest
+
+from fxis_shm.errors import CameraDown, FrameTimeout, FxisError
+from fxis_shm.launch import free_tcp_port
+from fxis_shm.workers.backends.aravis import PIXEL_FORMATS, FrameCounter, load_aravis
+
+from ..conftest import wait_until
+from .conftest import fxis
+
+pytestmark = pytest.mark.integration
+SMALL = "width=64,height=48"  # 3 KiB per Mono8 frame: 3 GVSP data packets
+FIRST_ID = 65401  # the first frame a new emulator sends
+
+
+def ramp(frame_id: int, height: int = 48, width: int = 64) -> np.ndarray:
+    y, x = np.mgrid[0:height, 0:width]
+    return ((x + y + frame_id) % 255).astype(np.uint8)
+
+
+def is_frame(frame) -> bool:
+    return np.array_equal(frame.image, ramp(frame.frame_id, *frame.image.shape[:2]))
+
+
+def status_of(svc, camera: str) -> dict:
+    with svc.client() as client:
+        return client.status()["cameras"][camera]
+
+
+def newest_id(svc, camera: str) -> int:
+    with svc.client() as client:
+        try:
+            return client.latest([camera])[camera].frame_id
+        except FxisError:  # nothing stored yet
+            return -1
+
+
+def stored_frames(svc, camera: str) -> list:
+    """Most of the frames stored so far, consecutive up to now (not quite all: the
+    service checks that a sequence's count fits in the ring with the measured period)."""
+    with svc.client() as client:
+        status = client.status()["cameras"][camera]
+        assert status["frames_stored"] < status["ring_slots"], "the ring wrapped: give it more slots"
+        return client.sequence("consecutive", camera=camera, count=int(status["frames_stored"] * 0.8))
+
+
+# ---- pure parts: no emulator needed ----------------------------------------------------------
+
+def test_gige_vision_block_ids_unwrap_into_a_64_bit_counter():
+    ids = FrameCounter(0xFFFF)
+    assert [ids.next(raw) for raw in (65534, 65535, 1, 2)] == [(65534, 0), (65535, 0), (65536, 0), (65537, 0)]
+    assert ids.next(5) == (65540, 2)  # 3 and 4 never arrived
+    assert ids.next(65533) == (65541, 0)  # backwards: the camera restarted its count, nothing lost
+    ids = FrameCounter(0xFFFF)
+    ids.next(65530)
+    assert ids.next(3) == (65538, 7)  # 65531..65535, 1, 2 lost across the wrap
+    usb = FrameCounter(None)  # USB3 Vision: 64-bit block ids, no wrap
+    assert [usb.next(raw) for raw in (7, 8, 10)] == [(7, 0), (8, 0), (10, 1)]
+
+
+@pytest.mark.parametrize("pattern, site", [("BayerRG8", (0, 0)), ("BayerGR8", (0, 1)),
+                                           ("BayerGB8", (1, 0)), ("BayerBG8", (1, 1))])
+def test_bayer_mosaics_become_bgr_with_the_right_colours(pattern, site):
+    import cv2
+
+    mosaic = np.zeros((8, 8), np.uint8)
+    mosaic[site[0]::2, site[1]::2] = 200  # only the red sites lit: a red scene
+    bgr = cv2.cvtColor(mosaic, getattr(cv2, PIXEL_FORMATS[pattern].to_bgr))
+    assert bgr[2:6, 2:6].reshape(-1, 3).mean(axis=0).tolist() == [0, 0, 200]
+
+
+def test_without_pygobject_the_error_names_the_extra(monkeypatch):
+    monkeypatch.setitem(sys.modules, "gi", None)  # `import gi` now raises ImportError
+    with pytest.raises(ImportError, match=r"fxis-shm\[aravis\]"):
+        load_aravis()
+
+
+# ---- against emulators -----------------------------------------------------------------------
+
+def test_a_free_running_camera_delivers_every_frame_complete_across_the_id_wrap(emulator, start_service):
+    cam = emulator()
+    svc = start_service("--camera", f"a=aravis:device={cam.device_id},fps=50,{SMALL},pixel_format=Mono8",
+                        "--slots", "400")
+    wait_until(lambda: newest_id(svc, "a") > 65545, timeout=15, what="frame ids past the 16-bit wrap")
+    # the measured rate is a running average: an emulator that once sends a frame late
+    # (it does, now and then, by ~100 ms) pulls it down for a second
+    status = wait_until(lambda: (s := status_of(svc, "a"))["fps"] == pytest.approx(50, rel=0.1) and s,
+                        timeout=10, what="the measured frame rate to be the emulator's")
+    assert status["kind"] == "aravis" and status["alive"]
+    assert status["shape"] == [48, 64] and status["dtype"] == "uint8"
+    frames = stored_frames(svc, "a")
+    ids = [f.frame_id for f in frames]
+    assert ids[0] < 65535 < ids[-1]
+    gaps = [(a, b) for a, b in zip(ids, ids[1:]) if b != a + 1]
+    assert not gaps, f"frame ids not consecutive at {gaps}; status {status_of(svc, 'a')}"
+    status = status_of(svc, "a")
+    assert status["frames_dropped"] == 0, status  # none lost on loopback
+    assert [f.frame_id for f in frames if not is_frame(f)] == []
+    assert np.median(np.diff([f.t_capture for f in frames])) == pytest.approx(20e6, rel=0.1)
+
+
+def test_two_emulated_cameras_answer_a_tuple(emulator, second_address, start_service):
+    left, right = emulator("127.0.0.1"), emulator(second_address)
+    svc = start_service(
+        "--camera", f"left=aravis:device={left.device_id},fps=20,{SMALL},pixel_format=Mono8",
+        "--camera", f"right=aravis:device={right.device_id},fps=20,{SMALL},pixel_format=BayerRG8")
+    wait_until(lambda: all(status_of(svc, c)["frames_stored"] >= 5 for c in ("left", "right")),
+               timeout=15, what="frames from both emulators")
+    with svc.client() as client:
+        frames = client.tuple()
+    assert frames["left"].image.shape == (48, 64) and is_frame(frames["left"])
+    assert frames["right"].image.shape == (48, 64, 3)  # demosaiced to BGR
+    # both emulators start their frames on multiples of the period (of the same clock)
+    assert frames.skew_ns < 25_000_000  # well within half a period
+
+
+def test_a_tuple_request_software_triggers_both_cameras(emulator, second_address, start_service):
+    a, b = emulator("127.0.0.1"), emulator(second_address)
+    svc = start_service("--camera", f"a=aravis:device={a.device_id},trigger=software,{SMALL},pixel_format=Mono8",
+                        "--camera", f"b=aravis:device={b.device_id},trigger=software,{SMALL},pixel_format=Mono8")
+    assert status_of(svc, "a")["trigger"] == "software"
+    previous = None
+    with svc.client() as client:
+        for _ in range(3):
+            frames = client.tuple()
+            for frame in frames.values():
+                assert frame.t_capture >= frames.t_request  # it arrived after this request's trigger
+                assert is_frame(frame)
+            if previous is not None:
+                assert all(frames[c].frame_id == previous[c].frame_id + 1 for c in frames)
+            previous = frames
+    # one frame per trigger: the cameras do not run free
+    assert [status_of(svc, c)["frames_stored"] for c in ("a", "b")] == [3, 3]
+
+
+def test_incomplete_frames_from_packet_loss_are_dropped_and_counted(emulator, start_service):
+    cam = emulator(loss_per_thousand=50)  # 5 % of the packets: about 1 frame in 4 is incomplete
+    svc = start_service("--camera", f"a=aravis:device={cam.device_id},fps=50,{SMALL},pixel_format=Mono8",
+                        "--slots", "400")
+    wait_until(lambda: (s := status_of(svc, "a"))["frames_dropped"] >= 10 and s["frames_stored"] >= 40,
+               timeout=20, what="drops under packet loss")
+    frames = stored_frames(svc, "a")
+    assert all(is_frame(f) for f in frames)  # not one incomplete frame reached the client
+    ids = [f.frame_id for f in frames]
+    assert ids[-1] - ids[0] + 1 > len(ids)  # some are missing...
+    newest = newest_id(svc, "a")
+    status = status_of(svc, "a")
+    # ...and every frame the emulator sent (ids FIRST_ID..newest) was stored or counted as
+    # dropped, exactly once (give or take the frames sent between the two requests)
+    sent = newest - FIRST_ID + 1
+    assert sent <= status["frames_stored"] + status["frames_dropped"] <= sent + 5
+
+
+def test_a_camera_that_vanishes_is_reported_lost_and_resumes_with_a_new_generation(emulator, start_service):
+    cam = emulator()
+    svc = start_service("--camera", f"a=aravis:device={cam.device_id},fps=20,{SMALL},pixel_format=Mono8")
+    wait_until(lambda: status_of(svc, "a")["frames_stored"] >= 3, timeout=15, what="first frames")
+    generation = status_of(svc, "a")["generation"]
+    cam.kill()
+    wait_until(lambda: "camera lost" in status_of(svc, "a").get("note", ""), timeout=15,
+               what="the status to report the camera lost")
+    with svc.client() as client:
+        with pytest.raises((FrameTimeout, CameraDown)):
+            client.image("a", wait="next", timeout_ms=300)
+    cam.start()  # the same camera comes back
+    status = wait_until(lambda: (s := status_of(svc, "a"))["generation"] > generation and s["note"] == "" and s,
+                        timeout=20, what="the camera to be reopened")
+    assert status["alive"]
+    with svc.client() as client:
+        frame = client.image("a", wait="next")
+    assert frame.generation > generation and is_frame(frame)
+
+
+@pytest.mark.parametrize("setting, allowed", [("width=4096", "1..2048"),
+                                              ("pixel_format=Mono12", "BayerRG8, Mono8, RGB8")])
+def test_a_setting_the_camera_refuses_stops_start_up_naming_camera_and_key(emulator, setting, allowed):
+    cam = emulator()
+    ports = [f"tcp://127.0.0.1:{free_tcp_port()}" for _ in range(3)]
+    result = fxis("run", "--name", f"refuse{os.getpid()}", "--endpoint", ports[0], "--pub", ports[1],
+                  "--events", ports[2], "--camera", f"cam=aravis:device={cam.device_id},{setting}")
+    assert result.returncode == 1
+    lines = [line for line in result.stderr.splitlines() if "refuses" in line and "camera 'cam'" in line]
+    assert lines, result.stderr
+    assert setting in lines[-1] and allowed in lines[-1]
+
+
+def test_fxis_cameras_lists_the_emulator(emulator):
+    cam = emulator()
+    result = fxis("cameras", "--json")
+    assert result.returncode == 0, result.stderr
+    found = {c["id"]: c for c in json.loads(result.stdout)["cameras"]}
+    entry = found[cam.device_id]
+    assert entry["kind"] == "aravis" and entry["model"] == "Fake"
+    assert entry["format"].startswith("512x512 Mono8")  # the emulator's start-up format
+
+
+def test_device_timestamps_land_on_the_host_clock(emulator, start_service):
+    cam = emulator()
+    svc = start_service("--camera", f"a=aravis:device={cam.device_id},fps=50,{SMALL},pixel_format=Mono16,"
+                        "timestamp=device")
+    wait_until(lambda: status_of(svc, "a")["frames_stored"] >= 20, timeout=15, what="frames")
+    with svc.client() as client:
+        frames = client.sequence("consecutive", camera="a", count=10)
+        now = client.time()
+    for f in frames:
+        assert f.image.dtype == np.uint16 and f.image.shape == (48, 64)
+        assert f.image[0, 0] == (256 * f.frame_id) % 65535  # the emulator's Mono16 ramp
+        # captured (device clock, mapped) at most a few ms before the host stored it
+        assert 0 <= f.t_stored - f.t_capture < 20_000_000
+        assert now - 2_000_000_000 < f.t_capture < now
+    assert np.median(np.diff([f.t_capture for f in frames])) == pytest.approx(20e6, rel=0.05)

@@ -1,0 +1,243 @@
+"""The ``opencv`` backend against a real peer: a video file the test writes with
+cv2.VideoWriter, played through a real ``fxis run`` service."""
+import os
+import time
+
+import cv2
+import numpy as np
+import pytest
+
+from fxis_shm.options import parse_options
+from fxis_shm.workers.backends.base import Camera, CameraLost
+from fxis_shm.workers.backends.opencv import OpenCVCamera
+
+from ..conftest import wait_until
+from .conftest import fxis
+
+pytestmark = pytest.mark.integration
+
+FRAMES, FPS = 40, 20.0
+PERIOD_NS = round(1e9 / FPS)
+WIDTH, HEIGHT = 64, 48
+BITS = 8  # the frame number, as 8 vertical bars of 8 px: white = 1, black = 0 (survives MJPG)
+
+
+def draw(k: int) -> np.ndarray:
+    image = np.zeros((HEIGHT, WIDTH, 3), np.uint8)
+    for bit in range(BITS):
+        if k >> bit & 1:
+            image[:, bit * 8 : bit * 8 + 8] = 255
+    return image
+
+
+def read_number(image: np.ndarray) -> int:
+    grey = image if image.ndim == 2 else image.mean(axis=2)
+    return sum(1 << bit for bit in range(BITS) if grey[8:-8, bit * 8 + 2 : bit * 8 + 6].mean() > 128)
+
+
+@pytest.fixture(scope="module")
+def video(tmp_path_factory) -> str:
+    """40 frames of 64x48 at 20 fps, MJPG in .avi, frame k showing the number k."""
+    path = str(tmp_path_factory.mktemp("video") / "count.avi")
+    writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*"MJPG"), FPS, (WIDTH, HEIGHT))
+    assert writer.isOpened(), "this OpenCV cannot write MJPG .avi files"
+    for k in range(FRAMES):
+        writer.write(draw(k))
+    writer.release()
+    return path
+
+
+def status_of(svc, camera="v") -> dict:
+    with svc.client() as client:
+        return client.status()["cameras"][camera]
+
+
+def newest(svc, count, camera="v"):
+    """The ``count`` newest frames, oldest first."""
+    with svc.client() as client:
+        last = client.latest([camera])[camera]
+        return client.sequence("consecutive", camera=camera, count=count, at=last.t_capture)
+
+
+def cpu_seconds(pid: int) -> float:
+    with open(f"/proc/{pid}/stat", "rb") as f:
+        stat = f.read()
+    fields = stat[stat.rfind(b")") + 2 :].split()
+    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+
+
+def test_the_test_video_is_what_the_tests_expect(video):
+    cap = cv2.VideoCapture(video)
+    assert cap.get(cv2.CAP_PROP_FPS) == pytest.approx(FPS)
+    numbers = []
+    while True:
+        ok, frame = cap.read()
+        if not ok:
+            break
+        numbers.append(read_number(frame))
+    cap.release()
+    assert numbers == list(range(FRAMES))
+
+
+def test_a_file_plays_in_order_at_its_rate_then_stops(start_service, video):
+    svc = start_service("--camera", f"v=opencv:source={video}", "--slots", "64")
+    status = wait_until(lambda: (s := status_of(svc))["frames_stored"] >= FRAMES and s,
+                        timeout=15, what="the whole file to play")
+    assert status["shape"] == [HEIGHT, WIDTH, 3] and status["alive"]
+    assert status["fps"] == pytest.approx(FPS, rel=0.01)
+    frames = newest(svc, FRAMES)
+    assert [f.frame_id for f in frames] == list(range(FRAMES))
+    assert [read_number(f.image) for f in frames] == [f.frame_id for f in frames]
+    # t_capture is the playback schedule: one file period apart (later only if decoding fell behind)
+    gaps = np.diff([f.t_capture for f in frames])
+    assert np.median(gaps) == pytest.approx(PERIOD_NS, abs=1000)
+    assert gaps.min() >= PERIOD_NS - 1000
+
+    # the end: no more frames, and the worker waits rather than spins
+    pid = status["writer_pid"]
+    cpu_before, t_before = cpu_seconds(pid), time.monotonic()
+    time.sleep(1.0)
+    used = (cpu_seconds(pid) - cpu_before) / (time.monotonic() - t_before)
+    status = status_of(svc)
+    assert status["frames_stored"] == FRAMES and status["alive"]
+    assert used < 0.3, f"the worker of a finished file uses {used:.0%} of a CPU"
+
+
+@pytest.mark.xfail(not hasattr(Camera, "note"), strict=True, run=False,
+                   reason="the camera worker does not yet publish Camera.note in the status note "
+                          "(workers/backends/base.py and workers/camera.py: see the helper's report)")
+def test_the_end_of_a_file_shows_in_the_status_note(start_service, video):
+    svc = start_service("--camera", f"v=opencv:source={video},rate=400")
+    status = wait_until(lambda: (s := status_of(svc))["frames_stored"] >= FRAMES and "end of file" in s["note"]
+                        and s, timeout=10, what="the end of the file in the status note")
+    assert "loop=false" in status["note"] and status["alive"]
+
+
+def test_rate_max_delivers_faster_than_the_file_rate(start_service, video):
+    svc = start_service("--camera", f"v=opencv:source={video},rate=max", "--slots", "64")
+    wait_until(lambda: status_of(svc)["frames_stored"] >= FRAMES, timeout=10, what="the whole file")
+    # (a consecutive request reaches back by the ring's period estimate, which irregular
+    # decoding times make a little longer than most gaps: ask for the newest 10, not all 40)
+    frames = newest(svc, 10)
+    assert [f.frame_id for f in frames] == list(range(FRAMES - 10, FRAMES))
+    assert [read_number(f.image) for f in frames] == [f.frame_id for f in frames]
+    gaps = np.diff([f.t_capture for f in frames])
+    assert (gaps > 0).all()
+    assert np.median(gaps) < PERIOD_NS / 4  # stamped as decoded, not at the file's 50 ms
+
+
+def test_a_looping_file_goes_on_past_its_end(start_service, video):
+    rate = 200.0  # 0.2 s per pass of the file
+    svc = start_service("--camera", f"v=opencv:source={video},loop=true,rate={rate:g}")
+    wait_until(lambda: status_of(svc)["frames_stored"] >= 2 * FRAMES + 10, timeout=15,
+               what="two passes of the file")
+    frames = newest(svc, 16)  # a ring of 20 slots holds 19 that can always be read
+    ids = [f.frame_id for f in frames]
+    assert ids == list(range(ids[0], ids[0] + 16)) and ids[-1] >= 2 * FRAMES
+    assert [read_number(f.image) for f in frames] == [i % FRAMES for i in ids]
+    gaps = np.diff([f.t_capture for f in frames])
+    assert np.median(gaps) == pytest.approx(1e9 / rate, abs=1000)  # the loop keeps the schedule
+    assert status_of(svc)["note"] == ""
+
+
+def test_a_stream_that_ends_is_lost_and_reopened(video):
+    """A URL is a live source: read by a thread, stamped on arrival; when it stops
+    delivering, grab raises CameraLost, and open() starts it again."""
+    options = parse_options("v", "opencv", OpenCVCamera.OPTIONS, {"source": "file://" + video})
+    camera = OpenCVCamera("v", options, time.monotonic_ns())
+    camera.open()
+    captures = []
+    try:
+        assert camera.layout is None  # a live source tells its layout with its first frame
+        with pytest.raises(CameraLost, match="delivered no frame"):
+            deadline = time.monotonic() + 10
+            while time.monotonic() < deadline:
+                capture = camera.grab(0.1)
+                if capture is not None:
+                    captures.append((capture.frame_id, capture.t_capture, read_number(capture.image)))
+        camera.close()
+        camera.open()
+        again = camera.grab(5.0)
+    finally:
+        camera.close()
+    ids = [c[0] for c in captures]
+    assert ids == list(range(len(ids))) and len(ids) + camera.frames_dropped == FRAMES
+    assert all(b[1] > a[1] and b[2] > a[2] for a, b in zip(captures, captures[1:]))
+    assert camera.layout.shape == (HEIGHT, WIDTH, 3)
+    assert again.frame_id == len(ids)  # frame ids go on after a reconnection
+
+
+def test_the_worker_reconnects_a_lost_stream(start_service, video):
+    svc = start_service("--camera", f"v=opencv:source=file://{video}")
+    status = wait_until(lambda: (s := status_of(svc))["generation"] >= 1 and s["frames_stored"] > FRAMES // 2
+                        and s, timeout=20, what="the stream to be lost and reopened")
+    assert status["alive"]
+    with svc.client() as client:
+        frame = client.latest(["v"])["v"]
+    assert frame.generation >= 1 and frame.image.shape == (HEIGHT, WIDTH, 3)
+
+
+def test_mono8_frames_are_grey(video):
+    options = parse_options("v", "opencv", OpenCVCamera.OPTIONS,
+                            {"source": video, "rate": "max", "pixel_format": "mono8"})
+    camera = OpenCVCamera("v", options, time.monotonic_ns())
+    camera.open()
+    try:
+        assert camera.layout.shape == (HEIGHT, WIDTH) and camera.nominal_period_ns == 0
+        captures = [camera.grab(1.0) for _ in range(3)]
+    finally:
+        camera.close()
+    assert [c.frame_id for c in captures] == [0, 1, 2]
+    assert all(c.image.shape == (HEIGHT, WIDTH) and c.image.dtype == np.uint8 for c in captures)
+    assert [read_number(c.image) for c in captures] == [0, 1, 2]
+
+
+def test_a_finished_file_returns_none_without_spinning(video):
+    options = parse_options("v", "opencv", OpenCVCamera.OPTIONS, {"source": video, "rate": "max"})
+    camera = OpenCVCamera("v", options, time.monotonic_ns())
+    camera.open()
+    try:
+        captures = [camera.grab(1.0) for _ in range(FRAMES)]
+        assert [c.frame_id for c in captures] == list(range(FRAMES))
+        cpu = time.process_time()
+        assert [camera.grab(0.05) for _ in range(4)] == [None] * 4
+        assert time.process_time() - cpu < 0.1  # it waited out the timeouts asleep
+        assert "end of file" in camera.note
+    finally:
+        camera.close()
+
+
+def test_a_missing_file_stops_start_up_naming_camera_and_source(tmp_path):
+    missing = tmp_path / "no-such-video.avi"
+    result = fxis("run", "--name", f"ocv{os.getpid()}", "--camera", f"v=opencv:source={missing}",
+                  "--endpoint", "tcp://127.0.0.1:1", "--pub", "tcp://127.0.0.1:2",
+                  "--events", "tcp://127.0.0.1:3")
+    assert result.returncode == 1
+    assert "camera 'v'" in result.stderr and "key 'source'" in result.stderr
+    assert str(missing) in result.stderr
+
+
+@pytest.mark.parametrize("flag, words", [
+    ("v=opencv:rate=fast", ["camera 'v'", "'rate'", "max"]),
+    ("v=opencv:loop=maybe", ["camera 'v'", "'loop'"]),
+    ("v=opencv:pixel_format=rgb8", ["camera 'v'", "'pixel_format'", "mono8"]),
+])
+def test_malformed_keys_are_config_errors(flag, words):
+    result = fxis("run", "--camera", flag)
+    assert result.returncode == 2
+    assert all(w in result.stderr for w in words), result.stderr
+
+
+def test_file_keys_on_a_device_and_device_keys_on_a_file_are_refused(video):
+    for raw, key in (({"source": video, "width": "320"}, "'width'"),
+                     ({"source": "0", "loop": "true"}, "'loop'"),
+                     ({}, "'source'")):
+        with pytest.raises(ValueError, match=key):
+            OpenCVCamera("v", parse_options("v", "opencv", OpenCVCamera.OPTIONS, raw), 0)
+
+
+def test_discover_lists_capture_devices_only():
+    found = OpenCVCamera.discover()
+    assert isinstance(found, list)
+    for camera in found:  # none on a machine without /dev/video*
+        assert isinstance(camera["id"], int) and camera["model"] and camera["format"]

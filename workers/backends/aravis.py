@@ -1,0 +1,553 @@
+"""GigE Vision and USB3 Vision cameras through Aravis (PyGObject; the ``aravis`` extra).
+
+    --camera left=aravis:device=Aravis-Fake-GV01,fps=20,width=640,height=480
+
+``device`` is an id as ``fxis cameras`` lists it (Aravis' device id; an IP
+address or a serial number work too); without it the first camera Aravis finds
+is used. Settings the camera refuses stop start-up with a ValueError naming the
+key and what the camera allows; settings that are not given stay as the camera
+has them.
+
+Frames: a pool of buffers is queued on the Aravis stream, ``grab`` pops one,
+copies the image out (Bayer demosaiced to BGR, RGB8 reordered to BGR, unless
+``raw=true``) and queues the buffer again. A buffer Aravis could not complete
+(missing packets, timeout) is counted in ``frames_dropped`` and never returned,
+as are frames whose block ids never arrived (a gap in the ids). GigE Vision
+block ids are 16-bit (1..65535, 0 is reserved): they are unwrapped into a 64-bit
+counter, so frame ids keep increasing.
+
+Time (docs/cameras.md): ``timestamp=host`` (default) is the moment Aravis saw
+the frame arrive, a wall-clock time mapped onto CLOCK_MONOTONIC with both
+clocks read right after the buffer is popped; ``timestamp=device`` is the
+camera's own timestamp mapped onto CLOCK_MONOTONIC by a fitted drift and offset
+(``fxis_shm.clocks.DeviceClockFit``).
+
+Faults: no frame for a while makes ``grab`` probe the camera's control channel
+from a helper thread (reading the GigE Vision control-privilege register, or a
+feature for other cameras); a failed probe, a probe showing that this host lost
+control of the camera (it restarted), or Aravis' ``control-lost`` signal raise
+CameraLost; the worker then closes and reopens the camera with backoff.
+"""
+from __future__ import annotations
+
+import ipaddress
+import logging
+import threading
+import time
+from dataclasses import dataclass
+from typing import Any
+
+import numpy as np
+
+from fxis_shm.clocks import DeviceClockFit, wall_to_monotonic
+from fxis_shm.options import Option, boolean, choice, number, text
+from fxis_shm.ring import FrameLayout
+
+from .base import Camera, CameraLost, Capture
+
+log = logging.getLogger("camera")
+
+EXTRA_HINT = ("the aravis backend needs PyGObject and Aravis' introspection data: "
+              "pip install 'fxis-shm[aravis]' and, on Debian/Ubuntu, apt-get install gir1.2-aravis-0.8 "
+              "(scripts/install-system-packages.sh)")
+
+
+def load_aravis():
+    """(Aravis, GLib) from PyGObject; ImportError naming the ``aravis`` extra if missing."""
+    try:
+        import gi
+
+        gi.require_version("Aravis", "0.8")
+        from gi.repository import Aravis, GLib
+    except (ImportError, ValueError) as exc:  # ValueError: gi is there, Aravis' typelib is not
+        raise ImportError(f"{EXTRA_HINT} ({type(exc).__name__}: {exc})") from exc
+    return Aravis, GLib
+
+
+@dataclass(frozen=True)
+class PixelFormat:
+    """How a GenICam pixel format becomes an image in the ring."""
+
+    dtype: str
+    channels: int  # in the camera's buffer
+    to_bgr: str | None = None  # cv2 colour conversion to BGR (unless raw=true)
+
+
+# GenICam (PFNC) names. OpenCV names its Bayer codes after the second row's
+# pattern, one row and column down from GenICam's: BayerRG (an RGGB mosaic) is
+# OpenCV's BayerBG. tests/backends/test_aravis.py checks this on a known mosaic.
+PIXEL_FORMATS = {
+    "Mono8": PixelFormat("uint8", 1),
+    "Mono10": PixelFormat("uint16", 1),  # unpacked: 10 bits in 16
+    "Mono12": PixelFormat("uint16", 1),
+    "Mono16": PixelFormat("uint16", 1),
+    "RGB8": PixelFormat("uint8", 3, "COLOR_RGB2BGR"),
+    "BGR8": PixelFormat("uint8", 3),
+    "BayerRG8": PixelFormat("uint8", 1, "COLOR_BayerBG2BGR"),
+    "BayerGR8": PixelFormat("uint8", 1, "COLOR_BayerGB2BGR"),
+    "BayerGB8": PixelFormat("uint8", 1, "COLOR_BayerGR2BGR"),
+    "BayerBG8": PixelFormat("uint8", 1, "COLOR_BayerRG2BGR"),
+}
+
+N_BUFFERS = 12  # frames Aravis can hold for us; ~0.6 s at 20 fps if the worker stalls
+MIN_SOCKET_BUFFER = 1 << 20  # bytes; the kernel caps it at net.core.rmem_max
+GV_CCP_REGISTER = 0x0A00  # GigE Vision bootstrap: control channel privilege
+GV_CCP_CONTROL_BITS = 0x3  # exclusive | control
+PROBE_IDLE_S = 0.5  # probe the camera after this long without a frame (at least 4 periods)
+MAX_ID_GAP = 10_000  # a larger jump of the frame ids is a restarted count, not lost frames
+
+
+class FrameCounter:
+    """64-bit frame ids from a camera's block ids, and the frames missing before each.
+
+    GigE Vision 1.x block ids are 16-bit and run 1..65535 (0 is reserved), so
+    after 65535 comes 1. Ids that go back without wrapping, or jump by more than
+    MAX_ID_GAP, restart the count: the ids keep increasing by one and nothing is
+    counted as missing. Pure: no camera, no clock.
+    """
+
+    def __init__(self, wrap: int | None = 0xFFFF):
+        self.wrap = wrap
+        self._last_raw: int | None = None
+        self.value = 0
+
+    def next(self, raw: int) -> tuple[int, int]:
+        """(64-bit id of the frame with block id ``raw``, frames missing just before it)."""
+        last, self._last_raw = self._last_raw, raw
+        if last is None:
+            self.value = raw
+            return raw, 0
+        step = raw - last
+        if self.wrap and step < -(self.wrap // 2) and raw <= self.wrap and last <= self.wrap:
+            step += self.wrap  # 65535 -> 1 is one step
+        if step <= 0 or step > MAX_ID_GAP:
+            log.warning("frame ids jumped from %d to %d: the camera restarted its count", last, raw)
+            step = 1
+        self.value += step
+        return self.value, step - 1
+
+
+class AravisCamera(Camera):
+    kind = "aravis"
+    OPTIONS = {
+        "device": Option(text, None, "camera id as `fxis cameras` lists it (default: the first camera found)"),
+        "fps": Option(number(float, 0, exclusive_min=True), None, "frames per second (AcquisitionFrameRate; "
+                      "default: as the camera is set)"),
+        "width": Option(number(int, 1, 65535), None, "image width in pixels (default: as set)"),
+        "height": Option(number(int, 1, 65535), None, "image height in pixels (default: as set)"),
+        "offset_x": Option(number(int, 0, 65535), None, "left edge of the region, pixels"),
+        "offset_y": Option(number(int, 0, 65535), None, "top edge of the region, pixels"),
+        "pixel_format": Option(choice(*PIXEL_FORMATS), None,
+                               f"one of {', '.join(PIXEL_FORMATS)} (default: as set); Bayer becomes BGR, "
+                               "RGB8 becomes BGR, unless raw=true"),
+        "raw": Option(boolean, False, "store Bayer mosaics and RGB8 as the camera sends them"),
+        "exposure_us": Option(number(float, 0, exclusive_min=True), None, "exposure time, microseconds (turns auto off)"),
+        "gain": Option(number(float, 0), None, "gain, in the camera's unit (usually dB; turns auto off)"),
+        "packet_size": Option(number(int, 64, 65535), None,
+                              "GigE Vision packet size in bytes (default: as negotiated)"),
+        "trigger": Option(choice("free", "software"), "free",
+                          "free-running, or one frame per software trigger (TriggerSoftware)"),
+        "timestamp": Option(choice("host", "device"), "host",
+                            "t_capture from the host's arrival time, or the camera's clock mapped "
+                            "onto the host's (docs/cameras.md)"),
+    }
+
+    def __init__(self, name: str, options: dict[str, Any], time_origin_ns: int):
+        super().__init__(name, options, time_origin_ns)
+        self._cam = self._device = self._stream = None
+        self._layout: FrameLayout | None = None
+        self._period_ns = 0
+        self._lost = threading.Event()
+        self._probe_error: str | None = None
+        self._opened = False  # has open() ever succeeded?
+
+    # ---- open and configure -------------------------------------------------------------
+
+    def open(self) -> None:
+        Aravis, GLib = load_aravis()
+        self._Aravis, self._GLib = Aravis, GLib
+        device_id = self.options["device"] or self._first_device()
+        self.device_id = device_id
+        try:
+            cam = Aravis.Camera.new(device_id)
+        except GLib.Error as exc:
+            message = f"Aravis cannot open device {device_id!r}: {exc.message}"
+            if not self._opened:  # at start-up, say what it sees (a reconnection retries quickly)
+                Aravis.update_device_list()
+                seen = [Aravis.get_device_id(i) for i in range(Aravis.get_n_devices())]
+                message += f"; it sees {', '.join(seen) if seen else 'no camera'}"
+            raise RuntimeError(message) from None
+        self._cam, self._device = cam, cam.get_device()
+        self._lost, self._probe_error = threading.Event(), None
+        lost = self._lost  # the handler must not hold self: it runs on Aravis' heartbeat thread
+        self._lost_handler = self._device.connect("control-lost", lambda *_: lost.set())
+        try:
+            self._configure()
+            self._start_stream()
+        except BaseException:
+            self.close()
+            raise
+        self._opened = True
+
+    def _first_device(self) -> str:
+        Aravis = self._Aravis
+        Aravis.update_device_list()
+        if Aravis.get_n_devices() == 0:
+            raise RuntimeError("Aravis finds no camera (give device=...; `fxis cameras` lists what it sees)")
+        return Aravis.get_device_id(0)
+
+    def _refuse(self, key: str, value, allowed: str) -> ValueError:
+        if isinstance(value, float):
+            value = f"{value:g}"
+        return ValueError(f"camera {self.name!r} ({self.device_id}) refuses {key}={value}: {allowed}")
+
+    def _configure(self) -> None:
+        cam, o, GLib = self._cam, self.options, self._GLib
+        try:
+            cam.stop_acquisition()  # a worker that crashed may have left it running
+        except GLib.Error:
+            pass
+        try:
+            self._configure_trigger()
+            if o["pixel_format"] is not None:
+                offered = list(cam.dup_available_pixel_formats_as_strings())
+                if o["pixel_format"] not in offered:
+                    usable = [f for f in offered if f in PIXEL_FORMATS]
+                    raise self._refuse("pixel_format", o["pixel_format"], f"it offers {', '.join(offered)}" + (
+                        f" (fxis stores {', '.join(usable) or 'none of them'})" if usable != offered else ""))
+                cam.set_pixel_format_from_string(o["pixel_format"])
+            self._configure_region()
+            self._configure_numbers()
+        except GLib.Error as exc:
+            raise RuntimeError(f"camera {self.name!r} ({self.device_id}): configuration failed: "
+                               f"{exc.message}") from None
+        fmt = cam.get_pixel_format_as_string()
+        if fmt not in PIXEL_FORMATS:
+            raise self._refuse("pixel_format", f"{fmt} (its current format)",
+                               f"fxis stores {', '.join(PIXEL_FORMATS)}; choose one with pixel_format=")
+        self._format = fmt
+        self._pixel = PIXEL_FORMATS[fmt]
+        self._pfnc = cam.get_pixel_format()
+        _, _, w, h = cam.get_region()
+        self._width, self._height = w, h
+        converts = self._pixel.to_bgr and not o["raw"]
+        channels = 3 if converts else self._pixel.channels
+        self._layout = FrameLayout(h, w, channels, self._pixel.dtype)
+        self._period_ns = 0
+        if self.options["trigger"] == "free" and cam.is_frame_rate_available():
+            rate = cam.get_frame_rate()
+            self._period_ns = round(1e9 / rate) if rate > 0 else 0
+        log.info("camera %s: %s %s %dx%d %s, %s, timestamp=%s", self.name, self.device_id,
+                 cam.get_model_name(), w, h, fmt,
+                 f"{1e9 / self._period_ns:.3g} fps" if self._period_ns else "trigger=software"
+                 if self.supports_trigger else "frame rate unknown", o["timestamp"])
+
+    def _configure_trigger(self) -> None:
+        cam = self._cam
+        if self.options["trigger"] == "software":
+            if not cam.is_software_trigger_supported():
+                raise self._refuse("trigger", "software", "the camera has no TriggerSoftware command; "
+                                   "use trigger=free")
+            sources = list(cam.dup_available_trigger_sources() or [])
+            if "Software" not in sources:
+                raise self._refuse("trigger", "software",
+                                   f"its TriggerSource offers {', '.join(sources) or 'nothing'}")
+            cam.set_trigger("Software")  # TriggerSelector=FrameStart, TriggerMode=On, TriggerSource=Software
+        elif cam.is_feature_available("TriggerMode"):
+            cam.clear_triggers()  # TriggerMode=Off: free-running
+
+    def _configure_region(self) -> None:
+        cam, o = self._cam, self.options
+        if all(o[k] is None for k in ("width", "height", "offset_x", "offset_y")):
+            return
+        x, y, w, h = cam.get_region()
+        sized = o["width"] is not None or o["height"] is not None
+        x = (0 if sized else x) if o["offset_x"] is None else o["offset_x"]  # a new size starts at 0,0
+        y = (0 if sized else y) if o["offset_y"] is None else o["offset_y"]
+        w = w if o["width"] is None else o["width"]
+        h = h if o["height"] is None else o["height"]
+        if cam.is_region_offset_available():
+            cam.set_integer("OffsetX", 0)  # the largest width is allowed at offset 0
+            cam.set_integer("OffsetY", 0)
+        elif x or y:
+            raise self._refuse("offset_x" if x else "offset_y", x or y, "the camera has no region offset")
+        for key, value, bounds, step, offset, okey in (
+                ("width", w, cam.get_width_bounds(), cam.get_width_increment(), x, "offset_x"),
+                ("height", h, cam.get_height_bounds(), cam.get_height_increment(), y, "offset_y")):
+            lo, hi = bounds
+            if not lo <= value <= hi:
+                raise self._refuse(key, value, f"it allows {lo}..{hi}" + (f" in steps of {step}" if step > 1 else ""))
+            if step > 1 and (value - lo) % step:
+                raise self._refuse(key, value, f"it allows {lo}..{hi} in steps of {step}")
+            if offset + value > hi:
+                raise self._refuse(okey, offset, f"with {key}={value} it allows at most {hi - value}")
+        cam.set_integer("Width", w)
+        cam.set_integer("Height", h)
+        if x or y:
+            for key, value, bounds in (("offset_x", x, cam.get_x_offset_bounds()),
+                                       ("offset_y", y, cam.get_y_offset_bounds())):
+                if not bounds[0] <= value <= bounds[1]:
+                    raise self._refuse(key, value, f"it allows {bounds[0]}..{bounds[1]}")
+            cam.set_integer("OffsetX", x)
+            cam.set_integer("OffsetY", y)
+        got = tuple(cam.get_region())
+        if got != (x, y, w, h):
+            raise self._refuse("width/height/offset_x/offset_y", f"{w}x{h}+{x}+{y}",
+                               f"it set {got[2]}x{got[3]}+{got[0]}+{got[1]}")
+
+    def _configure_numbers(self) -> None:
+        cam, o = self._cam, self.options
+        if o["fps"] is not None:
+            if not cam.is_frame_rate_available():
+                raise self._refuse("fps", o["fps"], "the camera has no frame rate control")
+            lo, hi = cam.get_frame_rate_bounds()
+            if not lo <= o["fps"] <= hi:
+                raise self._refuse("fps", o["fps"], f"it allows {lo:g}..{hi:g}")
+            cam.set_frame_rate(o["fps"])
+        if o["exposure_us"] is not None:
+            if not cam.is_exposure_time_available():
+                raise self._refuse("exposure_us", o["exposure_us"], "the camera has no exposure time control")
+            lo, hi = cam.get_exposure_time_bounds()
+            if not lo <= o["exposure_us"] <= hi:
+                raise self._refuse("exposure_us", o["exposure_us"], f"it allows {lo:g}..{hi:g} us")
+            if cam.is_exposure_auto_available():
+                cam.set_exposure_time_auto(self._Aravis.Auto.OFF)
+            cam.set_exposure_time(o["exposure_us"])
+        if o["gain"] is not None:
+            if not cam.is_gain_available():
+                raise self._refuse("gain", o["gain"], "the camera has no gain control")
+            lo, hi = cam.get_gain_bounds()
+            if not lo <= o["gain"] <= hi:
+                raise self._refuse("gain", o["gain"], f"it allows {lo:g}..{hi:g}")
+            if cam.is_gain_auto_available():
+                cam.set_gain_auto(self._Aravis.Auto.OFF)
+            cam.set_gain(o["gain"])
+        if o["packet_size"] is not None:
+            if not cam.is_gv_device():
+                raise self._refuse("packet_size", o["packet_size"], "only GigE Vision cameras have one")
+            lo, hi = self._device.get_integer_feature_bounds("GevSCPSPacketSize")
+            if not lo <= o["packet_size"] <= hi:
+                raise self._refuse("packet_size", o["packet_size"], f"it allows {lo}..{hi} bytes")
+            cam.gv_set_packet_size(o["packet_size"])
+
+    def _start_stream(self) -> None:
+        Aravis, cam = self._Aravis, self._cam
+        self._gv = cam.is_gv_device()
+        if self._gv:
+            # Aravis' packet socket listens on the NIC of the interface address; a camera on
+            # a loopback address (an emulator) sends through lo, which it never sees.
+            if ipaddress.ip_address(self._device.get_device_address().get_address().to_string()).is_loopback:
+                cam.gv_set_stream_options(Aravis.GvStreamOption.PACKET_SOCKET_DISABLED)
+        payload = cam.get_payload()
+        self._stream = cam.create_stream(None, None)
+        if self._stream is None:
+            raise RuntimeError(f"camera {self.name!r} ({self.device_id}): Aravis could not create a stream")
+        if self._gv:
+            # A frame arrives as a burst of packets: the socket must hold a few whole frames.
+            self._stream.set_property("socket-buffer", Aravis.GvStreamSocketBuffer.FIXED)
+            self._stream.set_property("socket-buffer-size", max(MIN_SOCKET_BUFFER, 4 * payload))
+        for _ in range(N_BUFFERS):
+            self._stream.push_buffer(Aravis.Buffer.new_allocate(payload))
+        shape = (self._height, self._width) + ((self._pixel.channels,) if self._pixel.channels > 1 else ())
+        self._image = np.empty(shape, self._pixel.dtype)
+        self._row_bytes = self._image.nbytes // self._height
+        self._image_bytes = self._image.view(np.uint8).reshape(self._height, self._row_bytes)
+        self._convert = None
+        if self._pixel.to_bgr and not self.options["raw"]:
+            import cv2
+
+            self._convert = getattr(cv2, self._pixel.to_bgr)
+            self._converted = np.empty(self._layout.shape, np.uint8)
+        self._ids = FrameCounter(0xFFFF if self._gv else None)
+        self._failed_since_good = 0
+        self._clock = None
+        if self.options["timestamp"] == "device":
+            # Aravis gives device timestamps in ns: it converts GigE Vision ticks with the
+            # camera's timestamp tick frequency (USB3 Vision timestamps are ns already).
+            self._clock = DeviceClockFit(tick_ns=1.0)
+            if self._gv and not self._device.get_timestamp_tick_frequency():
+                log.warning("camera %s reports no timestamp tick frequency: Aravis stamps its frames "
+                            "with the host's clock, so timestamp=device is the arrival time", self.name)
+        self._probe: threading.Thread | None = None
+        self._probe_started = 0.0
+        self._warned_device_ts = False
+        self._cam.start_acquisition()
+        self._last_frame = time.monotonic()
+
+    # ---- what the worker asks --------------------------------------------------------------
+
+    def trigger(self) -> None:
+        cam = self._cam
+        if cam is None:
+            raise RuntimeError(f"camera {self.name!r} is not open (lost?)")
+        try:
+            cam.software_trigger()  # executes TriggerSoftware
+        except self._GLib.Error as exc:
+            raise RuntimeError(f"TriggerSoftware failed: {exc.message}") from None
+
+    # ---- frames ------------------------------------------------------------------------------
+
+    def grab(self, timeout: float) -> Capture | None:
+        Aravis = self._Aravis
+        deadline = time.monotonic() + timeout
+        while True:
+            if self._lost.is_set():
+                raise CameraLost("Aravis lost the control channel (control-lost)")
+            remaining = deadline - time.monotonic()
+            buffer = self._stream.timeout_pop_buffer(max(0, int(remaining * 1e6)))
+            mono_before = time.monotonic_ns()
+            wall_now = time.time_ns()
+            mono_now = (mono_before + time.monotonic_ns()) // 2
+            if buffer is None:
+                self._check_alive()
+                return None
+            self._last_frame = time.monotonic()
+            try:
+                capture = self._take(buffer, Aravis, mono_now, wall_now)
+            finally:
+                self._stream.push_buffer(buffer)
+            if capture is not None:
+                return capture
+            if time.monotonic() >= deadline:
+                return None
+
+    def _take(self, buffer, Aravis, mono_now: int, wall_now: int) -> Capture | None:
+        """The frame in ``buffer`` (copied out), or None if it is incomplete (counted)."""
+        status = buffer.get_status()
+        if status != Aravis.BufferStatus.SUCCESS:
+            if status != Aravis.BufferStatus.ABORTED:
+                self.frames_dropped += 1
+                self._failed_since_good += 1
+            return None
+        if buffer.get_payload_type() not in (Aravis.BufferPayloadType.IMAGE,
+                                             Aravis.BufferPayloadType.EXTENDED_CHUNK_DATA):
+            self.frames_dropped += 1
+            self._failed_since_good += 1
+            return None
+        frame_id, missing = self._ids.next(buffer.get_frame_id())
+        # frames that never arrived whole: the gap in the ids minus those already counted
+        self.frames_dropped += max(0, missing - self._failed_since_good)
+        self._failed_since_good = 0
+        image = self._image_of(buffer)
+        if image is None:
+            self.frames_dropped += 1
+            return None
+        t_host = wall_to_monotonic(buffer.get_system_timestamp(), mono_now, wall_now)
+        t_capture = t_host
+        if self._clock is not None:
+            ticks = buffer.get_timestamp()
+            if ticks > 0:
+                self._clock.add(ticks, t_host)
+                t_capture = self._clock.to_host(ticks)
+            elif not self._warned_device_ts:
+                self._warned_device_ts = True
+                log.warning("camera %s sends no device timestamps: using the arrival time", self.name)
+        return Capture(image, frame_id, t_capture)
+
+    def _image_of(self, buffer) -> np.ndarray | None:
+        w, h = buffer.get_image_width(), buffer.get_image_height()
+        if (w, h) != (self._width, self._height) or buffer.get_image_pixel_format() != self._pfnc:
+            log.warning("camera %s sent a %dx%d frame of format 0x%08x; expected %dx%d %s", self.name,
+                        w, h, buffer.get_image_pixel_format(), self._width, self._height, self._format)
+            return None
+        data = buffer.get_image_data()  # bytes: PyGObject copied them out of the buffer
+        row = self._row_bytes
+        if len(data) < row * h:
+            return None
+        stride = len(data) // h  # > row if the camera pads its lines
+        np.copyto(self._image_bytes, np.frombuffer(data, np.uint8, count=stride * h).reshape(h, stride)[:, :row])
+        if self._convert is None:
+            return self._image
+        import cv2
+
+        cv2.cvtColor(self._image, self._convert, dst=self._converted)
+        return self._converted
+
+    # ---- is the camera still there? ------------------------------------------------------------
+
+    def _idle_limit(self) -> float:
+        return max(PROBE_IDLE_S, 4 * self._period_ns / 1e9)
+
+    def _check_alive(self) -> None:
+        """No frame came: after a while, probe the control channel (in a thread, as a dead
+        camera makes a read block for seconds); raise CameraLost once the probe failed."""
+        if self._probe_error is not None:
+            raise CameraLost(self._probe_error)
+        now = time.monotonic()
+        if self._probe is not None:
+            if not self._probe.is_alive():
+                self._probe = None
+            return
+        if now - max(self._last_frame, self._probe_started) < self._idle_limit():
+            return
+        self._probe_started = now
+        idle = now - self._last_frame
+        self._probe = threading.Thread(target=self._run_probe, args=(idle,), daemon=True,
+                                       name=f"aravis-probe-{self.name}")
+        self._probe.start()
+
+    def _run_probe(self, idle: float) -> None:
+        cam, device, GLib = self._cam, self._device, self._GLib
+        if cam is None:
+            return
+        try:
+            if self._gv:
+                ccp = device.read_register(GV_CCP_REGISTER)
+                if not ccp & GV_CCP_CONTROL_BITS:
+                    self._probe_error = (f"no frame for {idle:.1f} s and the camera has no controlling "
+                                         "host any more (it restarted)")
+            else:
+                cam.get_integer("Width")
+        except GLib.Error as exc:
+            self._probe_error = f"no frame for {idle:.1f} s and the camera does not answer ({exc.message})"
+
+    # ---- close -----------------------------------------------------------------------------
+
+    def close(self) -> None:
+        cam, stream, device = self._cam, self._stream, self._device
+        self._cam = self._stream = self._device = None
+        if cam is None:
+            return
+        lost = self._lost.is_set() or self._probe_error is not None
+        if not lost:
+            try:
+                cam.stop_acquisition()
+            except self._GLib.Error:
+                lost = True
+        try:
+            device.disconnect(self._lost_handler)
+        except Exception:
+            pass
+        if lost:
+            # Finalizing the objects of a camera that is gone blocks on control-channel
+            # timeouts (seconds): let a thread do it, so the worker can retry meanwhile.
+            objects = [stream, cam, device]
+            del stream, cam, device
+            threading.Thread(target=objects.clear, daemon=True, name="aravis-release").start()
+        else:
+            del stream, cam, device
+
+    # ---- fxis cameras ----------------------------------------------------------------------
+
+    @classmethod
+    def discover(cls) -> list[dict]:
+        Aravis, GLib = load_aravis()
+        Aravis.update_device_list()
+        found = []
+        for i in range(Aravis.get_n_devices()):
+            device_id = Aravis.get_device_id(i)
+            entry = {"id": device_id, "model": Aravis.get_device_model(i),
+                     "vendor": Aravis.get_device_vendor(i), "serial": Aravis.get_device_serial_nbr(i),
+                     "protocol": Aravis.get_device_protocol(i), "address": Aravis.get_device_address(i)}
+            try:
+                cam = Aravis.Camera.new(device_id)
+                _, _, w, h = cam.get_region()
+                fmt = f"{w}x{h} {cam.get_pixel_format_as_string()}"
+                if cam.is_frame_rate_available():
+                    fmt += f" {cam.get_frame_rate():g} fps"
+                del cam
+            except GLib.Error as exc:
+                fmt = f"? (cannot open it: {exc.message})"
+            entry["format"] = fmt
+            found.append(entry)
+        return found
