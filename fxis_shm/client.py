@@ -186,11 +186,15 @@ class Client(SocketOwner):
         deadline = time.monotonic() + self.timeout + extra_wait
         # A DEALER with no connected peer (service down, or our keys refused) would
         # block in send: wait for it to become writable within our own deadline.
+        unsendable = RequestTimeout(f"could not send {op!r} to {self.endpoint} within "
+                                    f"{self.timeout:.3g} s (is the service running, and are our keys accepted?)")
         if not self._sock.poll(self.timeout * 1000, zmq.POLLOUT):
-            raise RequestTimeout(f"could not send {op!r} to {self.endpoint} within {self.timeout:.3g} s "
-                                 "(is the service running, and are our keys accepted?)")
-        self._sock.send_multipart([b""] + protocol.encode_request(op, id=request_id, **fields),
-                                  flags=zmq.NOBLOCK)
+            raise unsendable
+        try:
+            self._sock.send_multipart([b""] + protocol.encode_request(op, id=request_id, **fields),
+                                      flags=zmq.NOBLOCK)
+        except zmq.Again:  # the peer went away between the poll and the send
+            raise unsendable from None
         while True:
             remaining = deadline - time.monotonic()
             if remaining <= 0 or not self._sock.poll(remaining * 1000, zmq.POLLIN):

@@ -42,12 +42,16 @@ class DeviceClockFit:
         self._refit()
 
     def _refit(self) -> None:
-        d0, h0 = self._pairs[0]
-        if len(self._pairs) >= 2:
-            d1, h1 = self._pairs[-1]
-            span = (d1 - d0) * self.tick_ns
-            # drift from the ends of the window (long baseline, jitter averages out)
-            self.drift = (h1 - h0) / span if span > 0 else 1.0
+        pairs = list(self._pairs)
+        d0 = pairs[0][0]
+        if len(pairs) >= 2:
+            # drift between the least delayed frames of the window's first and last
+            # quarters: a long baseline, and a late frame at either end cannot skew it
+            quarter = max(1, len(pairs) // 4)
+            early = min(pairs[:quarter], key=lambda p: p[1] - p[0] * self.tick_ns)
+            late = min(pairs[-quarter:], key=lambda p: p[1] - p[0] * self.tick_ns)
+            span = (late[0] - early[0]) * self.tick_ns
+            self.drift = (late[1] - early[1]) / span if span > 0 else 1.0
         # offset through the least delayed frame of the window
         self.offset = min(h - self.drift * (d - d0) * self.tick_ns for d, h in self._pairs) \
             - self.drift * d0 * self.tick_ns

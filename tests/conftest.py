@@ -1,6 +1,13 @@
+import os
+import subprocess
+import sys
 import time
 
 import pytest
+
+from fxis_shm import naming
+from fxis_shm.launch import ServiceProcess
+from fxis_shm.supervisor import lock_path
 
 
 def wait_until(predicate, timeout: float = 10.0, interval: float = 0.02, what: str = "condition"):
@@ -18,3 +25,32 @@ def wait_until(predicate, timeout: float = 10.0, interval: float = 0.02, what: s
 @pytest.fixture
 def wait():
     return wait_until
+
+
+def assert_nothing_left(name: str) -> None:
+    assert naming.leftovers(name) == [], f"service {name!r} left shared memory behind"
+    assert not os.path.exists(lock_path(name)), f"service {name!r} left its lock file"
+
+
+@pytest.fixture
+def start_service(tmp_path):
+    """Start real services (``fxis run`` processes); each is stopped and checked for leftovers."""
+    started = []
+
+    def start(*args, **kwargs) -> ServiceProcess:
+        log = open(tmp_path / f"service{len(started)}.log", "w")
+        svc = ServiceProcess(list(args), stderr=log, **kwargs)
+        started.append((svc, log))
+        return svc.start()
+
+    yield start
+    for svc, log in started:
+        svc.stop()
+        log.close()
+        assert_nothing_left(svc.name)
+
+
+def fxis(*args, timeout: float = 60.0) -> subprocess.CompletedProcess:
+    """Run the ``fxis`` command line (as a module, so the venv need not be on PATH)."""
+    return subprocess.run([sys.executable, "-m", "fxis_shm.cli", *args],
+                          capture_output=True, text=True, timeout=timeout)

@@ -2,34 +2,11 @@ import os
 
 import pytest
 
-from fxis_shm import naming
+from ..conftest import assert_nothing_left, start_service  # noqa: F401  (shared fixtures)
+
 from fxis_shm.launch import ServiceProcess
-from fxis_shm.supervisor import lock_path
 
 SMALL = "width=64,height=48"
-
-
-def assert_nothing_left(name: str) -> None:
-    assert naming.leftovers(name) == [], f"service {name!r} left shared memory behind"
-    assert not os.path.exists(lock_path(name)), f"service {name!r} left its lock file"
-
-
-@pytest.fixture
-def start_service(tmp_path):
-    """Start real services (``fxis run`` processes); each is stopped and checked for leftovers."""
-    started = []
-
-    def start(*args, **kwargs) -> ServiceProcess:
-        log = open(tmp_path / f"service{len(started)}.log", "w")
-        svc = ServiceProcess(list(args), stderr=log, **kwargs)
-        started.append((svc, log))
-        return svc.start()
-
-    yield start
-    for svc, log in started:
-        svc.stop()
-        log.close()
-        assert_nothing_left(svc.name)
 
 
 @pytest.fixture(scope="module")

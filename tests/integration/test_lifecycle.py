@@ -10,14 +10,10 @@ import pytest
 from fxis_shm import CameraDown, naming
 from fxis_shm.launch import ServiceProcess
 
-from .conftest import SMALL, assert_nothing_left, child_pids
+from ..conftest import assert_nothing_left, fxis
+from .conftest import SMALL, child_pids
 
 pytestmark = pytest.mark.integration
-
-
-def fxis(*args, timeout=30):
-    return subprocess.run([sys.executable, "-m", "fxis_shm.cli", *args],
-                          capture_output=True, text=True, timeout=timeout)
 
 
 def test_stop_leaves_nothing_behind(start_service):
