@@ -98,7 +98,7 @@ class Answers:
             meta = snaps[cam].frame_meta(i)
             position[(cam, i)] = len(frames)
             frames.append(protocol.frame_meta(cam, meta.frame_id, meta.t_capture, meta.t_stored,
-                                              meta.generation, image, len(images)))
+                                              meta.generation, image, len(images), meta.t_available))
             images.append(image)
         return frames, images, position
 

@@ -33,6 +33,7 @@ class Frame:
     t_stored: int
     generation: int
     timing: dict = field(default_factory=dict, repr=False)
+    t_available: int | None = None  # when the worker had the whole frame (before any processing hook)
 
 
 class FrameTuple(Mapping):
@@ -222,7 +223,7 @@ def frames_of(header: dict, images: list[np.ndarray]) -> list[Frame]:
     try:
         return [
             Frame(img, m["camera"], m["frame_id"], m["t_capture"], m["t_stored"],
-                  m["generation"], timing)
+                  m["generation"], timing, m.get("t_available"))
             for m, img in zip(header["frames"], images)
         ]
     except KeyError as exc:

@@ -284,12 +284,13 @@ def parse_stream_topic(topic: str) -> StreamTopic | None:
 
 def frame_meta(
     camera: str, frame_id: int, t_capture: int, t_stored: int, generation: int,
-    image: np.ndarray, buffer: int,
+    image: np.ndarray, buffer: int, t_available: int | None = None,
 ) -> dict:
     return {
         "camera": camera,
         "frame_id": int(frame_id),
         "t_capture": int(t_capture),
+        "t_available": int(t_capture if t_available is None else t_available),
         "t_stored": int(t_stored),
         "generation": int(generation),
         "shape": list(image.shape),

@@ -29,7 +29,7 @@ def test_tuple_pixels_are_the_frames_the_metadata_names(two_cameras):
             assert frames.skew_ns == abs(frames["cam0"].t_capture - frames["cam1"].t_capture)
             for frame in frames.values():
                 assert frame.image.shape == (48, 64) and frame.image.dtype.name == "uint8"
-                assert frame.t_stored >= frame.t_capture
+                assert frame.t_capture <= frame.t_available <= frame.t_stored
                 assert frame.generation == 1
 
 

@@ -277,7 +277,7 @@ def test_a_reply_round_trips_images_of_every_layout(shape, dtype, transport):
     assert header["clock"] == CLOCK
     assert header["id"] == 5
     assert header["frames"][0] == {
-        "camera": "cam0", "frame_id": 100, "t_capture": 10**12, "t_stored": 10**12 + 7,
+        "camera": "cam0", "frame_id": 100, "t_capture": 10**12, "t_available": 10**12, "t_stored": 10**12 + 7,
         "generation": 2, "shape": list(shape), "dtype": dtype, "buffer": 0,
     }
 
