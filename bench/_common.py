@@ -12,6 +12,7 @@ import json
 import math
 import os
 import platform
+import random
 import subprocess
 import sys
 import time
@@ -48,6 +49,18 @@ def add_service_args(p: argparse.ArgumentParser, endpoint_note: str = "") -> Non
                    help="client timeout per request, seconds (no request can hang longer)")
     g.add_argument("--seed", type=int, default=None,
                    help="seed of the random sleeps (default: random; the seed used is saved in the JSON)")
+
+
+def parse_args(p: argparse.ArgumentParser, argv: list[str] | None):
+    """The parsed flags, with ``seed`` drawn if none was given; or the exit status
+    of --help or of bad flags (argparse printed why), returned rather than raised."""
+    try:
+        args = p.parse_args(argv)
+    except SystemExit as exc:
+        return exc.code
+    if getattr(args, "seed", 0) is None:
+        args.seed = random.SystemRandom().randrange(2**32)
+    return args
 
 
 def usage_error(p: argparse.ArgumentParser, message: str) -> int:

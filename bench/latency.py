@@ -449,10 +449,9 @@ def _service_cameras(status: dict, args, names: list[str]) -> str | None:
 
 def main(argv: list[str] | None = None) -> int:
     p = parser()
-    try:
-        args = p.parse_args(argv)
-    except SystemExit as exc:  # --help, or bad flags (argparse printed why)
-        return exc.code
+    args = common.parse_args(p, argv)
+    if isinstance(args, int):
+        return args
     n_cams = args.cameras or (len(args.phases) if args.phases else 2)
     phases = args.phases or [float(j) for j in range(n_cams)]
     if len(phases) != n_cams:
@@ -460,8 +459,6 @@ def main(argv: list[str] | None = None) -> int:
     period_ms = 1000.0 / args.fps
     if args.jitter_ms * 2 >= period_ms:
         return common.usage_error(p, f"--jitter-ms must be below half the frame period ({period_ms / 2:.3f} ms)")
-    if args.seed is None:
-        args.seed = random.SystemRandom().randrange(2**32)
     names = [f"cam{j}" for j in range(n_cams)]
     exp = Experiment(names, args.fps, phases, args.jitter_ms)
     out = common.ensure_dir(args.out)

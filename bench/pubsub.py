@@ -187,8 +187,10 @@ def plot(path: str, events: dict, streams: dict) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     p = parser()
-    args = p.parse_args(argv)
-    seed = args.seed if args.seed is not None else random.randrange(2**32)
+    args = common.parse_args(p, argv)
+    if isinstance(args, int):
+        return args
+    seed = args.seed
     rng = random.Random(seed)
     out = common.ensure_dir(args.out)
     run_args = common.synthetic_camera_flags(["cam0", "cam1"], args.fps, args.width, args.height)

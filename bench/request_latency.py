@@ -162,12 +162,9 @@ def run(args, client, status: dict) -> list[dict]:
 
 def main(argv: list[str] | None = None) -> int:
     p = parser()
-    try:
-        args = p.parse_args(argv)
-    except SystemExit as exc:  # --help, or bad flags (argparse printed why)
-        return exc.code
-    if args.seed is None:
-        args.seed = random.SystemRandom().randrange(2**32)
+    args = common.parse_args(p, argv)
+    if isinstance(args, int):
+        return args
     out = common.ensure_dir(args.out)
     names = [f"cam{j}" for j in range(args.cameras)]
     run_args = common.synthetic_camera_flags(names, args.fps, args.width, args.height)

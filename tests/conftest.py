@@ -1,6 +1,7 @@
 import os
 import subprocess
 import sys
+import threading
 import time
 
 import pytest
@@ -25,6 +26,16 @@ def wait_until(predicate, timeout: float = 10.0, interval: float = 0.02, what: s
 @pytest.fixture
 def wait():
     return wait_until
+
+
+def run_in_threads(target, count: int, timeout: float) -> None:
+    """Run ``target`` in ``count`` threads at once; each is joined within ``timeout`` s."""
+    threads = [threading.Thread(target=target) for _ in range(count)]
+    for t in threads:
+        t.start()
+    for t in threads:
+        t.join(timeout)
+    assert not any(t.is_alive() for t in threads), "a thread did not finish in time"
 
 
 def assert_nothing_left(name: str) -> None:

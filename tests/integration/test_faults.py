@@ -2,7 +2,6 @@
 coordinator, partial tuples, per-client limits, and torn reads under stress."""
 import os
 import signal
-import threading
 import time
 
 import pytest
@@ -11,7 +10,7 @@ import zmq
 from fxis_shm import CameraDown, RequestTimeout, ServiceError, read_stamp
 from fxis_shm.protocol import encode_request
 
-from ..conftest import wait_until
+from ..conftest import run_in_threads, wait_until
 from .conftest import SMALL, child_pids
 
 pytestmark = pytest.mark.integration
@@ -98,11 +97,7 @@ def test_torn_reads_never_reach_a_client(start_service):
         except Exception as exc:
             errors.append(exc)
 
-    threads = [threading.Thread(target=reader) for _ in range(8)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join(120)
+    run_in_threads(reader, 8, timeout=120)
     assert not errors, errors[:3]
     assert served[0] > 1000
     with svc.client() as client:

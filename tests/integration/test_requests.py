@@ -2,7 +2,6 @@
 many clients are served at once, and a waiting request delays no one."""
 import os
 import signal
-import threading
 
 import pytest
 import zmq
@@ -10,6 +9,7 @@ import zmq
 from fxis_shm import Client, RequestTimeout, read_stamp
 from fxis_shm.protocol import encode_request
 
+from ..conftest import run_in_threads
 from .conftest import child_pids
 
 pytestmark = pytest.mark.integration
@@ -78,11 +78,7 @@ def test_many_clients_at_once(two_cameras):
         except Exception as exc:  # collected and reported below
             errors.append(exc)
 
-    threads = [threading.Thread(target=worker) for _ in range(16)]
-    for t in threads:
-        t.start()
-    for t in threads:
-        t.join(30)
+    run_in_threads(worker, 16, timeout=30)
     assert not errors, errors[:3]
     assert len(served) == 16 * 5
 
