@@ -2,8 +2,8 @@
 time-synchronized images over ZeroMQ."""
 from .client import Client, Frame, FrameTuple
 from .errors import (
-    CameraDown, ConfigError, FrameTimeout, FxisError, ProtocolError, RequestTimeout,
-    ServiceError, SkewExceeded, UnknownCamera,
+    CameraDown, ConfigError, FrameTimeout, FxisError, LocalPathUnavailable, Overwritten,
+    ProtocolError, RequestTimeout, ServiceError, SkewExceeded, UnknownCamera,
 )
 from .security import ClientKeys
 from .stamp import read_stamp
@@ -11,6 +11,7 @@ from .stamp import read_stamp
 __all__ = [
     "Client", "ClientKeys", "Frame", "FrameTuple", "read_stamp",
     "FxisError", "ConfigError", "ProtocolError", "RequestTimeout", "ServiceError",
-    "CameraDown", "UnknownCamera", "SkewExceeded", "FrameTimeout",
+    "CameraDown", "UnknownCamera", "SkewExceeded", "FrameTimeout", "LocalPathUnavailable",
+    "Overwritten",
 ]
 __version__ = "0.1.0"

@@ -10,6 +10,7 @@ from typing import Callable
 
 from . import protocol, sequences
 from .cameras import CameraHandle
+from .bufferpool import BufferPool
 from .errors import Code
 from .ring import Overwritten
 from .selection import INDEPENDENT, select
@@ -46,6 +47,7 @@ class Pending:
     missing: list = field(default_factory=list)  # cameras down, left out of a partial tuple
     triggered: frozenset = frozenset()  # software-triggered cameras this request triggered
     t_trigger: int | None = None
+    local: bool = False  # the client shares our kernel: reply with where the frames are (fast path)
 
     @property
     def op(self) -> str:
@@ -56,6 +58,7 @@ class Answers:
     def __init__(self, cameras: dict[str, CameraHandle], settings: dict):
         self.cameras = cameras
         self.settings = settings
+        self.buffers = BufferPool()
 
     def setting(self, request: dict, key: str):
         value = request.get(key)
@@ -67,8 +70,11 @@ class Answers:
     # ---- reading the rings ----
 
     def snapshots(self, names: list[str], now: int) -> dict:
-        snaps = self.snapshots_allowing_empty(names, now)
-        empty = [c for c in names if not len(snaps[c].timeline)]
+        return self.check_not_empty(self.snapshots_allowing_empty(names, now))
+
+    @staticmethod
+    def check_not_empty(snaps: dict) -> dict:
+        empty = [c for c, snap in snaps.items() if not len(snap.timeline)]
         if empty:
             raise Reject(Code.NO_FRAMES, f"camera(s) {empty} have stored no frame yet")
         return snaps
@@ -83,29 +89,49 @@ class Answers:
             snaps[cam] = handle.reader.snapshot()
         return snaps
 
-    def copy(self, snaps: dict, picks: list[tuple[str, int]]) -> tuple[list, list, dict]:
-        """Copy each distinct (camera, logical index) once: metadata, images, and each pick's position."""
+    def copy(self, snaps: dict, picks: list[tuple[str, int]], refs: bool = False) -> tuple[list, list, dict]:
+        """Copy each distinct (camera, logical index) once: metadata, images, and each pick's position.
+        With ``refs`` (a local client) nothing is copied: the metadata says where each frame is."""
         frames, images, position = [], [], {}
         for cam, i in picks:
             if (cam, i) in position:
                 continue
-            handle = self.cameras[cam]
-            try:
-                image = handle.reader.copy(snaps[cam], i)
-            except Overwritten:
-                handle.torn_reads += 1
-                raise
-            meta = snaps[cam].frame_meta(i)
             position[(cam, i)] = len(frames)
-            frames.append(protocol.frame_meta(cam, meta.frame_id, meta.t_capture, meta.t_stored,
-                                              meta.generation, image, len(images), meta.t_available))
-            images.append(image)
+            frames.append(self._reference(cam, snaps[cam], i) if refs else
+                          self._copied(cam, snaps[cam], i, len(images), images))
         return frames, images, position
 
-    def with_retries(self, names: list[str], now: int, build: Callable[[dict], tuple]):
-        """Run ``build(snapshots)``, re-snapshotting if a chosen slot was overwritten meanwhile."""
+    def _copied(self, cam: str, snap, i: int, buffer: int, images: list) -> dict:
+        handle = self.cameras[cam]
+        layout = handle.reader.layout
+        try:
+            image = handle.reader.copy(snap, i, self.buffers.take(layout.shape, layout.dtype))
+        except Overwritten:
+            handle.torn_reads += 1
+            raise
+        images.append(image)
+        meta = snap.frame_meta(i)
+        return protocol.frame_meta(cam, meta.frame_id, meta.t_capture, meta.t_stored,
+                                   meta.generation, image, buffer, meta.t_available)
+
+    def _reference(self, cam: str, snap, i: int) -> dict:
+        reader = self.cameras[cam].reader
+        slot, seq = snap.slot(i), snap.seq(i)
+        reader.check_slot(slot, seq, "before")  # already gone: choose again rather than send it
+        meta = snap.frame_meta(i)
+        return protocol.frame_ref(cam, meta.frame_id, meta.t_capture, meta.t_stored, meta.generation,
+                                  reader.layout.shape, reader.layout.dtype, meta.t_available,
+                                  ring=reader.name, instance=reader.instance, slot=slot, seq=seq)
+
+    def with_retries(self, names: list[str], now: int, build: Callable[[dict], tuple],
+                     taken: dict | None = None):
+        """Run ``build(snapshots)``, re-snapshotting if a chosen slot was overwritten meanwhile.
+        ``taken``: snapshots of ``names`` just taken, used for the first attempt."""
         for attempt in range(COPY_ATTEMPTS):
-            snaps = self.snapshots(names, now if attempt == 0 else time.monotonic_ns())
+            if attempt == 0 and taken is not None:
+                snaps = self.check_not_empty(taken)
+            else:
+                snaps = self.snapshots(names, now if attempt == 0 else time.monotonic_ns())
             try:
                 return build(snaps)
             except Overwritten:
@@ -161,7 +187,7 @@ class Answers:
             raise Reject(Code.SKEW_EXCEEDED,
                          f"the best tuple near t* has a skew of {sel.best_skew_ns / 1e6:.3f} ms, "
                          f"more than max_skew_ms={max_skew}")
-        frames, images, _ = self.copy(snaps, picks)
+        frames, images, _ = self.copy(snaps, picks, p.local)
         body = {"op": p.op, "t_request": p.t_star, "frames": frames,
                 "timing": {"searched": searched}}
         if p.op == "tuple":
@@ -187,7 +213,7 @@ class Answers:
         return INDEPENDENT if p.op == "image" else self.setting(p.request, "sync")
 
     def latest(self, p: Pending, snaps: dict) -> tuple[dict, list]:
-        frames, images, _ = self.copy(snaps, [(c, len(snaps[c].timeline) - 1) for c in p.cameras])
+        frames, images, _ = self.copy(snaps, [(c, len(snaps[c].timeline) - 1) for c in p.cameras], p.local)
         return {"op": "latest", "frames": frames, "timing": {}}, images
 
     def sequence_spec(self, p: Pending) -> sequences.SequenceSpec:
@@ -227,7 +253,7 @@ class Answers:
                 groups.append({**chosen, ref: i})
         self.check_size(len(groups) * len(p.cameras))
         searched = time.monotonic_ns()
-        frames, images, position = self.copy(snaps, [(c, g[c]) for g in groups for c in p.cameras])
+        frames, images, position = self.copy(snaps, [(c, g[c]) for g in groups for c in p.cameras], p.local)
         body = {
             "op": "sequence", "t_request": p.t_star, "targets": targets, "frames": frames,
             "groups": [[position[(c, g[c])] for c in p.cameras] for g in groups],

@@ -2,6 +2,8 @@
 the worker replaces it), whether its worker is alive, and its status."""
 from __future__ import annotations
 
+import time
+
 import posix_ipc
 
 from . import naming
@@ -11,6 +13,9 @@ from .waitpolicy import CameraState
 
 # A worker heartbeats at least every 0.1 s; silence this long means it hangs.
 STALE_HEARTBEAT_NS = 2_000_000_000
+# How long a look at /proc that found the worker running stays good: requests
+# need not pay a file read each, and a death is still seen within this time.
+ALIVE_CHECK_NS = 20_000_000
 
 
 def process_alive(pid: int) -> bool:
@@ -33,6 +38,7 @@ class CameraHandle:
         self.torn_reads = 0
         self.last_error = ""
         self._trigger: posix_ipc.Semaphore | None = None
+        self._seen_alive = (0, 0)  # (pid, when) of the last look that found the worker running
 
     def ring(self) -> RingReader | None:
         """The ring, opened or re-opened if the worker created a new one; None if absent."""
@@ -53,11 +59,20 @@ class CameraHandle:
         if ring is None:
             return f"camera {self.name!r} has no ring: {self.last_error}"
         pid = ring.field("writer_pid")
-        if not process_alive(pid):
+        if not self._alive(pid):
             return f"camera {self.name!r} is down: its worker is not running"
         if now - ring.field("heartbeat_ns") > STALE_HEARTBEAT_NS:
             return f"camera {self.name!r} is down: its worker has not reported for over 2 s"
         return None
+
+    def _alive(self, pid: int) -> bool:
+        checked = time.monotonic_ns()
+        seen_pid, seen_at = self._seen_alive
+        if pid == seen_pid and checked - seen_at < ALIVE_CHECK_NS:
+            return True
+        alive = process_alive(pid)
+        self._seen_alive = (pid, checked) if alive else (0, 0)
+        return alive
 
     @property
     def triggered(self) -> bool:

@@ -3,6 +3,12 @@
 It uses a DEALER socket and tags every request with an id, so a timed-out
 request leaves the client usable (a reply that arrives late is recognised by
 its id and discarded), and a restarted service is reconnected to by itself.
+
+Two paths bring the pixels (``Frame.path`` says which one did): on the
+service's own kernel, the service replies with where the chosen frames are and
+the client copies them out of the shared-memory rings itself ("local", see
+fxis_shm.localpath); elsewhere, or when the rings cannot be opened here, the
+frames travel in the reply ("network").
 """
 from __future__ import annotations
 
@@ -10,16 +16,21 @@ import itertools
 import time
 from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Iterator
+from typing import Callable, Iterator
 
 import numpy as np
 import zmq
 
 from . import protocol
-from .errors import ProtocolError, RequestTimeout, service_error
+from .errors import LocalPathUnavailable, Overwritten, ProtocolError, RequestTimeout, service_error
+from .localpath import LocalRings, LocalUnavailable, boot_id
 from .security import ClientKeys
 
 DEFAULT_ENDPOINT = "tcp://127.0.0.1:5555"
+LOCAL, NETWORK = "local", "network"
+LOCAL_MODES = ("auto", "off", "require")
+_LOCAL_ATTEMPTS = 3  # requests re-asked after a torn local copy before giving up
+_LOCAL_RETRY_S = 10.0  # after the rings could not be opened, the network path this long
 
 
 @dataclass
@@ -34,6 +45,13 @@ class Frame:
     generation: int
     timing: dict = field(default_factory=dict, repr=False)
     t_available: int | None = None  # when the worker had the whole frame (before any processing hook)
+    path: str = NETWORK  # how the pixels came: "local" (copied from the ring here) or "network"
+    _still_valid: Callable[[], bool] | None = field(default=None, repr=False)
+
+    def still_valid(self) -> bool:
+        """False once a zero-copy view's slot has been overwritten (then discard what you
+        computed from it). A copied image (the default) stays valid for ever."""
+        return self._still_valid is None or self._still_valid()
 
 
 class FrameTuple(Mapping):
@@ -45,6 +63,14 @@ class FrameTuple(Mapping):
         self.t_request = t_request
         self.timing = timing
         self.missing = list(missing)  # cameras left out of a partial tuple (they were down)
+
+    @property
+    def path(self) -> str:
+        """How the pixels came: "local" or "network" (the same for every frame of a reply)."""
+        return next(iter(self._frames.values())).path if self._frames else NETWORK
+
+    def still_valid(self) -> bool:
+        return all(f.still_valid() for f in self._frames.values())
 
     def __getitem__(self, camera: str) -> Frame:
         return self._frames[camera]
@@ -96,46 +122,71 @@ class Client(SocketOwner):
     """``Client(endpoint, timeout)``: every call raises RequestTimeout after ``timeout`` seconds."""
 
     def __init__(self, endpoint: str = DEFAULT_ENDPOINT, timeout: float = 2.0,
-                 context: zmq.Context | None = None, keys: ClientKeys | None = None):
+                 context: zmq.Context | None = None, keys: ClientKeys | None = None,
+                 local: str = "auto"):
         """``keys``: for a service with CurveZMQ, its public key and this client's pair
-        (``ClientKeys.from_files("server.key", "me.key_secret")``)."""
+        (``ClientKeys.from_files("server.key", "me.key_secret")``).
+
+        ``local``: "auto" copies frames straight from the service's shared-memory rings
+        when the service runs on this kernel and its rings can be opened (same user, same
+        /dev/shm), else takes them from the reply; "off" always takes them from the
+        reply; "require" raises LocalPathUnavailable rather than use the network path."""
+        if local not in LOCAL_MODES:
+            raise ValueError(f"local must be one of {LOCAL_MODES}, got {local!r}")
         self.endpoint = endpoint
         self.timeout = timeout
+        self.local = local
         self._ids = itertools.count(1)
         self._sock = connected_socket(context, zmq.DEALER, endpoint, keys)
         self._clock_offset: int | None = None  # service clock minus local clock
         self._periods: float | None = None  # longest frame period, for sequences that wait
+        self._boot_id = boot_id()
+        self._rings = LocalRings()
+        self._local_off: tuple[str, float] | None = None  # why the local path is not used, since when
+        self.paths = {LOCAL: 0, NETWORK: 0, "torn": 0}  # replies by path; local copies found torn
+
+    def close(self) -> None:
+        self._rings.close()
+        super().close()
+
+    @property
+    def local_unavailable(self) -> str | None:
+        """Why the last request could not use the local path (None: it could, or was not asked to)."""
+        return self._local_off[0] if self._local_off else None
 
     # ---- operations ----
 
     def image(self, camera: str, at: int | None = None, wait: str | None = None,
-              timeout_ms: float | None = None) -> Frame:
-        """The frame of ``camera`` nearest to ``at`` (default: the moment the request arrives)."""
-        header, images = self._call("image", self._extra_wait(at, timeout_ms), camera=camera, at=at,
-                                    wait=wait, timeout_ms=timeout_ms)
-        return frames_of(header, images)[0]
+              timeout_ms: float | None = None, copy: bool = True) -> Frame:
+        """The frame of ``camera`` nearest to ``at`` (default: the moment the request arrives).
+
+        ``copy=False`` (local path only): the image is a read-only view of the ring slot,
+        with no copy at all; check ``frame.still_valid()`` after using it."""
+        reply = self._fetch("image", self._extra_wait(at, timeout_ms), copy, camera=camera, at=at,
+                            wait=wait, timeout_ms=timeout_ms)
+        return frames_of(*reply)[0]
 
     def tuple(self, cameras: list[str] | None = None, at: int | None = None,
               sync: str | None = None, wait: str | None = None,
               max_skew_ms: float | None = None, timeout_ms: float | None = None,
-              partial: bool = False) -> FrameTuple:
+              partial: bool = False, copy: bool = True) -> FrameTuple:
         """One frame per camera (default: all), nearest to ``at`` and to each other.
         With ``partial``, cameras that are down are left out (``.missing`` names
         them) instead of failing the request with CameraDown."""
-        header, images = self._call("tuple", self._extra_wait(at, timeout_ms), cameras=cameras, at=at,
-                                    sync=sync, wait=wait, max_skew_ms=max_skew_ms,
-                                    timeout_ms=timeout_ms, partial=partial or None)
-        return tuple_of(header, images)
+        reply = self._fetch("tuple", self._extra_wait(at, timeout_ms), copy, cameras=cameras, at=at,
+                            sync=sync, wait=wait, max_skew_ms=max_skew_ms,
+                            timeout_ms=timeout_ms, partial=partial or None)
+        return tuple_of(*reply)
 
-    def latest(self, cameras: list[str] | None = None) -> FrameTuple:
+    def latest(self, cameras: list[str] | None = None, copy: bool = True) -> FrameTuple:
         """The newest stored frame of each camera, without waiting."""
-        return tuple_of(*self._call("latest", 0.0, cameras=cameras))
+        return tuple_of(*self._fetch("latest", 0.0, copy, cameras=cameras))
 
     def sequence(self, kind: str, *, camera: str | None = None, cameras: list[str] | None = None,
                  count: int | None = None, direction: str = "before",
                  interval_ms: float | None = None, start: int | None = None, end: int | None = None,
                  at: int | None = None, sync: str | None = None,
-                 timeout_ms: float | None = None) -> list:
+                 timeout_ms: float | None = None, copy: bool = True) -> list:
         """Several frames of one ``camera`` (a list of Frame) or tuples of ``cameras``
         (default all; a list of FrameTuple):
 
@@ -152,8 +203,7 @@ class Client(SocketOwner):
         extra = self._extra_wait(last, timeout_ms)
         if kind == "consecutive" and direction != "before" and count:
             extra += count * self._longest_period_s()
-        header, images = self._call("sequence", extra, **fields)
-        return sequence_of(header, images, single=camera is not None)
+        return sequence_of(*self._fetch("sequence", extra, copy, **fields), single=camera is not None)
 
     def _longest_period_s(self) -> float:
         if self._periods is None:
@@ -167,6 +217,59 @@ class Client(SocketOwner):
     def time(self) -> int:
         """The service's clock now (ns of its CLOCK_MONOTONIC)."""
         return self._call("time", 0.0)[0]["now"]
+
+    # ---- the two paths ----
+
+    def _fetch(self, op: str, extra_wait: float, copy: bool, **fields) -> tuple[dict, list, Callable | None]:
+        """A request for frames, over the local path if it can be used: the reply header,
+        the images (the header's ``path`` set) and a validity check for zero-copy views."""
+        if self._local_usable():
+            for _ in range(_LOCAL_ATTEMPTS):
+                header, images = self._call(op, extra_wait, local=self._boot_id, **fields)
+                if header.get("delivery") != protocol.LOCAL:  # the service is on another kernel
+                    self._give_up_local("the service runs on another kernel")
+                    return self._network_reply(header, images)
+                try:
+                    images = self._rings.images(header["frames"], copy)
+                except Overwritten:  # we were too slow: the ring came round; ask again
+                    self.paths["torn"] += 1
+                    continue
+                except LocalUnavailable as exc:  # the frames are there, just not here: same t*
+                    self._give_up_local(str(exc))
+                    fields = _same_moment(op, fields, header)
+                    break
+                self.paths[LOCAL] += 1
+                header["path"] = LOCAL
+                check = None if copy else (lambda metas=header["frames"]: all(map(self._rings.still_valid, metas)))
+                return header, images, check
+            else:
+                raise Overwritten(f"the frames of {op!r} were overwritten in the rings {_LOCAL_ATTEMPTS} "
+                                  "times before this client could copy them (is it starved of CPU, "
+                                  "or are the rings too short?)")
+        if self.local == "require":
+            raise LocalPathUnavailable(f"the local fast path cannot be used: {self.local_unavailable}")
+        return self._network_reply(*self._call(op, extra_wait, **fields))
+
+    def _network_reply(self, header: dict, images: list) -> tuple[dict, list, None]:
+        self.paths[NETWORK] += 1
+        header["path"] = NETWORK
+        return header, images, None
+
+    def _local_usable(self) -> bool:
+        if self.local == "off":
+            return False
+        if self._boot_id is None:
+            self._local_off = ("this kernel has no boot id to compare", time.monotonic())
+            return False
+        if self._local_off is not None and time.monotonic() - self._local_off[1] < _LOCAL_RETRY_S:
+            return False
+        return True
+
+    def _give_up_local(self, reason: str) -> None:
+        """Take the network path for a while: the rings cannot be read here now."""
+        self._local_off = (reason, time.monotonic())
+        if self.local == "require":
+            raise LocalPathUnavailable(f"the local fast path cannot be used: {reason}")
 
     # ---- plumbing ----
 
@@ -218,29 +321,37 @@ class Client(SocketOwner):
 
 # ---- decoding replies and stream messages into Frames ----
 
-def frames_of(header: dict, images: list[np.ndarray]) -> list[Frame]:
-    timing = header.get("timing", {})
+def frames_of(header: dict, images: list[np.ndarray], still_valid: Callable | None = None) -> list[Frame]:
+    timing, path = header.get("timing", {}), header.get("path", NETWORK)
     try:
         return [
             Frame(img, m["camera"], m["frame_id"], m["t_capture"], m["t_stored"],
-                  m["generation"], timing, m.get("t_available"))
+                  m["generation"], timing, m.get("t_available"), path, still_valid)
             for m, img in zip(header["frames"], images)
         ]
     except KeyError as exc:
         raise ProtocolError(f"frame metadata lacks {exc}") from None
 
 
-def tuple_of(header: dict, images: list[np.ndarray]) -> FrameTuple:
-    frames = frames_of(header, images)
+def tuple_of(header: dict, images: list[np.ndarray], still_valid: Callable | None = None) -> FrameTuple:
+    frames = frames_of(header, images, still_valid)
     return FrameTuple({f.camera: f for f in frames}, header.get("t_request"), header.get("timing", {}),
                       header.get("missing", ()))
 
 
-def sequence_of(header: dict, images: list[np.ndarray], single: bool) -> list:
-    frames = frames_of(header, images)
+def sequence_of(header: dict, images: list[np.ndarray], still_valid: Callable | None = None,
+                single: bool = False) -> list:
+    frames = frames_of(header, images, still_valid)
     groups = header.get("groups", [])
     timing = header.get("timing", {})
     if single:
         return [frames[g[0]] for g in groups]
     return [FrameTuple({frames[i].camera: frames[i] for i in g}, t, timing)
             for g, t in zip(groups, header.get("targets", [None] * len(groups)))]
+
+
+def _same_moment(op: str, fields: dict, header: dict) -> dict:
+    """The fields of a request asked again: for the t* the service chose the first time."""
+    if op == "latest" or fields.get("at") is not None or header.get("t_request") is None:
+        return fields
+    return {**fields, "at": header["t_request"]}

@@ -22,6 +22,7 @@ from .answers import Answers, NotReady, Pending, Reject
 from .cameras import CameraHandle
 from .errors import Code, ProtocolError
 from .framewatch import FrameWatch
+from .localpath import boot_id
 from .security import load_pair, make_server
 from .streams import Streams
 from .waitpolicy import AUTO, NEXT, NONE, waiting_for, waiting_for_selection
@@ -62,6 +63,15 @@ def split_envelope(frames: list) -> tuple[list, list]:
     return frames[:1], frames[1:]
 
 
+def send_parts(sock: zmq.Socket, parts: list) -> None:
+    """One multipart message, without blocking: image buffers handed to ZeroMQ
+    without a copy, small byte strings copied (cheaper than tracking them)."""
+    last = len(parts) - 1
+    for i, part in enumerate(parts):
+        flags = zmq.NOBLOCK | (zmq.SNDMORE if i < last else 0)
+        sock.send(part, flags, copy=isinstance(part, (bytes, zmq.Frame)))
+
+
 def _readable_field(frame: bytes, name: str, kinds: tuple):
     """A field of a header we could not decode, if it is there and readable."""
     try:
@@ -90,6 +100,7 @@ class Coordinator:
         self.started_ns = time.monotonic_ns()
         self.requests_served = 0
         self.events_dropped = 0
+        self.boot_id = boot_id()
 
     # ---- the loop ----
 
@@ -265,7 +276,8 @@ class Coordinator:
                 raise Reject(Code.CAMERA_DOWN, f"every requested camera is down: {missing}")
         t_star = request.get("at")
         t_star = t_received if t_star is None else t_star
-        p = Pending(respond, request, cameras, t_received, t_star, missing=missing)
+        local = self.boot_id is not None and request.get("local") == self.boot_id
+        p = Pending(respond, request, cameras, t_received, t_star, missing=missing, local=local)
         horizon = int(self.settings["horizon_ms"] * 1e6)
         if self._latest_needed(p, 0) - t_received > horizon:
             raise Reject(Code.OUT_OF_RANGE,
@@ -309,14 +321,14 @@ class Coordinator:
     def _advance(self, p: Pending, now: int) -> bool:
         """Answer ``p`` if it can be answered now; True once it got its reply."""
         try:
-            waits, states = self._waits(p, now)
+            waits, states, snaps = self._waits(p, now)
             for cam in p.cameras:
                 if cam not in waits:  # ready now, or when a frame that raced the request landed
                     stored = states[cam].newest_stored if cam in states else None
                     p.ready_at.setdefault(cam, max(now, stored or now))
             if not waits:
                 try:
-                    self._answer(p, now)
+                    self._answer(p, now, snaps)
                     return True
                 except NotReady as exc:
                     waits = {c: None for c in p.cameras}
@@ -336,11 +348,15 @@ class Coordinator:
             p.respond(protocol.encode_error(p.request["id"], Code.INTERNAL, repr(exc)))
         return True
 
-    def _waits(self, p: Pending, now: int) -> tuple[dict, dict]:
-        """Cameras still waited for (see waitpolicy), and the camera states seen."""
+    def _waits(self, p: Pending, now: int) -> tuple[dict, dict, dict | None]:
+        """Cameras still waited for (see waitpolicy), and the camera states and snapshots seen."""
         if p.op == "latest":
-            return {}, {}
+            return {}, {}, None
         snaps = self.answers.snapshots_allowing_empty(p.cameras, now)
+        waits, states = self._waits_seen(p, now, snaps)
+        return waits, states, snaps
+
+    def _waits_seen(self, p: Pending, now: int, snaps: dict) -> tuple[dict, dict]:
         states = {c: self.cameras[c].state(snaps[c]) for c in p.cameras}
         if p.op == "sequence":
             waits = {}
@@ -369,11 +385,13 @@ class Coordinator:
             self.answers.radius(p.cameras), self.answers.tolerance(p.cameras),
         ), states
 
-    def _answer(self, p: Pending, t_waited: int) -> None:
+    def _answer(self, p: Pending, t_waited: int, snaps: dict | None = None) -> None:
         build = {"image": self.answers.frames_near, "tuple": self.answers.frames_near,
                  "latest": self.answers.latest, "sequence": self.answers.sequence}[p.op]
-        body, images = self.answers.with_retries(p.cameras, t_waited, lambda snaps: build(p, snaps))
+        body, images = self.answers.with_retries(p.cameras, t_waited, lambda s: build(p, s), snaps)
         body["timing"].update(received=p.t_received, waited=t_waited, copied=time.monotonic_ns())
+        if p.local:
+            body["delivery"] = protocol.LOCAL
         body["timing"]["cameras"] = {c: {"waited": p.ready_at.get(c, t_waited)} for c in p.cameras}
         self._reply(p.respond, p.request, body, images)
 
@@ -383,6 +401,7 @@ class Coordinator:
             "op": "status",
             "service": self.service,
             "now": now,
+            "boot_id": self.boot_id,
             "uptime_s": round((now - self.started_ns) / 1e9, 3),
             "endpoint": self.endpoint,
             "pub": self.pub_endpoint,
@@ -411,7 +430,7 @@ class Coordinator:
             return None
 
     def _op_time(self) -> dict:
-        return {"op": "time", "now": time.monotonic_ns()}
+        return {"op": "time", "now": time.monotonic_ns(), "boot_id": self.boot_id}
 
     # ---- replies ----
 
@@ -423,7 +442,7 @@ class Coordinator:
 
     def _send(self, envelope: list, frames: list) -> None:
         try:
-            self.router.send_multipart(envelope + frames, copy=False, flags=zmq.NOBLOCK)
+            send_parts(self.router, envelope + frames)
         except zmq.Again:
             log.warning("dropped a reply: the client is not reading its replies")
         except zmq.ZMQError as exc:  # EHOSTUNREACH: the client went away
@@ -431,6 +450,6 @@ class Coordinator:
 
     def _publish(self, topic: str, frames: list) -> None:
         try:  # a subscriber whose queue is full loses this message; nobody waits
-            self.pub.send_multipart([topic.encode(), *frames], copy=False, flags=zmq.NOBLOCK)
+            send_parts(self.pub, [topic.encode(), *frames])
         except zmq.ZMQError as exc:
             log.debug("could not publish on %s: %s", topic, exc)

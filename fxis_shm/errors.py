@@ -53,6 +53,15 @@ class RingError(FxisError):
     """A shared-memory ring is missing, retired or not of the expected layout."""
 
 
+class Overwritten(RingError):
+    """A frame's slot was overwritten before or while it was copied: the copy is not returned."""
+
+
+class LocalPathUnavailable(FxisError):
+    """The local fast path was required (``Client(local="require")``) but cannot be used;
+    the message says why."""
+
+
 class ServiceError(FxisError):
     """The service answered with an error reply."""
 

@@ -23,6 +23,7 @@ CLOCK = "CLOCK_MONOTONIC"
 MAX_HEADER_BYTES = 64 * 1024
 RESERVED_TOPICS = ("frames/", "tuples", "fxis.")  # stream topics the service publishes itself
 DTYPES = ("uint8", "uint16", "float32")
+LOCAL = "local"  # the delivery of a reply whose frames the client copies from the rings itself
 
 
 # ---- field checks: each returns the value or raises ProtocolError ----
@@ -117,6 +118,12 @@ def _optional(check):
     return wrapped
 
 
+def _boot_id(field, v):
+    if not isinstance(v, str) or not 0 < len(v) <= 64:
+        _fail(field, "must be the client's boot id, a string of 1 to 64 characters")
+    return v
+
+
 def _request_id(field, v):
     if isinstance(v, bool) or not isinstance(v, (int, str)):
         _fail(field, "must be an integer or a string")
@@ -135,16 +142,20 @@ _WAITING: dict[str, tuple[Check, Any]] = {
     "timeout_ms": (_optional(_timeout), None),
 }
 # op -> {field: (check, default)}; a default of ... marks a required field
+# "local": the client's kernel boot id; a service on the same kernel then replies
+# with where the frames are instead of their pixels (the local fast path).
+_LOCAL: dict[str, tuple[Check, Any]] = {"local": (_optional(_boot_id), None)}
 OPS: dict[str, dict[str, tuple[Check, Any]]] = {
-    "image": {"camera": (_name, ...), **_WAITING},
+    "image": {"camera": (_name, ...), **_WAITING, **_LOCAL},
     "tuple": {
         "cameras": (_optional(_names), None),
         "sync": (_optional(_choice(SYNC_MODES)), None),
         "max_skew_ms": (_optional(_number), None),
         "partial": (_optional(_boolean), None),
         **_WAITING,
+        **_LOCAL,
     },
-    "latest": {"cameras": (_optional(_names), None)},
+    "latest": {"cameras": (_optional(_names), None), **_LOCAL},
     "sequence": {
         "camera": (_optional(_name), None),
         "cameras": (_optional(_names), None),
@@ -157,6 +168,7 @@ OPS: dict[str, dict[str, tuple[Check, Any]]] = {
         "sync": (_optional(_choice(SYNC_MODES)), None),
         "at": (_optional(_int), None),
         "timeout_ms": (_optional(_timeout), None),
+        **_LOCAL,
     },
     "status": {},
     "time": {},
@@ -190,7 +202,9 @@ def decode_event(frames: Sequence[bytes], max_header_bytes: int = MAX_HEADER_BYT
     """Validate a request event ([EVENT_TOPIC, header]): a request plus its ``reply_topic``."""
     if len(frames) != 2 or bytes(frames[0]) != EVENT_TOPIC:
         raise ProtocolError(f"a request event is two frames: {EVENT_TOPIC!r} and a JSON header")
-    schemas = {op: {**OPS[op], "reply_topic": (_topic, ...)} for op in EVENT_OPS}
+    # Event answers go to many subscribers, so they always carry the pixels: no "local".
+    schemas = {op: {**{k: v for k, v in OPS[op].items() if k not in _LOCAL}, "reply_topic": (_topic, ...)}
+               for op in EVENT_OPS}
     return _decode_header(frames[1], max_header_bytes, schemas)
 
 
@@ -282,10 +296,8 @@ def parse_stream_topic(topic: str) -> StreamTopic | None:
 
 # ---- replies ----
 
-def frame_meta(
-    camera: str, frame_id: int, t_capture: int, t_stored: int, generation: int,
-    image: np.ndarray, buffer: int, t_available: int | None = None,
-) -> dict:
+def _described(camera, frame_id, t_capture, t_stored, generation, shape, dtype: str,
+               t_available) -> dict:
     return {
         "camera": camera,
         "frame_id": int(frame_id),
@@ -293,10 +305,28 @@ def frame_meta(
         "t_available": int(t_capture if t_available is None else t_available),
         "t_stored": int(t_stored),
         "generation": int(generation),
-        "shape": list(image.shape),
-        "dtype": image.dtype.name,
-        "buffer": buffer,
+        "shape": [int(n) for n in shape],
+        "dtype": dtype,
     }
+
+
+def frame_meta(
+    camera: str, frame_id: int, t_capture: int, t_stored: int, generation: int,
+    image: np.ndarray, buffer: int, t_available: int | None = None,
+) -> dict:
+    """A frame whose pixels travel in buffer frame number ``buffer`` of the reply."""
+    return {**_described(camera, frame_id, t_capture, t_stored, generation, image.shape,
+                         image.dtype.name, t_available), "buffer": buffer}
+
+
+def frame_ref(
+    camera: str, frame_id: int, t_capture: int, t_stored: int, generation: int,
+    shape, dtype: str, t_available: int | None, *, ring: str, instance: int, slot: int, seq: int,
+) -> dict:
+    """A frame of a local reply: the client copies it out of ``slot`` of the ring
+    segment ``ring`` (whose header carries ``instance``) while the slot shows ``seq``."""
+    return {**_described(camera, frame_id, t_capture, t_stored, generation, shape, dtype, t_available),
+            "ring": ring, "instance": int(instance), "slot": int(slot), "seq": int(seq)}
 
 
 def encode_reply(request_id, body: dict, buffers: Sequence = ()) -> list:
@@ -325,6 +355,8 @@ def decode_reply(frames: Sequence) -> tuple[dict, list[np.ndarray]]:
     images = []
     if not isinstance(header.get("frames", []), list):
         raise ProtocolError("reply field 'frames' must be a list")
+    if header.get("delivery") == LOCAL:
+        return header, images  # the frames stay in the rings (see fxis_shm.localpath)
     for meta in header.get("frames", ()):
         images.append(_image(meta, buffers))
     return header, images

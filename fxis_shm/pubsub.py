@@ -66,7 +66,7 @@ class Message:
 
     def sequence(self, single: bool = False) -> list:
         self.raise_for_error()
-        return sequence_of(self.header, self.images, single)
+        return sequence_of(self.header, self.images, single=single)
 
 
 class Subscriber(SocketOwner):

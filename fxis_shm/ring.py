@@ -29,11 +29,11 @@ import numpy as np
 import posix_ipc
 
 from . import naming
-from .errors import RingError
+from .errors import Overwritten, RingError
 from .timesearch import Timeline
 
 MAGIC = b"FXISRNG1"
-LAYOUT_VERSION = 1
+LAYOUT_VERSION = 2
 HEADER_BYTES = 1024
 PAGE = 4096
 STATE_INIT, STATE_LIVE, STATE_RETIRED = 0, 1, 2
@@ -45,6 +45,7 @@ HEADER = np.dtype([
     ("height", "<u4"), ("width", "<u4"), ("channels", "<u4"), ("slots", "<u4"),
     ("dtype", "S8"), ("slot_stride", "<u8"), ("data_offset", "<u8"),
     ("generation", "<u8"), ("writer_pid", "<u8"), ("write_count", "<u8"),
+    ("instance", "<u8"),  # random, drawn when the segment is created: names this very segment
     ("heartbeat_ns", "<i8"), ("generation_started_ns", "<i8"),
     ("period_ns", "<i8"), ("nominal_period_ns", "<i8"), ("delay_ns", "<i8"),
     ("frames_captured", "<u8"), ("frames_dropped", "<u8"), ("hook_errors", "<u8"),
@@ -122,10 +123,6 @@ class Snapshot:
         return self.timeline.at(len(self.timeline) - 1) if len(self.timeline) else None
 
 
-class Overwritten(RingError):
-    """The slot was overwritten before or while it was copied."""
-
-
 class _Mapping:
     """The numpy views shared by writer and reader over one mapped segment."""
 
@@ -136,7 +133,7 @@ class _Mapping:
         if self.header["magic"] != MAGIC or self.header["version"] != LAYOUT_VERSION:
             if writable and self.header["magic"] == b"":
                 return  # being created
-            raise RingError("segment is not an fxis ring of layout version 1")
+            raise RingError(f"segment is not an fxis ring of layout version {LAYOUT_VERSION}")
         self._views()
 
     def _views(self) -> None:
@@ -163,7 +160,10 @@ class _Mapping:
         for attr in ("header", "table", "seq", "data"):
             self.__dict__.pop(attr, None)
         if getattr(self, "_mm", None) is not None:
-            self._mm.close()
+            try:
+                self._mm.close()
+            except BufferError:  # a zero-copy view handed out still maps it; unmapped when it goes
+                pass
             self._mm = None
 
 
@@ -239,6 +239,7 @@ class RingWriter(_Mapping):
         h["dtype"], h["slots"] = layout.dtype.encode(), slots
         h["generation"] = generation  # continues across a layout change: never repeats
         h["slot_stride"], h["data_offset"] = stride, data_offset
+        h["instance"] = int.from_bytes(os.urandom(8), "little")
         h["magic"] = MAGIC
         self._views()
 
@@ -313,7 +314,25 @@ class RingReader(_Mapping):
     """A read-only view of a camera's ring (the coordinator, or a local client)."""
 
     def __init__(self, service: str, camera: str, with_semaphore: bool = True):
-        self.name = naming.ring_name(service, camera)
+        self._open(naming.ring_name(service, camera))
+        self.semaphore = None
+        if with_semaphore:
+            try:
+                self.semaphore = posix_ipc.Semaphore(naming.semaphore_name(service, camera))
+            except posix_ipc.ExistentialError:
+                self.close()
+                raise RingError(f"semaphore of ring {self.name} does not exist") from None
+
+    @classmethod
+    def named(cls, name: str) -> "RingReader":
+        """The ring of segment ``name`` (as a reply of the local fast path names it), without its semaphore."""
+        reader = cls.__new__(cls)
+        reader.semaphore = None
+        reader._open(name)
+        return reader
+
+    def _open(self, name: str) -> None:
+        self.name = name
         try:
             shm = posix_ipc.SharedMemory(self.name, read_only=True)
         except posix_ipc.ExistentialError:
@@ -326,13 +345,6 @@ class RingReader(_Mapping):
             self._map(shm.fd, shm.size, writable=False)
         finally:
             shm.close_fd()
-        self.semaphore = None
-        if with_semaphore:
-            try:
-                self.semaphore = posix_ipc.Semaphore(naming.semaphore_name(service, camera))
-            except posix_ipc.ExistentialError:
-                self.close()
-                raise RingError(f"semaphore of ring {self.name} does not exist") from None
 
     @property
     def retired(self) -> bool:
@@ -353,20 +365,44 @@ class RingReader(_Mapping):
         # Only the oldest end can be invalid (being overwritten); keep the newest valid run.
         bad = np.flatnonzero(~valid)
         first = lo + (int(bad[-1]) + 1 if bad.size else 0)
-        timeline = Timeline(table["t_capture"], first % self.slots, count - first)
+        # A list: the searches read single elements, which a list serves far faster than numpy.
+        timeline = Timeline(table["t_capture"].tolist(), first % self.slots, count - first)
         return Snapshot(timeline, first, table)
+
+    @property
+    def instance(self) -> int:
+        return int(self.header["instance"])
 
     def copy(self, snapshot: Snapshot, i: int, out: np.ndarray | None = None) -> np.ndarray:
         """Copy the frame of logical index ``i``; raises Overwritten if the slot changed."""
-        slot, expected = snapshot.slot(i), snapshot.seq(i)
-        if int(self.seq[slot]) != expected:
-            raise Overwritten(f"slot {slot} of {self.name} was overwritten before the copy")
+        return self.copy_slot(snapshot.slot(i), snapshot.seq(i), out)
+
+    def copy_slot(self, slot: int, expected_seq: int, out: np.ndarray | None = None) -> np.ndarray:
+        """Copy the frame in ``slot`` if it is the one ``expected_seq`` names and stays
+        so to the end of the copy; raises Overwritten otherwise."""
+        self.check_slot(slot, expected_seq, "before")
         if out is None:
             out = np.empty(self.layout.shape, dtype=self.layout.dtype)
         np.copyto(out, self.slot_image(slot))
-        if int(self.seq[slot]) != expected:
-            raise Overwritten(f"slot {slot} of {self.name} was overwritten during the copy")
+        self.check_slot(slot, expected_seq, "during")
         return out
+
+    def view_slot(self, slot: int, expected_seq: int) -> np.ndarray:
+        """A read-only view of the frame in ``slot`` (no copy): valid only while
+        ``slot_holds(slot, expected_seq)`` stays true; the writer may overwrite it any time."""
+        self.check_slot(slot, expected_seq, "before")
+        view = self.slot_image(slot)
+        view.flags.writeable = False
+        return view
+
+    def slot_holds(self, slot: int, expected_seq: int) -> bool:
+        return int(self.seq[slot]) == expected_seq
+
+    def check_slot(self, slot: int, expected_seq: int, when: str) -> None:
+        if not 0 <= slot < self.slots:
+            raise Overwritten(f"{self.name} has no slot {slot}")
+        if int(self.seq[slot]) != expected_seq:
+            raise Overwritten(f"slot {slot} of {self.name} was overwritten {when} the copy")
 
     def wait_for_frame(self, timeout: float) -> bool:
         """Block until the writer posts a new frame or ``timeout`` seconds pass."""

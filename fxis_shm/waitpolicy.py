@@ -79,7 +79,6 @@ def waiting_for(
 def with_predictions(tl: Timeline, cam: CameraState, now: int, up_to: int) -> tuple[Timeline, list[int]]:
     """``tl`` extended by the frames the camera should still deliver up to ``up_to``
     (skipping those already overdue); also returns the predicted times."""
-    stored = [tl.at(i) for i in range(len(tl))]
     predicted = []
     if cam.newest is not None and cam.period_ns > 0:
         t = cam.newest + cam.period_ns
@@ -87,7 +86,9 @@ def with_predictions(tl: Timeline, cam: CameraState, now: int, up_to: int) -> tu
             if now < overdue_time(t, cam):
                 predicted.append(t)
             t += cam.period_ns
-    times = stored + predicted
+    if not predicted:
+        return tl, predicted
+    times = [tl.at(i) for i in range(len(tl))] + predicted
     return Timeline(times, 0, len(times)), predicted
 
 
@@ -104,10 +105,13 @@ def waiting_for_selection(
     waits: dict[str, int | None] = {n: None for n, c in cameras.items() if c.newest is None}
     if waits:
         return waits
-    extended, stored_count = {}, {}
+    extended, stored_count, any_predicted = {}, {}, False
     for name, tl in timelines.items():
-        extended[name], _ = with_predictions(tl, cameras[name], now, t_star + radius_ns)
+        extended[name], predicted = with_predictions(tl, cameras[name], now, t_star + radius_ns)
         stored_count[name] = len(tl)
+        any_predicted = any_predicted or bool(predicted)
+    if not any_predicted:  # every frame the request can use is stored
+        return {}
     chosen = choose(extended)
     future = {n for n, i in chosen.index.items() if i >= stored_count[n]}
     if not future:

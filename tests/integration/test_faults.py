@@ -7,7 +7,7 @@ import time
 import pytest
 import zmq
 
-from fxis_shm import CameraDown, RequestTimeout, ServiceError, read_stamp
+from fxis_shm import CameraDown, Client, Overwritten, RequestTimeout, ServiceError, read_stamp
 from fxis_shm.protocol import encode_request
 
 from ..conftest import run_in_threads, wait_until
@@ -79,18 +79,26 @@ def test_a_client_cannot_hog_the_pending_requests(start_service, tmp_path):
         sock.close()
 
 
-def test_torn_reads_never_reach_a_client(start_service):
-    """Rings of 2 slots at 500 fps: the writer laps readers constantly."""
+@pytest.mark.parametrize("local", ["off", "require"])
+def test_torn_reads_never_reach_a_client(start_service, local):
+    """Rings of 2 slots at 500 fps: the writer laps readers constantly. The service
+    copies the frames (local="off") or the clients copy them from the rings themselves."""
     svc = start_service("--slots", "2", "--camera", "fast=synthetic:fps=500,width=512,height=256")
-    errors, served = [], [0]
+    errors, served, torn, paths = [], [0], [0], set()
 
     def reader():
         try:
-            with svc.client(timeout=5.0) as client:
+            with Client(svc.endpoint, timeout=5.0, local=local) as client:
                 for _ in range(150):
-                    for frame in (client.image("fast"), client.latest()["fast"]):
+                    try:
+                        frames = (client.image("fast"), client.latest()["fast"])
+                    except Overwritten:  # overwritten 3 times before we copied: a clean refusal
+                        continue
+                    for frame in frames:
                         assert read_stamp(frame.image) == frame.frame_id, "a torn or wrong frame"
                         served[0] += 1
+                        paths.add(frame.path)
+                torn[0] += client.paths["torn"]
         except ServiceError as exc:  # INTERNAL after 3 overwritten copies is a clean refusal
             if exc.code != "INTERNAL":
                 errors.append(exc)
@@ -100,8 +108,10 @@ def test_torn_reads_never_reach_a_client(start_service):
     run_in_threads(reader, 8, timeout=120)
     assert not errors, errors[:3]
     assert served[0] > 1000
+    assert paths == {"network" if local == "off" else "local"}
     with svc.client() as client:
         status = client.status()["cameras"]["fast"]
     assert isinstance(status["torn_reads"], int) and status["frames_stored"] > 100  # wrapped many times
-    print(f"torn-read stress: {served[0]} frames served, {status['torn_reads']} torn copies "
-          f"detected and refused, {status['frames_stored']} frames written")
+    print(f"torn-read stress ({paths.pop()} path): {served[0]} frames served, "
+          f"{status['torn_reads'] + torn[0]} torn copies detected and refused, "
+          f"{status['frames_stored']} frames written")

@@ -17,6 +17,9 @@ from fxis_shm.protocol import (
     encode_reply,
     encode_request,
     frame_meta,
+    frame_ref,
+    decode_event,
+    encode_event,
 )
 
 
@@ -41,10 +44,11 @@ def rejected(frames, code=Code.BAD_REQUEST) -> str:
 # ---- requests: round trips ----
 
 REQUEST_DEFAULTS = {
-    "image": {"id": None, "camera": ..., "at": None, "wait": None, "timeout_ms": None},
+    "image": {"id": None, "camera": ..., "at": None, "wait": None, "timeout_ms": None,
+              "local": None},
     "tuple": {"id": None, "cameras": None, "sync": None, "max_skew_ms": None, "partial": None,
-              "at": None, "wait": None, "timeout_ms": None},
-    "latest": {"id": None, "cameras": None},
+              "at": None, "wait": None, "timeout_ms": None, "local": None},
+    "latest": {"id": None, "cameras": None, "local": None},
     "status": {"id": None},
     "time": {"id": None},
 }
@@ -63,6 +67,7 @@ REQUEST_DEFAULTS = {
         ("tuple", {"cameras": ["a"], "sync": "joint", "max_skew_ms": 0.5, "at": 0}),
         ("latest", {}),
         ("latest", {"cameras": ["cam1"]}),
+        ("tuple", {"local": "0b1e6f3c-5a4f-4d1e-9c1b-2f3e4d5c6b7a"}),
         ("status", {"id": 0}),
         ("time", {"id": ""}),
     ],
@@ -388,3 +393,28 @@ def test_deeply_nested_json_is_a_bad_request():
     with pytest.raises(ProtocolError) as info:
         decode_request([b"[" * 10_000 + b"]" * 10_000])  # within the size limit
     assert info.value.code == Code.BAD_REQUEST and "nested" in info.value.message
+
+
+# ---- the local fast path ----
+
+@pytest.mark.parametrize("bad", ["", "x" * 65, 7, ["id"], True])
+def test_a_bad_local_boot_id_is_refused(bad):
+    with pytest.raises(ProtocolError, match="'local'.*boot id"):
+        decode_request(encode_request("tuple", local=bad))
+
+
+def test_request_events_cannot_ask_for_ring_references():
+    with pytest.raises(ProtocolError, match=r"unknown field\(s\) \['local'\]"):
+        decode_event(encode_event("tuple", "replies", local="boot"))
+
+
+def test_a_local_reply_names_where_each_frame_is_and_carries_no_buffers():
+    ref = frame_ref("cam0", np.int64(7), 10**12, 10**12 + 5, 1, (1024, 1360), "uint8", None,
+                    ring="/fxis.svc.cam0.ring", instance=np.uint64(2**63 + 1), slot=3, seq=np.uint64(88))
+    header, images = decode_reply(over_the_wire(encode_reply(4, {"frames": [ref], "delivery": "local"})))
+    assert images == []
+    assert header["frames"][0] == {
+        "camera": "cam0", "frame_id": 7, "t_capture": 10**12, "t_available": 10**12,
+        "t_stored": 10**12 + 5, "generation": 1, "shape": [1024, 1360], "dtype": "uint8",
+        "ring": "/fxis.svc.cam0.ring", "instance": 2**63 + 1, "slot": 3, "seq": 88,
+    }
