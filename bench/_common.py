@@ -43,12 +43,18 @@ def add_service_args(p: argparse.ArgumentParser, endpoint_note: str = "") -> Non
                    help="measure the service already running at this endpoint (e.g. "
                         "tcp://127.0.0.1:5555, on this host) instead of launching one"
                         + (f"; {endpoint_note}" if endpoint_note else ""))
-    g.add_argument("--out", default=DEFAULT_OUT, metavar="DIR",
-                   help="folder for the JSON and PNG files (created if missing; files are overwritten)")
-    g.add_argument("--timeout", type=float, default=3.0, metavar="S",
+    add_output_args(g)
+
+
+def add_output_args(g, out_help: str = "folder for the JSON and PNG files (created if missing; "
+                                       "files are overwritten)",
+                    seed_help: str = "seed of the random sleeps") -> None:
+    """--out, --timeout, --seed, into an argument group (or parser) ``g``."""
+    g.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=out_help)
+    g.add_argument("--timeout", type=positive_float, default=3.0, metavar="S",
                    help="client timeout per request, seconds (no request can hang longer)")
     g.add_argument("--seed", type=int, default=None,
-                   help="seed of the random sleeps (default: random; the seed used is saved in the JSON)")
+                   help=f"{seed_help} (default: random; the seed used is saved in the JSON)")
 
 
 def parse_args(p: argparse.ArgumentParser, argv: list[str] | None):
