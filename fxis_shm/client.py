@@ -239,6 +239,7 @@ class Client(SocketOwner):
                     fields = _same_moment(op, fields, header)
                     break
                 self.paths[LOCAL] += 1
+                self._local_off = None  # (again) usable
                 header["path"] = LOCAL
                 check = None if copy else (lambda metas=header["frames"]: all(map(self._rings.still_valid, metas)))
                 return header, images, check
