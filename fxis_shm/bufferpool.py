@@ -41,7 +41,3 @@ class BufferPool:
             same_size.append(buf)
             self.kept_bytes += nbytes
         return buf.view(dtype).reshape(shape)
-
-    def clear(self) -> None:
-        self._buffers.clear()
-        self.kept_bytes = 0

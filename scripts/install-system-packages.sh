@@ -4,11 +4,12 @@
 # - Aravis (GigE Vision / USB3 Vision) with its GObject introspection data, and
 #   the headers PyGObject compiles against (the "aravis" extra);
 # - aravis-tools, whose arv-fake-gv-camera-0.8 is the GigE Vision camera
-#   emulator the backend tests run against; iproute2 for loopback addresses.
+#   emulator the backend tests run against; iproute2 for loopback addresses;
+#   util-linux for unshare (a client in its own mount namespace, test_localpath).
 # Runs as root (or with sudo); does nothing when everything is present.
 set -euo pipefail
 
-wanted=(gir1.2-aravis-0.8 aravis-tools libgirepository1.0-dev libcairo2-dev pkg-config iproute2)
+wanted=(gir1.2-aravis-0.8 aravis-tools libgirepository1.0-dev libcairo2-dev pkg-config iproute2 util-linux)
 python3 -c "import venv, ensurepip" 2>/dev/null || wanted+=(python3-venv)
 
 missing=()

@@ -2,23 +2,21 @@
 emulators (``arv-fake-gv-camera-0.8``) started per test and killed at teardown,
 a second loopback address for a second emulator, and real ``fxis run`` services.
 
-Tests skip only if Aravis' Python binding or the emulator is not installed.
+Nothing is skipped: where Aravis' Python binding or the emulator is missing the tests
+fail saying what to install (`make test` installs both).
 """
 from __future__ import annotations
 
 import itertools
-import os
 import shutil
 import signal
 import socket
 import struct
 import subprocess
-import sys
 import time
 
 import pytest
 
-from fxis_shm.launch import ServiceProcess
 from fxis_shm.tether import die_with_parent
 
 from ..conftest import fxis, start_service  # noqa: F401  (shared with the integration tests)
@@ -46,7 +44,7 @@ def aravis_missing() -> str | None:
 def aravis_available():
     reason = aravis_missing()
     if reason:
-        pytest.skip(reason)
+        pytest.fail(f"{reason}; `make test` installs what the Aravis tests need")
 
 
 # ---- a GigE Vision control-channel probe, without Aravis --------------------------------------

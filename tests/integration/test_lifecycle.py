@@ -2,7 +2,6 @@
 import os
 import signal
 import subprocess
-import sys
 
 import posix_ipc
 import pytest
@@ -114,9 +113,9 @@ def test_bad_config_file_exits_2(tmp_path):
 
 def test_config_file_is_used(start_service, tmp_path):
     config = tmp_path / "cell.toml"
-    config.write_text(f'slots = 5\n[cameras.left]\nkind = "synthetic"\nfps = 40\nwidth = 64\n'
-                      f'height = 48\n[cameras.right]\nkind = "synthetic"\npixel_format = "bgr8"\n'
-                      f'width = 64\nheight = 48\n')
+    config.write_text('slots = 5\n[cameras.left]\nkind = "synthetic"\nfps = 40\nwidth = 64\n'
+                      'height = 48\n[cameras.right]\nkind = "synthetic"\npixel_format = "bgr8"\n'
+                      'width = 64\nheight = 48\n')
     svc = start_service("--config", str(config))
     with svc.client() as client:
         status = client.status()["cameras"]

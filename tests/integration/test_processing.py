@@ -5,7 +5,6 @@ import pytest
 
 from fxis_shm import read_stamp
 
-from ..conftest import wait_until
 from .conftest import SMALL
 
 pytestmark = pytest.mark.integration

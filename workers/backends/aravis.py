@@ -34,7 +34,6 @@ import ipaddress
 import logging
 import threading
 import time
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
@@ -44,6 +43,7 @@ from fxis_shm.options import Option, boolean, choice, number, text
 from fxis_shm.ring import FrameLayout
 
 from .base import Camera, CameraLost, Capture
+from .pixelformats import PIXEL_FORMATS as GENICAM_FORMATS
 
 log = logging.getLogger("camera")
 
@@ -64,30 +64,10 @@ def load_aravis():
     return Aravis, GLib
 
 
-@dataclass(frozen=True)
-class PixelFormat:
-    """How a GenICam pixel format becomes an image in the ring."""
-
-    dtype: str
-    channels: int  # in the camera's buffer
-    to_bgr: str | None = None  # cv2 colour conversion to BGR (unless raw=true)
-
-
-# GenICam (PFNC) names. OpenCV names its Bayer codes after the second row's
-# pattern, one row and column down from GenICam's: BayerRG (an RGGB mosaic) is
-# OpenCV's BayerBG. tests/backends/test_aravis.py checks this on a known mosaic.
-PIXEL_FORMATS = {
-    "Mono8": PixelFormat("uint8", 1),
-    "Mono10": PixelFormat("uint16", 1),  # unpacked: 10 bits in 16
-    "Mono12": PixelFormat("uint16", 1),
-    "Mono16": PixelFormat("uint16", 1),
-    "RGB8": PixelFormat("uint8", 3, "COLOR_RGB2BGR"),
-    "BGR8": PixelFormat("uint8", 3),
-    "BayerRG8": PixelFormat("uint8", 1, "COLOR_BayerBG2BGR"),
-    "BayerGR8": PixelFormat("uint8", 1, "COLOR_BayerGB2BGR"),
-    "BayerGB8": PixelFormat("uint8", 1, "COLOR_BayerGR2BGR"),
-    "BayerBG8": PixelFormat("uint8", 1, "COLOR_BayerRG2BGR"),
-}
+# The formats this backend stores (a subset of the GenICam table).
+PIXEL_FORMATS = {name: GENICAM_FORMATS[name] for name in (
+    "Mono8", "Mono10", "Mono12", "Mono16", "RGB8", "BGR8",
+    "BayerRG8", "BayerGR8", "BayerGB8", "BayerBG8")}
 
 N_BUFFERS = 12  # frames Aravis can hold for us; ~0.6 s at 20 fps if the worker stalls
 MIN_SOCKET_BUFFER = 1 << 20  # bytes; the kernel caps it at net.core.rmem_max

@@ -13,7 +13,7 @@ trigger) are set through the device's SFNC features when the device offers
 them; a key the device lacks or a value it refuses stops start-up with a
 ValueError that names the camera, the key and what the device allows.
 
-Images: the buffer's component is converted to NumPy and copied out before the
+Images (workers/backends/pixelformats.py): the buffer's component is converted to NumPy and copied out before the
 buffer goes back to the producer. Mono8 -> (h, w) uint8; Mono10..16 -> (h, w)
 uint16 as delivered; RGB8/RGBa8/BGRa8 -> BGR; Bayer -> BGR (cv2 demosaicing);
 ``raw=true`` keeps colour and Bayer data as delivered.
@@ -30,13 +30,12 @@ import logging
 import os
 import time
 
-import numpy as np
-
 from fxis_shm.clocks import DeviceClockFit
 from fxis_shm.options import Option, boolean, choice, number, text
 from fxis_shm.ring import FrameLayout
 
 from .base import Camera, CameraLost, Capture
+from .pixelformats import PIXEL_FORMATS, image_layout, to_image
 
 log = logging.getLogger("camera")
 
@@ -45,23 +44,6 @@ _INSTALL_HINT = "the genicam backend needs harvesters and genicam: pip install '
 _PROBE_AFTER_S = 1.0  # without frames this long, check that the device still answers
 _FIRST_FRAME_S = 5.0  # how long start-up waits for a frame when it must look at one
 _EVENT_WAIT_MS = 5
-
-# PFNC name -> (values per pixel as delivered, NumPy dtype, cv2 conversion to BGR or None)
-# cv2 names Bayer patterns after the 2x2 block at (1, 1), GenICam after the one at (0, 0):
-# GenICam BayerRG (R at the origin) is cv2's BayerBG.
-_BAYER_CV2 = {"RG": "COLOR_BayerBG2BGR", "BG": "COLOR_BayerRG2BGR",
-              "GR": "COLOR_BayerGB2BGR", "GB": "COLOR_BayerGR2BGR"}
-FORMATS: dict[str, tuple[int, str, str | None]] = {
-    "Mono8": (1, "uint8", None),
-    **{f"Mono{bits}": (1, "uint16", None) for bits in (10, 12, 14, 16)},
-    "RGB8": (3, "uint8", "COLOR_RGB2BGR"),
-    "BGR8": (3, "uint8", None),
-    "RGBa8": (4, "uint8", "COLOR_RGBA2BGR"),
-    "BGRa8": (4, "uint8", "COLOR_BGRA2BGR"),
-    **{f"Bayer{p}8": (1, "uint8", code) for p, code in _BAYER_CV2.items()},
-    **{f"Bayer{p}{bits}": (1, "uint16", code) for p, code in _BAYER_CV2.items() for bits in (10, 12, 16)},
-}
-
 
 def _sdk():
     """harvesters.core, genicam.genapi and genicam.gentl, or ImportError saying what to install."""
@@ -96,30 +78,6 @@ def producers_from_env(environ=os.environ) -> list[str]:
             if cti not in files:
                 files.append(cti)
     return files
-
-
-def image_layout(pixel_format: str, width: int, height: int, raw: bool) -> FrameLayout:
-    channels, dtype, code = FORMATS[pixel_format]
-    if code is not None and not raw:
-        channels = 3
-    return FrameLayout(height, width, channels, dtype)
-
-
-def to_image(data: np.ndarray, pixel_format: str, width: int, height: int, raw: bool) -> np.ndarray:
-    """A component's pixel values (1-D, as harvesters expands them, rows maybe
-    padded) as a new (h, w[, c]) array that owns its memory."""
-    import cv2
-
-    channels, dtype, code = FORMATS[pixel_format]
-    flat = data.view(dtype) if data.dtype != np.dtype(dtype) else data
-    per_row = flat.size // height if height else 0
-    if per_row < width * channels:
-        raise ValueError(f"a {pixel_format} buffer of {data.size} values is too small for {width}x{height}")
-    rows = flat[: per_row * height].reshape(height, per_row)[:, : width * channels]
-    image = rows.reshape(height, width, channels) if channels > 1 else rows
-    if code is None or raw:
-        return np.array(image)  # a copy: the buffer goes back to the producer
-    return cv2.cvtColor(np.ascontiguousarray(image), getattr(cv2, code))
 
 
 def _readable(node, genapi) -> bool:
@@ -295,8 +253,8 @@ class GenicamCamera(Camera):
             raise ValueError(f"camera {self.name!r}: the device does not say its PixelFormat; "
                              f"fxis cannot tell how to read its images")
         self._pixel_format = node.value
-        if self._pixel_format not in FORMATS:
-            offered = [e.symbolic for e in node.entries if e.symbolic in FORMATS and
+        if self._pixel_format not in PIXEL_FORMATS:
+            offered = [e.symbolic for e in node.entries if e.symbolic in PIXEL_FORMATS and
                        e.node.get_access_mode() not in (genapi.EAccessMode.NI, genapi.EAccessMode.NA)]
             raise self._refuse("pixel_format", f"fxis cannot convert {self._pixel_format!r} to NumPy; "
                                                f"set one the device offers that it can: "
