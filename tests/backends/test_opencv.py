@@ -155,6 +155,7 @@ def test_a_stream_that_ends_is_lost_and_reopened(video):
                 capture = camera.grab(0.1)
                 if capture is not None:
                     captures.append((capture.frame_id, capture.t_capture, read_number(capture.image)))
+        dropped = camera.frames_dropped  # of this first run: the reopened one may drop more
         camera.close()
         camera.open()
         again = camera.grab(15.0)
@@ -162,7 +163,7 @@ def test_a_stream_that_ends_is_lost_and_reopened(video):
         camera.close()
     ids = [c[0] for c in captures]
     assert ids == list(range(len(ids))), ids
-    assert len(ids) + camera.frames_dropped == FRAMES, (len(ids), camera.frames_dropped)
+    assert len(ids) + dropped == FRAMES, (len(ids), dropped)
     assert all(b[1] > a[1] and b[2] > a[2] for a, b in zip(captures, captures[1:]))
     assert camera.layout.shape == (HEIGHT, WIDTH, 3)
     assert again is not None and again.frame_id == len(ids), again  # frame ids go on after a reconnection
