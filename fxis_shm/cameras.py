@@ -79,6 +79,21 @@ class CameraHandle:
         """True if the camera captures on software triggers rather than free-running."""
         return bool(self.reader.field("flags") & FLAG_TRIGGERED)
 
+    # ---- what the request engine reads (fxis_shm.engine.CameraSource) ----
+
+    def snapshot(self) -> Snapshot:
+        """The ring's frames now (call after ``down_reason`` found the ring there)."""
+        return self.reader.snapshot()
+
+    @property
+    def period_ns(self) -> int:
+        return self.reader.field("period_ns") if self.reader is not None else 0
+
+    @property
+    def slots(self) -> int | None:
+        ring = self.ring()
+        return ring.slots if ring is not None else None
+
     def fire_trigger(self) -> None:
         """Ask the camera's worker to trigger one capture now."""
         if self._trigger is None:

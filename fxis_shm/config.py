@@ -24,7 +24,7 @@ DEFAULT_EVENTS = "tcp://127.0.0.1:5557"
 DEFAULT_SLOTS = 20
 DEFAULT_CAMERAS = ("cam0=synthetic", "cam1=synthetic")
 ZERO_ALLOWED = {"sync_tolerance_ms"}  # 0: always the least skew, however far from t*
-# Request defaults that the config may change (see coordinator.DEFAULTS)
+# Request defaults that the config may change (see engine.REQUEST_DEFAULTS)
 SERVICE_SETTINGS = {
     "sync": str, "wait": str, "timeout_ms": float, "max_skew_ms": float,
     "horizon_ms": float, "sync_tolerance_ms": float, "max_pending": int,

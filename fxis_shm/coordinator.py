@@ -1,10 +1,12 @@
-"""The coordinator: reads every camera's ring and answers requests.
+"""The coordinator: the sockets and the poll loop around the request engine.
 
 One thread runs one poll loop over the ROUTER socket (requests from REQ and
 DEALER clients), the SUB socket (request events), the XPUB socket (streams
-and event answers) and the frame notifications of FrameWatch. A request that
-must wait for frames is parked and re-evaluated when frames arrive or its next
-deadline passes, so it never delays other clients.
+and event answers) and the frame notifications of FrameWatch. A request goes
+receive -> engine (fxis_shm.engine: wait or answer, and with which frames) ->
+copy (fxis_shm.copyout) -> reply. A request that must wait stays in the engine
+and is evaluated again when frames arrive or its wake-up time passes, so it
+never delays other clients.
 """
 from __future__ import annotations
 
@@ -17,30 +19,19 @@ from typing import Callable
 import zmq
 from zmq.auth.thread import ThreadAuthenticator
 
-from . import naming, protocol, sequences
-from .answers import Answers, NotReady, Pending, Reject
+from . import naming, protocol
 from .cameras import CameraHandle
+from .engine import FRAME_OPS, Action, Failure, Reply, RequestEngine, Trigger
 from .errors import Code, ProtocolError
 from .framewatch import FrameWatch
 from .localpath import boot_id
+from .copyout import CopyOut
+from .ring import Overwritten
 from .security import load_pair, make_server
 from .streams import Streams
-from .waitpolicy import AUTO, NEXT, NONE, waiting_for, waiting_for_selection
 
 log = logging.getLogger("coordinator")
 
-DEFAULTS = {
-    "sync": "joint",
-    "wait": "auto",
-    "timeout_ms": 1000.0,
-    "max_skew_ms": None,
-    "horizon_ms": 10_000.0,
-    "sync_tolerance_ms": 2.0,  # above cameras' jitter range, far below a frame period
-    "max_pending": 1000,
-    "max_pending_per_client": 100,
-    "max_sequence_frames": 500,
-}
-_LIVENESS_CHECK_NS = 100_000_000  # waiting requests notice a dead camera this fast
 _PUB_QUEUE = 16  # messages queued per subscriber; beyond, that subscriber loses messages
 MAX_MESSAGE_BYTES = 1 << 20  # a peer sending more is disconnected by ZeroMQ
 
@@ -90,13 +81,13 @@ class Coordinator:
         self.curve = None
         if spec.get("curve_secret"):
             self.curve = (load_pair(spec["curve_secret"]), spec["curve_clients"])
-        self.settings = {**DEFAULTS, **spec.get("settings", {})}
         self.cameras = {
             name: CameraHandle(self.service, name, cam["kind"])
             for name, cam in spec["cameras"].items()
         }
-        self.answers = Answers(self.cameras, self.settings)
-        self.pending: list[Pending] = []
+        self.engine = RequestEngine(self.cameras, spec.get("settings", {}))
+        self.settings = self.engine.settings
+        self.copyout = CopyOut(self.cameras, self.settings)
         self.started_ns = time.monotonic_ns()
         self.requests_served = 0
         self.events_dropped = 0
@@ -122,7 +113,7 @@ class Coordinator:
                 self.events.setsockopt(zmq.SUBSCRIBE, protocol.EVENT_TOPIC)
             watch = FrameWatch(ctx, self.service, list(self.cameras))
             closing.append(watch)
-            self.streams = Streams(self.answers, self._publish)
+            self.streams = Streams(self.copyout, self._publish)
             poller = zmq.Poller()
             for sock in (self.router, self.pub, self.events, watch.pull):
                 if sock is not None:
@@ -139,7 +130,8 @@ class Coordinator:
                     self._drain(self.router, self._on_request)
                 if self.events is not None and self.events in events:
                     self._drain(self.events, self._on_event)
-                self._advance_pending(updated)
+                if updated or self._due():
+                    self._carry_out(self.engine.on_frames(updated, time.monotonic_ns()))
                 if updated:
                     self.streams.on_frames(updated, time.monotonic_ns())
         finally:
@@ -164,10 +156,14 @@ class Coordinator:
         return sock
 
     def _poll_timeout_ms(self) -> int:
-        if not self.pending:
+        wake = self.engine.next_wake()
+        if wake is None:
             return 200
-        wake = min(p.wake_at for p in self.pending)
         return max(0, min(200, (wake - time.monotonic_ns()) // 1_000_000 + 1))
+
+    def _due(self) -> bool:
+        wake = self.engine.next_wake()
+        return wake is not None and wake <= time.monotonic_ns()
 
     def _drain_subscriptions(self) -> None:
         while True:
@@ -190,23 +186,11 @@ class Coordinator:
             except Exception:  # no message may take the service down
                 log.exception("a message could not be handled; dropped")
 
-    def _advance_pending(self, updated: set[str]) -> None:
-        if not self.pending:
-            return
-        now = time.monotonic_ns()
-        still = []
-        for p in self.pending:
-            due = p.wake_at <= now or not updated.isdisjoint(p.cameras)
-            if not (due and self._advance(p, now)):
-                still.append(p)
-        self.pending = still
-
     # ---- requests and events ----
 
     def _on_request(self, frames: list, t_received: int) -> None:
         envelope, body = split_envelope(frames)
         respond = lambda reply: self._send(envelope, reply)  # noqa: E731
-        respond.client = bytes(envelope[0])  # for the per-client limit
         try:
             request = protocol.decode_request(body)
         except ProtocolError as exc:
@@ -214,7 +198,7 @@ class Coordinator:
             rid = _readable_field(body[0], "id", (int, str)) if body else None
             respond(protocol.encode_error(rid, exc.code, exc.message))
             return
-        self._start(request, respond, t_received)
+        self._start(request, respond, t_received, client=bytes(envelope[0]))
 
     def _on_event(self, frames: list, t_received: int) -> None:
         try:
@@ -231,169 +215,37 @@ class Coordinator:
         topic = request["reply_topic"]
         self._start(request, lambda reply: self._publish(topic, reply), t_received)
 
-    def _start(self, request: dict, respond: Callable[[list], None], t_received: int) -> None:
+    def _start(self, request: dict, respond: Callable[[list], None], t_received: int,
+               client: bytes | None = None) -> None:
         op = request["op"]
         try:
-            if op in ("status", "time"):
-                body = getattr(self, f"_op_{op}")()
-                self._reply(respond, request, body)
+            if op not in FRAME_OPS:
+                self._reply(respond, request, getattr(self, f"_op_{op}")())
                 return
-            p = self._pending(request, respond, t_received)
-            # First evaluation at the arrival time: a request that need not wait records no wait.
-            if not self._advance(p, t_received):
-                self.pending.append(p)
-        except Reject as exc:
-            respond(protocol.encode_error(request["id"], exc.code, exc.message))
+            local = self.boot_id is not None and request.get("local") == self.boot_id
+            self._carry_out(self.engine.submit(request, t_received, respond, client=client, local=local))
         except Exception as exc:  # a bug must not take the service down
             log.exception("internal error on %s", op)
             respond(protocol.encode_error(request["id"], Code.INTERNAL, repr(exc)))
 
-    def _cameras_of(self, request: dict) -> list[str]:
-        if request.get("camera") is not None:
-            names = [request["camera"]]
-        else:
-            names = request.get("cameras") or list(self.cameras)
-        unknown = [n for n in names if n not in self.cameras]
-        if unknown:
-            raise Reject(Code.UNKNOWN_CAMERA,
-                         f"unknown camera(s) {unknown}; this service has {sorted(self.cameras)}")
-        return names
-
-    def _pending(self, request: dict, respond, t_received: int) -> Pending:
-        cameras = self._cameras_of(request)
-        if len(self.pending) >= self.settings["max_pending"]:
-            raise Reject(Code.BUSY, f"{len(self.pending)} requests are waiting already; try again")
-        client = getattr(respond, "client", None)
-        limit = self.settings["max_pending_per_client"]
-        if client is not None and sum(getattr(q.respond, "client", None) == client for q in self.pending) >= limit:
-            raise Reject(Code.BUSY, f"this client has {limit} requests waiting already (the limit)")
-        missing = []
-        if request.get("partial"):  # leave out the cameras that are down, and say which
-            now = time.monotonic_ns()
-            missing = [c for c in cameras if self.cameras[c].down_reason(now)]
-            cameras = [c for c in cameras if c not in missing]
-            if not cameras:
-                raise Reject(Code.CAMERA_DOWN, f"every requested camera is down: {missing}")
-        t_star = request.get("at")
-        t_star = t_received if t_star is None else t_star
-        local = self.boot_id is not None and request.get("local") == self.boot_id
-        p = Pending(respond, request, cameras, t_received, t_star, missing=missing, local=local)
-        horizon = int(self.settings["horizon_ms"] * 1e6)
-        if self._latest_needed(p, 0) - t_received > horizon:
-            raise Reject(Code.OUT_OF_RANGE,
-                         f"the request needs frames {(self._latest_needed(p, 0) - t_received) / 1e6:.1f} ms "
-                         f"in the future; the horizon is {self.settings['horizon_ms']} ms")
-        if p.op == "sequence":
-            self._check_sequence(p)
-        timeout = int(self.answers.setting(request, "timeout_ms") * 1e6)
-        p.deadline = max(t_received, self._latest_needed(p, 0)) + timeout
-        if p.op in ("image", "tuple") and request.get("at") is None:
-            self._trigger(p)
-        return p
-
-    def _trigger(self, p: Pending) -> None:
-        """Trigger the request's software-triggered cameras at once (t* = the trigger)."""
-        triggered = [c for c in p.cameras if self.cameras[c].ring() is not None and self.cameras[c].triggered]
-        if not triggered:
-            return
-        p.t_trigger = p.t_star = time.monotonic_ns()
-        for cam in triggered:
-            self.cameras[cam].fire_trigger()
-        p.triggered = frozenset(triggered)
-
-    def _check_sequence(self, p: Pending) -> None:
-        r = p.request
-        if r["count"] is not None:
-            self.answers.check_size(r["count"] * len(p.cameras))
-            slots = min((h.reader.slots for h in map(self.cameras.get, p.cameras) if h.ring()), default=None)
-            if r["kind"] == "consecutive" and slots is not None and r["count"] >= slots:
-                # the oldest slot is always the next one overwritten: one fewer is guaranteed
-                raise Reject(Code.OUT_OF_RANGE,
-                             f"asks for {r['count']} consecutive frames; rings of {slots} slots "
-                             f"hold at most {slots - 1} consecutive frames that can always be read")
-
-    def _latest_needed(self, p: Pending, period_ns: int) -> int:
-        """The latest capture time the request needs frames up to."""
-        if p.op != "sequence":
-            return p.t_star
-        return sequences.latest_needed(self.answers.sequence_spec(p), period_ns)
-
-    def _advance(self, p: Pending, now: int) -> bool:
-        """Answer ``p`` if it can be answered now; True once it got its reply."""
-        try:
-            waits, states, snaps = self._waits(p, now)
-            for cam in p.cameras:
-                if cam not in waits:  # ready now, or when a frame that raced the request landed
-                    stored = states[cam].newest_stored if cam in states else None
-                    p.ready_at.setdefault(cam, max(now, stored or now))
-            if not waits:
-                try:
-                    self._answer(p, now, snaps)
-                    return True
-                except NotReady as exc:
-                    waits = {c: None for c in p.cameras}
-                    reason = str(exc)
+    def _carry_out(self, actions: list[Action]) -> None:
+        """Do what the engine decided: fire triggers, copy frames out and reply, or fail."""
+        for action in actions:
+            if isinstance(action, Trigger):
+                for cam in action.cameras:
+                    self.cameras[cam].fire_trigger()
+            elif isinstance(action, Failure):
+                action.pending.ticket(protocol.encode_error(action.pending.id, action.code, action.message))
             else:
-                reason = f"the frames awaited from {sorted(waits)}"
-            if now >= p.deadline:
-                raise Reject(Code.TIMEOUT, f"{reason} did not arrive within "
-                                           f"{(p.deadline - max(p.t_received, p.t_star)) / 1e6:.0f} ms")
-            give_ups = [t for t in waits.values() if t is not None]
-            p.wake_at = min([p.deadline, now + _LIVENESS_CHECK_NS, *give_ups])
-            return False
-        except Reject as exc:
-            p.respond(protocol.encode_error(p.request["id"], exc.code, exc.message))
-        except Exception as exc:
-            log.exception("internal error on %s", p.op)
-            p.respond(protocol.encode_error(p.request["id"], Code.INTERNAL, repr(exc)))
-        return True
+                self._answer(action)
 
-    def _waits(self, p: Pending, now: int) -> tuple[dict, dict, dict | None]:
-        """Cameras still waited for (see waitpolicy), and the camera states and snapshots seen."""
-        if p.op == "latest":
-            return {}, {}, None
-        snaps = self.answers.snapshots_allowing_empty(p.cameras, now)
-        waits, states = self._waits_seen(p, now, snaps)
-        return waits, states, snaps
-
-    def _waits_seen(self, p: Pending, now: int, snaps: dict) -> tuple[dict, dict]:
-        states = {c: self.cameras[c].state(snaps[c]) for c in p.cameras}
-        if p.op == "sequence":
-            waits = {}
-            for cam, state in states.items():
-                t_needed = self._latest_needed(p, state.period_ns)
-                waits.update(waiting_for(AUTO, t_needed, now, {cam: state}))
-            return waits, states
-        mode = self.answers.setting(p.request, "wait")
-        if p.triggered:  # the triggered frames, and the others' frames around the trigger
-            free = {c: s for c, s in states.items() if c not in p.triggered}
-            waits = waiting_for(AUTO, p.t_star, now, free)
-            waits.update(waiting_for(NEXT, p.t_star, now,
-                                     {c: states[c] for c in p.triggered}, t_arrival=p.t_trigger))
-            return waits, states
-        if mode == NEXT:
-            waits = waiting_for(NEXT, p.t_star, now, states, t_arrival=p.t_received)
-            if p.t_star > now:  # a future t*: also reach the frames around it
-                waits.update(waiting_for(AUTO, p.t_star, now, states))
-            return waits, states
-        if mode == NONE:
-            return {}, states
-        sync = self.answers.sync_mode(p)
-        return waiting_for_selection(
-            p.t_star, now, {c: snaps[c].timeline for c in p.cameras}, states,
-            lambda timelines: self.answers.select_frames(sync, timelines, p.t_star),
-            self.answers.radius(p.cameras), self.answers.tolerance(p.cameras),
-        ), states
-
-    def _answer(self, p: Pending, t_waited: int, snaps: dict | None = None) -> None:
-        build = {"image": self.answers.frames_near, "tuple": self.answers.frames_near,
-                 "latest": self.answers.latest, "sequence": self.answers.sequence}[p.op]
-        body, images = self.answers.with_retries(p.cameras, t_waited, lambda s: build(p, s), snaps)
-        body["timing"].update(received=p.t_received, waited=t_waited, copied=time.monotonic_ns())
-        if p.local:
-            body["delivery"] = protocol.LOCAL
-        body["timing"]["cameras"] = {c: {"waited": p.ready_at.get(c, t_waited)} for c in p.cameras}
-        self._reply(p.respond, p.request, body, images)
+    def _answer(self, reply: Reply) -> None:
+        try:
+            body, images = self.copyout.reply(reply)
+        except Overwritten:  # the ring came round during the copy: the engine plans again
+            self._carry_out(self.engine.retry(reply, time.monotonic_ns()))
+            return
+        self._reply(reply.pending.ticket, reply.pending.request, body, images)
 
     def _op_status(self) -> dict:
         now = time.monotonic_ns()
@@ -406,7 +258,7 @@ class Coordinator:
             "endpoint": self.endpoint,
             "pub": self.pub_endpoint,
             "events": self.events_endpoint,
-            "pending": len(self.pending),
+            "pending": len(self.engine.pending),
             "requests_served": self.requests_served,
             "events_dropped": self.events_dropped,
             "streams": self.streams.status(),

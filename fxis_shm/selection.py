@@ -119,3 +119,17 @@ def select(
     if mode == JOINT:
         return select_joint(timelines, t_star, radius_ns, tolerance_ns)
     raise ValueError(f"unknown sync mode {mode!r}; use one of {SYNC_MODES}")
+
+
+def radius_for(periods: Mapping[str, int]) -> int:
+    """How far from t* a tuple's frames may lie: the longest frame period."""
+    return max(periods.values(), default=0)
+
+
+def tolerance_for(periods: Mapping[str, int], tolerance_ms: float) -> int:
+    """The sync tolerance: tuples this much more skewed than the least count as equally
+    synchronized. Capped at a quarter of the shortest frame period, so it never lets a
+    tuple of another skew class (a period apart) through."""
+    known = [p for p in periods.values() if p > 0]
+    tolerance = int(tolerance_ms * 1e6)
+    return min(tolerance, min(known) // 4) if known else tolerance

@@ -12,7 +12,8 @@ import logging
 from dataclasses import dataclass
 
 from . import protocol
-from .answers import Answers, Reject
+from .decisions import Reject
+from .copyout import CopyOut
 from .protocol import StreamTopic, parse_stream_topic
 from .ring import Overwritten
 from .selection import JOINT
@@ -31,14 +32,14 @@ class _StreamState:
 
 
 class Streams:
-    def __init__(self, answers: Answers, publish):
-        self.answers = answers
+    def __init__(self, copyout: CopyOut, publish):
+        self.copyout = copyout
         self.publish = publish
         self.active: dict[str, _StreamState] = {}
 
     def subscription(self, topic: str, subscribed: bool) -> None:
         stream = parse_stream_topic(topic)
-        if stream is None or (stream.camera and stream.camera not in self.answers.cameras):
+        if stream is None or (stream.camera and stream.camera not in self.copyout.cameras):
             return  # not a stream (an event reply topic, or a prefix): nothing to produce
         if subscribed:
             self.active.setdefault(topic, _StreamState(stream))
@@ -72,7 +73,7 @@ class Streams:
     def _copy(self, snap, cam: str, i: int, copies: dict):
         key = (cam, snap.first_write + i)
         if key not in copies:
-            frames, images, _ = self.answers.copy({cam: snap}, [(cam, i)])
+            frames, images, _ = self.copyout.copy({cam: snap}, [(cam, i)])
             copies[key] = (frames[0], images[0])
         return copies[key]
 
@@ -84,8 +85,8 @@ class Streams:
 
     def _frames(self, topic: str, state: _StreamState, now: int, copies: dict) -> None:
         cam = state.topic.camera
-        snap = self.answers.snapshots([cam], now)[cam]
-        period = self.answers.period(cam)
+        snap = self.copyout.snapshots([cam], now)[cam]
+        period = self.copyout.period(cam)
         first_new = max(0, state.last_write + 1 - snap.first_write)
         for i in range(first_new, len(snap.timeline)):
             t = snap.timeline.at(i)
@@ -97,13 +98,13 @@ class Streams:
         state.last_write = snap.first_write + len(snap.timeline) - 1
 
     def _tuple(self, topic: str, state: _StreamState, now: int, copies: dict) -> None:
-        cams = list(self.answers.cameras)
-        snaps = self.answers.snapshots(cams, now)
+        cams = list(self.copyout.cameras)
+        snaps = self.copyout.snapshots(cams, now)
         t_ref = min(snaps[c].newest for c in cams)  # every camera has frames up to here
-        period = max(self.answers.period(c) for c in cams)
+        period = max(self.copyout.period(c) for c in cams)
         if not self._interval_ok(state, t_ref, period):
             return
-        sel = self.answers.select_frames(self.answers.settings["sync"] or JOINT,
+        sel = self.copyout.select_frames(self.copyout.settings["sync"] or JOINT,
                                    {c: snaps[c].timeline for c in cams}, t_ref)
         key = tuple(snaps[c].first_write + sel.index[c] for c in cams)
         if key == state.last_key or (state.last_key and max(sel.t.values()) <= state.last_t_max):

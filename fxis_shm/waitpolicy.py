@@ -95,13 +95,15 @@ def with_predictions(tl: Timeline, cam: CameraState, now: int, up_to: int) -> tu
 def waiting_for_selection(
     t_star: int, now: int, timelines: Mapping[str, Timeline], cameras: Mapping[str, CameraState],
     choose: Callable[[dict[str, Timeline]], Selection], radius_ns: int, tolerance_ns: int = 0,
+    stored: Selection | None = None,
 ) -> dict[str, int | None]:
     """``auto`` for a request answered by ``choose``: the cameras whose frame in the
     best selection over stored and predicted frames is not stored yet.
 
     Predicted frames carry no timing jitter, so a tuple of them may look less skewed
     than a stored one by noise alone: when the best stored tuple is nearer to t* and
-    at most twice ``tolerance_ns`` more skewed, it is answered at once."""
+    at most twice ``tolerance_ns`` more skewed, it is answered at once. ``stored``: the
+    selection over the stored frames, if the caller made it already (it answers with it)."""
     waits: dict[str, int | None] = {n: None for n, c in cameras.items() if c.newest is None}
     if waits:
         return waits
@@ -116,7 +118,8 @@ def waiting_for_selection(
     future = {n for n, i in chosen.index.items() if i >= stored_count[n]}
     if not future:
         return {}
-    stored = choose(dict(timelines))
+    if stored is None:
+        stored = choose(dict(timelines))
     stored_nearer = stored.max_abs_error_ns(t_star) < chosen.max_abs_error_ns(t_star)
     if stored_nearer and stored.skew_ns <= chosen.skew_ns + 2 * tolerance_ns:
         return {}

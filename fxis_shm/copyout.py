@@ -1,0 +1,94 @@
+"""The coordinator's access to the rings: snapshots of the cameras that are up, and
+copies of chosen frames out of them, into pooled buffers handed to ZeroMQ (or, for a
+client on this kernel, where each frame is, so that it copies the frame itself)."""
+from __future__ import annotations
+
+import time
+
+from . import protocol
+from .bufferpool import BufferPool
+from .cameras import CameraHandle
+from .decisions import Reject, check_not_empty
+from .engine import Reply
+from .errors import Code
+from .ring import Overwritten, Snapshot
+from .selection import Selection, radius_for, select, tolerance_for
+from .timesearch import Timeline
+
+
+class CopyOut:
+    def __init__(self, cameras: dict[str, CameraHandle], settings: dict):
+        self.cameras = cameras
+        self.settings = settings
+        self.buffers = BufferPool()
+
+    def period(self, cam: str) -> int:
+        return self.cameras[cam].period_ns
+
+    def snapshots(self, names: list[str], now: int) -> dict[str, Snapshot]:
+        """Each camera's frames now; Reject if one is down or has none."""
+        snaps = {}
+        for cam in names:
+            reason = self.cameras[cam].down_reason(now)
+            if reason:
+                raise Reject(Code.CAMERA_DOWN, reason)
+            snaps[cam] = self.cameras[cam].snapshot()
+        check_not_empty(snaps)
+        return snaps
+
+    def select_frames(self, mode: str, timelines: dict[str, Timeline], t: int) -> Selection:
+        periods = {c: self.period(c) for c in timelines}
+        return select(mode, timelines, t, radius_for(periods),
+                      tolerance_for(periods, self.settings["sync_tolerance_ms"]))
+
+    def reply(self, reply: Reply) -> tuple[dict, list]:
+        """The body and images of the reply ``reply`` plans; raises Overwritten if a chosen
+        slot was overwritten before its copy was complete."""
+        p, plan = reply.pending, reply.plan
+        searched = time.monotonic_ns()
+        frames, images, position = self.copy(reply.snapshots, plan.picks, refs=p.local)
+        body = {**plan.body, "frames": frames}
+        if plan.groups is not None:
+            body["groups"] = [[position[pick] for pick in group] for group in plan.groups]
+        body["timing"] = {
+            "searched": searched, "received": p.t_received, "waited": reply.t_decided,
+            "copied": time.monotonic_ns(),
+            "cameras": {c: {"waited": p.ready_at.get(c, reply.t_decided)} for c in p.cameras},
+        }
+        if p.local:
+            body["delivery"] = protocol.LOCAL
+        return body, images
+
+    def copy(self, snaps: dict, picks: list[tuple[str, int]], refs: bool = False) -> tuple[list, list, dict]:
+        """Copy each distinct (camera, snapshot index) once: metadata, images, and each pick's position.
+        With ``refs`` (a local client) nothing is copied: the metadata says where each frame is."""
+        frames, images, position = [], [], {}
+        for cam, i in picks:
+            if (cam, i) in position:
+                continue
+            position[(cam, i)] = len(frames)
+            frames.append(self._reference(cam, snaps[cam], i) if refs else
+                          self._copied(cam, snaps[cam], i, len(images), images))
+        return frames, images, position
+
+    def _copied(self, cam: str, snap: Snapshot, i: int, buffer: int, images: list) -> dict:
+        handle = self.cameras[cam]
+        layout = handle.reader.layout
+        try:
+            image = handle.reader.copy(snap, i, self.buffers.take(layout.shape, layout.dtype))
+        except Overwritten:
+            handle.torn_reads += 1
+            raise
+        images.append(image)
+        meta = snap.frame_meta(i)
+        return protocol.frame_meta(cam, meta.frame_id, meta.t_capture, meta.t_stored,
+                                   meta.generation, image, buffer, meta.t_available)
+
+    def _reference(self, cam: str, snap: Snapshot, i: int) -> dict:
+        reader = self.cameras[cam].reader
+        slot, seq = snap.slot(i), snap.seq(i)
+        reader.check_slot(slot, seq, "before")  # already gone: choose again rather than send it
+        meta = snap.frame_meta(i)
+        return protocol.frame_ref(cam, meta.frame_id, meta.t_capture, meta.t_stored, meta.generation,
+                                  reader.layout.shape, reader.layout.dtype, meta.t_available,
+                                  ring=reader.name, instance=reader.instance, slot=slot, seq=seq)
