@@ -131,6 +131,8 @@ class CameraHandle:
             frames_dropped=ring.field("frames_dropped"),
             last_frame_age_ms=round((now - newest_stored) / 1e6, 3) if newest_stored else None,
             ring_slots=ring.slots,
+            ring=ring.name,
+            instance=ring.instance,
             generation=ring.field("generation"),
             writer_pid=ring.field("writer_pid"),
             delay_ms=round(ring.field("delay_ns") / 1e6, 3),

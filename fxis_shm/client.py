@@ -22,8 +22,9 @@ import numpy as np
 import zmq
 
 from . import protocol
-from .errors import LocalPathUnavailable, Overwritten, ProtocolError, RequestTimeout, service_error
+from .errors import CameraDown, LocalPathUnavailable, Overwritten, ProtocolError, RequestTimeout, service_error
 from .localpath import LocalRings, LocalUnavailable, boot_id
+from .localreads import LocalReads
 from .security import ClientKeys
 
 DEFAULT_ENDPOINT = "tcp://127.0.0.1:5555"
@@ -142,10 +143,13 @@ class Client(SocketOwner):
         self._periods: float | None = None  # longest frame period, for sequences that wait
         self._boot_id = boot_id()
         self._rings = LocalRings()
+        self._reads: LocalReads | None = None  # answers from the rings without the coordinator
+        self._reads_off: tuple[str, float] | None = None  # why not, since when
         self._local_off: tuple[str, float] | None = None  # why the local path is not used, since when
         self.paths = {LOCAL: 0, NETWORK: 0, "torn": 0}  # replies by path; local copies found torn
 
     def close(self) -> None:
+        self._drop_reads()
         self._rings.close()
         super().close()
 
@@ -222,7 +226,12 @@ class Client(SocketOwner):
 
     def _fetch(self, op: str, extra_wait: float, copy: bool, **fields) -> tuple[dict, list, Callable | None]:
         """A request for frames, over the local path if it can be used: the reply header,
-        the images (the header's ``path`` set) and a validity check for zero-copy views."""
+        the images (the header's ``path`` set) and a validity check for zero-copy views.
+        Where the rings can be read with the service's own clock, the client answers
+        itself (fxis_shm.localreads); otherwise the coordinator chooses the frames."""
+        reads = self._local_reads()
+        if reads is not None and reads.serves(op, fields):
+            return self._read_locally(op, extra_wait, copy, fields)
         if self._local_usable():
             for _ in range(_LOCAL_ATTEMPTS):
                 header, images = self._call(op, extra_wait, local=self._boot_id, **fields)
@@ -250,6 +259,38 @@ class Client(SocketOwner):
         if self.local == "require":
             raise LocalPathUnavailable(f"the local fast path cannot be used: {self.local_unavailable}")
         return self._network_reply(*self._call(op, extra_wait, **fields))
+
+    def _read_locally(self, op: str, extra_wait: float, copy: bool, fields: dict) -> tuple[dict, list, Callable | None]:
+        deadline = time.monotonic_ns() + int((self.timeout + extra_wait) * 1e9)
+        try:
+            header, images, check = self._reads.answer(op, fields, deadline, copy)
+        except CameraDown:
+            # The service may have been restarted with new rings: learn them again, once.
+            self._drop_reads()
+            if self._local_reads() is None:
+                raise
+            header, images, check = self._reads.answer(op, fields, deadline, copy)
+        self.paths[LOCAL] += 1
+        header["path"] = LOCAL
+        return header, images, check
+
+    def _local_reads(self) -> LocalReads | None:
+        """The client's own reads of the rings, learnt from the service's status once."""
+        if self._reads is not None or self.local == "off":
+            return self._reads
+        if self._reads_off is not None and time.monotonic() - self._reads_off[1] < _LOCAL_RETRY_S:
+            return None
+        try:
+            self._reads = LocalReads(self.status(), self._boot_id)
+            self._reads_off = None
+        except LocalUnavailable as exc:
+            self._reads_off = (str(exc), time.monotonic())
+        return self._reads
+
+    def _drop_reads(self) -> None:
+        if self._reads is not None:
+            self._reads.close()
+            self._reads = None
 
     def _network_reply(self, header: dict, images: list) -> tuple[dict, list, None]:
         self.paths[NETWORK] += 1
@@ -280,6 +321,8 @@ class Client(SocketOwner):
         extra = max(0.0, (timeout_ms or 0) / 1000 - self.timeout / 2)
         if at is None:
             return extra
+        if self._clock_offset is None and self._local_reads() is not None:
+            self._clock_offset = 0  # the service's clock is ours (same kernel, same time namespace)
         if self._clock_offset is None:
             sent = time.monotonic_ns()
             now = self.time()

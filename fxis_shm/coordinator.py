@@ -24,7 +24,7 @@ from .cameras import CameraHandle
 from .engine import FRAME_OPS, Action, Failure, Reply, RequestEngine, Trigger
 from .errors import Code, ProtocolError
 from .framewatch import FrameWatch
-from .localpath import boot_id
+from .localpath import boot_id, time_namespace
 from .copyout import CopyOut
 from .ring import Overwritten
 from .security import load_pair, make_server
@@ -92,6 +92,7 @@ class Coordinator:
         self.requests_served = 0
         self.events_dropped = 0
         self.boot_id = boot_id()
+        self.time_namespace = time_namespace()
 
     # ---- the loop ----
 
@@ -254,6 +255,7 @@ class Coordinator:
             "service": self.service,
             "now": now,
             "boot_id": self.boot_id,
+            "time_namespace": self.time_namespace,
             "uptime_s": round((now - self.started_ns) / 1e9, 3),
             "endpoint": self.endpoint,
             "pub": self.pub_endpoint,

@@ -16,11 +16,14 @@ from .selection import Selection, radius_for, select, tolerance_for
 from .timesearch import Timeline
 
 
+COPY, REFS, VIEWS = "copy", "refs", "views"  # how a reply carries its frames
+
+
 class CopyOut:
-    def __init__(self, cameras: dict[str, CameraHandle], settings: dict):
+    def __init__(self, cameras: dict[str, CameraHandle], settings: dict, buffers: BufferPool | None = None):
         self.cameras = cameras
         self.settings = settings
-        self.buffers = BufferPool()
+        self.buffers = buffers or BufferPool()
 
     def period(self, cam: str) -> int:
         return self.cameras[cam].period_ns
@@ -41,12 +44,15 @@ class CopyOut:
         return select(mode, timelines, t, radius_for(periods),
                       tolerance_for(periods, self.settings["sync_tolerance_ms"]))
 
-    def reply(self, reply: Reply) -> tuple[dict, list]:
+    def reply(self, reply: Reply, how: str | None = None) -> tuple[dict, list]:
         """The body and images of the reply ``reply`` plans; raises Overwritten if a chosen
-        slot was overwritten before its copy was complete."""
+        slot was overwritten before its copy was complete. ``how``: COPY (pooled buffers),
+        REFS (where each frame is, for a client on this kernel) or VIEWS (read-only views
+        of the slots, for a reader in this process); default REFS for a local client."""
         p, plan = reply.pending, reply.plan
         searched = time.monotonic_ns()
-        frames, images, position = self.copy(reply.snapshots, plan.picks, refs=p.local)
+        how = how or (REFS if p.local else COPY)
+        frames, images, position = self.copy(reply.snapshots, plan.picks, how)
         body = {**plan.body, "frames": frames}
         if plan.groups is not None:
             body["groups"] = [[position[pick] for pick in group] for group in plan.groups]
@@ -55,27 +61,30 @@ class CopyOut:
             "copied": time.monotonic_ns(),
             "cameras": {c: {"waited": p.ready_at.get(c, reply.t_decided)} for c in p.cameras},
         }
-        if p.local:
+        if how == REFS:
             body["delivery"] = protocol.LOCAL
         return body, images
 
-    def copy(self, snaps: dict, picks: list[tuple[str, int]], refs: bool = False) -> tuple[list, list, dict]:
+    def copy(self, snaps: dict, picks: list[tuple[str, int]], how: str = COPY) -> tuple[list, list, dict]:
         """Copy each distinct (camera, snapshot index) once: metadata, images, and each pick's position.
-        With ``refs`` (a local client) nothing is copied: the metadata says where each frame is."""
+        With REFS nothing is copied: the metadata says where each frame is."""
         frames, images, position = [], [], {}
         for cam, i in picks:
             if (cam, i) in position:
                 continue
             position[(cam, i)] = len(frames)
-            frames.append(self._reference(cam, snaps[cam], i) if refs else
-                          self._copied(cam, snaps[cam], i, len(images), images))
+            frames.append(self._reference(cam, snaps[cam], i) if how == REFS else
+                          self._copied(cam, snaps[cam], i, len(images), images, how == VIEWS))
         return frames, images, position
 
-    def _copied(self, cam: str, snap: Snapshot, i: int, buffer: int, images: list) -> dict:
+    def _copied(self, cam: str, snap: Snapshot, i: int, buffer: int, images: list, view: bool) -> dict:
         handle = self.cameras[cam]
-        layout = handle.reader.layout
+        reader = handle.reader
         try:
-            image = handle.reader.copy(snap, i, self.buffers.take(layout.shape, layout.dtype))
+            if view:
+                image = reader.view_slot(snap.slot(i), snap.seq(i))
+            else:
+                image = reader.copy(snap, i, self.buffers.take(reader.layout.shape, reader.layout.dtype))
         except Overwritten:
             handle.torn_reads += 1
             raise

@@ -166,6 +166,10 @@ class RequestEngine:
             self.pending.append(p)
         return actions
 
+    def cancel_all(self) -> None:
+        """Forget every waiting request (their caller gave up on them)."""
+        self.pending.clear()
+
     def next_wake(self) -> int | None:
         """The earliest moment a waiting request wants to be evaluated again."""
         return min((p.wake_at for p in self.pending), default=None)

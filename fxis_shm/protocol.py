@@ -223,6 +223,17 @@ def _decode_header(frame: bytes, max_header_bytes: int, schemas: dict) -> dict:
         raise ProtocolError("request header is nested too deeply") from None
     if not isinstance(header, dict):
         raise ProtocolError(f"request header must be a JSON object, got {type(header).__name__}")
+    return _validate(header, schemas)
+
+
+def request_of(op: str, **fields) -> dict:
+    """The request a client would send, validated and with defaults filled in as the
+    service does, without encoding it (for requests a client answers itself)."""
+    header = {"v": VERSION, "op": op, **{k: v for k, v in fields.items() if v is not None}}
+    return _validate(header, OPS)
+
+
+def _validate(header: dict, schemas: dict) -> dict:
     if "v" not in header:
         raise ProtocolError("request header has no 'v' (protocol version)")
     if header["v"] != VERSION:

@@ -53,10 +53,30 @@ def test_kill_9_of_the_coordinator(start_service):
         os.kill(coordinator, signal.SIGKILL)
         with pytest.raises(RequestTimeout):  # nobody answers during the outage; nothing hangs
             client.status()
-        frame, _ = until_served(client, lambda c: c.image("a"))
-        assert frame.frame_id > before and read_stamp(frame.image) == frame.frame_id
-        assert client.status()["supervisor"]["processes"]["coordinator"]["restarts"] == 1
+        status, _ = until_served(client, lambda c: c.status())
+        assert status["supervisor"]["processes"]["coordinator"]["restarts"] == 1
+        for local in ("off", "auto"):  # through the new coordinator, and from the rings
+            with svc.client(timeout=1.0) as fresh:
+                fresh.local = local
+                frame = fresh.image("a")
+                assert frame.frame_id > before and read_stamp(frame.image) == frame.frame_id
     assert child_pids(svc, "coordinator") != [coordinator]
+
+
+def test_same_host_reads_go_on_while_the_coordinator_hangs(start_service):
+    svc = start_service("--camera", f"a=synthetic:fps=50,{SMALL}")
+    (coordinator,) = child_pids(svc, "coordinator")
+    with svc.client(timeout=0.5) as client:
+        before = client.image("a").frame_id  # learns the rings
+        os.kill(coordinator, signal.SIGSTOP)
+        try:
+            with pytest.raises(RequestTimeout):
+                client.status()
+            later = client.image("a", at=client.image("a").t_capture + 100_000_000)  # a wait, too
+        finally:
+            os.kill(coordinator, signal.SIGCONT)
+        assert later.frame_id > before and later.path == "local"
+        assert read_stamp(later.image) == later.frame_id
 
 
 def test_a_client_cannot_hog_the_pending_requests(start_service, tmp_path):

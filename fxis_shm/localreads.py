@@ -1,0 +1,142 @@
+"""Same-host reads without a round trip: a client that answers frame requests itself.
+
+On the service's host (the same kernel and time namespace, so the same
+CLOCK_MONOTONIC; the rings readable; each ring the very segment the service
+reports) the client runs the service's own request engine (fxis_shm.engine) over
+read-only mappings of the rings: the same selection and wait policy, and no
+message to the coordinator. It copies the chosen frames under the seqlock, or
+hands out read-only views of the slots.
+
+Waiting for a frame that is not stored yet costs no CPU until just before it is
+due: the client sleeps until the camera's next frame is expected (its newest
+frame's storage time plus its period, both in the ring) less a margin, then
+watches the rings' write counters. Any number of readers can wait this way; a
+reader leaves nothing behind in the ring, and the writer never knows it exists.
+
+What only the coordinator can do (software triggers) still goes to it.
+"""
+from __future__ import annotations
+
+import time
+from typing import Callable
+
+from . import protocol
+from .bufferpool import BufferPool
+from .cameras import CameraHandle
+from .copyout import COPY, VIEWS, CopyOut
+from .engine import Failure, Reply, RequestEngine
+from .errors import RequestTimeout, service_error
+from .localpath import LocalUnavailable, boot_id, time_namespace
+from .ring import Overwritten
+
+WAKE_MARGIN_NS = 1_500_000  # stop sleeping this long before a frame is due
+POLL_S = 0.0001  # then look at the write counters this often
+
+
+def same_clock(status: dict, our_boot_id: str | None = None) -> str | None:
+    """Why this process cannot read the service's clock as its own (None: it can)."""
+    ours = boot_id() if our_boot_id is None else our_boot_id
+    if status.get("boot_id") is None or status.get("boot_id") != ours:
+        return "the service runs on another kernel"
+    namespace = time_namespace()
+    if namespace is None or status.get("time_namespace") != namespace:
+        return "the service runs in another time namespace (its CLOCK_MONOTONIC is not ours)"
+    return None
+
+
+class LocalReads:
+    """The service's rings as this client maps them, and the engine that answers from them."""
+
+    def __init__(self, status: dict, our_boot_id: str | None = None, max_pooled_bytes: int = 128 << 20):
+        reason = same_clock(status, our_boot_id)
+        if reason:
+            raise LocalUnavailable(reason)
+        self.cameras: dict[str, CameraHandle] = {}
+        try:
+            for name, info in status["cameras"].items():
+                self.cameras[name] = handle = CameraHandle(status["service"], name, info["kind"])
+                ring = handle.ring()
+                if ring is None:
+                    raise LocalUnavailable(handle.last_error)
+                if info.get("instance") is not None and ring.instance != info["instance"]:
+                    raise LocalUnavailable(f"{ring.name} here is not the service's ring (another IPC "
+                                           "namespace, or the ring was replaced)")
+        except BaseException:
+            self.close()
+            raise
+        self.engine = RequestEngine(self.cameras, status.get("settings"))
+        self.copyout = CopyOut(self.cameras, self.engine.settings, BufferPool(max_pooled_bytes))
+
+    def serves(self, op: str, fields: dict) -> bool:
+        """False for requests only the coordinator can answer: those that fire software triggers."""
+        if op not in ("image", "tuple") or fields.get("at") is not None:
+            return True
+        names = [fields["camera"]] if fields.get("camera") else fields.get("cameras") or list(self.cameras)
+        return not any(c in self.cameras and self.cameras[c].slots and self.cameras[c].triggered
+                       for c in names)
+
+    def answer(self, op: str, fields: dict, deadline_ns: int,
+               copy: bool = True) -> tuple[dict, list, Callable[[], bool] | None]:
+        """The reply header, images and (for views) a validity check, as the coordinator would
+        send them. Raises the service's errors, or RequestTimeout at ``deadline_ns``."""
+        request = protocol.request_of(op, id=None, **fields)
+        actions = self.engine.submit(request, time.monotonic_ns(), ticket=op)
+        while True:
+            reply = _settled(actions)
+            if reply is not None:
+                try:
+                    body, images = self.copyout.reply(reply, COPY if copy else VIEWS)
+                except Overwritten:  # the ring came round during the copy: plan again
+                    actions = self.engine.retry(reply, time.monotonic_ns())
+                    continue
+                body["timing"]["sent"] = time.monotonic_ns()
+                header = {"ok": True, "clock": protocol.CLOCK, **body}
+                return header, images, None if copy else self._validity(reply)
+            now = time.monotonic_ns()
+            if now >= deadline_ns:
+                self.engine.cancel_all()
+                raise RequestTimeout(f"no answer to {op!r} from the rings within the client's timeout")
+            waiting = {c for p in self.engine.pending for c in p.cameras}
+            updated = self._wait_for_frames(waiting, min(deadline_ns, self.engine.next_wake() or now))
+            actions = self.engine.on_frames(updated, time.monotonic_ns())
+
+    def _wait_for_frames(self, cameras: set[str], until_ns: int) -> set[str]:
+        """The cameras that stored a frame before ``until_ns`` (empty: none did)."""
+        readers = {c: self.cameras[c].reader for c in cameras if self.cameras[c].reader is not None}
+        counts = {c: r.field("write_count") for c, r in readers.items()}
+        due = min((_next_due(r) for r in readers.values()), default=until_ns)
+        nap_ns = min(due - WAKE_MARGIN_NS, until_ns) - time.monotonic_ns()
+        if nap_ns > 0:
+            time.sleep(nap_ns / 1e9)
+        while True:
+            updated = {c for c, r in readers.items() if r.field("write_count") != counts[c]}
+            if updated or time.monotonic_ns() >= until_ns:
+                return updated
+            time.sleep(POLL_S)
+
+    def _validity(self, reply: Reply) -> Callable[[], bool]:
+        slots = [(self.cameras[c].reader, reply.snapshots[c].slot(i), reply.snapshots[c].seq(i))
+                 for c, i in reply.plan.picks]
+        return lambda: all(reader.slot_holds(slot, seq) for reader, slot, seq in slots)
+
+    def close(self) -> None:
+        for handle in self.cameras.values():
+            handle.close()
+
+
+def _settled(actions: list) -> Reply | None:
+    for action in actions:
+        if isinstance(action, Failure):
+            raise service_error(action.code, action.message)
+        if isinstance(action, Reply):
+            return action
+    return None
+
+
+def _next_due(reader) -> int:
+    """When the ring's next frame should be stored: its newest frame's storage time plus a period."""
+    count = reader.field("write_count")
+    if count == 0:
+        return 0
+    newest_stored = int(reader.table["t_stored"][(count - 1) % reader.slots])
+    return newest_stored + reader.field("period_ns")
