@@ -276,7 +276,9 @@ class Client(SocketOwner):
 
     def _local_reads(self) -> LocalReads | None:
         """The client's own reads of the rings, learnt from the service's status once."""
-        if self._reads is not None or self.local == "off":
+        if self.local == "off":
+            return None
+        if self._reads is not None:
             return self._reads
         if self._reads_off is not None and time.monotonic() - self._reads_off[1] < _LOCAL_RETRY_S:
             return None

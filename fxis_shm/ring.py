@@ -107,7 +107,7 @@ class Snapshot:
     meta: np.ndarray  # copy of the slot table (SLOT records)
 
     def slot(self, i: int) -> int:
-        return self.timeline.physical(i)
+        return (self.first_write + i) % len(self.meta)  # logical index i is write first_write + i
 
     def seq(self, i: int) -> int:
         """The seq value the slot of logical index ``i`` must show for a valid copy."""
@@ -365,8 +365,11 @@ class RingReader(_Mapping):
         # Only the oldest end can be invalid (being overwritten); keep the newest valid run.
         bad = np.flatnonzero(~valid)
         first = lo + (int(bad[-1]) + 1 if bad.size else 0)
-        # A list: the searches read single elements, which a list serves far faster than numpy.
-        timeline = Timeline(table["t_capture"].tolist(), first % self.slots, count - first)
+        # Oldest first in a list: the searches read single elements, which a list serves far
+        # faster than numpy, and a vector that does not wrap is searched by plain bisection.
+        times = table["t_capture"].tolist()
+        oldest = first % self.slots
+        timeline = Timeline(times[oldest:] + times[:oldest], 0, count - first)
         return Snapshot(timeline, first, table)
 
     @property

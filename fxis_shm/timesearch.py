@@ -9,7 +9,8 @@ Pure: arrays and numbers in, indices out.
 """
 from __future__ import annotations
 
-from dataclasses import dataclass
+import bisect
+from dataclasses import dataclass, field
 from typing import Sequence
 
 
@@ -20,11 +21,14 @@ class Timeline:
     times: Sequence[int]
     start: int
     count: int
+    # the valid frames do not wrap around the end of the vector: plain slices serve them
+    contiguous: bool = field(init=False, repr=False, compare=False)
 
     def __post_init__(self):
         n = len(self.times)
         if not (0 <= self.count <= n) or (n and not 0 <= self.start < n):
             raise ValueError(f"bad timeline: start={self.start} count={self.count} n={n}")
+        object.__setattr__(self, "contiguous", self.start + self.count <= n)
 
     def __len__(self) -> int:
         return self.count
@@ -34,10 +38,14 @@ class Timeline:
         return (self.start + i) % len(self.times)
 
     def at(self, i: int) -> int:
+        if self.contiguous:
+            return int(self.times[self.start + i])
         return int(self.times[self.physical(i)])
 
     def bisect_left(self, t: int) -> int:
         """First logical index whose time is >= t (``count`` if none)."""
+        if self.contiguous:
+            return bisect.bisect_left(self.times, t, self.start, self.start + self.count) - self.start
         lo, hi = 0, self.count
         while lo < hi:
             mid = (lo + hi) // 2
@@ -49,6 +57,8 @@ class Timeline:
 
     def bisect_right(self, t: int) -> int:
         """First logical index whose time is > t (``count`` if none)."""
+        if self.contiguous:
+            return bisect.bisect_right(self.times, t, self.start, self.start + self.count) - self.start
         lo, hi = 0, self.count
         while lo < hi:
             mid = (lo + hi) // 2

@@ -52,7 +52,8 @@ class TableCamera:
         for w in range(first, count):
             t_capture, t_stored, generation = self.frames[w]
             meta[w % self.slots] = (2 * w + 2, w, t_capture, t_stored, t_capture, generation)
-        return Snapshot(Timeline(meta["t_capture"].tolist(), first % self.slots, count - first), first, meta)
+        times = [self.frames[w][0] for w in range(first, count)]  # oldest first, as RingReader gives
+        return Snapshot(Timeline(times, 0, len(times)), first, meta)
 
     def state(self, snap: Snapshot) -> CameraState:
         n = len(snap.timeline)
