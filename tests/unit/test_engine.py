@@ -324,3 +324,15 @@ def test_a_sequence_larger_than_the_limit_is_refused():
     failure = only(engine.submit(request("sequence", kind="interval", camera="cam", count=5,
                                          interval_ms=-10), 20 * PERIOD, 1), Failure)
     assert failure.code == "TOO_LARGE"
+
+
+def test_the_coordinator_and_same_host_clients_decide_with_this_one_engine():
+    """One implementation of selection and waiting: both callers hand requests to the engine
+    and hold no selection or wait-policy function of their own."""
+    from fxis_shm import coordinator, engine, localreads
+
+    deciding = ("fxis_shm.selection", "fxis_shm.waitpolicy", "fxis_shm.decisions", "fxis_shm.timesearch")
+    for caller in (coordinator, localreads):
+        assert caller.RequestEngine is engine.RequestEngine
+        own = [name for name, value in vars(caller).items() if getattr(value, "__module__", None) in deciding]
+        assert own == [], f"{caller.__name__} decides by itself with {own}"

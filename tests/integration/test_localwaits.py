@@ -1,0 +1,106 @@
+"""Same-host reads that wait, fail and follow restarts without the coordinator (issue 12)."""
+import os
+import random
+import signal
+import threading
+import time
+
+import pytest
+
+from fxis_shm import CameraDown, Client, read_stamp
+
+from ..conftest import run_in_threads, wait_until
+from .conftest import SMALL
+
+
+def test_local_and_network_answers_agree_frame_for_frame(two_cameras):
+    rng = random.Random(12)
+    with Client(two_cameras.endpoint, local="require") as local, \
+            Client(two_cameras.endpoint, local="off") as remote:
+        wait_until(lambda: local.status()["cameras"]["cam1"].get("frames_stored", 0) > 30,
+                   what="600 ms of frames")
+        for _ in range(25):
+            t_star = time.monotonic_ns() - rng.randrange(20_000_000, 300_000_000)  # the ring holds 400 ms
+            by_ring, by_wire = local.tuple(at=t_star), remote.tuple(at=t_star)
+            assert by_ring.path == "local" and by_wire.path == "network"
+            assert {c: f.frame_id for c, f in by_ring.items()} == {c: f.frame_id for c, f in by_wire.items()}, t_star
+            frame_ring, frame_wire = local.image("cam1", at=t_star), remote.image("cam1", at=t_star)
+            assert frame_ring.frame_id == frame_wire.frame_id
+
+
+def test_many_local_readers_wait_for_the_next_frame_at_once(two_cameras):
+    results, errors = [], []
+
+    def reader():
+        try:
+            with Client(two_cameras.endpoint, local="require", timeout=5.0) as client:
+                client.latest()  # learnt the rings
+                asked = time.monotonic_ns()
+                t_star = asked + 50_000_000  # 2.5 periods ahead: a frame not stored yet
+                results.append((asked, t_star, client.image("cam0", at=t_star)))
+        except Exception as exc:  # noqa: BLE001 - reported below
+            errors.append(exc)
+
+    run_in_threads(reader, 12, timeout=30)
+    assert not errors, errors[:3]
+    assert len(results) == 12
+    for asked, t_star, frame in results:
+        assert frame.path == "local" and read_stamp(frame.image) == frame.frame_id
+        assert frame.t_stored > asked  # waited for a frame stored after the call
+        assert abs(frame.t_capture - t_star) <= 10_000_000 + 2_000_000  # the nearest: half a period, and jitter
+
+
+def _camera_a(svc, client):
+    return client.status()["cameras"]["a"]
+
+
+def test_a_worker_killed_while_a_local_client_waits_gives_camera_down(start_service):
+    # 2 fps: a request for a moment 1.5 s ahead waits for several frames.
+    svc = start_service("--camera", f"a=synthetic:fps=2,{SMALL}")
+    outcome = {}
+    with Client(svc.endpoint, local="require", timeout=10.0) as client:
+        wait_until(lambda: _camera_a(svc, client).get("frames_stored", 0) >= 1, what="a first frame")
+        pid = _camera_a(svc, client)["writer_pid"]
+        client.latest()  # learnt the rings
+        waiting = threading.Event()
+
+        def wait_for_future_frame():
+            waiting.set()
+            try:
+                outcome["frame"] = client.image("a", at=time.monotonic_ns() + 1_500_000_000)
+            except Exception as exc:  # noqa: BLE001 - checked below
+                outcome["error"] = exc
+            outcome["returned"] = time.monotonic()
+
+        thread = threading.Thread(target=wait_for_future_frame)
+        thread.start()
+        waiting.wait(5)
+        wait_until(lambda: client._reads.engine.pending, what="the request to wait in the client")
+        os.kill(pid, signal.SIGKILL)
+        killed = time.monotonic()
+        thread.join(15)
+    assert not thread.is_alive(), "the waiting request hung"
+    assert isinstance(outcome.get("error"), CameraDown), outcome
+    assert "down" in str(outcome["error"])
+    assert outcome["returned"] - killed < 5.0  # the liveness check, not the client's 10 s timeout
+
+
+def test_a_local_client_follows_a_restarted_worker_by_itself(start_service):
+    svc = start_service("--camera", f"a=synthetic:fps=50,{SMALL}")
+    with Client(svc.endpoint, local="require", timeout=2.0) as client:
+        before = client.image("a")
+        assert before.generation == 1 and before.path == "local"
+        os.kill(_camera_a(svc, client)["writer_pid"], signal.SIGKILL)
+        wait_until(lambda: _camera_a(svc, client)["alive"] is False, what="camera a to show down")
+        with pytest.raises(CameraDown):
+            client.image("a")
+
+        def restarted_frame():
+            try:
+                return client.image("a")
+            except CameraDown:
+                return None
+
+        after = wait_until(restarted_frame, timeout=20, what="the restarted camera's frames")
+    assert after.generation == 2 and after.path == "local"
+    assert read_stamp(after.image) == after.frame_id
