@@ -107,7 +107,7 @@ class CameraHandle:
             newest=snapshot.newest,
             period_ns=ring.field("period_ns"),
             delay_ns=max(0, ring.field("delay_ns")),
-            newest_stored=snapshot.frame_meta(n - 1).t_stored if n else None,
+            newest_stored=int(snapshot.meta["t_stored"][snapshot.slot(n - 1)]) if n else None,
         )
 
     def status(self, now: int) -> dict:

@@ -47,10 +47,19 @@ def select_independent(timelines: Mapping[str, Timeline], t_star: int) -> Select
     return Selection(index, {cam: timelines[cam].at(i) for cam, i in index.items()})
 
 
-def _candidates(tl: Timeline, t_star: int, radius: int) -> list[int]:
-    near = set(tl.within(t_star - radius, t_star + radius))
-    near.add(tl.nearest(t_star))
-    return sorted(near)
+def _candidates(tl: Timeline, t_star: int, radius: int) -> range:
+    """The frames within ``radius`` of t*, and the nearest one: one run of indices, since the
+    nearest frame lies inside the window or next to it."""
+    near = tl.within(t_star - radius, t_star + radius)
+    nearest = tl.nearest(t_star)
+    return range(min(near.start, nearest), max(near.stop, nearest + 1))
+
+
+def _times(tl: Timeline, indices: range) -> zip:
+    """(index, time) of a run of frames, read in one slice where the timeline does not wrap."""
+    if tl.contiguous:
+        return zip(indices, tl.times[tl.start + indices.start : tl.start + indices.stop])
+    return zip(indices, map(tl.at, indices))
 
 
 def _closest_in(tl: Timeline, indices: list[int], t_star: int) -> int:
@@ -73,9 +82,9 @@ def select_joint(
     if len(timelines) == 1:
         return select_independent(timelines, t_star)
     events = sorted(
-        (tl.at(i), cam, i)
+        (t, cam, i)
         for cam, tl in timelines.items()
-        for i in _candidates(tl, t_star, radius_ns)
+        for i, t in _times(tl, _candidates(tl, t_star, radius_ns))
     )
     # Two pointers: for every right end, the shortest window holding every camera.
     windows = []
