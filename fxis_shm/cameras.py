@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import time
 
+import numpy as np
 import posix_ipc
 
 from . import naming
@@ -11,6 +12,8 @@ from .errors import RingError
 from .ring import FLAG_TRIGGERED, RingReader, Snapshot
 from .waitpolicy import CameraState
 
+# The columns of the ``frames`` op's rows, one row per frame.
+FRAME_FIELDS = ("frame_id", "t_capture", "t_stored", "t_available", "generation")
 # A worker heartbeats at least every 0.1 s; silence this long means it hangs.
 STALE_HEARTBEAT_NS = 2_000_000_000
 # How long a look at /proc that found the worker running stays good: requests
@@ -140,6 +143,20 @@ class CameraHandle:
             hook_errors=ring.field("hook_errors"),
             note=ring.header["status_text"].item().decode(errors="replace"),
         )
+        return info
+
+    def timeline(self, now: int) -> dict:
+        """What a caller elsewhere needs to choose frames itself (the ``frames`` op): the
+        camera's liveness, timing and every valid frame's identity and times, oldest first."""
+        down = self.down_reason(now)
+        info: dict = {"alive": down is None, "reason": down, "frames": []}
+        if self.reader is None:
+            return info
+        snap = self.reader.snapshot()
+        picked = snap.meta[[snap.slot(i) for i in range(len(snap.timeline))]]
+        info.update(period_ns=self.period_ns, delay_ns=max(0, self.reader.field("delay_ns")),
+                    slots=self.reader.slots, triggered=self.triggered,
+                    frames=np.stack([picked[k].astype(np.int64) for k in FRAME_FIELDS], axis=1).tolist())
         return info
 
     def close(self) -> None:

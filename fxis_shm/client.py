@@ -222,6 +222,11 @@ class Client(SocketOwner):
         """The service's clock now (ns of its CLOCK_MONOTONIC)."""
         return self._call("time", 0.0)[0]["now"]
 
+    def frame_times(self, cameras: list[str] | None = None) -> dict:
+        """Each camera's frames without pixels (the ``frames`` op): liveness, period and a row
+        per valid frame with the fields named in ``columns``, times in the service's clock."""
+        return self._call("frames", 0.0, cameras=cameras)[0]
+
     # ---- the two paths ----
 
     def _fetch(self, op: str, extra_wait: float, copy: bool, **fields) -> tuple[dict, list, Callable | None]:

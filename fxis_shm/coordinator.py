@@ -20,7 +20,7 @@ import zmq
 from zmq.auth.thread import ThreadAuthenticator
 
 from . import naming, protocol
-from .cameras import CameraHandle
+from .cameras import FRAME_FIELDS, CameraHandle
 from .engine import FRAME_OPS, Action, Failure, Reply, RequestEngine, Trigger
 from .errors import Code, ProtocolError
 from .framewatch import FrameWatch
@@ -221,10 +221,12 @@ class Coordinator:
         op = request["op"]
         try:
             if op not in FRAME_OPS:
-                self._reply(respond, request, getattr(self, f"_op_{op}")())
+                self._reply(respond, request, getattr(self, f"_op_{op}")(request))
                 return
             local = self.boot_id is not None and request.get("local") == self.boot_id
             self._carry_out(self.engine.submit(request, t_received, respond, client=client, local=local))
+        except ProtocolError as exc:  # a request that cannot be answered as asked
+            respond(protocol.encode_error(request["id"], exc.code, exc.message))
         except Exception as exc:  # a bug must not take the service down
             log.exception("internal error on %s", op)
             respond(protocol.encode_error(request["id"], Code.INTERNAL, repr(exc)))
@@ -248,7 +250,7 @@ class Coordinator:
             return
         self._reply(reply.pending.ticket, reply.pending.request, body, images)
 
-    def _op_status(self) -> dict:
+    def _op_status(self, request: dict) -> dict:
         now = time.monotonic_ns()
         return {
             "op": "status",
@@ -283,8 +285,20 @@ class Coordinator:
         except (OSError, ValueError):
             return None
 
-    def _op_time(self) -> dict:
+    def _op_time(self, request: dict) -> dict:
         return {"op": "time", "now": time.monotonic_ns(), "boot_id": self.boot_id}
+
+    def _op_frames(self, request: dict) -> dict:
+        """Every camera's frame times without pixels, for callers that choose frames
+        themselves (a client over several services)."""
+        names = request["cameras"] or list(self.cameras)
+        unknown = [n for n in names if n not in self.cameras]
+        if unknown:
+            raise ProtocolError(f"unknown camera(s) {unknown}; known: {sorted(self.cameras)}",
+                                Code.UNKNOWN_CAMERA)
+        now = time.monotonic_ns()
+        return {"op": "frames", "now": now, "columns": list(FRAME_FIELDS),
+                "cameras": {n: self.cameras[n].timeline(now) for n in names}}
 
     # ---- replies ----
 

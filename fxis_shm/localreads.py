@@ -82,7 +82,7 @@ class LocalReads:
         request = protocol.request_of(op, id=None, **fields)
         actions = self.engine.submit(request, time.monotonic_ns(), ticket=op)
         while True:
-            reply = _settled(actions)
+            reply = settled(actions)
             if reply is not None:
                 try:
                     body, images = self.copyout.reply(reply, COPY if copy else VIEWS)
@@ -124,7 +124,8 @@ class LocalReads:
             handle.close()
 
 
-def _settled(actions: list) -> Reply | None:
+def settled(actions: list) -> Reply | None:
+    """The reply the engine's actions settle on, None if they are waits; raises a failure."""
     for action in actions:
         if isinstance(action, Failure):
             raise service_error(action.code, action.message)

@@ -172,6 +172,7 @@ OPS: dict[str, dict[str, tuple[Check, Any]]] = {
     },
     "status": {},
     "time": {},
+    "frames": {"cameras": (_optional(_names), None)},  # frame times without pixels
 }
 EVENT_OPS = ("image", "tuple", "latest", "sequence", "time")
 EVENT_TOPIC = b"fxis.request"  # the topic of request events published to the service
