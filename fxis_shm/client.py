@@ -122,6 +122,13 @@ class SocketOwner:
 class Client(SocketOwner):
     """``Client(endpoint, timeout)``: every call raises RequestTimeout after ``timeout`` seconds."""
 
+    def __new__(cls, endpoint: str | list[str] = DEFAULT_ENDPOINT, *args, **kwargs):
+        """``Client([endpoint_a, endpoint_b])``: one client over several services (MultiClient)."""
+        if cls is Client and isinstance(endpoint, (list, tuple)):
+            from .multiclient import MultiClient  # imports this module
+            return MultiClient(endpoint, **kwargs)
+        return super().__new__(cls)
+
     def __init__(self, endpoint: str = DEFAULT_ENDPOINT, timeout: float = 2.0,
                  context: zmq.Context | None = None, keys: ClientKeys | None = None,
                  local: str = "auto"):

@@ -5,7 +5,7 @@ import signal
 
 import pytest
 
-from fxis_shm import CameraDown, UnknownCamera, read_stamp
+from fxis_shm import CameraDown, Client, UnknownCamera, read_stamp
 from fxis_shm.errors import ConfigError
 from fxis_shm.multiclient import MultiClient
 
@@ -40,7 +40,8 @@ def _least_skew_near(times: dict[str, list[int]], t_star: int, radius: int) -> i
 
 def test_a_tuple_across_services_is_the_least_skewed_one(two_services):
     a, b = two_services
-    with MultiClient([a.endpoint, b.endpoint]) as client:
+    with Client([a.endpoint, b.endpoint]) as client:
+        assert isinstance(client, MultiClient)
         assert set(client.cameras) == {"left", "right", "top"}
         wait_until(lambda: all(len(client.clients[i].frame_times()["cameras"][c]["frames"]) > 10
                                for i, c in ((0, "left"), (1, "top"))), what="frames in every ring")
