@@ -41,7 +41,7 @@ class CameraHandle:
         self.torn_reads = 0
         self.last_error = ""
         self._trigger: posix_ipc.Semaphore | None = None
-        self._seen_alive = (0, 0)  # (pid, when) of the last look that found the worker running
+        self._seen_alive = (0, 0, 0)  # (pid, when, write count) of the last look that found it running
 
     def ring(self) -> RingReader | None:
         """The ring, opened or re-opened if the worker created a new one; None if absent."""
@@ -62,19 +62,21 @@ class CameraHandle:
         if ring is None:
             return f"camera {self.name!r} has no ring: {self.last_error}"
         pid = ring.field("writer_pid")
-        if not self._alive(pid):
+        if not self._alive(pid, ring.field("write_count")):
             return f"camera {self.name!r} is down: its worker is not running"
         if now - ring.field("heartbeat_ns") > STALE_HEARTBEAT_NS:
             return f"camera {self.name!r} is down: its worker has not reported for over 2 s"
         return None
 
-    def _alive(self, pid: int) -> bool:
+    def _alive(self, pid: int, write_count: int) -> bool:
         checked = time.monotonic_ns()
-        seen_pid, seen_at = self._seen_alive
-        if pid == seen_pid and checked - seen_at < ALIVE_CHECK_NS:
+        seen_pid, seen_at, seen_count = self._seen_alive
+        if pid == seen_pid and (checked - seen_at < ALIVE_CHECK_NS or write_count != seen_count):
+            # a frame stored since the last look is as good a sign of life as /proc
+            self._seen_alive = (pid, checked if write_count != seen_count else seen_at, write_count)
             return True
         alive = process_alive(pid)
-        self._seen_alive = (pid, checked) if alive else (0, 0)
+        self._seen_alive = (pid, checked, write_count) if alive else (0, 0, 0)
         return alive
 
     @property
