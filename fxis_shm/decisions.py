@@ -11,7 +11,7 @@ Pure: snapshots, camera states, settings and ``now`` in; a ``Wait`` or a
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Callable, Mapping, Protocol
+from typing import Any, Callable, Mapping, Protocol
 
 from . import sequences
 from .errors import Code
@@ -41,7 +41,7 @@ class Wait:
 class Plan:
     """The answer: the reply's fields and the frames it carries, as (camera, snapshot index)."""
 
-    body: dict
+    body: dict[str, Any]
     picks: list[tuple[str, int]]
     groups: list[list[tuple[str, int]]] | None = None  # a sequence: the picks of each tuple
 
@@ -69,12 +69,12 @@ class Context:
 class Request(Protocol):
     """What ``decide`` reads of a request (fxis_shm.engine.Pending)."""
 
-    request: dict
+    request: dict[str, Any]
     cameras: list[str]
     t_received: int
     t_star: int
     missing: list[str]
-    triggered: frozenset
+    triggered: frozenset[str]
     t_trigger: int | None
 
     @property
@@ -99,12 +99,14 @@ def _chooser(mode: str, ctx: Context) -> Callable[..., Selection]:
     return choose
 
 
-def _near(p: Request, now: int, snaps, states, ctx: Context) -> Wait | Plan:
+def _near(p: Request, now: int, snaps: Mapping[str, Snapshot], states: Mapping[str, CameraState],
+          ctx: Context) -> Wait | Plan:
     """image and tuple: one frame per camera near t*."""
     mode = INDEPENDENT if p.op == "image" else ctx.sync
     choose = _chooser(mode, ctx)
     usable = {c: _usable(p, c, snaps[c]) for c in p.cameras}
     timelines = {c: u[0] for c, u in usable.items() if u is not None}
+    first = {c: u[1] for c, u in usable.items() if u is not None}
     stored: Selection | None = None
     if p.triggered:  # the triggered frames, and the others' frames around the trigger
         free = {c: s for c, s in states.items() if c not in p.triggered}
@@ -142,8 +144,8 @@ def _near(p: Request, now: int, snaps, states, ctx: Context) -> Wait | Plan:
             raise Reject(Code.SKEW_EXCEEDED,
                          f"the best tuple near t* has a skew of {sel.best_skew_ns / 1e6:.3f} ms, "
                          f"more than max_skew_ms={ctx.max_skew_ms}")
-    picks = [(c, usable[c][1] + i) for c, i in sel.index.items()]  # back to snapshot indices
-    body: dict = {"op": p.op, "t_request": p.t_star}
+    picks = [(c, first[c] + i) for c, i in sel.index.items()]  # back to snapshot indices
+    body: dict[str, Any] = {"op": p.op, "t_request": p.t_star}
     if p.op == "tuple":
         body.update(skew_ns=sel.skew_ns, sync=mode)
         if p.missing:
@@ -165,7 +167,8 @@ def _usable(p: Request, cam: str, snap: Snapshot) -> tuple[Timeline, int] | None
     return Timeline(tl.times, tl.physical(first), len(tl) - first), first
 
 
-def _sequence(p: Request, now: int, snaps, states, ctx: Context) -> Wait | Plan:
+def _sequence(p: Request, now: int, snaps: Mapping[str, Snapshot], states: Mapping[str, CameraState],
+              ctx: Context) -> Wait | Plan:
     spec = sequence_spec(p.request, p.t_star)
     waits: dict[str, int | None] = {}
     for cam, state in states.items():
@@ -206,7 +209,7 @@ def _sequence(p: Request, now: int, snaps, states, ctx: Context) -> Wait | Plan:
     return Plan(body, [pick for t in tuples for pick in t], tuples)
 
 
-def sequence_spec(request: dict, t_star: int) -> sequences.SequenceSpec:
+def sequence_spec(request: dict[str, Any], t_star: int) -> sequences.SequenceSpec:
     return sequences.SequenceSpec(
         kind=request["kind"], t_star=t_star, count=request["count"] or 1,
         direction=request["direction"], interval_ns=int((request["interval_ms"] or 0) * 1e6),

@@ -49,14 +49,15 @@ def encode(image: np.ndarray, encoding: str, quality: int = DEFAULT_JPEG_QUALITY
     return data.tobytes()
 
 
-def decode(data, encoding: str, shape: tuple[int, ...], dtype: str) -> np.ndarray:
+def decode(data: bytes | memoryview, encoding: str, shape: tuple[int, ...], dtype: str) -> np.ndarray:
     """The frame back from its bytes, with the ``shape`` and ``dtype`` it was sent with."""
     if encoding == RAW:
         image = np.frombuffer(data, dtype=dtype)
     else:
-        image = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
-        if image is None:
+        decoded = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
+        if decoded is None:
             raise ProtocolError(f"the {encoding} data of a frame could not be decoded")
+        image = np.asarray(decoded)
     if image.size != int(np.prod(shape)) or image.dtype.name != dtype:
         raise ProtocolError(
             f"a {encoding} frame decoded to {image.shape} {image.dtype.name}, expected {tuple(shape)} {dtype}")

@@ -70,7 +70,7 @@ class Pending:
     """A request on its way to a reply. ``ticket`` is the caller's: where the reply goes."""
 
     ticket: Any
-    request: dict
+    request: dict[str, Any]
     cameras: list[str]
     t_received: int
     t_star: int
@@ -80,16 +80,16 @@ class Pending:
     wake_at: int = 0
     ready_at: dict[str, int] = field(default_factory=dict)  # when each camera's frame was there
     missing: list[str] = field(default_factory=list)  # cameras down, left out of a partial tuple
-    triggered: frozenset = frozenset()  # software-triggered cameras this request triggered
+    triggered: frozenset[str] = frozenset()  # software-triggered cameras this request triggered
     t_trigger: int | None = None
     attempts: int = 0  # plans made for it
 
     @property
     def op(self) -> str:
-        return self.request["op"]
+        return str(self.request["op"])
 
     @property
-    def id(self):
+    def id(self) -> Any:
         return self.request.get("id")
 
 
@@ -126,7 +126,7 @@ class RequestEngine:
 
     # ---- what happens ----
 
-    def submit(self, request: dict, now: int, ticket: Any, client: Any = None,
+    def submit(self, request: dict[str, Any], now: int, ticket: Any, client: Any = None,
                local: bool = False) -> list[Action]:
         """A request for frames (op image, tuple, latest or sequence) arrived at ``now``."""
         p = Pending(ticket, request, [], now, now, client=client, local=local)
@@ -174,7 +174,7 @@ class RequestEngine:
         """The earliest moment a waiting request wants to be evaluated again."""
         return min((p.wake_at for p in self.pending), default=None)
 
-    def setting(self, request: dict, key: str):
+    def setting(self, request: dict[str, Any], key: str) -> Any:
         value = request.get(key)
         return self.settings[key] if value is None else value
 
@@ -210,7 +210,7 @@ class RequestEngine:
                 p.triggered = frozenset(triggered)
                 actions.append(Trigger(triggered))
 
-    def _cameras_of(self, request: dict) -> list[str]:
+    def _cameras_of(self, request: dict[str, Any]) -> list[str]:
         if request.get("camera") is not None:
             names = [request["camera"]]
         else:

@@ -8,6 +8,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from typing import Any
+
 from .ring import SLOT, Snapshot
 from .timesearch import Timeline
 from .waitpolicy import CameraState
@@ -21,10 +23,10 @@ class RemoteCamera:
     def __init__(self, name: str, service: str):
         self.name, self.service = name, service
         self.offset_ns = 0  # the service's clock minus the caller's, when last described
-        self._info: dict = {"alive": False, "reason": f"camera {name!r} was not described yet", "frames": []}
+        self._info: dict[str, Any] = {"alive": False, "reason": f"camera {name!r} was not described yet", "frames": []}
         self._snapshot = _snapshot_of([], [], 0)
 
-    def describe(self, info: dict, columns: list[str], offset_ns: int) -> None:
+    def describe(self, info: dict[str, Any], columns: list[str], offset_ns: int) -> None:
         """Take the service's latest description of the camera (one ``frames`` entry)."""
         self._info, self.offset_ns = info, offset_ns
         self._snapshot = _snapshot_of(info.get("frames", []), columns, offset_ns)
@@ -34,7 +36,7 @@ class RemoteCamera:
         self._info = {**self._info, "alive": False,
                       "reason": f"camera {self.name!r} is down: its service {self.service} {why}"}
 
-    def service_row(self, i: int) -> dict:
+    def service_row(self, i: int) -> dict[str, int]:
         """Frame ``i`` of the last snapshot as the service knows it (its own clock)."""
         rec = self._snapshot.meta[i]
         row = {k: int(rec[k]) for k in ("frame_id", "generation", *_TIMES)}
@@ -78,7 +80,7 @@ class RemoteCamera:
         return int(self._snapshot.meta["t_stored"][n - 1]) + self.period_ns
 
 
-def _snapshot_of(rows: list, columns: list[str], offset_ns: int) -> Snapshot:
+def _snapshot_of(rows: list[list[int]], columns: list[str], offset_ns: int) -> Snapshot:
     """A snapshot over the described frames (oldest first), times in the caller's clock.
     Its slot table holds exactly these frames, so logical index i is slot i."""
     meta = np.zeros(len(rows), dtype=SLOT)

@@ -12,7 +12,7 @@ Pure: timelines and numbers in, a Selection out.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Mapping
+from typing import Iterator, Mapping
 
 from .timesearch import Timeline
 
@@ -55,7 +55,7 @@ def _candidates(tl: Timeline, t_star: int, radius: int) -> range:
     return range(min(near.start, nearest), max(near.stop, nearest + 1))
 
 
-def _times(tl: Timeline, indices: range) -> zip:
+def _times(tl: Timeline, indices: range) -> Iterator[tuple[int, int]]:
     """(index, time) of a run of frames, read in one slice where the timeline does not wrap."""
     if tl.contiguous:
         return zip(indices, tl.times[tl.start + indices.start : tl.start + indices.stop])
@@ -101,7 +101,7 @@ def select_joint(
         if len(inside) == len(timelines):
             windows.append((left, right))
     best_skew = min(events[r][0] - events[l][0] for l, r in windows)
-    best = None
+    best: tuple[tuple[int, int], Selection] | None = None
     for l, r in windows:
         if events[r][0] - events[l][0] > best_skew + tolerance_ns:
             continue
@@ -113,6 +113,7 @@ def select_joint(
         key = (sel.max_abs_error_ns(t_star), sel.skew_ns)
         if best is None or key <= best[0]:  # later windows are newer: newest wins ties
             best = (key, sel)
+    assert best is not None  # the tuple of least skew is always within tolerance
     return best[1]
 
 

@@ -24,7 +24,7 @@ class Timeline:
     # the valid frames do not wrap around the end of the vector: plain slices serve them
     contiguous: bool = field(init=False, repr=False, compare=False)
 
-    def __post_init__(self):
+    def __post_init__(self) -> None:
         n = len(self.times)
         if not (0 <= self.count <= n) or (n and not 0 <= self.start < n):
             raise ValueError(f"bad timeline: start={self.start} count={self.count} n={n}")
