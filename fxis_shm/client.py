@@ -22,7 +22,7 @@ import numpy as np
 import zmq
 
 from . import protocol
-from .errors import CameraDown, LocalPathUnavailable, Overwritten, ProtocolError, RequestTimeout, service_error
+from .errors import CameraDown, LocalPathUnavailable, UnknownCamera, Overwritten, ProtocolError, RequestTimeout, service_error
 from .localpath import LocalRings, LocalUnavailable, boot_id
 from .localreads import LocalReads
 from .security import ClientKeys
@@ -276,8 +276,8 @@ class Client(SocketOwner):
         deadline = time.monotonic_ns() + int((self.timeout + extra_wait) * 1e9)
         try:
             header, images, check = self._reads.answer(op, fields, deadline, copy)
-        except CameraDown:
-            # The service may have been restarted with new rings: learn them again, once.
+        except (CameraDown, UnknownCamera):
+            # The service may have been restarted with new rings or other cameras: learn them again, once.
             self._drop_reads()
             if self._local_reads() is None:
                 raise

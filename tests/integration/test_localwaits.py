@@ -104,3 +104,16 @@ def test_a_local_client_follows_a_restarted_worker_by_itself(start_service):
         after = wait_until(restarted_frame, timeout=20, what="the restarted camera's frames")
     assert after.generation == 2 and after.path == "local"
     assert read_stamp(after.image) == after.frame_id
+
+
+def test_a_local_client_learns_a_service_restarted_with_more_cameras(start_service):
+    first = start_service("--camera", f"a=synthetic:fps=50,{SMALL}")
+    with Client(first.endpoint, local="require", timeout=2.0) as client:
+        assert client.image("a").path == "local"
+        first.stop()
+        again = start_service("--camera", f"a=synthetic:fps=50,{SMALL}", "--camera", f"b=synthetic:fps=50,{SMALL}",
+                              name=first.name, endpoint=first.endpoint, pub=first.pub, events=first.events)
+        wait_until(lambda: again.client().status()["cameras"]["b"].get("frames_stored"), what="camera b")
+        frame = client.image("b")  # a camera the client had not seen: it learns the rings again
+    again.stop()  # before the fixture checks that the first one, of the same name, left nothing
+    assert frame.path == "local" and read_stamp(frame.image) == frame.frame_id
