@@ -80,6 +80,9 @@ class LocalReads:
         """The reply header, images and (for views) a validity check, as the coordinator would
         send them. Raises the service's errors, or RequestTimeout at ``deadline_ns``."""
         request = protocol.request_of(op, id=None, **fields)
+        # Write counts read before every look the engine takes: a frame stored after a look
+        # shows as a changed count, however soon after the look it came.
+        seen = {c: h.reader.field("write_count") for c, h in self.cameras.items() if h.reader is not None}
         actions = self.engine.submit(request, time.monotonic_ns(), ticket=op)
         while True:
             reply = settled(actions)
@@ -97,20 +100,24 @@ class LocalReads:
                 self.engine.cancel_all()
                 raise RequestTimeout(f"no answer to {op!r} from the rings within the client's timeout")
             waiting = {c for p in self.engine.pending for c in p.cameras}
-            updated = self._wait_for_frames(waiting, min(deadline_ns, self.engine.next_wake() or now))
+            updated = self._wait_for_frames(waiting, min(deadline_ns, self.engine.next_wake() or now), seen)
             actions = self.engine.on_frames(updated, time.monotonic_ns())
 
-    def _wait_for_frames(self, cameras: set[str], until_ns: int) -> set[str]:
-        """The cameras that stored a frame before ``until_ns`` (empty: none did)."""
+    def _wait_for_frames(self, cameras: set[str], until_ns: int, seen: dict[str, int]) -> set[str]:
+        """The cameras whose write count moved on from ``seen`` before ``until_ns`` (empty: none
+        did); ``seen`` is updated to the counts found."""
         readers = {c: self.cameras[c].reader for c in cameras if self.cameras[c].reader is not None}
-        counts = {c: r.field("write_count") for c, r in readers.items()}
-        due = min((_next_due(r) for r in readers.values()), default=until_ns)
-        nap_ns = min(due - WAKE_MARGIN_NS, until_ns) - time.monotonic_ns()
-        if nap_ns > 0:
-            time.sleep(nap_ns / 1e9)
+        counts = {c: seen.get(c, -1) for c in readers}
+        due = min((_next_due(r) for r in readers.values()), default=until_ns)  # before the look below
+        if all(r.field("write_count") == counts[c] for c, r in readers.items()):  # else: no nap
+            nap_ns = min(due - WAKE_MARGIN_NS, until_ns) - time.monotonic_ns()
+            if nap_ns > 0:
+                time.sleep(nap_ns / 1e9)
         while True:
-            updated = {c for c, r in readers.items() if r.field("write_count") != counts[c]}
+            now_counts = {c: r.field("write_count") for c, r in readers.items()}
+            updated = {c for c, n in now_counts.items() if n != counts[c]}
             if updated or time.monotonic_ns() >= until_ns:
+                seen.update(now_counts)
                 return updated
             time.sleep(POLL_S)
 

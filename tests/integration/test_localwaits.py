@@ -117,3 +117,20 @@ def test_a_local_client_learns_a_service_restarted_with_more_cameras(start_servi
         frame = client.image("b")  # a camera the client had not seen: it learns the rings again
     again.stop()  # before the fixture checks that the first one, of the same name, left nothing
     assert frame.path == "local" and read_stamp(frame.image) == frame.frame_id
+
+
+def test_a_local_wait_ends_with_the_frame_it_waited_for_not_a_period_later(start_service):
+    """Two cameras in phase: the second camera's frame may land while the client looks at the
+    first one's; the client must still notice it (it once slept a whole period more)."""
+    svc = start_service("--camera", f"a=synthetic:fps=10,{SMALL}", "--camera", f"b=synthetic:fps=10,{SMALL}")
+    rng = random.Random(3)
+    late = []
+    with Client(svc.endpoint, local="require", timeout=5.0) as client:
+        client.tuple()
+        for _ in range(40):
+            time.sleep(rng.uniform(0, 0.1))  # every phase of the 100 ms period
+            tup = client.tuple()
+            newest_stored = max(f.t_stored for f in tup.values())
+            if tup.timing["waited"] - newest_stored > 50_000_000:  # half a period after it was there
+                late.append((tup.timing["waited"] - newest_stored) / 1e6)
+    assert late == [], f"decided {late} ms after the last frame it used was stored"
