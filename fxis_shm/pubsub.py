@@ -46,6 +46,12 @@ class Message:
         return self.header.get("seq")
 
     @property
+    def rate(self) -> dict | None:
+        """In a decimated stream's first message: the rate asked, the camera's, and whether
+        every frame is sent (the camera is no faster than the rate asked)."""
+        return self.header.get("rate")
+
+    @property
     def ok(self) -> bool:
         return bool(self.header.get("ok"))
 

@@ -9,9 +9,10 @@ messages) can tell what it missed from seq and frame_id gaps.
 from __future__ import annotations
 
 import logging
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 from . import protocol
+from .decimation import Decimator, every_frame
 from .decisions import Reject
 from .copyout import CopyOut
 from .protocol import StreamTopic, parse_stream_topic
@@ -26,9 +27,12 @@ class _StreamState:
     topic: StreamTopic
     seq: int = 0
     last_write: int = -1  # frames: write index of the last frame published
-    last_t: int | None = None  # t_capture (frames) or reference time (tuples) last published
     last_key: tuple = ()  # tuples: the frames of the last tuple published
     last_t_max: int = 0  # tuples: the newest capture time in the last tuple published
+    decimator: Decimator = field(init=False)
+
+    def __post_init__(self):
+        self.decimator = Decimator(self.topic.rate_hz)
 
 
 class Streams:
@@ -64,12 +68,6 @@ class Streams:
             except (Reject, Overwritten) as exc:
                 log.debug("stream %s skipped a round: %s", topic, exc)
 
-    def _interval_ok(self, state: _StreamState, t: int, cam_period: int) -> bool:
-        rate = state.topic.rate_hz
-        if state.last_t is None or not rate:
-            return True
-        return t >= state.last_t + int(1e9 / rate) - cam_period // 2
-
     def _copy(self, snap, cam: str, i: int, copies: dict):
         key = (cam, snap.first_write + i)
         if key not in copies:
@@ -77,10 +75,13 @@ class Streams:
             copies[key] = (frames[0], images[0])
         return copies[key]
 
-    def _send(self, topic: str, state: _StreamState, metas: list, images: list, extra: dict) -> None:
+    def _send(self, topic: str, state: _StreamState, metas: list, images: list, extra: dict,
+              period_ns: int) -> None:
         state.seq += 1
         frames = [{**m, "buffer": n} for n, m in enumerate(metas)]
         body = {"stream": topic[:-1], "seq": state.seq, "frames": frames, **extra}
+        if state.seq == 1 and state.topic.rate_hz:  # what rate the subscriber will get
+            body["rate"] = _rate_note(state.topic.rate_hz, period_ns)
         self.publish(topic, protocol.encode_reply(None, body, images))
 
     def _frames(self, topic: str, state: _StreamState, now: int, copies: dict) -> None:
@@ -89,12 +90,10 @@ class Streams:
         period = self.copyout.period(cam)
         first_new = max(0, state.last_write + 1 - snap.first_write)
         for i in range(first_new, len(snap.timeline)):
-            t = snap.timeline.at(i)
-            if not self._interval_ok(state, t, period):
+            if not state.decimator.offer(snap.timeline.at(i), period):
                 continue
             meta, image = self._copy(snap, cam, i, copies)
-            self._send(topic, state, [meta], [image], {})
-            state.last_t = t
+            self._send(topic, state, [meta], [image], {}, period)
         state.last_write = snap.first_write + len(snap.timeline) - 1
 
     def _tuple(self, topic: str, state: _StreamState, now: int, copies: dict) -> None:
@@ -102,14 +101,22 @@ class Streams:
         snaps = self.copyout.snapshots(cams, now)
         t_ref = min(snaps[c].newest for c in cams)  # every camera has frames up to here
         period = max(self.copyout.period(c) for c in cams)
-        if not self._interval_ok(state, t_ref, period):
-            return
         sel = self.copyout.select_frames(self.copyout.settings["sync"] or JOINT,
-                                   {c: snaps[c].timeline for c in cams}, t_ref)
+                                         {c: snaps[c].timeline for c in cams}, t_ref)
         key = tuple(snaps[c].first_write + sel.index[c] for c in cams)
         if key == state.last_key or (state.last_key and max(sel.t.values()) <= state.last_t_max):
+            return  # no tuple newer than the last one
+        state.last_key, state.last_t_max = key, max(sel.t.values())
+        if not state.decimator.offer(t_ref, period):
             return
         pairs = [self._copy(snaps[c], c, sel.index[c], copies) for c in cams]
         self._send(topic, state, [m for m, _ in pairs], [img for _, img in pairs],
-                   {"t_request": t_ref, "skew_ns": sel.skew_ns})
-        state.last_key, state.last_t, state.last_t_max = key, t_ref, max(sel.t.values())
+                   {"t_request": t_ref, "skew_ns": sel.skew_ns}, period)
+
+
+def _rate_note(rate_hz: float, period_ns: int) -> dict:
+    fps = round(1e9 / period_ns, 3) if period_ns > 0 else None
+    note = {"asked_hz": rate_hz, "camera_fps": fps, "every_frame": every_frame(rate_hz, period_ns)}
+    if note["every_frame"]:
+        note["message"] = f"asked for {rate_hz} Hz; the camera gives {fps} fps: every frame is sent"
+    return note
