@@ -290,10 +290,35 @@ def pyplot():
 
 
 def progress(total: int, desc: str):
-    from tqdm import tqdm
+    """A progress bar on a terminal; elsewhere (CI logs, output to a file) one line when the
+    stage starts and one when it ends, so logs stay readable."""
+    if sys.stderr.isatty():
+        from tqdm import tqdm
 
-    return tqdm(total=total, desc=desc, file=sys.stderr, unit="req", dynamic_ncols=True,
-                leave=False)
+        return tqdm(total=total, desc=desc, file=sys.stderr, unit="req", dynamic_ncols=True,
+                    leave=False)
+    return _StageLines(total, desc)
+
+
+class _StageLines:
+    """What ``progress`` gives when stderr is not a terminal: the bar's calls, two lines."""
+
+    def __init__(self, total: int, desc: str):
+        self.total, self.desc, self.done, self.started = total, desc, 0, time.monotonic()
+        print(f"{desc}: {total} steps ...", file=sys.stderr, flush=True)
+
+    def update(self, n: int = 1) -> None:
+        self.done += n
+
+    def close(self) -> None:
+        print(f"{self.desc}: {self.done} of {self.total} done in {time.monotonic() - self.started:.1f} s",
+              file=sys.stderr, flush=True)
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
 
 
 def sleep_ms(duration_ms: float) -> None:
