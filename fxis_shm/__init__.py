@@ -1,17 +1,21 @@
 """fxis-shm: multi-camera acquisition into shared-memory rings, served as
-time-synchronized images over ZeroMQ."""
+time-synchronized images over ZeroMQ. The public API is what ``__all__`` names
+(README.md, "The public API")."""
 from .client import Client, Frame, FrameTuple
 from .errors import (
     CameraDown, ConfigError, FrameTimeout, FxisError, LocalPathUnavailable, Overwritten,
-    ProtocolError, RequestTimeout, ServiceError, SkewExceeded, UnknownCamera,
+    ProtocolError, RequestTimeout, RingError, ServiceError, SkewExceeded, UnknownCamera,
 )
+from .multiclient import MultiClient
+from .pubsub import EventPublisher, Message, Subscriber, handshake
 from .security import ClientKeys
 from .stamp import read_stamp
 
 __all__ = [
-    "Client", "ClientKeys", "Frame", "FrameTuple", "read_stamp",
+    "Client", "MultiClient", "ClientKeys", "Frame", "FrameTuple",
+    "Subscriber", "EventPublisher", "Message", "handshake", "read_stamp",
     "FxisError", "ConfigError", "ProtocolError", "RequestTimeout", "ServiceError",
     "CameraDown", "UnknownCamera", "SkewExceeded", "FrameTimeout", "LocalPathUnavailable",
-    "Overwritten",
+    "RingError", "Overwritten",
 ]
 __version__ = "0.1.0"

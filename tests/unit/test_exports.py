@@ -1,0 +1,38 @@
+"""The public API is exactly what README.md documents, all importable from ``fxis_shm``."""
+import pathlib
+import re
+
+import fxis_shm
+
+README = pathlib.Path(__file__).resolve().parents[2] / "README.md"
+
+
+def documented_names() -> set[str]:
+    text = README.read_text()
+    section = text.split("### The public API", 1)[1].split("\n## ", 1)[0]
+    return set(re.findall(r"`([A-Za-z_]+)`", section)) - {"fxis_shm", "__all__"}
+
+
+def test_all_is_exactly_the_documented_api():
+    assert sorted(fxis_shm.__all__) == sorted(documented_names())
+    assert len(set(fxis_shm.__all__)) == len(fxis_shm.__all__)
+
+
+def test_every_exported_name_imports_and_every_error_is_an_fxis_error():
+    for name in fxis_shm.__all__:
+        value = getattr(fxis_shm, name)
+        if isinstance(value, type) and issubclass(value, Exception):
+            assert issubclass(value, fxis_shm.FxisError), name
+
+
+def test_module_paths_keep_working():
+    from fxis_shm.client import Client
+    from fxis_shm.pubsub import Subscriber
+
+    assert Client is fxis_shm.Client and Subscriber is fxis_shm.Subscriber
+
+
+def test_no_public_name_outside_all():
+    public = {n for n, v in vars(fxis_shm).items()
+              if not n.startswith("_") and not isinstance(v, type(fxis_shm))}
+    assert public == set(fxis_shm.__all__)
