@@ -19,7 +19,7 @@ from typing import Callable
 import zmq
 from zmq.auth.thread import ThreadAuthenticator
 
-from . import naming, protocol
+from . import naming, ordering, protocol
 from .cameras import FRAME_FIELDS, CameraHandle
 from .engine import FRAME_OPS, Action, Failure, Reply, RequestEngine, Trigger
 from .errors import Code, ProtocolError
@@ -258,6 +258,7 @@ class Coordinator:
             "now": now,
             "boot_id": self.boot_id,
             "time_namespace": self.time_namespace,
+            "ring_ordering": ordering.MODE,
             "uptime_s": round((now - self.started_ns) / 1e9, 3),
             "endpoint": self.endpoint,
             "pub": self.pub_endpoint,

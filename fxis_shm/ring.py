@@ -15,8 +15,10 @@ The writer never waits for a reader. After every stored frame it posts the
 semaphore ``/fxis.<service>.<camera>.new`` (only when its value is 0, so an
 absent reader cannot make it grow). Segments and semaphores are mode 0600.
 
-Ordering note: the seqlock relies on stores becoming visible in program order,
-which x86-64 guarantees (TSO). See docs/design.md for weaker memory models.
+Ordering: ``seq`` and ``write_count`` are stored with release order and loaded with
+acquire order, with a release fence after the odd ``seq`` and an acquire fence before
+a reader's final checks (fxis_shm.ordering: C11 fences on ARM64, plain accesses on
+x86-64, whose stores and loads keep program order).
 """
 from __future__ import annotations
 
@@ -28,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 import posix_ipc
 
-from . import naming
+from . import naming, ordering
 from .errors import Overwritten, RingError
 from .timesearch import Timeline
 
@@ -56,6 +58,11 @@ SLOT = np.dtype([
     ("t_stored", "<i8"), ("t_available", "<i8"), ("generation", "<u8"),
 ])
 assert HEADER.itemsize <= HEADER_BYTES and SLOT.itemsize == 48
+WRITE_COUNT_AT = HEADER.fields["write_count"][1]  # byte offsets of the ordered words
+
+
+def _seq_at(slot: int) -> int:
+    return HEADER_BYTES + slot * SLOT.itemsize  # seq is a slot record's first field
 
 
 def _align(n: int, to: int = PAGE) -> int:
@@ -127,6 +134,7 @@ class _Mapping:
     """The numpy views shared by writer and reader over one mapped segment."""
 
     def _map(self, fd: int, size: int, writable: bool) -> None:
+        ordering.require_supported()
         prot = mmap.PROT_READ | (mmap.PROT_WRITE if writable else 0)
         self._mm = mmap.mmap(fd, size, flags=mmap.MAP_SHARED | mmap.MAP_POPULATE, prot=prot)
         self.header = np.ndarray((), dtype=HEADER, buffer=self._mm)
@@ -154,6 +162,8 @@ class _Mapping:
         return self.data[slot].view(self.layout.dtype).reshape(self.layout.shape)
 
     def field(self, name: str) -> int:
+        if name == "write_count":  # the word that publishes frames: read it ordered
+            return ordering.load_acquire(self._mm, WRITE_COUNT_AT)
         return int(self.header[name])
 
     def _unmap(self) -> None:
@@ -248,17 +258,18 @@ class RingWriter(_Mapping):
         """Store one frame; returns its t_stored. Never blocks on readers."""
         w = self._count
         slot = w % self.slots
-        self.seq[slot] = 2 * w + 1
+        ordering.store_release(self._mm, _seq_at(slot), 2 * w + 1)
+        ordering.fence_release()  # the slot reads as being written before any of its new bytes show
         np.copyto(self.slot_image(slot), image, casting="no")
         rec = self.table[slot]
         t_stored = time.monotonic_ns()
         rec["frame_id"], rec["t_capture"], rec["t_stored"] = frame_id, t_capture, t_stored
         rec["t_available"] = t_capture if t_available is None else t_available
         rec["generation"] = self.generation
-        self.seq[slot] = 2 * w + 2
+        ordering.store_release(self._mm, _seq_at(slot), 2 * w + 2)  # after every byte of the frame
         self._count = w + 1
+        ordering.store_release(self._mm, WRITE_COUNT_AT, self._count)
         h = self.header
-        h["write_count"] = self._count
         h["heartbeat_ns"] = t_stored
         self._update_timing(frame_id, t_capture, t_stored)
         if self.semaphore.value == 0:
@@ -355,13 +366,17 @@ class RingReader(_Mapping):
         for _ in range(4):
             before = self.field("write_count")
             table = self.table.copy()
+            ordering.fence_acquire()  # the copy is complete before the checks below read
             after = self.field("write_count")
             if before == after:
                 break
+        seq_now = self.seq.copy()  # a record the writer began to overwrite during the copy shows here
         count = after
         lo = max(0, count - self.slots)
         writes = np.arange(lo, count, dtype=np.uint64)
-        valid = table["seq"][writes % np.uint64(self.slots)] == 2 * writes + 2
+        slots = writes % np.uint64(self.slots)
+        copied = table["seq"][slots]
+        valid = (copied == 2 * writes + 2) & (seq_now[slots] == copied)
         # Only the oldest end can be invalid (being overwritten); keep the newest valid run.
         bad = np.flatnonzero(~valid)
         first = lo + (int(bad[-1]) + 1 if bad.size else 0)
@@ -387,6 +402,7 @@ class RingReader(_Mapping):
         if out is None:
             out = np.empty(self.layout.shape, dtype=self.layout.dtype)
         np.copyto(out, self.slot_image(slot))
+        ordering.fence_acquire()  # every byte was read before the seq is read again
         self.check_slot(slot, expected_seq, "during")
         return out
 
@@ -399,12 +415,14 @@ class RingReader(_Mapping):
         return view
 
     def slot_holds(self, slot: int, expected_seq: int) -> bool:
-        return int(self.seq[slot]) == expected_seq
+        """True while the slot still holds that frame; what was read of it before is valid."""
+        ordering.fence_acquire()
+        return ordering.load_acquire(self._mm, _seq_at(slot)) == expected_seq
 
     def check_slot(self, slot: int, expected_seq: int, when: str) -> None:
         if not 0 <= slot < self.slots:
             raise Overwritten(f"{self.name} has no slot {slot}")
-        if int(self.seq[slot]) != expected_seq:
+        if ordering.load_acquire(self._mm, _seq_at(slot)) != expected_seq:
             raise Overwritten(f"slot {slot} of {self.name} was overwritten {when} the copy")
 
     def wait_for_frame(self, timeout: float) -> bool:

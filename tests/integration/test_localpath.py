@@ -132,3 +132,10 @@ def test_a_client_that_cannot_read_the_rings_falls_back_to_the_network(two_camer
     reason = "is not the service's ring" if impostor else "does not exist"
     assert reason in out["why"]
     assert "local fast path cannot be used" in out["require"] and reason in out["require"]
+
+
+def test_the_service_says_how_its_rings_are_ordered(two_cameras):
+    from fxis_shm import ordering
+
+    with Client(two_cameras.endpoint) as client:
+        assert client.status()["ring_ordering"] == ordering.MODE == "fenced"  # the install built the helper
