@@ -22,7 +22,8 @@ import numpy as np
 import zmq
 
 from . import protocol
-from .errors import CameraDown, LocalPathUnavailable, UnknownCamera, Overwritten, ProtocolError, RequestTimeout, service_error
+from .bufferpool import release as release_buffer
+from .errors import CameraDown, FxisError, LocalPathUnavailable, UnknownCamera, Overwritten, ProtocolError, RequestTimeout, service_error
 from .localpath import LocalRings, LocalUnavailable, boot_id
 from .localreads import LocalReads
 from .security import ClientKeys
@@ -54,6 +55,37 @@ class Frame:
         computed from it). A copied image (the default) stays valid for ever."""
         return self._still_valid is None or self._still_valid()
 
+    def release(self) -> None:
+        """Done with the image: its buffer goes back to the client's pool now (otherwise it
+        does when the last reference to the image goes). Using ``image`` afterwards raises
+        FxisError. ``with frame:`` releases on leaving the block."""
+        if not isinstance(self.image, ReleasedImage):
+            release_buffer(self.image)
+            self.image = ReleasedImage(f"the image of frame {self.frame_id} of {self.camera!r}")
+
+    def __enter__(self) -> "Frame":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+class ReleasedImage:
+    """What ``Frame.image`` is after ``release()``: any use says so."""
+
+    __slots__ = ("what",)
+
+    def __init__(self, what: str):
+        self.what = what
+
+    def _fail(self, *args, **kwargs):
+        raise FxisError(f"{self.what} was released: its buffer may hold another frame now")
+
+    __getattr__ = __array__ = __getitem__ = __len__ = __iter__ = _fail
+
+    def __repr__(self) -> str:
+        return f"<{self.what}, released>"
+
 
 class FrameTuple(Mapping):
     """One frame per camera, chosen together for the request time ``t_request``."""
@@ -72,6 +104,17 @@ class FrameTuple(Mapping):
 
     def still_valid(self) -> bool:
         return all(f.still_valid() for f in self._frames.values())
+
+    def release(self) -> None:
+        """Release every frame (see ``Frame.release``); ``with tuple_:`` does it on leaving."""
+        for frame in self._frames.values():
+            frame.release()
+
+    def __enter__(self) -> "FrameTuple":
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
 
     def __getitem__(self, camera: str) -> Frame:
         return self._frames[camera]

@@ -139,3 +139,20 @@ def test_the_service_says_how_its_rings_are_ordered(two_cameras):
 
     with Client(two_cameras.endpoint) as client:
         assert client.status()["ring_ordering"] == ordering.MODE == "fenced"  # the install built the helper
+
+
+def test_a_released_frame_gives_its_buffer_back_and_cannot_be_used_after(two_cameras):
+    from fxis_shm import FxisError
+
+    with Client(two_cameras.endpoint, local="require") as client:
+        with client.image("cam0") as frame:
+            assert read_stamp(frame.image) == frame.frame_id
+            address = frame.image.ctypes.data
+        with pytest.raises(FxisError, match="was released"):
+            frame.image.shape
+        held = client.image("cam0")  # held: not released, still referenced
+        assert held.image.ctypes.data == address  # the released buffer, reused at once
+        with client.tuple() as pair:
+            pass
+        assert read_stamp(held.image) == held.frame_id  # never overwritten while held
+        assert "released" in repr(pair["cam1"].image)

@@ -1,6 +1,6 @@
 import numpy as np
 
-from fxis_shm.bufferpool import BufferPool
+from fxis_shm.bufferpool import BufferPool, release
 
 
 def test_a_dropped_buffer_is_handed_out_again():
@@ -36,3 +36,36 @@ def test_beyond_its_budget_the_pool_keeps_nothing_more():
     held = [pool.take((32,), "uint8") for _ in range(4)]
     assert pool.kept_bytes == 64  # two kept, two one-off allocations
     assert all(a.nbytes == 32 for a in held)
+
+
+def test_a_view_of_a_dropped_array_keeps_its_buffer_leased():
+    pool = BufferPool()
+    image = pool.take((4, 8), "uint8")
+    row = image[1]
+    address = image.ctypes.data
+    del image
+    assert pool.leased == 1 and pool.take((4, 8), "uint8").ctypes.data != address
+    del row
+    assert any(pool.take((4, 8), "uint8").ctypes.data == address for _ in range(2))
+
+
+def test_release_gives_a_buffer_back_at_once_and_only_once():
+    pool = BufferPool()
+    image = pool.take((4, 8), "uint8")
+    assert release(image) is True and pool.leased == 0
+    assert release(image) is False  # already back
+    again = pool.take((4, 8), "uint8")
+    assert again.ctypes.data == image.ctypes.data
+    assert release(np.zeros(3)) is False  # not a pool's: nothing to give back
+
+
+def test_arrays_held_across_many_takes_are_never_handed_out_twice():
+    pool = BufferPool()
+    held = []
+    for n in range(200):
+        image = pool.take((16, 16), "uint8")
+        image.fill(n % 256)
+        if n % 3 == 0:
+            held.append((n, image))  # kept; the others are dropped and come back
+    assert all(int(image[0, 0]) == n % 256 and (image == image[0, 0]).all() for n, image in held)
+    assert len({image.ctypes.data for _, image in held}) == len(held)
