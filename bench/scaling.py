@@ -75,7 +75,7 @@ else:  # run as a script, or loaded from its path
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     import _common as common
 
-from fxis_shm import Client
+from fxis_shm import Client, procstat
 from fxis_shm.launch import ServiceProcess
 
 SECTIONS = ("cameras", "size", "clients", "fps")
@@ -558,23 +558,6 @@ def report_clients(result: dict) -> None:
 
 # ---- section: fps ----------------------------------------------------------------------------
 
-def descendants(root: int) -> list[int]:
-    """Every process below ``root`` (children, their children, ...)."""
-    parent_of = {}
-    for entry in os.listdir("/proc"):
-        if entry.isdigit():
-            try:
-                stat = open(f"/proc/{entry}/stat", "rb").read()
-            except OSError:
-                continue
-            parent_of[int(entry)] = int(stat[stat.rfind(b")") + 2:].split()[1])
-    found, frontier = [], [root]
-    while frontier:
-        frontier = [pid for pid, ppid in parent_of.items() if ppid in frontier]
-        found += frontier
-    return found
-
-
 def service_processes(status: dict, supervisor_pid: int) -> dict[str, int]:
     """name -> pid of every process of the service: the supervisor, what it reports, the rest."""
     procs = {"supervisor": supervisor_pid}
@@ -582,7 +565,7 @@ def service_processes(status: dict, supervisor_pid: int) -> dict[str, int]:
         if proc.get("pid"):
             procs[name] = proc["pid"]
     known = set(procs.values())
-    for pid in descendants(supervisor_pid):
+    for pid in procstat.descendants(supervisor_pid):
         if pid not in known:
             procs[f"other {pid}"] = pid
     return procs
@@ -590,12 +573,8 @@ def service_processes(status: dict, supervisor_pid: int) -> dict[str, int]:
 
 def cpu_ticks(pid: int) -> int | None:
     """utime + stime of ``pid`` (every thread), in clock ticks; None if it is gone."""
-    try:
-        stat = open(f"/proc/{pid}/stat", "rb").read()
-    except OSError:
-        return None
-    fields = stat[stat.rfind(b")") + 2:].split()
-    return int(fields[11]) + int(fields[12])
+    stat = procstat.read(pid)
+    return None if stat is None else stat.cpu_ticks
 
 
 def host_idle_ticks() -> int:

@@ -22,7 +22,7 @@ else:
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     import _common as common
 
-from fxis_shm import FxisError, RequestTimeout
+from fxis_shm import FxisError, RequestTimeout, procstat
 from fxis_shm.launch import ServiceProcess
 from fxis_shm.pubsub import Subscriber
 
@@ -30,17 +30,10 @@ from fxis_shm.pubsub import Subscriber
 def service_processes(root: int) -> dict[int, str]:
     """pid -> role of the supervisor and its children."""
     procs = {root: "supervisor"}
-    for entry in os.listdir("/proc"):
-        if not entry.isdigit():
-            continue
-        try:
-            stat = open(f"/proc/{entry}/stat", "rb").read()
-            cmd = open(f"/proc/{entry}/cmdline", "rb").read().replace(b"\0", b" ").decode(errors="replace")
-        except OSError:
-            continue
-        if int(stat[stat.rfind(b")") + 2:].split()[1]) == root:
-            procs[int(entry)] = "coordinator" if "workers.coordinator" in cmd else \
-                "camera " + cmd.split('"camera": "')[1].split('"')[0] if '"camera": "' in cmd else "other"
+    for child in procstat.children(root):
+        cmd = " ".join(procstat.cmdline(child.pid))
+        procs[child.pid] = "coordinator" if "workers.coordinator" in cmd else \
+            "camera " + cmd.split('"camera": "')[1].split('"')[0] if '"camera": "' in cmd else "other"
     return procs
 
 

@@ -7,7 +7,7 @@ import time
 import numpy as np
 import posix_ipc
 
-from . import naming
+from . import naming, procstat
 from .errors import RingError
 from .ring import FLAG_TRIGGERED, RingReader, Snapshot
 from .waitpolicy import CameraState
@@ -23,15 +23,8 @@ ALIVE_CHECK_NS = 20_000_000
 
 def process_alive(pid: int) -> bool:
     """True if ``pid`` runs (a zombie, dead but not yet reaped, does not)."""
-    if pid <= 0:
-        return False
-    try:
-        with open(f"/proc/{pid}/stat", "rb") as f:
-            stat = f.read()
-    except OSError:
-        return False
-    state = stat[stat.rfind(b")") + 2 : stat.rfind(b")") + 3]
-    return state not in (b"Z", b"X", b"x")
+    stat = procstat.read(pid) if pid > 0 else None
+    return stat is not None and stat.running
 
 
 class CameraHandle:

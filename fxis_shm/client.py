@@ -23,7 +23,7 @@ import zmq
 
 from . import protocol
 from .bufferpool import release as release_buffer
-from .errors import CameraDown, FxisError, LocalPathUnavailable, UnknownCamera, Overwritten, ProtocolError, RequestTimeout, service_error
+from .errors import CameraDown, FxisError, InvalidArgument, LocalPathUnavailable, UnknownCamera, Overwritten, ProtocolError, RequestTimeout, service_error
 from .localpath import LocalRings, LocalUnavailable, boot_id
 from .localreads import LocalReads
 from .security import ClientKeys
@@ -183,7 +183,7 @@ class Client(SocketOwner):
         /dev/shm), else takes them from the reply; "off" always takes them from the
         reply; "require" raises LocalPathUnavailable rather than use the network path."""
         if local not in LOCAL_MODES:
-            raise ValueError(f"local must be one of {LOCAL_MODES}, got {local!r}")
+            raise InvalidArgument(f"local must be one of {LOCAL_MODES}, got {local!r}")
         self.endpoint = endpoint
         self.timeout = timeout
         self.local = local

@@ -22,7 +22,7 @@ from zmq.auth.thread import ThreadAuthenticator
 from . import naming, ordering, protocol
 from .cameras import FRAME_FIELDS, CameraHandle
 from .engine import FRAME_OPS, Action, Failure, Reply, RequestEngine, Trigger
-from .errors import Code, ProtocolError
+from .errors import Code, ConfigError, ProtocolError
 from .framewatch import FrameWatch
 from .localpath import boot_id, time_namespace
 from .copyout import CopyOut
@@ -153,7 +153,7 @@ class Coordinator:
         try:
             sock.bind(endpoint)
         except zmq.ZMQError as exc:
-            raise RuntimeError(f"cannot bind the {what} {endpoint}: {exc}") from None
+            raise ConfigError(f"cannot bind the {what} {endpoint}: {exc}") from None
         return sock
 
     def _poll_timeout_ms(self) -> int:

@@ -36,6 +36,14 @@ class ConfigError(FxisError):
     """A setting is invalid; the message names the setting."""
 
 
+class InvalidArgument(FxisError, ValueError):
+    """A function was called with a value it cannot take; the message says which."""
+
+
+class ServiceNotStarted(FxisError, RuntimeError):
+    """A service launched from Python (fxis_shm.launch) did not come up; the message says why."""
+
+
 class ProtocolError(FxisError):
     """A message does not follow docs/protocol.md."""
 

@@ -15,7 +15,7 @@ import sys
 import time
 
 from .client import Client
-from .errors import RequestTimeout
+from .errors import RequestTimeout, ServiceNotStarted
 from .tether import die_with_parent
 
 
@@ -50,14 +50,14 @@ class ServiceProcess:
         with self.client(timeout=0.5) as client:
             while True:
                 if self.proc.poll() is not None:
-                    raise RuntimeError(f"fxis run exited with code {self.proc.returncode} during start-up")
+                    raise ServiceNotStarted(f"fxis run exited with code {self.proc.returncode} during start-up")
                 try:
                     client.status()
                     return self
                 except RequestTimeout:
                     if time.monotonic() > deadline:
                         self.stop()
-                        raise RuntimeError(f"service did not answer within {self.ready_timeout} s")
+                        raise ServiceNotStarted(f"service did not answer within {self.ready_timeout} s")
 
     def client(self, timeout: float = 2.0) -> Client:
         return Client(self.endpoint, timeout=timeout, keys=self.client_keys)

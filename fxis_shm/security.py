@@ -17,6 +17,8 @@ from urllib.parse import urlsplit
 import zmq
 import zmq.auth
 
+from .errors import ConfigError
+
 
 def create_keys(folder: str, name: str) -> tuple[str, str]:
     """Write NAME.key and NAME.key_secret into ``folder`` (0700); returns their paths."""
@@ -26,16 +28,23 @@ def create_keys(folder: str, name: str) -> tuple[str, str]:
     return public, secret
 
 
+def _certificate(path: str) -> tuple[bytes, bytes | None]:
+    try:
+        return zmq.auth.load_certificate(path)
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"cannot read the key file {path}: {exc}") from None
+
+
 def load_public(path: str) -> bytes:
-    public, _ = zmq.auth.load_certificate(path)
+    public, _ = _certificate(path)
     return public
 
 
 def load_pair(path: str) -> tuple[bytes, bytes]:
     """(public, secret) from a NAME.key_secret file."""
-    public, secret = zmq.auth.load_certificate(path)
+    public, secret = _certificate(path)
     if secret is None:
-        raise ValueError(f"{path} holds no secret key (use the .key_secret file)")
+        raise ConfigError(f"{path} holds no secret key (use the .key_secret file)")
     return public, secret
 
 

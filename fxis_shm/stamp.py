@@ -12,6 +12,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .errors import InvalidArgument
+
 STAMP_BYTES = 16
 
 
@@ -27,9 +29,9 @@ def _encode(frame_id: int) -> np.ndarray:
 def write_stamp(image: np.ndarray, frame_id: int) -> None:
     """Stamp ``frame_id`` into the first and the last row of ``image`` (in place)."""
     if image.ndim < 1 or image.shape[0] < 1:
-        raise ValueError(f"an image of shape {image.shape} has no row to hold a stamp")
+        raise InvalidArgument(f"an image of shape {image.shape} has no row to hold a stamp")
     if image[0].nbytes < STAMP_BYTES:
-        raise ValueError(f"image rows of {image[0].nbytes} bytes cannot hold a stamp")
+        raise InvalidArgument(f"image rows of {image[0].nbytes} bytes cannot hold a stamp")
     code = _encode(frame_id)
     for row in (0, image.shape[0] - 1):
         _row_bytes(image, row)[:STAMP_BYTES] = code

@@ -7,6 +7,7 @@ import cv2
 import numpy as np
 import pytest
 
+from fxis_shm import procstat
 from fxis_shm.options import parse_options
 from fxis_shm.workers.backends.base import Camera, CameraLost
 from fxis_shm.workers.backends.opencv import OpenCVCamera
@@ -60,10 +61,7 @@ def newest(svc, count, camera="v"):
 
 
 def cpu_seconds(pid: int) -> float:
-    with open(f"/proc/{pid}/stat", "rb") as f:
-        stat = f.read()
-    fields = stat[stat.rfind(b")") + 2 :].split()
-    return (int(fields[11]) + int(fields[12])) / os.sysconf("SC_CLK_TCK")
+    return procstat.read(pid).cpu_seconds
 
 
 def test_the_test_video_is_what_the_tests_expect(video):

@@ -4,6 +4,7 @@ import pytest
 
 from ..conftest import assert_nothing_left, start_service  # noqa: F401  (shared fixtures)
 
+from fxis_shm import procstat
 from fxis_shm.launch import ServiceProcess
 
 SMALL = "width=64,height=48"
@@ -23,18 +24,5 @@ def two_cameras():
 
 def child_pids(svc, role: str) -> list[int]:
     """Pids of the service's children of one role ("camera" or "coordinator")."""
-    pids = []
-    for entry in os.listdir("/proc"):
-        if not entry.isdigit():
-            continue
-        try:
-            with open(f"/proc/{entry}/stat", "rb") as f:
-                stat = f.read()
-            with open(f"/proc/{entry}/cmdline", "rb") as f:
-                cmdline = f.read().split(b"\0")
-        except OSError:
-            continue
-        ppid = int(stat[stat.rfind(b")") + 2 :].split()[1])
-        if ppid == svc.proc.pid and f"fxis_shm.workers.{role}".encode() in cmdline:
-            pids.append(int(entry))
-    return pids
+    return [child.pid for child in procstat.children(svc.proc.pid)
+            if f"fxis_shm.workers.{role}" in procstat.cmdline(child.pid)]

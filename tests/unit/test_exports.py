@@ -36,3 +36,17 @@ def test_no_public_name_outside_all():
     public = {n for n, v in vars(fxis_shm).items()
               if not n.startswith("_") and not isinstance(v, type(fxis_shm))}
     assert public == set(fxis_shm.__all__)
+
+
+def test_bad_arguments_to_the_public_api_raise_fxis_errors(tmp_path):
+    import numpy as np
+    import pytest
+
+    from fxis_shm.stamp import write_stamp
+
+    with pytest.raises(fxis_shm.FxisError, match="local must be one of"):
+        fxis_shm.Client("tcp://127.0.0.1:9", local="sometimes")
+    with pytest.raises(fxis_shm.ConfigError, match="cannot read the key file"):
+        fxis_shm.ClientKeys.from_files(str(tmp_path / "missing.key"), str(tmp_path / "me.key_secret"))
+    with pytest.raises(fxis_shm.FxisError, match="cannot hold a stamp"):
+        write_stamp(np.zeros((4, 2), np.uint8), 7)

@@ -1,0 +1,31 @@
+import os
+import subprocess
+import sys
+
+from fxis_shm import procstat
+
+
+def test_this_process_reads_as_running_with_its_parent():
+    me = procstat.read(os.getpid())
+    assert me.running and me.ppid == os.getppid() and me.cpu_ticks >= 0
+    assert any(a.endswith("python") or "python" in a for a in procstat.cmdline(os.getpid())[:1])
+
+
+def test_a_child_is_found_and_a_reaped_one_is_gone():
+    child = subprocess.Popen([sys.executable, "-c", "import time; time.sleep(30)"])
+    try:
+        assert child.pid in [c.pid for c in procstat.children(os.getpid())]
+        assert child.pid in procstat.descendants(os.getpid())
+    finally:
+        child.kill()
+        child.wait()
+    assert procstat.read(child.pid) is None and procstat.cmdline(child.pid) == []
+
+
+def test_a_zombie_does_not_count_as_running():
+    child = subprocess.Popen([sys.executable, "-c", "pass"])
+    try:
+        os.waitid(os.P_PID, child.pid, os.WEXITED | os.WNOWAIT)  # dead, not reaped
+        assert procstat.read(child.pid).running is False
+    finally:
+        child.wait()
