@@ -26,6 +26,7 @@ def _run(args) -> int:
             "cameras": args.camera, "restart_limit": args.restart_limit,
             "log_level": args.log_level, "curve_secret": args.curve_secret,
             "curve_clients": args.curve_clients, "insecure_bind": args.insecure_bind or None,
+            "clock": args.clock,
         })
     except ConfigError as exc:
         print(f"fxis run: {exc}", file=sys.stderr)
@@ -150,6 +151,10 @@ def parser() -> argparse.ArgumentParser:
     run.add_argument("--events", help="endpoint receiving request events (default tcp://127.0.0.1:5557)")
     run.add_argument("--slots", type=int, help="frames held per camera ring (default 20)")
     run.add_argument("--config", metavar="FILE.toml", help="settings file (flags override it)")
+    run.add_argument("--clock", choices=("monotonic", "realtime", "tai"),
+                     help="the clock of every time the service gives and takes (default monotonic); "
+                          "realtime or tai where PTP or chrony keeps the cell's hosts in step "
+                          "(docs/deployment.md)")
     run.add_argument("--restart-limit", type=int, help="restarts of a crashed process before giving up (default 5)")
     run.add_argument("--log-level", help="DEBUG, INFO (default), WARNING or ERROR")
     run.add_argument("--curve-secret", metavar="FILE", help="the service's NAME.key_secret: CurveZMQ on every socket")

@@ -39,6 +39,7 @@ from typing import Any
 import numpy as np
 
 from fxis_shm.clocks import DeviceClockFit, wall_to_monotonic
+from fxis_shm import timebase
 from fxis_shm.options import Option, boolean, choice, number, text
 from fxis_shm.ring import FrameLayout
 
@@ -375,9 +376,9 @@ class AravisCamera(Camera):
                 raise CameraLost("Aravis lost the control channel (control-lost)")
             remaining = deadline - time.monotonic()
             buffer = self._stream.timeout_pop_buffer(max(0, int(remaining * 1e6)))
-            mono_before = time.monotonic_ns()
+            mono_before = timebase.now()
             wall_now = time.time_ns()
-            mono_now = (mono_before + time.monotonic_ns()) // 2
+            mono_now = (mono_before + timebase.now()) // 2
             if buffer is None:
                 self._check_alive()
                 return None

@@ -31,6 +31,7 @@ import os
 import time
 
 from fxis_shm.clocks import DeviceClockFit
+from fxis_shm import timebase
 from fxis_shm.options import Option, boolean, choice, number, text
 from fxis_shm.ring import FrameLayout
 
@@ -418,7 +419,7 @@ class GenicamCamera(Camera):
         if buffer is None:
             self._check_alive()
             return None
-        t_host = time.monotonic_ns()
+        t_host = timebase.now()
         self._last_frame_s = time.monotonic()
         with buffer:  # re-queued on exit: everything we keep is copied out before
             try:
