@@ -43,11 +43,17 @@ def _run(args) -> int:
 def _status(args) -> int:
     with Client(args.endpoint, timeout=args.timeout) as client:
         status = client.status()
+        # this host's view of the service's clock (what a client here maps times with)
+        status["clock_mapping"] = client.clock_estimate().as_dict()
     if args.json:
         print(json.dumps(status, indent=2))
         return 0
     print(f"service {status['service']!r}  uptime {status['uptime_s']:.1f} s  "
           f"requests {status['requests_served']}  waiting {status['pending']}")
+    mapping = status["clock_mapping"]
+    print(f"clock {status.get('clock', 'monotonic')}: {mapping['method']}, offset from this host's monotonic "
+          f"{mapping['offset_ns'] / 1e6:+.3f} ms, drift {mapping['drift_ppm']:+.2f} ppm, "
+          f"uncertainty {mapping['uncertainty_ns'] / 1e3:.0f} us")
     columns = ["camera", "kind", "alive", "shape", "fps", "stored", "dropped", "age_ms",
                "slots", "gen", "torn"]
     rows = []

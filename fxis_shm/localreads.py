@@ -83,7 +83,8 @@ class LocalReads:
                copy: bool = True) -> tuple[dict, list, Callable[[], bool] | None]:
         """The reply header, images and (for views) a validity check, as the coordinator would
         send them. Raises the service's errors, or RequestTimeout at ``deadline_ns``."""
-        request = protocol.request_of(op, id=None, **fields)
+        # the frames stay raw: nothing travels, so compressing would only cost
+        request = protocol.request_of(op, id=None, **{k: v for k, v in fields.items() if k not in ("encoding", "quality")})
         # Write counts read before every look the engine takes: a frame stored after a look
         # shows as a changed count, however soon after the look it came.
         seen = {c: h.reader.field("write_count") for c, h in self.cameras.items() if h.reader is not None}
