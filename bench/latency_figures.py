@@ -34,12 +34,8 @@ def figures(records: list[dict], exp: Experiment, series: list[tuple[str, str]],
         paths.append(path)
 
     # Fig. 5: eps_j per request
-    fig, axes = plt.subplots(len(series), 1, figsize=(11, 3.4 * len(series)), squeeze=False,
-                             sharex=True, sharey=True)
+    fig, axes = per_camera_panels(plt, exp, series, by, "eps_ms", "eps_")
     for ax, ser in zip(axes[:, 0], series):
-        for j, cam in enumerate(exp.names, 1):
-            ax.plot([r["k"] for r in by[ser]], [r["eps_ms"][cam] for r in by[ser]], ".-", lw=0.7,
-                    ms=4, label=f"eps_{j} ({cam})")
         for y in (-exp.period_ms / 2, exp.period_ms / 2):
             ax.axhline(y, color="grey", ls=":", lw=0.8)
         ax.axhline(0, color="black", lw=0.5)
@@ -108,12 +104,8 @@ def figures(records: list[dict], exp: Experiment, series: list[tuple[str, str]],
     save(fig, "latency_fig7_spike.png")
 
     # Fig. 8: tau_w per request
-    fig, axes = plt.subplots(len(series), 1, figsize=(11, 3.4 * len(series)), squeeze=False,
-                             sharex=True, sharey=True)
+    fig, axes = per_camera_panels(plt, exp, series, by, "tau_w_ms", "tau_w")
     for ax, ser in zip(axes[:, 0], series):
-        for j, cam in enumerate(exp.names, 1):
-            ax.plot([r["k"] for r in by[ser]], [r["tau_w_ms"][cam] for r in by[ser]], ".-", lw=0.7,
-                    ms=4, label=f"tau_w{j} ({cam})")
         waits = [w for r in by[ser] for w in r["tau_w_ms"].values()]
         if waits:
             ax.axhline(sum(waits) / len(waits), color="black", ls="--", lw=0.8,
@@ -127,3 +119,14 @@ def figures(records: list[dict], exp: Experiment, series: list[tuple[str, str]],
     save(fig, "latency_fig8_wait.png")
     return paths
 
+
+def per_camera_panels(plt, exp: Experiment, series: list, by: dict, key: str, name: str):
+    """A panel per series, sharing their axes, with a line per camera of ``record[key][camera]``
+    over the requests; returns the figure and its axes."""
+    fig, axes = plt.subplots(len(series), 1, figsize=(11, 3.4 * len(series)), squeeze=False,
+                             sharex=True, sharey=True)
+    for ax, ser in zip(axes[:, 0], series):
+        for j, cam in enumerate(exp.names, 1):
+            ax.plot([r["k"] for r in by[ser]], [r[key][cam] for r in by[ser]], ".-", lw=0.7,
+                    ms=4, label=f"{name}{j} ({cam})")
+    return fig, axes

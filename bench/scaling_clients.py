@@ -201,11 +201,16 @@ def targets(result: dict, args) -> list[dict]:
     return [{"target": f"flat with idle clients ({args.load_path})", "passed": f["passed"], "detail": detail}]
 
 
+def plot_latency(ax, points: list[dict], x: list, what: str = "") -> None:
+    """Median and p99 round trip of every point over ``x``."""
+    ax.plot(x, [p["summary"]["rtt_ms"]["median"] for p in points], "o-", label="median" + what)
+    ax.plot(x, [p["summary"]["rtt_ms"]["p99"] for p in points], "^:", label="p99" + what)
+
+
 def plot_idle(ax, results, args) -> None:
     idle = results["clients"]["idle"]
     x = [p["idle"] for p in idle]
-    ax.plot(x, [p["summary"]["rtt_ms"]["median"] for p in idle], "o-", label="median")
-    ax.plot(x, [p["summary"]["rtt_ms"]["p99"] for p in idle], "^:", label="p99")
+    plot_latency(ax, idle, x)
     ax.set_xscale("symlog", linthresh=1)
     ax.set_xticks(x)
     shared.plain_numbers(ax.xaxis)
@@ -219,8 +224,7 @@ def plot_idle(ax, results, args) -> None:
 def plot_active(ax, results, args) -> None:
     active = results["clients"]["active"]
     x = [p["clients"] for p in active]
-    ax.plot(x, [p["summary"]["rtt_ms"]["median"] for p in active], "o-", label="median latency")
-    ax.plot(x, [p["summary"]["rtt_ms"]["p99"] for p in active], "^:", label="p99 latency")
+    plot_latency(ax, active, x, " latency")
     ax.set_xscale("log", base=2)
     ax.set_yscale("log")
     ax.set_xticks(x)
