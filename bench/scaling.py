@@ -94,15 +94,8 @@ WORKER_WAIT_S = 60.0  # longest a worker process of the active clients waits for
 
 # ---- command line ----------------------------------------------------------------------------
 
-def int_list(text: str) -> list[int]:
-    values = [int(v) for v in text.split(",") if v.strip()]
-    if not values or min(values) < 0:
-        raise argparse.ArgumentTypeError(f"expected comma-separated integers >= 0, got {text!r}")
-    return values
-
-
 def positive_int_list(text: str) -> list[int]:
-    values = int_list(text)
+    values = common.int_list(text)
     if min(values) < 1:
         raise argparse.ArgumentTypeError(f"expected comma-separated integers >= 1, got {text!r}")
     return values
@@ -130,26 +123,18 @@ def size_list(text: str) -> list[tuple[int, int]]:
     return sizes
 
 
-def name_list(choices: tuple[str, ...]):
-    def parse(text: str) -> list[str]:
-        names = [v.strip() for v in text.split(",") if v.strip()]
-        unknown = [n for n in names if n not in choices]
-        if unknown or not names:
-            raise argparse.ArgumentTypeError(f"choose from {','.join(choices)}, got {text!r}")
-        return [c for c in choices if c in names]
-    return parse
 
 
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="scaling.py", description=__doc__, formatter_class=common.HelpFormatter)
-    p.add_argument("--only", type=name_list(SECTIONS), default=",".join(SECTIONS), metavar="LIST",
+    p.add_argument("--only", type=common.name_list(SECTIONS), default=",".join(SECTIONS), metavar="LIST",
                    help=f"sections to run, comma-separated, of {','.join(SECTIONS)}")
     p.add_argument("-n", "--requests", type=common.positive_int, default=200,
                    help="timed requests per point and transport (cameras, size, idle clients)")
     p.add_argument("--sleep-max-ms", type=common.nonnegative_float, default=10.0,
                    help="each timed request follows a sleep drawn from U[0, this] ms")
     p.add_argument("--warmup", type=int, default=5, help="unrecorded requests before each point")
-    p.add_argument("--paths", type=name_list(PATHS), default=",".join(PATHS), metavar="LIST",
+    p.add_argument("--paths", type=common.name_list(PATHS), default=",".join(PATHS), metavar="LIST",
                    help="transports of the cameras and size sections: network (local=\"off\"), "
                         "local (local=\"require\", the shared-memory fast path)")
     p.add_argument("--load-path", choices=PATHS, default="network",
@@ -164,7 +149,7 @@ def parser() -> argparse.ArgumentParser:
     g.add_argument("--low-fps", type=common.positive_float, default=10.0,
                    help="frame rate of the cameras of these two sections")
     g = p.add_argument_group("clients section")
-    g.add_argument("--idle-counts", type=int_list, default="0,1,4,16,64", metavar="LIST",
+    g.add_argument("--idle-counts", type=common.int_list, default="0,1,4,16,64", metavar="LIST",
                    help="idle connected clients besides the one timing requests")
     g.add_argument("--active-counts", type=positive_int_list, default="1,2,4,8,16,32,64", metavar="LIST",
                    help="clients asking back to back at once")
