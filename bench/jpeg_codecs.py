@@ -7,7 +7,7 @@ Contenders (one that is not installed is skipped with a note):
               PyTurboJPEG 2.x wants libjpeg-turbo >= 3.0, Debian 12 and 13 ship 2.1, so PyTurboJPEG<2)
   turbojpeg-fastdct  the same with TurboJPEG's default DCT, the fast one below quality 96 (what
               simplejpeg always does: it shows what the fast DCT buys, in time and in PSNR)
-  fxis        fxis_shm.encoding.encode / decode: what the service does, through whichever engine it uses
+  fxis        fxis_shm.encoding.encode / decode: what the service does (OpenCV, with its checks)
 
 All are asked for OpenCV's JPEG: baseline, standard Huffman tables, 4:2:0 chroma for bgr8, the
 accurate integer DCT, fancy upsampling on decode; where a library can make it, time is all that
@@ -127,8 +127,7 @@ def turbojpeg(accurate: bool = True) -> Contender:
 def fxis() -> Contender:
     from fxis_shm import encoding
 
-    engine = getattr(encoding, "JPEG_ENGINE", "opencv")
-    return Contender("fxis", f"fxis_shm.encoding (JPEG engine: {engine})", "HxW",
+    return Contender("fxis", "fxis_shm.encoding.encode / decode", "HxW",
                      lambda image, q: encoding.encode(image, encoding.JPEG, q),
                      lambda data, like: encoding.decode(data, encoding.JPEG, like.shape, like.dtype.name))
 
