@@ -75,6 +75,8 @@ def opencv() -> Contender:
 
     def encode(image, quality):
         ok, buf = cv2.imencode(".jpg", image, [cv2.IMWRITE_JPEG_QUALITY, quality])
+        if not ok:
+            raise RuntimeError(f"cv2.imencode refused a {image.shape} frame")
         return buf.tobytes()
 
     def decode(data, _):
