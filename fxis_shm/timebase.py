@@ -64,3 +64,10 @@ def service_clock() -> str:
 def wire_name() -> str:
     """The service's clock as replies name it ("CLOCK_MONOTONIC", ...)."""
     return WIRE_NAMES[_service_clock]
+
+
+def service_and_tai() -> tuple[int, int]:
+    """This process's service clock and CLOCK_TAI, read together (for PTP camera timestamps)."""
+    first = now()
+    tai = time.clock_gettime_ns(CLOCK_IDS["tai"])
+    return (first + now()) // 2, tai

@@ -38,7 +38,7 @@ from typing import Any
 
 import numpy as np
 
-from fxis_shm.clocks import DeviceClockFit, wall_to_monotonic
+from fxis_shm.clocks import DeviceClockFit, PtpClock, wall_to_monotonic
 from fxis_shm import timebase
 from fxis_shm.options import Option, boolean, choice, number, text
 from fxis_shm.ring import FrameLayout
@@ -128,9 +128,9 @@ class AravisCamera(Camera):
                               "GigE Vision packet size in bytes (default: as negotiated)"),
         "trigger": Option(choice("free", "software"), "free",
                           "free-running, or one frame per software trigger (TriggerSoftware)"),
-        "timestamp": Option(choice("host", "device"), "host",
-                            "t_capture from the host's arrival time, or the camera's clock mapped "
-                            "onto the host's (docs/cameras.md)"),
+        "timestamp": Option(choice("host", "device", "ptp"), "host",
+                            "t_capture from the host's arrival time, the camera's clock mapped "
+                            "onto the host's, or the camera's PTP time as it is (docs/cameras.md)"),
     }
 
     def __init__(self, name: str, options: dict[str, Any], time_origin_ns: int):
@@ -342,6 +342,8 @@ class AravisCamera(Camera):
         self._ids = FrameCounter(0xFFFF if self._gv else None)
         self._failed_since_good = 0
         self._clock = None
+        if self.options["timestamp"] == "ptp":
+            self._clock = PtpClock(timebase.service_and_tai)  # Aravis gives device timestamps in ns
         if self.options["timestamp"] == "device":
             # Aravis gives device timestamps in ns: it converts GigE Vision ticks with the
             # camera's timestamp tick frequency (USB3 Vision timestamps are ns already).
