@@ -21,14 +21,14 @@ from typing import Callable, Iterator
 import numpy as np
 import zmq
 
-from . import protocol
+from . import defaults, protocol
 from .bufferpool import release as release_buffer
 from .errors import CameraDown, FxisError, InvalidArgument, LocalPathUnavailable, UnknownCamera, Overwritten, ProtocolError, RequestTimeout, service_error
 from .localpath import LocalRings, LocalUnavailable, boot_id
 from .localreads import LocalReads
 from .security import ClientKeys
 
-DEFAULT_ENDPOINT = "tcp://127.0.0.1:5555"
+DEFAULT_ENDPOINT = defaults.ENDPOINT
 LOCAL, NETWORK = "local", "network"
 LOCAL_MODES = ("auto", "off", "require")
 _LOCAL_ATTEMPTS = 3  # requests re-asked after a torn local copy before giving up

@@ -7,7 +7,7 @@ from typing import Any, ClassVar, Mapping
 
 import numpy as np
 
-from fxis_shm.options import Option
+from fxis_shm.camerakinds import camera_options
 from fxis_shm.ring import FrameLayout
 
 
@@ -29,13 +29,13 @@ class Capture:
 class Camera(ABC):
     """A source of frames, run inside its own camera worker process."""
 
-    kind: ClassVar[str]
-    OPTIONS: ClassVar[Mapping[str, Option]]
+    kind: ClassVar[str]  # its entry in fxis_shm.camerakinds, which declares its options
     note: str = ""  # a short line the worker shows as the camera's status note ("" for none)
 
     def __init__(self, name: str, options: Mapping[str, Any], time_origin_ns: int):
         self.name = name
-        self.options = dict(options)
+        # Typed, checked and completed with defaults (options not given may be left out or None)
+        self.options = camera_options(name, self.kind, {k: v for k, v in options.items() if v is not None})
         self.time_origin_ns = time_origin_ns
         self.frames_dropped = 0  # frames the camera lost before delivering them
 

@@ -31,7 +31,7 @@ import os
 import time
 
 from fxis_shm.clocks import DeviceClockFit
-from fxis_shm.options import Option, boolean, choice, number, text
+from fxis_shm.camerakinds import GENTL_PATH_VAR
 from fxis_shm.ring import FrameLayout
 
 from .base import Camera, CameraLost, Capture
@@ -39,7 +39,6 @@ from .pixelformats import PIXEL_FORMATS, image_layout, to_image
 
 log = logging.getLogger("camera")
 
-GENTL_PATH_VAR = "GENICAM_GENTL64_PATH"
 _INSTALL_HINT = "the genicam backend needs harvesters and genicam: pip install 'fxis-shm[genicam]'"
 _PROBE_AFTER_S = 1.0  # without frames this long, check that the device still answers
 _FIRST_FRAME_S = 5.0  # how long start-up waits for a frame when it must look at one
@@ -96,32 +95,6 @@ def _short(exc: Exception) -> str:
 
 class GenicamCamera(Camera):
     kind = "genicam"
-    OPTIONS = {
-        "cti": Option(text, None, f"GenTL producer: a .cti file or a folder of them "
-                                  f"(default: the folders of ${GENTL_PATH_VAR})"),
-        "device": Option(text, None, "serial number, device id, user-defined name or index "
-                                     "(default: the first device)"),
-        "fps": Option(number(float, 0, 100_000, exclusive_min=True), None,
-                      "AcquisitionFrameRate (default: as the device is set)"),
-        "width": Option(number(int, 1, 65535), None, "Width in pixels (default: as set)"),
-        "height": Option(number(int, 1, 65535), None, "Height in pixels (default: as set)"),
-        "offset_x": Option(number(int, 0, 65535), None,
-                           "OffsetX (default: as set; 0 when width is given)"),
-        "offset_y": Option(number(int, 0, 65535), None,
-                           "OffsetY (default: as set; 0 when height is given)"),
-        "pixel_format": Option(text, None, "PFNC name the device offers, e.g. Mono8, BayerRG8 "
-                                           "(default: as set)"),
-        "exposure_us": Option(number(float, 0, exclusive_min=True), None,
-                              "ExposureTime in microseconds, ExposureAuto off (default: as set)"),
-        "gain": Option(number(float), None, "Gain in the device's unit (dB per SFNC), GainAuto off "
-                                            "(default: as set)"),
-        "trigger": Option(choice("free", "software"), "free",
-                          "free-running, or one frame per software trigger (needs TriggerSoftware)"),
-        "timestamp": Option(choice("host", "device"), "host",
-                            "host: fetch time; device: the buffer's device timestamp, fitted onto "
-                            "the host clock"),
-        "raw": Option(boolean, False, "keep colour and Bayer data as delivered (no BGR conversion)"),
-    }
 
     def __init__(self, name, options, time_origin_ns):
         super().__init__(name, options, time_origin_ns)
