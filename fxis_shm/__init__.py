@@ -1,6 +1,7 @@
 """fxis-shm: multi-camera acquisition into shared-memory rings, served as
 time-synchronized images over ZeroMQ. The public API is what ``__all__`` names
 (README.md, "The public API")."""
+from . import _sourcetree
 from .client import Client, Frame, FrameTuple
 from .errors import (
     CameraDown, ConfigError, FrameTimeout, FxisError, LocalPathUnavailable, Overwritten,
@@ -19,3 +20,5 @@ __all__ = [
     "RingError", "Overwritten",
 ]
 __version__ = "0.1.0"
+
+_sourcetree.install(__path__[0])  # fxis_shm.workers from a source checkout, too
