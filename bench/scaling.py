@@ -403,34 +403,39 @@ def active_worker(conn) -> None:
         task = conn.recv()
         if task is None:
             return
-        records: list[list[dict]] = [[] for _ in range(task["threads"])]
-        ready = threading.Barrier(task["threads"] + 1)
-        window = {}
-        go = threading.Event()
+        conn.send(_active_task(conn, task))
 
-        def client_thread(j: int) -> None:
-            with make_client(task["endpoint"], task["timeout"], task["path"]) as client:
-                try:
-                    client.status()
-                except common.REQUEST_ERRORS as exc:
-                    records[j].append({"t_send": time.monotonic_ns(), "rtt_ns": 0,
-                                       "error": "connect: " + common.describe_error(exc)})
-                ready.wait(WORKER_WAIT_S)
-                if go.wait(WORKER_WAIT_S):
-                    time.sleep(max(0, window["start"] - time.monotonic_ns()) / 1e9)  # the common start
-                    while time.monotonic_ns() < window["end"]:
-                        records[j].append(timed(client))
 
-        threads = [threading.Thread(target=client_thread, args=(j,), daemon=True) for j in range(task["threads"])]
-        for t in threads:
-            t.start()
-        ready.wait(WORKER_WAIT_S)
-        conn.send("ready")
-        window["start"], window["end"] = conn.recv()
-        go.set()
-        for t in threads:
-            t.join()
-        conn.send([r for rs in records for r in rs])
+def _active_task(conn, task: dict) -> list[dict]:
+    """One task of active_worker: the records of all its clients' requests."""
+    records: list[list[dict]] = [[] for _ in range(task["threads"])]
+    ready = threading.Barrier(task["threads"] + 1)
+    window = {}
+    go = threading.Event()
+
+    def client_thread(j: int) -> None:
+        with make_client(task["endpoint"], task["timeout"], task["path"]) as client:
+            try:
+                client.status()
+            except common.REQUEST_ERRORS as exc:
+                records[j].append({"t_send": time.monotonic_ns(), "rtt_ns": 0,
+                                   "error": "connect: " + common.describe_error(exc)})
+            ready.wait(WORKER_WAIT_S)
+            if go.wait(WORKER_WAIT_S):
+                time.sleep(max(0, window["start"] - time.monotonic_ns()) / 1e9)  # the common start
+                while time.monotonic_ns() < window["end"]:
+                    records[j].append(timed(client))
+
+    threads = [threading.Thread(target=client_thread, args=(j,), daemon=True) for j in range(task["threads"])]
+    for t in threads:
+        t.start()
+    ready.wait(WORKER_WAIT_S)
+    conn.send("ready")
+    window["start"], window["end"] = conn.recv()
+    go.set()
+    for t in threads:
+        t.join()
+    return [r for rs in records for r in rs]
 
 
 class ActiveClients:
@@ -476,7 +481,7 @@ class ActiveClients:
         return records, start, end
 
     def close(self) -> None:
-        for proc, conn in self.workers:
+        for _, conn in self.workers:
             with contextlib.suppress(OSError):
                 conn.send(None)
         for proc, conn in self.workers:
@@ -740,7 +745,8 @@ def step_trouble(step: dict) -> str:
     req = step["requests"]
     parts = [f"{lost} frames lost"] if not step["no_loss"] else []
     parts += [f"{req['failed']} requests failed"] if req["failed"] else []
-    parts += [f"{step['served_per_s']:.1f} req/s served"] if step["served_per_s"] < MIN_SERVED_SHARE * step["request_hz"] else []
+    if step["served_per_s"] < MIN_SERVED_SHARE * step["request_hz"]:
+        parts.append(f"{step['served_per_s']:.1f} req/s served")
     return ", ".join(parts)
 
 

@@ -4,8 +4,18 @@ time-synchronized images over ZeroMQ. The public API is what ``__all__`` names
 from . import _sourcetree
 from .client import Client, Frame, FrameTuple
 from .errors import (
-    CameraDown, ConfigError, FrameTimeout, FxisError, LocalPathUnavailable, Overwritten,
-    ProtocolError, RequestTimeout, RingError, ServiceError, SkewExceeded, UnknownCamera,
+    CameraDown,
+    ConfigError,
+    FrameTimeout,
+    FxisError,
+    LocalPathUnavailable,
+    Overwritten,
+    ProtocolError,
+    RequestTimeout,
+    RingError,
+    ServiceError,
+    SkewExceeded,
+    UnknownCamera,
 )
 from .multiclient import MultiClient
 from .pubsub import EventPublisher, Message, Subscriber, handshake

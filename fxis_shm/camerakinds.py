@@ -8,8 +8,9 @@ entry in KINDS plus a backend module under workers/backends/.
 from __future__ import annotations
 
 import math
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, Mapping
+from typing import Any
 
 from .errors import ConfigError
 from .options import Option, boolean, choice, number, parse_options, text

@@ -167,7 +167,8 @@ def parser() -> argparse.ArgumentParser:
                      help=f"restarts of a crashed process before giving up (default {defaults.RESTART_LIMIT})")
     run.add_argument("--log-level", help=f"DEBUG, INFO, WARNING or ERROR (default {defaults.LOG_LEVEL})")
     run.add_argument("--curve-secret", metavar="FILE", help="the service's NAME.key_secret: CurveZMQ on every socket")
-    run.add_argument("--curve-clients", metavar="DIR", help="folder of the public keys (.key) of the clients allowed in")
+    run.add_argument("--curve-clients", metavar="DIR",
+                     help="folder of the public keys (.key) of the clients allowed in")
     run.add_argument("--insecure-bind", action="store_true",
                      help="allow endpoints reachable from other hosts without CurveZMQ (prints a warning)")
     run.set_defaults(func=_run)

@@ -14,7 +14,7 @@ import json
 import logging
 import threading
 import time
-from typing import Callable
+from collections.abc import Callable
 
 import zmq
 from zmq.auth.thread import ThreadAuthenticator
@@ -22,11 +22,11 @@ from zmq.auth.thread import ThreadAuthenticator
 from . import naming, ordering, protocol
 from .cameras import FRAME_FIELDS, CameraHandle
 from .childspec import CoordinatorSpec
+from .copyout import CopyOut
 from .engine import FRAME_OPS, Action, Failure, Reply, RequestEngine, Trigger
 from .errors import Code, ConfigError, ProtocolError
 from .framewatch import FrameWatch
 from .localpath import boot_id, time_namespace
-from .copyout import CopyOut
 from .ring import Overwritten
 from .security import load_pair, make_server
 from .streams import Streams

@@ -15,7 +15,6 @@ from .ring import Overwritten, Snapshot
 from .selection import Selection, radius_for, select, tolerance_for
 from .timesearch import Timeline
 
-
 COPY, REFS, VIEWS = "copy", "refs", "views"  # how a reply carries its frames
 
 

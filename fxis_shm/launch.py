@@ -42,7 +42,7 @@ class ServiceProcess:
         self.python, self.env = python, env  # the interpreter and environment of `fxis run`
         self.proc: subprocess.Popen | None = None
 
-    def start(self) -> "ServiceProcess":
+    def start(self) -> ServiceProcess:
         self.proc = subprocess.Popen(
             [self.python, "-m", "fxis_shm.cli", "run", *self.args], env=self.env,
             stdout=subprocess.DEVNULL, stderr=self.stderr, stdin=subprocess.DEVNULL,
@@ -59,7 +59,8 @@ class ServiceProcess:
                 except RequestTimeout:
                     if time.monotonic() > deadline:
                         self.stop()
-                        raise ServiceNotStarted(f"service did not answer within {self.ready_timeout} s")
+                        raise ServiceNotStarted(
+                            f"service did not answer within {self.ready_timeout} s") from None
 
     def client(self, timeout: float = 2.0) -> Client:
         return Client(self.endpoint, timeout=timeout, keys=self.client_keys)
@@ -77,7 +78,7 @@ class ServiceProcess:
                 self.proc.wait()
         return self.proc.returncode
 
-    def __enter__(self) -> "ServiceProcess":
+    def __enter__(self) -> ServiceProcess:
         return self.start()
 
     def __exit__(self, *exc) -> None:

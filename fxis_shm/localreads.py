@@ -18,7 +18,7 @@ What only the coordinator can do (software triggers) still goes to it.
 from __future__ import annotations
 
 import time
-from typing import Callable
+from collections.abc import Callable
 
 from . import protocol
 from .bufferpool import BufferPool

@@ -24,9 +24,9 @@ import zmq
 
 from . import defaults, protocol
 from .client import FrameTuple, SocketOwner, connected_socket, frames_of, sequence_of, tuple_of
-from .security import ClientKeys
 from .errors import ProtocolError, RequestTimeout, service_error
 from .protocol import StreamTopic
+from .security import ClientKeys
 
 DEFAULT_PUB = defaults.PUB
 DEFAULT_EVENTS = defaults.EVENTS

@@ -18,7 +18,8 @@ STAMP_BYTES = 16
 
 
 def _row_bytes(image: np.ndarray, row: int) -> np.ndarray:
-    return image[row].reshape(-1).view(np.uint8)
+    row_bytes: np.ndarray = image[row].reshape(-1).view(np.uint8)
+    return row_bytes
 
 
 def _encode(frame_id: int) -> np.ndarray:

@@ -8,7 +8,8 @@ import os
 import signal
 import sys
 import threading
-from typing import Callable, TypeVar
+from collections.abc import Callable
+from typing import TypeVar
 
 from fxis_shm.childspec import ChildSpec
 from fxis_shm.errors import SpecError

@@ -16,8 +16,8 @@ import importlib
 import logging
 import multiprocessing
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 

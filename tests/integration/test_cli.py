@@ -36,7 +36,7 @@ def test_grab_saves_pngs_and_metadata(two_cameras, tmp_path):
     assert result.returncode == 0, result.stderr
     meta = json.loads((tmp_path / "tuple.json").read_text())
     assert set(meta["frames"]) == {"cam0", "cam1"}
-    for name, frame in meta["frames"].items():
+    for frame in meta["frames"].values():
         image = cv2.imread(str(tmp_path / frame["file"]), cv2.IMREAD_UNCHANGED)
         assert image.shape == tuple(frame["shape"])
         assert read_stamp(image) == frame["frame_id"]

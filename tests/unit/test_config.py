@@ -5,9 +5,7 @@ import pytest
 
 from fxis_shm.config import build_config, load_toml, parse_camera_flag
 from fxis_shm.errors import ConfigError
-from fxis_shm.options import (
-    Option, boolean, choice, number, parse_options, split_key_values, text,
-)
+from fxis_shm.options import Option, boolean, choice, number, parse_options, split_key_values, text
 
 SYNTHETIC_DEFAULTS = {
     "fps": 20.0, "width": 1360, "height": 1024, "pixel_format": "mono8",

@@ -38,8 +38,8 @@ from typing import Any
 
 import numpy as np
 
-from fxis_shm.clocks import DeviceClockFit, wall_to_monotonic
 from fxis_shm.camerakinds import ARAVIS_PIXEL_FORMATS
+from fxis_shm.clocks import DeviceClockFit, wall_to_monotonic
 from fxis_shm.ring import FrameLayout
 
 from .base import Camera, CameraLost, Capture

@@ -2,8 +2,9 @@
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, ClassVar, Mapping
+from typing import Any, ClassVar
 
 import numpy as np
 
@@ -49,7 +50,7 @@ class Camera(ABC):
         Raises CameraLost if the camera is gone; incomplete frames are not returned
         but counted in ``frames_dropped``."""
 
-    def close(self) -> None:
+    def close(self) -> None:  # noqa: B027 (not abstract: a camera with nothing to release keeps it)
         """Stop acquiring and release the device."""
 
     _layout: FrameLayout | None = None  # backends set these when the camera is opened

@@ -30,8 +30,8 @@ import logging
 import os
 import time
 
-from fxis_shm.clocks import DeviceClockFit
 from fxis_shm.camerakinds import GENTL_PATH_VAR
+from fxis_shm.clocks import DeviceClockFit
 from fxis_shm.ring import FrameLayout
 
 from .base import Camera, CameraLost, Capture
@@ -357,11 +357,11 @@ class GenicamCamera(Camera):
                                f"its timestamps (timestamp=device)")
         with buffer:
             try:
-                buffer.module.timestamp_ns
+                _ = buffer.module.timestamp_ns  # raises if the buffers carry no ns timestamp
                 self._device_ns = True
             except gentl.GenericException:
                 try:
-                    buffer.module.timestamp
+                    _ = buffer.module.timestamp
                 except gentl.GenericException as exc:
                     raise self._refuse("timestamp", f"the device does not timestamp its buffers "
                                                     f"({_short(exc)}); it allows timestamp=host only") from None
@@ -442,7 +442,7 @@ class GenicamCamera(Camera):
         try:
             node = self._ia.remote_device.node_map.Width
             node.node.invalidate_node()
-            node.value
+            _ = node.value  # a read the device must answer
         except (gentl.GenericException, genapi.GenericException) as exc:
             raise CameraLost(f"the device does not answer: {_short(exc)}") from None
 

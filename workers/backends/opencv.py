@@ -70,8 +70,8 @@ class OpenCVCamera(Camera):
         if self._kind != "device":
             for key in ("width", "height", "fps"):
                 if self.options[key] is not None:
-                    raise ValueError(f"camera {name!r}: key {key!r} applies to devices only; "
-                                     f"{'use rate= for a file' if key == 'fps' else 'a ' + self._kind + ' has its own size'}")
+                    hint = "use rate= for a file" if key == "fps" else f"a {self._kind} has its own size"
+                    raise ValueError(f"camera {name!r}: key {key!r} applies to devices only; {hint}")
         if self._kind != "file":
             for key, default in (("rate", "file"), ("loop", False)):
                 if self.options[key] != default:
