@@ -14,16 +14,25 @@ from __future__ import annotations
 
 import itertools
 import time
-from collections.abc import Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
-from typing import Callable, Iterator
 
 import numpy as np
 import zmq
 
 from . import defaults, protocol
 from .bufferpool import release as release_buffer
-from .errors import CameraDown, FxisError, InvalidArgument, LocalPathUnavailable, UnknownCamera, Overwritten, ProtocolError, RequestTimeout, service_error
+from .errors import (
+    CameraDown,
+    FxisError,
+    InvalidArgument,
+    LocalPathUnavailable,
+    Overwritten,
+    ProtocolError,
+    RequestTimeout,
+    UnknownCamera,
+    service_error,
+)
 from .localpath import LocalRings, LocalUnavailable, boot_id
 from .localreads import LocalReads
 from .security import ClientKeys
@@ -63,7 +72,7 @@ class Frame:
             release_buffer(self.image)
             self.image = ReleasedImage(f"the image of frame {self.frame_id} of {self.camera!r}")
 
-    def __enter__(self) -> "Frame":
+    def __enter__(self) -> Frame:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -110,7 +119,7 @@ class FrameTuple(Mapping):
         for frame in self._frames.values():
             frame.release()
 
-    def __enter__(self) -> "FrameTuple":
+    def __enter__(self) -> FrameTuple:
         return self
 
     def __exit__(self, *exc) -> None:

@@ -10,8 +10,8 @@ until the next frame of a camera it waits for is due, and looks again.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from typing import Callable, Sequence
 
 from . import protocol
 from .client import Client, FrameTuple, frames_of, sequence_of, tuple_of
