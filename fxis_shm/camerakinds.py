@@ -100,6 +100,13 @@ OPENCV = CameraKind("opencv", "what cv2.VideoCapture opens: a device, a video fi
 
 # ---- aravis ----
 
+# Options both GenICam kinds (aravis, genicam) take
+_GENICAM_TRIGGER = Option(choice("free", "software"), "free",
+                          "free-running, or one frame per software trigger (TriggerSoftware)")
+_GENICAM_TIMESTAMP = Option(choice("host", "device"), "host",
+                            "host: the frame's arrival time; device: the camera's timestamp, fitted "
+                            "onto the host's clock (docs/cameras.md)")
+
 # The GenICam formats the aravis backend stores (a subset of workers/backends/pixelformats.py).
 ARAVIS_PIXEL_FORMATS = ("Mono8", "Mono10", "Mono12", "Mono16", "RGB8", "BGR8",
                         "BayerRG8", "BayerGR8", "BayerGB8", "BayerBG8")
@@ -120,11 +127,8 @@ ARAVIS = CameraKind("aravis", "GigE Vision and USB3 Vision cameras through the A
     "gain": Option(number(float, 0), None, "gain, in the camera's unit (usually dB; turns auto off)"),
     "packet_size": Option(number(int, 64, 65535), None,
                           "GigE Vision packet size in bytes (default: as negotiated)"),
-    "trigger": Option(choice("free", "software"), "free",
-                      "free-running, or one frame per software trigger (TriggerSoftware)"),
-    "timestamp": Option(choice("host", "device"), "host",
-                        "t_capture from the host's arrival time, or the camera's clock mapped "
-                        "onto the host's (docs/cameras.md)"),
+    "trigger": _GENICAM_TRIGGER,
+    "timestamp": _GENICAM_TIMESTAMP,
 }, "aravis:AravisCamera")
 
 
@@ -149,11 +153,8 @@ GENICAM = CameraKind("genicam", "any camera a GenTL producer (.cti) reaches, thr
                           "ExposureTime in microseconds, ExposureAuto off (default: as set)"),
     "gain": Option(number(float), None, "Gain in the device's unit (dB per SFNC), GainAuto off "
                                         "(default: as set)"),
-    "trigger": Option(choice("free", "software"), "free",
-                      "free-running, or one frame per software trigger (needs TriggerSoftware)"),
-    "timestamp": Option(choice("host", "device"), "host",
-                        "host: fetch time; device: the buffer's device timestamp, fitted onto "
-                        "the host clock"),
+    "trigger": _GENICAM_TRIGGER,
+    "timestamp": _GENICAM_TIMESTAMP,
     "raw": Option(boolean, False, "keep colour and Bayer data as delivered (no BGR conversion)"),
 }, "genicam:GenicamCamera")
 

@@ -7,8 +7,10 @@ import logging
 import os
 import subprocess
 import sys
+import textwrap
 
 from . import defaults, naming
+from .camerakinds import KINDS, PROCESS_OPTIONS
 from .client import Client
 from .config import build_config, load_toml
 from .errors import ConfigError, FxisError
@@ -147,6 +149,16 @@ def _clean(args) -> int:
     return 0
 
 
+def _kinds_help() -> str:
+    """The camera kinds --camera takes, and their keys (docs/cameras.md tells more)."""
+    lines = [f"camera kinds (KIND) and their keys (any kind also takes {', '.join(PROCESS_OPTIONS)}):"]
+    for kind in KINDS.values():
+        lines += [f"  {kind.name:<10} {kind.description}",
+                  *textwrap.wrap(", ".join(kind.options), 88, initial_indent=" " * 13,
+                                 subsequent_indent=" " * 13)]
+    return "\n".join(lines)
+
+
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="fxis", description="Multi-camera acquisition service: synchronized images on request.")
@@ -154,7 +166,8 @@ def parser() -> argparse.ArgumentParser:
 
     run = sub.add_parser("run", help="start the service (default: two synthetic cameras)",
                          description="Start camera workers and the coordinator; Ctrl-C stops them "
-                                     "and removes their shared memory.")
+                                     "and removes their shared memory.",
+                         epilog=_kinds_help(), formatter_class=argparse.RawDescriptionHelpFormatter)
     run.add_argument("--name", help=f"service name (default {defaults.SERVICE}); names its shared memory")
     run.add_argument("--camera", action="append", metavar="NAME=KIND[:key=value,...]",
                      help="a camera, e.g. left=synthetic:fps=30,phase_ms=5 (repeatable)")

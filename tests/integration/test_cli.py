@@ -6,6 +6,7 @@ import posix_ipc
 import pytest
 
 from fxis_shm import naming, read_stamp
+from fxis_shm.camerakinds import KINDS
 
 from .test_lifecycle import fxis
 
@@ -55,6 +56,13 @@ def test_clean_refuses_while_running(two_cameras):
     result = fxis("clean", "--name", two_cameras.name)
     assert result.returncode == 1 and "running" in result.stderr
     assert naming.leftovers(two_cameras.name)
+
+
+def test_run_help_lists_every_camera_kind_and_its_keys():
+    result = fxis("run", "--help")
+    for kind in KINDS.values():
+        assert f"{kind.name:<10} {kind.description}" in result.stdout
+        assert all(key in result.stdout for key in kind.options)
 
 
 def test_help_lists_commands():
