@@ -11,6 +11,7 @@ from typing import Any
 
 from . import defaults
 from .camerakinds import camera_options
+from .engine import REQUEST_DEFAULTS
 from .errors import ConfigError
 from .naming import check_name
 from .options import split_key_values
@@ -21,12 +22,9 @@ else:  # pragma: no cover
     import tomli as tomllib
 
 ZERO_ALLOWED = {"sync_tolerance_ms"}  # 0: always the least skew, however far from t*
-# Request defaults that the config may change (see engine.REQUEST_DEFAULTS)
-SERVICE_SETTINGS = {
-    "sync": str, "wait": str, "timeout_ms": float, "max_skew_ms": float,
-    "horizon_ms": float, "sync_tolerance_ms": float, "max_pending": int,
-    "max_sequence_frames": int, "max_pending_per_client": int,
-}
+# The request defaults a config may change, each of its default's type (max_skew_ms, None
+# by default, takes a number of ms)
+SERVICE_SETTINGS = {key: float if value is None else type(value) for key, value in REQUEST_DEFAULTS.items()}
 
 
 @dataclass(frozen=True)
