@@ -5,9 +5,9 @@ from __future__ import annotations
 
 import json
 import os
+import site
 import subprocess
 import sys
-import sysconfig
 from pathlib import Path
 
 import pytest
@@ -27,10 +27,9 @@ def bare_python(tmp_path_factory) -> str:
     venv = tmp_path_factory.mktemp("bare") / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=120)
     python = str(venv / "bin" / "python")
-    site = subprocess.run([python, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
-                          capture_output=True, text=True, check=True, timeout=30).stdout.strip()
-    deps = dict.fromkeys(sysconfig.get_paths()[key] for key in ("purelib", "platlib"))
-    Path(site, "fxis-test-deps.pth").write_text("\n".join(deps) + "\n")
+    bare_site = subprocess.run([python, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+                               capture_output=True, text=True, check=True, timeout=30).stdout.strip()
+    Path(bare_site, "fxis-test-deps.pth").write_text("\n".join(site.getsitepackages()) + "\n")
     return python
 
 
