@@ -185,9 +185,10 @@ class BagReader:
         with open(self.path, "rb") as f:
             return {m.name: dict(m.metadata) for m in self._make_reader(f).iter_metadata()}
 
-    def messages(self, topic: str) -> Iterator[tuple[int, object]]:
-        """(log_time, decoded message) of every message of ``topic``, in log-time order."""
+    def messages(self, topic: str, start_time: int | None = None) -> Iterator[tuple[int, object]]:
+        """(log_time, decoded message) of the messages of ``topic`` logged at or after
+        ``start_time`` (default all), in log-time order."""
         with open(self.path, "rb") as f:
             reader = self._make_reader(f, decoder_factories=self._decoders)
-            for _, _, message, decoded in reader.iter_decoded_messages(topics=[topic]):
+            for _, _, message, decoded in reader.iter_decoded_messages(topics=[topic], start_time=start_time):
                 yield message.log_time, decoded

@@ -11,6 +11,7 @@ BACKENDS = {
     "aravis": "fxis_shm.workers.backends.aravis:AravisCamera",  # GigE Vision, USB3 Vision
     "genicam": "fxis_shm.workers.backends.genicam:GenicamCamera",  # any GenTL producer
     "opencv": "fxis_shm.workers.backends.opencv:OpenCVCamera",  # cv2.VideoCapture
+    "bag": "fxis_shm.workers.backends.bag:BagCamera",  # a recorded topic (fxis record), replayed
 }
 
 
