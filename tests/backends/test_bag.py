@@ -33,12 +33,22 @@ def bag_cameras(path, extra=""):
             "--camera", f"right=bag:path={path},topic=/right/image_raw{extra}"]
 
 
+def replayed(client, count: int, cameras=("left", "right")) -> None:
+    """Waits until every camera has stored ``count`` frames."""
+    wait_until(lambda: all((client.status()["cameras"][c].get("frames_stored") or 0) >= count for c in cameras),
+               timeout=30, what=f"{count} frames replayed")
+
+
+def recorded_gap(stamps, a, b) -> int:
+    """The recorded time between the frames whose pixels two replayed frames show."""
+    return stamps[a.camera][read_stamp(b.image)] - stamps[a.camera][read_stamp(a.image)]
+
+
 def test_tuples_of_a_replayed_bag_are_the_recorded_frames_at_the_recorded_spacing(start_service, recorded):
     path, stamps = recorded
     svc = start_service(*bag_cameras(path), "--slots", "64")
     with svc.client(timeout=5) as client:
-        wait_until(lambda: all((c.get("frames_stored") or 0) >= 12 for c in client.status()["cameras"].values()),
-                   timeout=30, what="a dozen frames replayed")
+        replayed(client, 12)
         tuples = client.sequence("consecutive", cameras=["left", "right"], count=10)
     for t in tuples:
         ids = {cam: read_stamp(f.image) for cam, f in t.items()}
@@ -46,27 +56,24 @@ def test_tuples_of_a_replayed_bag_are_the_recorded_frames_at_the_recorded_spacin
         assert t["left"].image.shape == (120, 160) and t["right"].image.shape == (120, 160, 3)
         assert t.skew_ns == 0
     for a, b in zip(tuples, tuples[1:]):
-        recorded_gap = stamps["left"][read_stamp(b["left"].image)] - stamps["left"][read_stamp(a["left"].image)]
-        assert abs((b["left"].t_capture - a["left"].t_capture) - recorded_gap) <= 1_000  # ns: rounding only
+        gap = recorded_gap(stamps, a["left"], b["left"])
+        assert abs((b["left"].t_capture - a["left"].t_capture) - gap) <= 1_000  # ns: rounding only
 
 
 def test_speed_scales_the_spacing(start_service, recorded):
     path, stamps = recorded
     svc = start_service(*bag_cameras(path, ",speed=2"))
     with svc.client(timeout=5) as client:
-        wait_until(lambda: (client.status()["cameras"]["left"].get("frames_stored") or 0) >= 6,
-                   timeout=30, what="frames replayed")
-        pair = client.sequence("consecutive", camera="left", count=2)
-    recorded_gap = stamps["left"][read_stamp(pair[1].image)] - stamps["left"][read_stamp(pair[0].image)]
-    assert abs((pair[1].t_capture - pair[0].t_capture) - recorded_gap / 2) <= 1_000  # twice as fast
+        replayed(client, 6)
+        a, b = client.sequence("consecutive", camera="left", count=2)
+    assert abs((b.t_capture - a.t_capture) - recorded_gap(stamps, a, b) / 2) <= 1_000  # twice as fast
 
 
 def test_stamps_recorded_keeps_the_recorded_stamps(start_service, recorded):
     path, stamps = recorded
     svc = start_service(*bag_cameras(path, ",stamps=recorded"))
     with svc.client(timeout=5) as client:
-        wait_until(lambda: (client.status()["cameras"]["left"].get("frames_stored") or 0) >= 2,
-                   timeout=30, what="frames replayed")
+        replayed(client, 2)
         frame = client.latest(["left"])["left"]
         assert frame.t_capture == stamps["left"][read_stamp(frame.image)]  # yesterday's stamp, as recorded
         # asked for by a recorded time, it is found there
@@ -96,7 +103,7 @@ def test_a_jpeg_bag_replays_decoded(start_service, recorded, tmp_path):
         stop(cell)
     svc = start_service("--camera", f"v=bag:path={tmp_path / 'j'}")  # its only image topic
     with svc.client(timeout=5) as client:
-        wait_until(lambda: client.status()["cameras"]["v"].get("frames_stored"), timeout=30, what="a frame")
+        replayed(client, 1, ["v"])
         frame = client.latest()["v"]
     assert frame.image.shape == (120, 160, 3)
 
