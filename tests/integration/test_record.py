@@ -156,3 +156,16 @@ def test_the_mcap_file_names_its_clock_in_a_metadata_record(raw_bag):
         records = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
     assert records["fxis"]["clock"] == "CLOCK_MONOTONIC"
     assert records["fxis"]["mode"] == "frames" and int(records["fxis"]["clock_to_realtime_ns"]) > 0
+
+
+def test_a_recorder_that_cannot_keep_up_says_how_many_frames_it_missed(start_service, tmp_path):
+    """A camera at 1000 fps into a ring of 2 slots comes round faster than any poll: the
+    recorder loses frames, and counts every one of them."""
+    svc = start_service("--camera", "fast=synthetic:fps=1000,width=64,height=48", "--slots", "2")
+    result = record(svc, tmp_path / "m", "--seconds", "1")
+    frames, missed, dropped = (int(v) for v in result.stdout.splitlines()[1].split()[2:5])
+    ids = [read_stamp(rosmsgs.image_array(m.msg)) for m in read_bag(tmp_path / "m").messages["/fast/image_raw"]]
+    assert len(ids) == frames and missed > 0
+    span = ids[-1] - ids[0] + 1
+    assert frames + missed <= span  # nothing counted twice
+    assert span - frames - missed <= dropped  # every other gap is a frame the camera dropped
