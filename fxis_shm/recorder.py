@@ -12,6 +12,7 @@ from __future__ import annotations
 import os
 import signal
 import sys
+import threading
 import time
 from dataclasses import dataclass
 
@@ -19,7 +20,7 @@ from . import encoding as codec
 from . import rosmsgs
 from .bagfile import BagWriter
 from .client import Client
-from .errors import ConfigError, Overwritten, ServiceError
+from .errors import CameraDown, ConfigError, Overwritten, ServiceError
 from .recording import Follower, Steps
 
 _MAX_TUPLES_PER_REQUEST = 16  # bounds a reply's size (and the service's sequence limit)
@@ -82,24 +83,32 @@ class Recorder:
     # ---- the loop ----
 
     def run(self) -> dict:
-        """Record until --seconds or --frames is reached or Ctrl-C (SIGINT, SIGTERM)."""
-        stop_on_term = signal.signal(signal.SIGTERM, _interrupt) if _main_thread() else None
+        """Record until --seconds or --frames is reached or Ctrl-C (SIGINT, SIGTERM). A signal
+        only asks the loop to stop, so it never lands in the middle of writing a message; a
+        second Ctrl-C interrupts at once."""
+        self._stopping = False
+        previous = {sig: signal.signal(sig, self._ask_to_stop) for sig in (signal.SIGINT, signal.SIGTERM)} \
+            if _main_thread() else {}
         self.progress.stage(f"recording {', '.join(self.cameras)} into {self.s.out}")
         try:
-            while not self._done():
+            while not self._stopping and not self._done():
                 began = time.monotonic()
                 self._poll()
                 self.progress.update(self._line())
                 time.sleep(max(0.0, self.poll_s - (time.monotonic() - began)))
-        except KeyboardInterrupt:
-            self.progress.stage("interrupted: closing the bag")
+            if self._stopping:
+                self.progress.stage("interrupted: closing the bag")
         finally:
             self.bag.close()
-            if stop_on_term is not None:
-                signal.signal(signal.SIGTERM, stop_on_term)
+            for sig, handler in previous.items():
+                signal.signal(sig, handler)
         summary = self.summary()
         self.progress.stage(f"recorded {summary['seconds']:.1f} s into {self.s.out}")
         return summary
+
+    def _ask_to_stop(self, signum, frame) -> None:
+        self._stopping = True
+        signal.signal(signal.SIGINT, signal.default_int_handler)  # a second Ctrl-C: at once
 
     def _now(self) -> int:
         """The service's clock at the last poll."""
@@ -123,6 +132,8 @@ class Recorder:
                 self._poll_camera(cam, listing["cameras"][cam])
 
     def _poll_camera(self, cam: str, info: dict) -> None:
+        if not info.get("alive"):
+            return  # its worker restarts it; the frames after the outage are taken then
         follower = self.followers[cam]
         rows = follower.new_frames(info["frames"], info.get("period_ns") or 0)
         if self.s.frames is not None:
@@ -135,7 +146,7 @@ class Recorder:
         try:
             frames = self.client.sequence("range", camera=cam, start=rows[0][1], end=rows[-1][1])
         except (Overwritten, ServiceError) as exc:
-            if isinstance(exc, ServiceError) and exc.code != "OUT_OF_RANGE":
+            if not _frames_gone(exc):
                 raise
             follower.lost(len(rows))  # the ring came round between listing and copying
             return
@@ -163,7 +174,7 @@ class Recorder:
             tuples = self.client.sequence("interval", cameras=self.cameras, count=len(times),
                                           interval_ms=self.steps.interval_ns / 1e6, at=times[0])
         except (Overwritten, ServiceError) as exc:
-            if isinstance(exc, ServiceError) and exc.code != "OUT_OF_RANGE":
+            if not _frames_gone(exc):
                 raise
             self.steps.advance(len(times), answered=False)
             return
@@ -257,11 +268,11 @@ class Progress:
         self.stream.flush()
 
 
-def _interrupt(signum, frame):
-    raise KeyboardInterrupt
+def _frames_gone(exc: Exception) -> bool:
+    """Whether a sequence failed because its frames are no longer there to copy: the ring
+    came round (the recorder was too slow) or the camera went down meanwhile."""
+    return isinstance(exc, (Overwritten, CameraDown)) or getattr(exc, "code", None) == "OUT_OF_RANGE"
 
 
 def _main_thread() -> bool:
-    import threading
-
     return threading.current_thread() is threading.main_thread()
