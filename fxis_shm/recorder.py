@@ -191,7 +191,7 @@ class Recorder:
         image = frame.image
         if self.s.encoding == codec.JPEG:
             data = codec.encode(image, codec.JPEG, self.s.quality)
-            msg = rosmsgs.compressed_message(data, rosmsgs.ros_encoding(image), t_stamp, frame.camera)
+            msg = rosmsgs.compressed_message(data, t_stamp, frame.camera)
             topic, msgtype, size = rosmsgs.image_topic(frame.camera, True), rosmsgs.COMPRESSED, len(data)
         else:
             msg = rosmsgs.image_message(image, t_stamp, frame.camera)

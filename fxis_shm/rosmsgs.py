@@ -83,10 +83,11 @@ def image_message(image: np.ndarray, t_ns: int, camera: str) -> dict:
             "step": image.strides[0], "data": image.tobytes()}
 
 
-def compressed_message(jpeg: bytes, encoding: str, t_ns: int, camera: str) -> dict:
-    """A sensor_msgs/msg/CompressedImage; ``format`` as compressed_image_transport writes it."""
-    return {"header": header(t_ns, camera), "format": f"{encoding}; jpeg compressed {encoding}",
-            "data": jpeg}
+def compressed_message(jpeg: bytes, t_ns: int, camera: str) -> dict:
+    """A sensor_msgs/msg/CompressedImage. ``format`` is the plain "jpeg": Foxglove takes
+    only the plain names, and ROS's compressed_image_transport reads it too (the verbose
+    "bgr8; jpeg compressed bgr8" it writes is what Foxglove does not show)."""
+    return {"header": header(t_ns, camera), "format": "jpeg", "data": jpeg}
 
 
 def tuple_message(t_step: int, frames: list) -> dict:
