@@ -113,7 +113,7 @@ def _record(args) -> int:
     settings = RecordSettings(
         out=args.out, endpoint=args.endpoint, cameras=cameras, seconds=args.seconds, frames=args.frames,
         rate_hz=args.rate, tuples=args.tuples, encoding=args.encoding,
-        quality=args.quality or encoding.DEFAULT_JPEG_QUALITY, timeout=args.timeout)
+        quality=args.quality or encoding.DEFAULT_JPEG_QUALITY)
     with Client(args.endpoint, timeout=args.timeout) as client:
         try:
             recorder = Recorder(settings, client)

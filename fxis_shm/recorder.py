@@ -38,7 +38,6 @@ class RecordSettings:
     tuples: bool = False
     encoding: str = codec.RAW
     quality: int = codec.DEFAULT_JPEG_QUALITY
-    timeout: float = 3.0
 
 
 class Recorder:
