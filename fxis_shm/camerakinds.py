@@ -159,7 +159,20 @@ GENICAM = CameraKind("genicam", "any camera a GenTL producer (.cti) reaches, thr
 }, "genicam:GenicamCamera")
 
 
-KINDS: dict[str, CameraKind] = {k.name: k for k in (SYNTHETIC, OPENCV, ARAVIS, GENICAM)}
+BAG = CameraKind("bag", "a recorded topic (fxis record) played back into a ring at its recorded spacing", {
+    "path": Option(text, None, "the bag: a rosbag2 folder (fxis record --out DIR) or its .mcap file"),
+    "topic": Option(text, None, "the image topic to play, e.g. /left/image_raw "
+                                "(default: the bag's only image topic)"),
+    "loop": Option(boolean, True, "start again at the end (false: stop delivering, and say so)"),
+    "speed": Option(number(float, 0, 1000, exclusive_min=True), 1.0,
+                    "playback speed: 2 plays twice as fast (the spacing halves)"),
+    "stamps": Option(choice("now", "recorded"), "now",
+                     "now: each frame is stamped with its play time (at the recorded spacing); "
+                     "recorded: the recorded header.stamp"),
+}, "bag:BagCamera")
+
+
+KINDS: dict[str, CameraKind] = {k.name: k for k in (SYNTHETIC, OPENCV, ARAVIS, GENICAM, BAG)}
 
 
 def camera_kind(kind: str) -> CameraKind:

@@ -1,4 +1,4 @@
-"""The ``fxis`` command: run, status, grab, clean."""
+"""The ``fxis`` command: run, status, grab, record, clean."""
 from __future__ import annotations
 
 import argparse
@@ -99,6 +99,38 @@ def _grab(args) -> int:
         json.dump(meta, f, indent=2)
     print(f"saved {len(frames)} image(s) and tuple.json to {args.out} "
           f"(skew {frames.skew_ns / 1e6:.3f} ms)")
+    return 0
+
+
+def _record(args) -> int:
+    from . import encoding
+    from .recorder import Recorder, RecordSettings, summary_table
+
+    def usage(message: str) -> int:
+        print(f"fxis record: {message}", file=sys.stderr)
+        return EXIT_USAGE
+
+    for flag, value in (("--seconds", args.seconds), ("--frames", args.frames), ("--rate", args.rate)):
+        if value is not None and not value > 0:
+            return usage(f"{flag} must be > 0, got {value}")
+    if args.quality is not None and args.encoding != encoding.JPEG:
+        return usage("--quality applies to --encoding jpeg only")
+    if args.quality is not None and not 1 <= args.quality <= 100:
+        return usage(f"--quality must be from 1 to 100, got {args.quality}")
+    cameras = [c.strip() for c in args.cameras.split(",") if c.strip()] if args.cameras else None
+    if args.cameras is not None and not cameras:
+        return usage("--cameras names no camera")
+    settings = RecordSettings(
+        out=args.out, endpoint=args.endpoint, cameras=cameras, seconds=args.seconds, frames=args.frames,
+        rate_hz=args.rate, tuples=args.tuples, encoding=args.encoding,
+        quality=args.quality or encoding.DEFAULT_JPEG_QUALITY)
+    with Client(args.endpoint, timeout=args.timeout) as client:
+        try:
+            recorder = Recorder(settings, client)
+        except ConfigError as exc:
+            return usage(str(exc))
+        summary = recorder.run()
+    print(summary_table(summary))
     return 0
 
 
@@ -212,6 +244,31 @@ def parser() -> argparse.ArgumentParser:
     grab.add_argument("--cameras", help="comma-separated cameras (default all)")
     grab.add_argument("--at", type=int, help="t* in ns of the service's CLOCK_MONOTONIC (default now)")
     grab.set_defaults(func=_grab)
+
+    record = sub.add_parser(
+        "record", help="record the cameras into a rosbag2 bag (MCAP) for Foxglove, ros2 bag, rosbags",
+        description="Record every frame of the cameras (or one synchronized tuple per step with "
+                    "--tuples) into a rosbag2 folder with MCAP storage: /NAME/image_raw "
+                    "(sensor_msgs/msg/Image) or /NAME/image_raw/compressed (JPEG), stamps in the "
+                    "service's CLOCK_MONOTONIC. Ctrl-C ends the recording with a valid bag. "
+                    "Replay it with a camera of kind bag (docs/recording.md).")
+    client_args(record)
+    record.add_argument("--out", required=True, metavar="DIR", help="the bag folder to create (must not exist)")
+    record.add_argument("--cameras", metavar="A,B", help="comma-separated cameras (default all)")
+    until = record.add_mutually_exclusive_group()
+    until.add_argument("--seconds", type=float, metavar="S", help="stop after S seconds (default: at Ctrl-C)")
+    until.add_argument("--frames", type=int, metavar="N",
+                       help="stop after N frames per camera (N tuples with --tuples)")
+    record.add_argument("--rate", type=float, metavar="HZ",
+                        help="thin each camera to HZ on purpose (default every frame); with --tuples, "
+                             "the step rate (default the slowest camera's)")
+    record.add_argument("--tuples", action="store_true",
+                        help="one synchronized tuple per step: its images share the step's stamp, "
+                             "and /fxis/tuples lists their frame ids")
+    record.add_argument("--encoding", choices=("raw", "jpeg"), default="raw",
+                        help="raw: sensor_msgs/Image (default); jpeg: sensor_msgs/CompressedImage")
+    record.add_argument("--quality", type=int, metavar="Q", help="JPEG quality 1-100 (default 90)")
+    record.set_defaults(func=_record)
 
     keys = sub.add_parser("keys", help="make a CurveZMQ key pair (for a service or a client)")
     keys.add_argument("--out", required=True, metavar="DIR", help="folder to write NAME.key and NAME.key_secret into")
