@@ -65,7 +65,8 @@ def test_insecure_bind_warns(tmp_path):
     proc = subprocess.Popen(
         [sys.executable, "-m", "fxis_shm.cli", "run", "--name", f"insecure{port}", "--insecure-bind",
          "--camera", f"a=synthetic:{SMALL}", "--endpoint", f"tcp://0.0.0.0:{port}",
-         "--pub", f"tcp://127.0.0.1:{free_tcp_port()}", "--events", f"tcp://127.0.0.1:{free_tcp_port()}"],
+         "--pub", f"tcp://127.0.0.1:{free_tcp_port()}", "--events", f"tcp://127.0.0.1:{free_tcp_port()}",
+         "--http", "off"],
         stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:
         banner = []
