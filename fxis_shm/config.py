@@ -241,15 +241,15 @@ def _security(config: ServiceConfig, values: dict) -> ServiceConfig:
     if not isinstance(insecure, bool):
         raise ConfigError(f"insecure_bind must be true or false, got {insecure!r}")
     config = replace(config, insecure_bind=insecure)
-    if config.exposed and not secret and not insecure:
-        raise ConfigError(
-            f"{', '.join(config.exposed)} can be reached from other hosts, and images would travel "
-            "unauthenticated: give curve_secret and curve_clients (see fxis keys), or insecure_bind "
-            "to do it anyway")
-    web = [e for e in config.exposed_unencrypted if e.startswith("http://")]
-    if web and not insecure:
+    if config.http_url in config.exposed and not insecure:
         raise ConfigError(
             f"http {config.http} can be reached from other hosts, and the dashboard has no "
             "authentication (CurveZMQ does not cover HTTP): bind it to 127.0.0.1, turn it off "
             "(http = \"off\"), or give insecure_bind to do it anyway")
+    zmq_exposed = [e for e in config.exposed if e != config.http_url]
+    if zmq_exposed and not secret and not insecure:
+        raise ConfigError(
+            f"{', '.join(zmq_exposed)} can be reached from other hosts, and images would travel "
+            "unauthenticated: give curve_secret and curve_clients (see fxis keys), or insecure_bind "
+            "to do it anyway")
     return config

@@ -32,6 +32,7 @@ log = logging.getLogger("dashboard")
 BOUNDARY = "fxisframe"
 NOT_READY_RETRY_S = 0.2  # a stream whose camera is down looks again this often
 FEED = web.AppKey("feed", LiveFeed)
+FRAME_HEADER = "X-Fxis-Frame"  # GENERATION:FRAME_ID of the frame a picture shows
 
 
 def _page() -> bytes:
@@ -63,17 +64,20 @@ async def _status(request: web.Request) -> web.Response:
 
 async def _dashboard(request: web.Request) -> web.Response:
     feed = request.app[FEED]
-    return web.json_response({**feed.view, "endpoint": feed.endpoint,
-                              "configured": feed.cameras}, headers={"Cache-Control": "no-store"})
+    return web.json_response({**feed.view, "endpoint": feed.endpoint, "configured": feed.cameras,
+                              "previews_encoded": feed.cache.encoded},
+                             headers={"Cache-Control": "no-store"})
 
 
 async def _latest(request: web.Request) -> web.Response:
     try:
         width = parse_width(request.query.get("width"))
-        data, _ = await request.app[FEED].latest_jpeg(request.match_info["name"], width)
+        data, key = await request.app[FEED].latest_jpeg(request.match_info["name"], width)
     except FxisError as exc:
         return _error(exc)
-    return web.Response(body=data, content_type="image/jpeg", headers={"Cache-Control": "no-store"})
+    _, generation, frame_id, _ = key
+    return web.Response(body=data, content_type="image/jpeg", headers={
+        "Cache-Control": "no-store", FRAME_HEADER: f"{generation}:{frame_id}"})
 
 
 async def _stream(request: web.Request) -> web.StreamResponse:
