@@ -187,3 +187,23 @@ def test_a_dashboard_for_other_hosts_is_refused_without_insecure_bind():
     result = fxis("run", "--http", "0.0.0.0:8080")
     assert result.returncode == 2 and "--http" not in result.stdout
     assert "http 0.0.0.0:8080" in result.stderr and "insecure_bind" in result.stderr
+
+
+def test_a_viewer_that_stops_reading_holds_up_nobody(dashboard):
+    svc, base = dashboard
+    url = base + "/cameras/a/stream.mjpg?fps=20&width=320"
+    with urllib.request.urlopen(url, timeout=10) as stalled:  # opened, then never read
+        stalled.read1(1)
+        with svc.client() as client:
+            before = client.status()["cameras"]["a"]
+        with urllib.request.urlopen(url, timeout=10) as reader:
+            data = b""
+            while data.count(b"--fxisframe") < 30:  # 1.5 s of pictures while the other is unread
+                chunk = reader.read1(65536)
+                assert chunk, "the stream ended"
+                data += chunk
+        with svc.client() as client:
+            after = client.status()["cameras"]["a"]
+    assert after["frames_stored"] > before["frames_stored"]
+    assert after["frames_dropped"] == before["frames_dropped"]
+    assert get(base + "/cameras/a/latest.jpg")[0] == 200
