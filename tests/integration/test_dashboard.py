@@ -18,6 +18,7 @@ from fxis_shm.launch import free_tcp_port
 
 from ..conftest import fxis
 from .conftest import SMALL
+from .test_security import client_keys, keys  # noqa: F401  (a fixture)
 
 CAMERAS = ["--camera", "a=synthetic:fps=20,width=320,height=240",
            "--camera", f"b=synthetic:fps=10,{SMALL}"]
@@ -206,4 +207,17 @@ def test_a_viewer_that_stops_reading_holds_up_nobody(dashboard):
             after = client.status()["cameras"]["a"]
     assert after["frames_stored"] > before["frames_stored"]
     assert after["frames_dropped"] == before["frames_dropped"]
+    assert get(base + "/cameras/a/latest.jpg")[0] == 200
+
+
+def test_with_curve_the_dashboard_uses_the_services_own_pair(start_service, wait, keys):
+    folder, allowed = keys
+    # the service's own public key among the allowed ones lets its dashboard in
+    (allowed / "server.key").write_bytes((folder / "server.key").read_bytes())
+    port = free_tcp_port()
+    start_service(*CAMERAS, "--curve-secret", str(folder / "server.key_secret"),
+                  "--curve-clients", str(allowed), client_keys=client_keys(folder, "alice"),
+                  http=f"127.0.0.1:{port}")
+    base = f"http://127.0.0.1:{port}"
+    wait(lambda: service_ok(base), timeout=30, what="the dashboard served through CurveZMQ")
     assert get(base + "/cameras/a/latest.jpg")[0] == 200
