@@ -135,17 +135,18 @@ def synthetic_camera_flags(names: Sequence[str], fps: float, width: int, height:
 
 @contextlib.contextmanager
 def service(endpoint: str | None, run_args: list[str], log_path: str,
-            timeout: float) -> Iterator[tuple[Client, dict]]:
+            timeout: float, http: str = "off") -> Iterator[tuple[Client, dict]]:
     """A client of the service to measure, and facts about it.
 
     With ``endpoint`` None a service is launched with ``fxis run <run_args>`` (its log goes
-    to ``log_path``) and stopped on exit; otherwise the running service is used as is.
+    to ``log_path``; its dashboard at ``http``, HOST:PORT or off) and stopped on exit;
+    otherwise the running service is used as is.
     """
     info = {"launched": endpoint is None, "run_args": run_args if endpoint is None else None}
     with contextlib.ExitStack() as stack:
         if endpoint is None:
             log = stack.enter_context(open(log_path, "wb"))
-            svc = stack.enter_context(ServiceProcess(run_args, stderr=log))
+            svc = stack.enter_context(ServiceProcess(run_args, stderr=log, http=http))
             endpoint = svc.endpoint
             info["log"] = log_path
         info["endpoint"] = endpoint
@@ -173,6 +174,24 @@ def wait_until_streaming(client: Client, min_frames: int = 3, timeout: float = 1
             raise RuntimeError(f"the service's cameras did not stream within {timeout:.0f} s: "
                                f"{status and status['cameras']}")
         time.sleep(0.05)
+
+
+def wait_for_http(url: str, timeout: float = 15.0) -> None:
+    """Return once ``url`` answers 200 (a dashboard listening); RuntimeError after ``timeout`` s."""
+    import urllib.error
+    import urllib.request
+
+    deadline = time.monotonic() + timeout
+    while True:
+        try:
+            with urllib.request.urlopen(url, timeout=2) as answer:
+                if answer.status == 200:
+                    return
+        except (urllib.error.URLError, OSError):
+            pass
+        if time.monotonic() > deadline:
+            raise RuntimeError(f"{url} did not answer within {timeout:.0f} s")
+        time.sleep(0.1)
 
 
 def stamp_ok(frame, kind: str) -> bool | None:

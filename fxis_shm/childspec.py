@@ -115,4 +115,16 @@ class CoordinatorSpec(ChildSpec):
     curve_clients: str | None = None
 
 
-ROLES: dict[str, type[ChildSpec]] = {cls.ROLE: cls for cls in (CameraWorkerSpec, CoordinatorSpec)}
+@dataclass(frozen=True, kw_only=True)
+class DashboardSpec(ChildSpec):
+    ROLE = "dashboard"
+    MODULE = "fxis_shm.workers.dashboard"
+    VERSION = 1
+
+    endpoint: str  # the coordinator it is a client of
+    http: str  # HOST:PORT it serves
+    cameras: dict[str, Any]  # camera name -> {"kind", "fps" configured or None}
+    curve_secret: str | None = None  # the service's pair, to connect with under CurveZMQ
+
+
+ROLES: dict[str, type[ChildSpec]] = {cls.ROLE: cls for cls in (CameraWorkerSpec, CoordinatorSpec, DashboardSpec)}

@@ -29,7 +29,7 @@ def _run(args) -> int:
             "cameras": args.camera, "restart_limit": args.restart_limit,
             "log_level": args.log_level, "curve_secret": args.curve_secret,
             "curve_clients": args.curve_clients, "insecure_bind": args.insecure_bind or None,
-            "clock": args.clock,
+            "clock": args.clock, "http": args.http,
         })
     except ConfigError as exc:
         print(f"fxis run: {exc}", file=sys.stderr)
@@ -77,26 +77,21 @@ def _status(args) -> int:
 
 
 def _grab(args) -> int:
-    import cv2
+    from .tuplefiles import tuple_files
 
     cameras = args.cameras.split(",") if args.cameras else None
     with Client(args.endpoint, timeout=args.timeout) as client:
         frames = client.tuple(cameras=cameras, at=args.at)
+    files = tuple_files(frames)
     os.makedirs(args.out, exist_ok=True)
-    meta = {"t_request": frames.t_request, "skew_ns": frames.skew_ns,
-            "clock": "CLOCK_MONOTONIC", "timing": frames.timing, "frames": {}}
-    for name, frame in frames.items():
-        path = os.path.join(args.out, f"{name}.png")
-        if not cv2.imwrite(path, frame.image):
-            print(f"fxis grab: could not write {path}", file=sys.stderr)
+    for name, data in files.items():
+        path = os.path.join(args.out, name)
+        try:
+            with open(path, "wb") as f:
+                f.write(data)
+        except OSError as exc:
+            print(f"fxis grab: could not write {path}: {exc.strerror}", file=sys.stderr)
             return 1
-        meta["frames"][name] = {
-            "file": f"{name}.png", "frame_id": frame.frame_id, "t_capture": frame.t_capture,
-            "t_stored": frame.t_stored, "generation": frame.generation,
-            "shape": list(frame.image.shape), "dtype": frame.image.dtype.name,
-        }
-    with open(os.path.join(args.out, "tuple.json"), "w") as f:
-        json.dump(meta, f, indent=2)
     print(f"saved {len(frames)} image(s) and tuple.json to {args.out} "
           f"(skew {frames.skew_ns / 1e6:.3f} ms)")
     return 0
@@ -227,6 +222,10 @@ def parser() -> argparse.ArgumentParser:
                      help="folder of the public keys (.key) of the clients allowed in")
     run.add_argument("--insecure-bind", action="store_true",
                      help="allow endpoints reachable from other hosts without CurveZMQ (prints a warning)")
+    run.add_argument("--http", metavar="HOST:PORT|off",
+                     help=f"serve the live dashboard (pictures, rates, skew; docs/dashboard.md) here "
+                          f"(default {defaults.HTTP}); off: none. Another host's address needs "
+                          "--insecure-bind: HTTP has no authentication")
     run.set_defaults(func=_run)
 
     def client_args(sp):

@@ -21,6 +21,7 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
+HTTP_OFF = defaults.HTTP_OFF
 ZERO_ALLOWED = {"sync_tolerance_ms"}  # 0: always the least skew, however far from t*
 # The request defaults a config may change, each of its default's type (max_skew_ms, None
 # by default, takes a number of ms)
@@ -49,13 +50,26 @@ class ServiceConfig:
     curve_clients: str | None = None  # folder of the public keys of the clients allowed in
     insecure_bind: bool = False  # allow non-loopback endpoints without CURVE
     clock: str = "monotonic"  # the clock every time of the service is in (fxis_shm.timebase)
+    http: str = defaults.HTTP  # HOST:PORT of the live dashboard, or "off"
 
     @property
     def exposed(self) -> list[str]:
         """Endpoints reachable from other hosts."""
         from .security import is_loopback
 
-        return [e for e in (self.endpoint, self.pub, self.events) if not is_loopback(e)]
+        return [e for e in (self.endpoint, self.pub, self.events, self.http_url)
+                if e is not None and not is_loopback(e)]
+
+    @property
+    def http_url(self) -> str | None:
+        """The dashboard's address (None: no dashboard)."""
+        return None if self.http == HTTP_OFF else f"http://{self.http}"
+
+    @property
+    def exposed_unencrypted(self) -> list[str]:
+        """What other hosts could reach without authentication: every exposed endpoint
+        without CurveZMQ, and the dashboard (HTTP has no CurveZMQ) in any case."""
+        return [e for e in self.exposed if not self.curve_secret or e.startswith("http://")]
 
 
 def _camera(name: str, kind: str, raw: dict) -> CameraSpec:
@@ -79,6 +93,22 @@ def _check_endpoint(setting: str, endpoint: Any) -> str:
     if not isinstance(endpoint, str) or not endpoint.startswith(("tcp://", "ipc://")):
         raise ConfigError(f"{setting} {endpoint!r}: expected tcp://HOST:PORT or ipc://PATH")
     return endpoint
+
+
+def http_address(value: str) -> tuple[str, int]:
+    """``HOST:PORT`` (an IPv6 host in brackets) as (host, port); ConfigError naming ``http``."""
+    host, sep, port = str(value).rpartition(":")
+    host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+    if not sep or not host or not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise ConfigError(f"http {value!r}: expected HOST:PORT (e.g. {defaults.HTTP}) or {HTTP_OFF!r}")
+    return host, int(port)
+
+
+def _check_http(value: Any) -> str:
+    if value is False or str(value).lower() == HTTP_OFF:  # http = false in TOML reads as off too
+        return HTTP_OFF
+    http_address(value)
+    return str(value)
 
 
 def _check_int(setting: str, value: Any, minimum: int) -> int:
@@ -107,7 +137,7 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
     file_values = dict(file_values or {})
     flags = {k: v for k, v in (flags or {}).items() if v not in (None, [], ())}
     known = {"name", "endpoint", "pub", "events", "slots", "cameras", "restart_limit", "log_level",
-             "curve_secret", "curve_clients", "insecure_bind", "clock",
+             "curve_secret", "curve_clients", "insecure_bind", "clock", "http",
              *SERVICE_SETTINGS}
     unknown = sorted(set(file_values) - known)
     if unknown:
@@ -143,6 +173,8 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
         config = replace(config, pub=_check_endpoint("pub", values["pub"]))
     if "events" in values:
         config = replace(config, events=_check_endpoint("events", values["events"]))
+    if "http" in values:
+        config = replace(config, http=_check_http(values["http"]))
     endpoints = {"endpoint": config.endpoint, "pub": config.pub, "events": config.events}
     if len(set(endpoints.values())) < len(endpoints):
         raise ConfigError(f"endpoint, pub and events need an address each; got {endpoints}")
@@ -206,9 +238,15 @@ def _security(config: ServiceConfig, values: dict) -> ServiceConfig:
     if not isinstance(insecure, bool):
         raise ConfigError(f"insecure_bind must be true or false, got {insecure!r}")
     config = replace(config, insecure_bind=insecure)
-    if config.exposed and not secret and not insecure:
+    if config.http_url in config.exposed and not insecure:
         raise ConfigError(
-            f"{', '.join(config.exposed)} can be reached from other hosts, and images would travel "
+            f"http {config.http} can be reached from other hosts, and the dashboard has no "
+            "authentication (CurveZMQ does not cover HTTP): bind it to 127.0.0.1, turn it off "
+            "(http = \"off\"), or give insecure_bind to do it anyway")
+    zmq_exposed = [e for e in config.exposed if e != config.http_url]
+    if zmq_exposed and not secret and not insecure:
+        raise ConfigError(
+            f"{', '.join(zmq_exposed)} can be reached from other hosts, and images would travel "
             "unauthenticated: give curve_secret and curve_clients (see fxis keys), or insecure_bind "
             "to do it anyway")
     return config

@@ -11,3 +11,5 @@ SLOTS = 20  # frames held per camera ring
 CAMERAS = ("cam0=synthetic", "cam1=synthetic")  # when neither the config nor flags name any
 RESTART_LIMIT = 5  # restarts of one process before the supervisor gives up on it
 LOG_LEVEL = "INFO"
+HTTP = "127.0.0.1:8080"  # the live dashboard (fxis_shm.dashboard)
+HTTP_OFF = "off"  # no dashboard

@@ -29,13 +29,16 @@ class ServiceProcess:
     def __init__(self, args: list[str] = (), name: str | None = None,
                  endpoint: str | None = None, pub: str | None = None, events: str | None = None,
                  ready_timeout: float = 30.0, stderr=None, client_keys=None,
-                 python: str = sys.executable, env: dict[str, str] | None = None):
+                 python: str = sys.executable, env: dict[str, str] | None = None, http: str = "off"):
+        """``http``: the dashboard's HOST:PORT, or "off" (the default: tests and scripts
+        running at once must not all claim the same fixed port)."""
         self.name = name or f"t{os.getpid()}x{time.monotonic_ns() % 10**6}"
         self.endpoint = endpoint or f"tcp://127.0.0.1:{free_tcp_port()}"
         self.pub = pub or f"tcp://127.0.0.1:{free_tcp_port()}"
         self.events = events or f"tcp://127.0.0.1:{free_tcp_port()}"
         self.args = ["--name", self.name, "--endpoint", self.endpoint, "--pub", self.pub,
-                     "--events", self.events, *args]
+                     "--events", self.events, "--http", http, *args]
+        self.http = http
         self.ready_timeout = ready_timeout
         self.stderr = stderr
         self.client_keys = client_keys  # for a service with CurveZMQ

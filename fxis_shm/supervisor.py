@@ -20,7 +20,7 @@ import threading
 import time
 
 from . import naming, timebase
-from .childspec import CameraWorkerSpec, ChildSpec, CoordinatorSpec
+from .childspec import CameraWorkerSpec, ChildSpec, CoordinatorSpec, DashboardSpec
 from .config import ServiceConfig
 
 log = logging.getLogger("supervisor")
@@ -129,6 +129,16 @@ class Child:
             self.proc.kill()
 
 
+def dashboard_child(config: ServiceConfig, common: dict) -> Child | None:
+    """The live dashboard's process (fxis_shm.dashboard), a client of the service; None when off."""
+    if not config.http_url:
+        return None
+    return Child(DashboardSpec(
+        **common, endpoint=config.endpoint, http=config.http, curve_secret=config.curve_secret,
+        cameras={c.name: {"kind": c.kind, "fps": c.options.get("fps")} for c in config.cameras},
+    ), "dashboard", key="dashboard")
+
+
 class Supervisor:
     def __init__(self, config: ServiceConfig, out=sys.stdout):
         self.config = config
@@ -147,11 +157,12 @@ class Supervisor:
             cameras={c.name: c.kind for c in config.cameras}, settings=config.settings,
             curve_secret=config.curve_secret, curve_clients=config.curve_clients,
         ), "coordinator", key="coordinator")
+        self.dashboard = dashboard_child(config, common)
         self.events: list[dict] = []  # the latest exits and restarts, for status
 
     @property
     def children(self) -> list[Child]:
-        return [*self.cameras, self.coordinator]
+        return [*self.cameras, self.coordinator, *([self.dashboard] if self.dashboard else [])]
 
     def run(self) -> int:
         """Serve until SIGINT/SIGTERM; returns the process exit code."""
@@ -184,6 +195,9 @@ class Supervisor:
             child.wait_ready()
         self.coordinator.start()
         self.coordinator.wait_ready()
+        if self.dashboard:  # a reader like any client: after the service it reads
+            self.dashboard.start()
+            self.dashboard.wait_ready()
 
     def _announce(self) -> None:
         c = self.config
@@ -193,11 +207,13 @@ class Supervisor:
             lines.append(f"  {cam.name:<10} {cam.kind:<10} {opts}")
         lines.append(f"  requests on {c.endpoint}, publishing on {c.pub}, request events on {c.events}")
         lines.append(f"  rings of {c.slots} slots in /dev/shm/fxis.{c.name}.*")
+        if c.http_url:
+            lines.append(f"  live dashboard on {c.http_url}/")
         if c.curve_secret:
             lines.append(f"  CurveZMQ: only the clients whose keys are in {c.curve_clients}")
-        elif c.exposed:
-            lines.append(f"  WARNING: {', '.join(c.exposed)} reachable from other hosts WITHOUT "
-                         "authentication or encryption (--insecure-bind)")
+        if c.exposed_unencrypted:
+            lines.append(f"  WARNING: {', '.join(c.exposed_unencrypted)} reachable from other hosts "
+                         "WITHOUT authentication or encryption (--insecure-bind)")
         lines.append("  Ctrl-C stops the service.")
         print("\n".join(lines), file=self.out, flush=True)
 

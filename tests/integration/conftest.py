@@ -30,3 +30,22 @@ def child_pids(svc, role: str) -> list[int]:
     """Pids of the service's children of one role ("camera" or "coordinator")."""
     return [child.pid for child in procstat.children(svc.proc.pid)
             if f"fxis_shm.workers.{role}" in procstat.cmdline(child.pid)]
+
+
+@pytest.fixture
+def keys(tmp_path):
+    """CurveZMQ key pairs made by `fxis keys`: server, alice (allowed in) and mallory (not)."""
+    from ..conftest import fxis
+
+    folder, allowed = tmp_path / "keys", tmp_path / "allowed"
+    for name in ("server", "alice", "mallory"):
+        assert fxis("keys", "--out", str(folder), "--name", name).returncode == 0
+    allowed.mkdir()
+    (allowed / "alice.key").write_bytes((folder / "alice.key").read_bytes())
+    return folder, allowed
+
+
+def client_keys(folder, name):
+    from fxis_shm import ClientKeys
+
+    return ClientKeys.from_files(str(folder / "server.key"), str(folder / f"{name}.key_secret"))

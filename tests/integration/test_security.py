@@ -5,28 +5,14 @@ import time
 
 import pytest
 
-from fxis_shm import Client, ClientKeys, RequestTimeout
+from fxis_shm import Client, RequestTimeout
 from fxis_shm.launch import free_tcp_port
 from fxis_shm.pubsub import Subscriber
 
-from .conftest import SMALL
+from .conftest import SMALL, client_keys
 from .test_lifecycle import fxis
 
 pytestmark = pytest.mark.integration
-
-
-@pytest.fixture
-def keys(tmp_path):
-    folder, allowed = tmp_path / "keys", tmp_path / "allowed"
-    for name in ("server", "alice", "mallory"):
-        assert fxis("keys", "--out", str(folder), "--name", name).returncode == 0
-    allowed.mkdir()
-    (allowed / "alice.key").write_bytes((folder / "alice.key").read_bytes())
-    return folder, allowed
-
-
-def client_keys(folder, name):
-    return ClientKeys.from_files(str(folder / "server.key"), str(folder / f"{name}.key_secret"))
 
 
 def test_only_allowed_clients_are_served(start_service, keys):
@@ -65,7 +51,8 @@ def test_insecure_bind_warns(tmp_path):
     proc = subprocess.Popen(
         [sys.executable, "-m", "fxis_shm.cli", "run", "--name", f"insecure{port}", "--insecure-bind",
          "--camera", f"a=synthetic:{SMALL}", "--endpoint", f"tcp://0.0.0.0:{port}",
-         "--pub", f"tcp://127.0.0.1:{free_tcp_port()}", "--events", f"tcp://127.0.0.1:{free_tcp_port()}"],
+         "--pub", f"tcp://127.0.0.1:{free_tcp_port()}", "--events", f"tcp://127.0.0.1:{free_tcp_port()}",
+         "--http", "off"],
         stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
     try:
         banner = []
