@@ -28,7 +28,8 @@ def free_tcp_port() -> int:
 class ServiceProcess:
     def __init__(self, args: list[str] = (), name: str | None = None,
                  endpoint: str | None = None, pub: str | None = None, events: str | None = None,
-                 ready_timeout: float = 30.0, stderr=None, client_keys=None):
+                 ready_timeout: float = 30.0, stderr=None, client_keys=None,
+                 wrapper: list[str] = ()):
         self.name = name or f"t{os.getpid()}x{time.monotonic_ns() % 10**6}"
         self.endpoint = endpoint or f"tcp://127.0.0.1:{free_tcp_port()}"
         self.pub = pub or f"tcp://127.0.0.1:{free_tcp_port()}"
@@ -38,11 +39,14 @@ class ServiceProcess:
         self.ready_timeout = ready_timeout
         self.stderr = stderr
         self.client_keys = client_keys  # for a service with CurveZMQ
+        # a command that runs the service (e.g. in other namespaces: tests/hosts.py); it must
+        # exec it, not fork, so that SIGTERM reaches the service
+        self.wrapper = list(wrapper)
         self.proc: subprocess.Popen | None = None
 
     def start(self) -> "ServiceProcess":
         self.proc = subprocess.Popen(
-            [sys.executable, "-m", "fxis_shm.cli", "run", *self.args],
+            [*self.wrapper, sys.executable, "-m", "fxis_shm.cli", "run", *self.args],
             stdout=subprocess.DEVNULL, stderr=self.stderr, stdin=subprocess.DEVNULL,
             preexec_fn=die_with_parent,  # a killed launcher takes its service along
         )
