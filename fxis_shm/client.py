@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import itertools
 import time
+import warnings
 from collections.abc import Mapping
 from dataclasses import dataclass, field
 from typing import Callable, Iterator
@@ -33,6 +34,7 @@ LOCAL, NETWORK = "local", "network"
 LOCAL_MODES = ("auto", "off", "require")
 _LOCAL_ATTEMPTS = 3  # requests re-asked after a torn local copy before giving up
 _LOCAL_RETRY_S = 10.0  # after the rings could not be opened, the network path this long
+_PERIODS_VALID_S = 10.0  # the cameras' periods learnt from the status, for sequences that wait
 
 
 @dataclass
@@ -190,7 +192,7 @@ class Client(SocketOwner):
         self._ids = itertools.count(1)
         self._sock = connected_socket(context, zmq.DEALER, endpoint, keys)
         self._clock_offset: int | None = None  # service clock minus local clock
-        self._periods: float | None = None  # longest frame period, for sequences that wait
+        self._periods: tuple[float, float] | None = None  # (longest frame period, when learnt)
         self._boot_id = boot_id()
         self._rings = LocalRings()
         self._reads: LocalReads | None = None  # answers from the rings without the coordinator
@@ -210,29 +212,33 @@ class Client(SocketOwner):
 
     # ---- operations ----
 
-    def image(self, camera: str, at: int | None = None, wait: str | None = None,
-              timeout_ms: float | None = None, copy: bool = True) -> Frame:
-        """The frame of ``camera`` nearest to ``at`` (default: the moment the request arrives).
+    def image(self, camera: str, *, at: int | None = None, wait: str | None = None,
+              timeout: float | None = None, copy: bool = True, timeout_ms: float | None = None) -> Frame:
+        """The frame of ``camera`` nearest to ``at`` (ns of the service's clock; default: the
+        moment the request arrives).
 
+        ``timeout``: seconds the service may wait for frames (default: its setting).
         ``copy=False`` (local path only): the image is a read-only view of the ring slot,
         with no copy at all; check ``frame.still_valid()`` after using it."""
-        reply = self._fetch("image", self._extra_wait(at, timeout_ms), copy, camera=camera, at=at,
-                            wait=wait, timeout_ms=timeout_ms)
+        waits_ms = _timeout_ms(timeout, timeout_ms)
+        reply = self._fetch("image", self._extra_wait(at, waits_ms), copy, camera=camera, at=at,
+                            wait=wait, timeout_ms=waits_ms)
         return frames_of(*reply)[0]
 
-    def tuple(self, cameras: list[str] | None = None, at: int | None = None,
-              sync: str | None = None, wait: str | None = None,
-              max_skew_ms: float | None = None, timeout_ms: float | None = None,
-              partial: bool = False, copy: bool = True) -> FrameTuple:
-        """One frame per camera (default: all), nearest to ``at`` and to each other.
+    def tuple(self, cameras: list[str] | None = None, *, at: int | None = None,
+              sync: str | None = None, wait: str | None = None, max_skew_ms: float | None = None,
+              timeout: float | None = None, partial: bool = False, copy: bool = True,
+              timeout_ms: float | None = None) -> FrameTuple:
+        """One frame per camera (default: all), nearest to ``at`` (ns) and to each other.
         With ``partial``, cameras that are down are left out (``.missing`` names
         them) instead of failing the request with CameraDown."""
-        reply = self._fetch("tuple", self._extra_wait(at, timeout_ms), copy, cameras=cameras, at=at,
+        waits_ms = _timeout_ms(timeout, timeout_ms)
+        reply = self._fetch("tuple", self._extra_wait(at, waits_ms), copy, cameras=cameras, at=at,
                             sync=sync, wait=wait, max_skew_ms=max_skew_ms,
-                            timeout_ms=timeout_ms, partial=partial or None)
+                            timeout_ms=waits_ms, partial=partial or None)
         return tuple_of(*reply)
 
-    def latest(self, cameras: list[str] | None = None, copy: bool = True) -> FrameTuple:
+    def latest(self, cameras: list[str] | None = None, *, copy: bool = True) -> FrameTuple:
         """The newest stored frame of each camera, without waiting."""
         return tuple_of(*self._fetch("latest", 0.0, copy, cameras=cameras))
 
@@ -240,7 +246,7 @@ class Client(SocketOwner):
                  count: int | None = None, direction: str = "before",
                  interval_ms: float | None = None, start: int | None = None, end: int | None = None,
                  at: int | None = None, sync: str | None = None,
-                 timeout_ms: float | None = None, copy: bool = True) -> list:
+                 timeout: float | None = None, copy: bool = True, timeout_ms: float | None = None) -> list:
         """Several frames of one ``camera`` (a list of Frame) or tuples of ``cameras``
         (default all; a list of FrameTuple):
 
@@ -248,22 +254,29 @@ class Client(SocketOwner):
         - ``kind="interval"``: the frames nearest to t* + i*interval_ms, i = 0..count-1;
         - ``kind="range"``: every frame captured in [start, end] (ns).
         """
+        waits_ms = _timeout_ms(timeout, timeout_ms)
         fields = dict(camera=camera, cameras=cameras, kind=kind, count=count, direction=direction,
                       interval_ms=interval_ms, start=start, end=end, at=at, sync=sync,
-                      timeout_ms=timeout_ms)
+                      timeout_ms=waits_ms)
         last = end if kind == "range" else at
         if kind == "interval" and at is not None and count and interval_ms and interval_ms > 0:
             last = at + int((count - 1) * interval_ms * 1e6)
-        extra = self._extra_wait(last, timeout_ms)
+        extra = self._extra_wait(last, waits_ms)
         if kind == "consecutive" and direction != "before" and count:
             extra += count * self._longest_period_s()
         return sequence_of(*self._fetch("sequence", extra, copy, **fields), single=camera is not None)
 
     def _longest_period_s(self) -> float:
-        if self._periods is None:
+        """The slowest camera's frame period: from the rings when they are read here (no
+        request), else from the service's status, looked at again after a while."""
+        reads = self._local_reads()
+        if reads is not None:
+            periods = [h.period_ns for h in reads.cameras.values() if h.period_ns > 0]
+            return max(periods, default=1e9) / 1e9
+        if self._periods is None or time.monotonic() - self._periods[1] > _PERIODS_VALID_S:
             cams = self.status()["cameras"].values()
-            self._periods = max((1 / c["fps"] for c in cams if c.get("fps")), default=1.0)
-        return self._periods
+            self._periods = (max((1 / c["fps"] for c in cams if c.get("fps")), default=1.0), time.monotonic())
+        return self._periods[0]
 
     def status(self) -> dict:
         return self._call("status", 0.0)[0]
@@ -432,6 +445,16 @@ def frames_of(header: dict, images: list[np.ndarray], still_valid: Callable | No
         ]
     except KeyError as exc:
         raise ProtocolError(f"frame metadata lacks {exc}") from None
+
+
+def _timeout_ms(timeout: float | None, timeout_ms: float | None) -> float | None:
+    """A request's own timeout for the wire (ms), from ``timeout`` in seconds as everywhere in
+    this API; ``timeout_ms``, the old name, still works but warns."""
+    if timeout_ms is not None:
+        warnings.warn("timeout_ms= is deprecated: give timeout= in seconds", DeprecationWarning, stacklevel=3)
+        if timeout is None:
+            return timeout_ms
+    return None if timeout is None else timeout * 1000
 
 
 def tuple_of(header: dict, images: list[np.ndarray], still_valid: Callable | None = None) -> FrameTuple:

@@ -14,7 +14,7 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Callable, Sequence
 
 from . import protocol
-from .client import Client, FrameTuple, frames_of, sequence_of, tuple_of
+from .client import Client, FrameTuple, _timeout_ms, frames_of, sequence_of, tuple_of
 from .engine import Reply, RequestEngine
 from .errors import ConfigError, FxisError, Overwritten, RequestTimeout
 from .localreads import same_clock, settled
@@ -70,22 +70,23 @@ class MultiClient:
     # ---- operations (as Client's, over every service) ----
 
     def image(self, camera: str, *, at: int | None = None, wait: str | None = None,
-              timeout_ms: float | None = None):
-        return frames_of(*self._answer("image", camera=camera, at=at, wait=wait, timeout_ms=timeout_ms))[0]
+              timeout: float | None = None):
+        return frames_of(*self._answer("image", camera=camera, at=at, wait=wait, timeout_ms=_timeout_ms(timeout, None)))[0]
 
     def tuple(self, cameras: list[str] | None = None, *, at: int | None = None, sync: str | None = None,
-              wait: str | None = None, max_skew_ms: float | None = None, timeout_ms: float | None = None,
+              wait: str | None = None, max_skew_ms: float | None = None, timeout: float | None = None,
               partial: bool = False) -> FrameTuple:
         return tuple_of(*self._answer("tuple", cameras=cameras, at=at, sync=sync, wait=wait,
-                                      max_skew_ms=max_skew_ms, timeout_ms=timeout_ms, partial=partial or None))
+                                      max_skew_ms=max_skew_ms, timeout_ms=_timeout_ms(timeout, None), partial=partial or None))
 
     def latest(self, cameras: list[str] | None = None) -> FrameTuple:
         return tuple_of(*self._answer("latest", cameras=cameras))
 
     def sequence(self, kind: str, *, camera: str | None = None, cameras: list[str] | None = None,
-                 **fields) -> list:
+                 timeout: float | None = None, **fields) -> list:
+        """As ``Client.sequence`` (``count``, ``direction``, ``interval_ms``, ``start``, ``end``, ``at``, ``sync``)."""
         header, images = self._answer("sequence", kind=kind, camera=camera,
-                                      cameras=cameras, **fields)
+                                      cameras=cameras, timeout_ms=_timeout_ms(timeout, None), **fields)
         return sequence_of(header, images, single=camera is not None)
 
     # ---- one request ----

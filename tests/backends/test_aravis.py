@@ -175,7 +175,7 @@ def test_a_camera_that_vanishes_is_reported_lost_and_resumes_with_a_new_generati
                what="the status to report the camera lost")
     with svc.client() as client:
         with pytest.raises((FrameTimeout, CameraDown)):
-            client.image("a", wait="next", timeout_ms=300)
+            client.image("a", wait="next", timeout=0.3)
     cam.start()  # the same camera comes back
     status = wait_until(lambda: (s := status_of(svc, "a"))["generation"] > generation and s["note"] == "" and s,
                         timeout=20, what="the camera to be reopened")

@@ -121,7 +121,7 @@ def test_partly_filled_and_empty_rings(start_service):
         assert err.value.code == "OUT_OF_RANGE"
         if client.status()["cameras"]["slow"]["frames_stored"] == 0:
             with pytest.raises(FrameTimeout):
-                client.sequence("consecutive", camera="slow", count=1, timeout_ms=100)
+                client.sequence("consecutive", camera="slow", count=1, timeout=0.1)
 
 
 def _config_with(**settings) -> str:
