@@ -6,6 +6,7 @@ Every test here needs root and namespaces; without them the ``emulated_hosts`` f
 saying so. None of them asserts a duration: bench/network.py measures."""
 import os
 import subprocess
+import sys
 import time
 
 import numpy as np
@@ -207,3 +208,20 @@ def test_compressed_frames_over_the_link_keep_shape_and_stamp(emulated_hosts, en
         else:
             assert error.mean() <= 2.0  # q90 on the synthetic pattern: under 2 grey levels on average
         assert packed_bytes < raw_bytes / 2  # what the link carried, counted by the shaper
+
+
+# ---- the example ------------------------------------------------------------------------------
+
+def test_the_two_hosts_example_runs(emulated_hosts):
+    """examples/two_hosts/run.py makes its own lab; the fixture only checks that hosts can be made."""
+    from pathlib import Path
+
+    run = Path(__file__).resolve().parents[2] / "examples" / "two_hosts" / "run.py"
+    done = subprocess.run([sys.executable, str(run), "-n", "3", "--width", "320", "--height", "240",
+                           "--encoding", "jpeg"], capture_output=True, text=True, timeout=180)
+    report = f"stdout:\n{done.stdout}\nstderr:\n{done.stderr}"
+    assert done.returncode == 0, report
+    assert done.stdout.rstrip().endswith("OK"), report
+    assert "--insecure-bind" not in done.stdout and "--curve-secret" in done.stdout
+    from ..hosts import _owner_alive, ours
+    assert [n for n in ours(namespaces() + links()) if not _owner_alive(n)] == []  # run.py removed its hosts
