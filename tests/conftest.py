@@ -81,3 +81,5 @@ def emulated_hosts(tmp_path):
     with lab:
         yield lab
     assert lab.leftovers() == [], "emulated hosts left namespaces or links behind"
+    for svc in (svc for host in lab.hosts for svc in host.services):
+        assert not os.path.exists(lock_path(svc.name)), f"service {svc.name!r} left its lock file"

@@ -289,15 +289,19 @@ class Lab:
         self._keys_dir = self.closing.enter_context(tempfile.TemporaryDirectory(prefix="fxt-keys-"))
         self.log_dir = log_dir or self._keys_dir
         self.hosts: list[EmulatedHost] = []
-        remove_leftovers()
-        # one server key pair for every host of the lab, so one ClientKeys opens them all
-        keys = os.path.join(self._keys_dir, "keys")
-        self.allowed = os.path.join(self._keys_dir, "allowed")
-        _, self.server_secret = create_keys(keys, "server")
-        client_public, client_secret = create_keys(keys, "client")
-        os.makedirs(self.allowed, mode=0o700)
-        shutil.copy(client_public, self.allowed)
-        self.client_keys = ClientKeys.from_files(os.path.join(keys, "server.key"), client_secret)
+        try:
+            remove_leftovers()
+            # one server key pair for every host of the lab, so one ClientKeys opens them all
+            keys = os.path.join(self._keys_dir, "keys")
+            self.allowed = os.path.join(self._keys_dir, "allowed")
+            _, self.server_secret = create_keys(keys, "server")
+            client_public, client_secret = create_keys(keys, "client")
+            os.makedirs(self.allowed, mode=0o700)
+            shutil.copy(client_public, self.allowed)
+            self.client_keys = ClientKeys.from_files(os.path.join(keys, "server.key"), client_secret)
+        except BaseException:
+            self.closing.close()
+            raise
 
     def host(self, clock_offset_s: int = 1000, rate: str | None = "1gbit") -> EmulatedHost:
         """A new emulated host whose clock is ``clock_offset_s`` ahead of ours, on a link of ``rate``."""
