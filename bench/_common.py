@@ -226,6 +226,11 @@ def summary(values: Iterable[float]) -> dict:
     }
 
 
+def verdict(passed: bool | None) -> str:
+    """A target's verdict as printed: PASS, FAIL, or n/a when it could not be measured."""
+    return {True: "PASS", False: "FAIL", None: "n/a"}[passed]
+
+
 def fmt(value, digits: int = 2) -> str:
     if value is None or (isinstance(value, float) and math.isnan(value)):
         return "-"

@@ -2,8 +2,9 @@
 time-synchronized images over ZeroMQ. The public API is what ``__all__`` names
 (README.md, "The public API")."""
 from .client import Client, Frame, FrameTuple
+from .clockmap import ClockEstimate
 from .errors import (
-    CameraDown, ConfigError, FrameTimeout, FxisError, LocalPathUnavailable, Overwritten,
+    CameraDown, ConfigError, FrameTimeout, FxisError, InvalidArgument, LocalPathUnavailable, Overwritten,
     ProtocolError, RequestTimeout, RingError, ServiceError, SkewExceeded, UnknownCamera,
 )
 from .multiclient import MultiClient
@@ -12,10 +13,10 @@ from .security import ClientKeys
 from .stamp import read_stamp
 
 __all__ = [
-    "Client", "MultiClient", "ClientKeys", "Frame", "FrameTuple",
+    "Client", "MultiClient", "ClientKeys", "Frame", "FrameTuple", "ClockEstimate",
     "Subscriber", "EventPublisher", "Message", "handshake", "read_stamp",
     "FxisError", "ConfigError", "ProtocolError", "RequestTimeout", "ServiceError",
     "CameraDown", "UnknownCamera", "SkewExceeded", "FrameTimeout", "LocalPathUnavailable",
-    "RingError", "Overwritten",
+    "RingError", "Overwritten", "InvalidArgument",
 ]
 __version__ = "0.1.0"

@@ -7,7 +7,7 @@ import time
 import numpy as np
 import posix_ipc
 
-from . import naming, procstat
+from . import naming, procstat, timebase
 from .errors import RingError
 from .ring import FLAG_TRIGGERED, RingReader, Snapshot
 from .waitpolicy import CameraState
@@ -62,7 +62,7 @@ class CameraHandle:
         return None
 
     def _alive(self, pid: int, write_count: int) -> bool:
-        checked = time.monotonic_ns()
+        checked = timebase.now()
         seen_pid, seen_at, seen_count = self._seen_alive
         if pid == seen_pid and (checked - seen_at < ALIVE_CHECK_NS or write_count != seen_count):
             # a frame stored since the last look is as good a sign of life as /proc

@@ -26,6 +26,7 @@ def _run(args) -> int:
             "cameras": args.camera, "restart_limit": args.restart_limit,
             "log_level": args.log_level, "curve_secret": args.curve_secret,
             "curve_clients": args.curve_clients, "insecure_bind": args.insecure_bind or None,
+            "clock": args.clock,
         })
     except ConfigError as exc:
         print(f"fxis run: {exc}", file=sys.stderr)
@@ -42,11 +43,17 @@ def _run(args) -> int:
 def _status(args) -> int:
     with Client(args.endpoint, timeout=args.timeout) as client:
         status = client.status()
+        # this host's view of the service's clock (what a client here maps times with)
+        status["clock_mapping"] = client.clock_estimate().as_dict()
     if args.json:
         print(json.dumps(status, indent=2))
         return 0
     print(f"service {status['service']!r}  uptime {status['uptime_s']:.1f} s  "
           f"requests {status['requests_served']}  waiting {status['pending']}")
+    mapping = status["clock_mapping"]
+    print(f"clock {status.get('clock', 'monotonic')}: {mapping['method']}, offset from this host's monotonic "
+          f"{mapping['offset_ns'] / 1e6:+.3f} ms, drift {mapping['drift_ppm']:+.2f} ppm, "
+          f"uncertainty {mapping['uncertainty_ns'] / 1e3:.0f} us")
     columns = ["camera", "kind", "alive", "shape", "fps", "stored", "dropped", "age_ms",
                "slots", "gen", "torn"]
     rows = []
@@ -150,6 +157,10 @@ def parser() -> argparse.ArgumentParser:
     run.add_argument("--events", help="endpoint receiving request events (default tcp://127.0.0.1:5557)")
     run.add_argument("--slots", type=int, help="frames held per camera ring (default 20)")
     run.add_argument("--config", metavar="FILE.toml", help="settings file (flags override it)")
+    run.add_argument("--clock", choices=("monotonic", "realtime", "tai"),
+                     help="the clock of every time the service gives and takes (default monotonic); "
+                          "realtime or tai where PTP or chrony keeps the cell's hosts in step "
+                          "(docs/deployment.md)")
     run.add_argument("--restart-limit", type=int, help="restarts of a crashed process before giving up (default 5)")
     run.add_argument("--log-level", help="DEBUG, INFO (default), WARNING or ERROR")
     run.add_argument("--curve-secret", metavar="FILE", help="the service's NAME.key_secret: CurveZMQ on every socket")

@@ -8,134 +8,49 @@ Two paths bring the pixels (``Frame.path`` says which one did): on the
 service's own kernel, the service replies with where the chosen frames are and
 the client copies them out of the shared-memory rings itself ("local", see
 fxis_shm.localpath); elsewhere, or when the rings cannot be opened here, the
-frames travel in the reply ("network").
+frames travel in the reply ("network"), raw or compressed (``encoding``).
+
+Every time the client takes or returns is in the caller's clock (``clock``): it
+keeps an estimate of each service's clock against it (fxis_shm.clockmap, kept fresh
+in the background by fxis_shm.clocktracker), exactly 0 where the service provably
+reads the same clock.
 """
 from __future__ import annotations
 
 import itertools
 import time
 import warnings
-from collections.abc import Mapping
-from dataclasses import dataclass, field
-from typing import Callable, Iterator
+from typing import Callable
 
 import numpy as np
 import zmq
 
-from . import protocol
-from .bufferpool import release as release_buffer
-from .errors import CameraDown, FxisError, InvalidArgument, LocalPathUnavailable, UnknownCamera, Overwritten, ProtocolError, RequestTimeout, service_error
-from .localpath import LocalRings, LocalUnavailable, boot_id
+from . import encoding as codec
+from . import protocol, timebase
+from .clockmap import IDENTITY, SAME_CLOCK, SHARED, ClockEstimate
+from .clocktracker import ClockTracker
+from .errors import (CameraDown, InvalidArgument, LocalPathUnavailable, Overwritten, ProtocolError,
+                     RequestTimeout, UnknownCamera, service_error)
+from .frames import (LOCAL, NETWORK, Frame, FrameTuple, ReleasedImage, frames_of, in_caller_clock,  # noqa: F401
+                     sequence_of, tuple_of)
+from .localpath import LocalRings, LocalUnavailable, boot_id, time_namespace
 from .localreads import LocalReads
 from .security import ClientKeys
 
 DEFAULT_ENDPOINT = "tcp://127.0.0.1:5555"
-LOCAL, NETWORK = "local", "network"
 LOCAL_MODES = ("auto", "off", "require")
 _LOCAL_ATTEMPTS = 3  # requests re-asked after a torn local copy before giving up
 _LOCAL_RETRY_S = 10.0  # after the rings could not be opened, the network path this long
 _PERIODS_VALID_S = 10.0  # the cameras' periods learnt from the status, for sequences that wait
 
 
-@dataclass
-class Frame:
-    """One image and what the service knows of it. Times are ns of the service's CLOCK_MONOTONIC."""
-
-    image: np.ndarray
-    camera: str
-    frame_id: int
-    t_capture: int
-    t_stored: int
-    generation: int
-    timing: dict = field(default_factory=dict, repr=False)
-    t_available: int | None = None  # when the worker had the whole frame (before any processing hook)
-    path: str = NETWORK  # how the pixels came: "local" (copied from the ring here) or "network"
-    _still_valid: Callable[[], bool] | None = field(default=None, repr=False)
-
-    def still_valid(self) -> bool:
-        """False once a zero-copy view's slot has been overwritten (then discard what you
-        computed from it). A copied image (the default) stays valid for ever."""
-        return self._still_valid is None or self._still_valid()
-
-    def release(self) -> None:
-        """Done with the image: its buffer goes back to the client's pool now (otherwise it
-        does when the last reference to the image goes). Using ``image`` afterwards raises
-        FxisError. ``with frame:`` releases on leaving the block."""
-        if not isinstance(self.image, ReleasedImage):
-            release_buffer(self.image)
-            self.image = ReleasedImage(f"the image of frame {self.frame_id} of {self.camera!r}")
-
-    def __enter__(self) -> "Frame":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.release()
-
-
-class ReleasedImage:
-    """What ``Frame.image`` is after ``release()``: any use says so."""
-
-    __slots__ = ("what",)
-
-    def __init__(self, what: str):
-        self.what = what
-
-    def _fail(self, *args, **kwargs):
-        raise FxisError(f"{self.what} was released: its buffer may hold another frame now")
-
-    __getattr__ = __array__ = __getitem__ = __len__ = __iter__ = _fail
-
-    def __repr__(self) -> str:
-        return f"<{self.what}, released>"
-
-
-class FrameTuple(Mapping):
-    """One frame per camera, chosen together for the request time ``t_request``."""
-
-    def __init__(self, frames: dict[str, Frame], t_request: int | None, timing: dict,
-                 missing: list[str] = ()):
-        self._frames = frames
-        self.t_request = t_request
-        self.timing = timing
-        self.missing = list(missing)  # cameras left out of a partial tuple (they were down)
-
-    @property
-    def path(self) -> str:
-        """How the pixels came: "local" or "network" (the same for every frame of a reply)."""
-        return next(iter(self._frames.values())).path if self._frames else NETWORK
-
-    def still_valid(self) -> bool:
-        return all(f.still_valid() for f in self._frames.values())
-
-    def release(self) -> None:
-        """Release every frame (see ``Frame.release``); ``with tuple_:`` does it on leaving."""
-        for frame in self._frames.values():
-            frame.release()
-
-    def __enter__(self) -> "FrameTuple":
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.release()
-
-    def __getitem__(self, camera: str) -> Frame:
-        return self._frames[camera]
-
-    def __iter__(self) -> Iterator[str]:
-        return iter(self._frames)
-
-    def __len__(self) -> int:
-        return len(self._frames)
-
-    @property
-    def skew_ns(self) -> int:
-        """Max minus min capture time over the tuple."""
-        times = [f.t_capture for f in self._frames.values()]
-        return max(times) - min(times)
-
-    def __repr__(self) -> str:
-        ids = {c: f.frame_id for c, f in self._frames.items()}
-        return f"FrameTuple({ids}, skew_ns={self.skew_ns})"
+def checked_encoding(encoding: str, quality: int | None) -> tuple[str, int | None]:
+    """``encoding`` and ``quality`` if a service can send frames so, else InvalidArgument."""
+    try:
+        codec.check(encoding, codec.DEFAULT_JPEG_QUALITY if quality is None else quality)
+    except ProtocolError as exc:
+        raise InvalidArgument(exc.message) from None
+    return encoding, quality
 
 
 def connected_socket(context: zmq.Context | None, kind: int, endpoint: str,
@@ -176,22 +91,39 @@ class Client(SocketOwner):
 
     def __init__(self, endpoint: str = DEFAULT_ENDPOINT, timeout: float = 2.0,
                  context: zmq.Context | None = None, keys: ClientKeys | None = None,
-                 local: str = "auto"):
+                 local: str = "auto", *, clock: Callable[[], int] | str | None = None,
+                 encoding: str = codec.RAW, quality: int | None = None):
         """``keys``: for a service with CurveZMQ, its public key and this client's pair
         (``ClientKeys.from_files("server.key", "me.key_secret")``).
 
         ``local``: "auto" copies frames straight from the service's shared-memory rings
         when the service runs on this kernel and its rings can be opened (same user, same
         /dev/shm), else takes them from the reply; "off" always takes them from the
-        reply; "require" raises LocalPathUnavailable rather than use the network path."""
+        reply; "require" raises LocalPathUnavailable rather than use the network path.
+
+        ``clock``: the caller's clock, in which every time is given and returned:
+        "monotonic" (default, ``time.monotonic_ns``), "realtime" (``time.time_ns``), "tai",
+        or any function returning int ns. ``client.clocks`` shows its relation to the
+        service's clock.
+
+        ``encoding``: how frames travel over the network ("raw", "jpeg" with ``quality``
+        1-100, default 90, or "png"); each request may say otherwise. The local path is raw."""
         if local not in LOCAL_MODES:
             raise InvalidArgument(f"local must be one of {LOCAL_MODES}, got {local!r}")
+        if not (callable(clock) or clock is None or isinstance(clock, str)):
+            raise InvalidArgument(f"clock must be a clock's name or a function returning int ns, got {clock!r}")
         self.endpoint = endpoint
         self.timeout = timeout
         self.local = local
+        self.encoding, self.quality = checked_encoding(encoding, quality)
+        self._clock_name = timebase.name_of(clock)
+        self.clock: Callable[[], int] = clock if callable(clock) else timebase.reader(self._clock_name or "")
         self._ids = itertools.count(1)
+        self._context, self._keys = context, keys
         self._sock = connected_socket(context, zmq.DEALER, endpoint, keys)
-        self._clock_offset: int | None = None  # service clock minus local clock
+        self._identity: dict | None = None  # the service's kernel, time namespace and clock, from its status
+        self._mapping: ClockEstimate | None = None  # fixed: the service reads our clock (or one shared)
+        self._tracker: ClockTracker | None = None  # else: estimated
         self._periods: tuple[float, float] | None = None  # (longest frame period, when learnt)
         self._boot_id = boot_id()
         self._rings = LocalRings()
@@ -201,6 +133,8 @@ class Client(SocketOwner):
         self.paths = {LOCAL: 0, NETWORK: 0, "torn": 0}  # replies by path; local copies found torn
 
     def close(self) -> None:
+        if self._tracker is not None:
+            self._tracker.close()
         self._drop_reads()
         self._rings.close()
         super().close()
@@ -213,58 +147,69 @@ class Client(SocketOwner):
     # ---- operations ----
 
     def image(self, camera: str, *, at: int | None = None, wait: str | None = None,
-              timeout: float | None = None, copy: bool = True, timeout_ms: float | None = None) -> Frame:
-        """The frame of ``camera`` nearest to ``at`` (ns of the service's clock; default: the
-        moment the request arrives).
+              timeout: float | None = None, copy: bool = True, encoding: str | None = None,
+              quality: int | None = None, timeout_ms: float | None = None) -> Frame:
+        """The frame of ``camera`` nearest to ``at`` (ns of the caller's clock; default: the
+        moment of this call).
 
         ``timeout``: seconds the service may wait for frames (default: its setting).
         ``copy=False`` (local path only): the image is a read-only view of the ring slot,
-        with no copy at all; check ``frame.still_valid()`` after using it."""
-        waits_ms = _timeout_ms(timeout, timeout_ms)
-        reply = self._fetch("image", self._extra_wait(at, waits_ms), copy, camera=camera, at=at,
-                            wait=wait, timeout_ms=waits_ms)
-        return frames_of(*reply)[0]
+        with no copy at all; check ``frame.still_valid()`` after using it.
+        ``encoding``/``quality``: as the client's, for this request."""
+        return frames_of(*self._request("image", timeout, timeout_ms, copy, encoding, quality,
+                                        camera=camera, at=at, wait=wait))[0]
 
     def tuple(self, cameras: list[str] | None = None, *, at: int | None = None,
               sync: str | None = None, wait: str | None = None, max_skew_ms: float | None = None,
               timeout: float | None = None, partial: bool = False, copy: bool = True,
+              encoding: str | None = None, quality: int | None = None,
               timeout_ms: float | None = None) -> FrameTuple:
-        """One frame per camera (default: all), nearest to ``at`` (ns) and to each other.
-        With ``partial``, cameras that are down are left out (``.missing`` names
-        them) instead of failing the request with CameraDown."""
-        waits_ms = _timeout_ms(timeout, timeout_ms)
-        reply = self._fetch("tuple", self._extra_wait(at, waits_ms), copy, cameras=cameras, at=at,
-                            sync=sync, wait=wait, max_skew_ms=max_skew_ms,
-                            timeout_ms=waits_ms, partial=partial or None)
-        return tuple_of(*reply)
+        """One frame per camera (default: all), nearest to ``at`` (ns of the caller's clock;
+        default: the moment of this call) and to each other. With ``partial``, cameras
+        that are down are left out (``.missing`` names them) instead of failing the request
+        with CameraDown."""
+        return tuple_of(*self._request("tuple", timeout, timeout_ms, copy, encoding, quality, cameras=cameras,
+                                       at=at, sync=sync, wait=wait, max_skew_ms=max_skew_ms,
+                                       partial=partial or None))
 
-    def latest(self, cameras: list[str] | None = None, *, copy: bool = True) -> FrameTuple:
+    def latest(self, cameras: list[str] | None = None, *, copy: bool = True, encoding: str | None = None,
+               quality: int | None = None) -> FrameTuple:
         """The newest stored frame of each camera, without waiting."""
-        return tuple_of(*self._fetch("latest", 0.0, copy, cameras=cameras))
+        return tuple_of(*self._request("latest", None, None, copy, encoding, quality, cameras=cameras))
 
     def sequence(self, kind: str, *, camera: str | None = None, cameras: list[str] | None = None,
                  count: int | None = None, direction: str = "before",
                  interval_ms: float | None = None, start: int | None = None, end: int | None = None,
-                 at: int | None = None, sync: str | None = None,
-                 timeout: float | None = None, copy: bool = True, timeout_ms: float | None = None) -> list:
+                 at: int | None = None, sync: str | None = None, timeout: float | None = None,
+                 copy: bool = True, encoding: str | None = None, quality: int | None = None,
+                 timeout_ms: float | None = None) -> list:
         """Several frames of one ``camera`` (a list of Frame) or tuples of ``cameras``
         (default all; a list of FrameTuple):
 
         - ``kind="consecutive"``: ``count`` frames ``before``, ``after`` or ``around`` t*;
         - ``kind="interval"``: the frames nearest to t* + i*interval_ms, i = 0..count-1;
-        - ``kind="range"``: every frame captured in [start, end] (ns).
+        - ``kind="range"``: every frame captured in [start, end] (ns of the caller's clock).
         """
-        waits_ms = _timeout_ms(timeout, timeout_ms)
-        fields = dict(camera=camera, cameras=cameras, kind=kind, count=count, direction=direction,
-                      interval_ms=interval_ms, start=start, end=end, at=at, sync=sync,
-                      timeout_ms=waits_ms)
-        last = end if kind == "range" else at
-        if kind == "interval" and at is not None and count and interval_ms and interval_ms > 0:
-            last = at + int((count - 1) * interval_ms * 1e6)
-        extra = self._extra_wait(last, waits_ms)
-        if kind == "consecutive" and direction != "before" and count:
-            extra += count * self._longest_period_s()
-        return sequence_of(*self._fetch("sequence", extra, copy, **fields), single=camera is not None)
+        header, images, check = self._request(
+            "sequence", timeout, timeout_ms, copy, encoding, quality, camera=camera, cameras=cameras, kind=kind,
+            count=count, direction=direction, interval_ms=interval_ms, start=start, end=end, at=at, sync=sync)
+        return sequence_of(header, images, check, single=camera is not None)
+
+    @property
+    def clocks(self) -> dict[str, ClockEstimate]:
+        """The service's clock against the caller's: offset (service minus caller), drift,
+        uncertainty and how it is known ("same clock", "shared", "estimated")."""
+        return {self.endpoint: self.clock_estimate()}
+
+    def clock_estimate(self) -> ClockEstimate:
+        """The current mapping of the caller's clock onto the service's (see ``clocks``)."""
+        if self._mapping is None and self._tracker is None:
+            self._mapping = fixed_mapping(self._clock_name, self._service_identity())
+            if self._mapping is None:
+                self._tracker = ClockTracker(
+                    lambda: connected_socket(self._context, zmq.DEALER, self.endpoint, self._keys),
+                    self.clock, self.endpoint, self.timeout)
+        return self._mapping or self._tracker.estimate()  # type: ignore[union-attr]
 
     def _longest_period_s(self) -> float:
         """The slowest camera's frame period: from the rings when they are read here (no
@@ -279,11 +224,47 @@ class Client(SocketOwner):
         return self._periods[0]
 
     def status(self) -> dict:
-        return self._call("status", 0.0)[0]
+        status = self._call("status", 0.0)[0]
+        self._identity = {k: status.get(k) for k in ("boot_id", "time_namespace", "clock")}
+        return status
 
     def time(self) -> int:
-        """The service's clock now (ns of its CLOCK_MONOTONIC)."""
+        """The service's clock now (int ns of the clock its status names; CLOCK_MONOTONIC by default)."""
         return self._call("time", 0.0)[0]["now"]
+
+    def _service_identity(self) -> dict:
+        if self._identity is None:
+            self.status()
+        assert self._identity is not None
+        return self._identity
+
+    def _request(self, op: str, timeout: float | None, timeout_ms: float | None, copy: bool,
+                 encoding: str | None, quality: int | None, **fields) -> tuple[dict, list, Callable | None]:
+        """A frame request with the caller's times moved into the service's clock, and the
+        reply's moved back. Without ``at``, t* is the moment of the call (the request's
+        travel time does not count)."""
+        called = self.clock()
+        waits_ms = _timeout_ms(timeout, timeout_ms)
+        mapping = self.clock_estimate()
+        last = _last_needed(op, fields)  # in the caller's clock
+        extra = max(0.0, (waits_ms or 0) / 1000 - self.timeout / 2)
+        if last is not None:
+            extra += max(0.0, (last - called) / 1e9)
+        if op == "sequence" and fields["kind"] == "consecutive" and fields["direction"] != "before" and fields["count"]:
+            extra += fields["count"] * self._longest_period_s()
+        for key in ("at", "start", "end"):
+            if fields.get(key) is not None:
+                fields[key] = mapping.to_service(fields[key])
+        if op != "latest" and fields.get("at") is None:
+            fields["t_call"] = mapping.to_service(called)
+        if encoding is not None or quality is not None:
+            encoding, quality = checked_encoding(encoding or self.encoding, quality)
+        else:
+            encoding, quality = self.encoding, self.quality
+        if encoding != codec.RAW:
+            fields.update(encoding=encoding, quality=quality)
+        header, images, check = self._fetch(op, extra, copy, timeout_ms=waits_ms, **fields)
+        return in_caller_clock(header, mapping), images, check
 
     def frame_times(self, cameras: list[str] | None = None) -> dict:
         """Each camera's frames without pixels (the ``frames`` op): liveness, period and a row
@@ -329,7 +310,7 @@ class Client(SocketOwner):
         return self._network_reply(*self._call(op, extra_wait, **fields))
 
     def _read_locally(self, op: str, extra_wait: float, copy: bool, fields: dict) -> tuple[dict, list, Callable | None]:
-        deadline = time.monotonic_ns() + int((self.timeout + extra_wait) * 1e9)
+        deadline = self._reads.now() + int((self.timeout + extra_wait) * 1e9)
         try:
             header, images, check = self._reads.answer(op, fields, deadline, copy)
         except (CameraDown, UnknownCamera):
@@ -385,20 +366,6 @@ class Client(SocketOwner):
 
     # ---- plumbing ----
 
-    def _extra_wait(self, at: int | None, timeout_ms: float | None = None) -> float:
-        """Seconds the service may legitimately spend on a request beyond the client's
-        own timeout: waiting for a future ``at``, and a ``timeout_ms`` longer than ours."""
-        extra = max(0.0, (timeout_ms or 0) / 1000 - self.timeout / 2)
-        if at is None:
-            return extra
-        if self._clock_offset is None and self._local_reads() is not None:
-            self._clock_offset = 0  # the service's clock is ours (same kernel, same time namespace)
-        if self._clock_offset is None:
-            sent = time.monotonic_ns()
-            now = self.time()
-            self._clock_offset = now - (sent + time.monotonic_ns()) // 2
-        return extra + max(0.0, (at - self._clock_offset - time.monotonic_ns()) / 1e9)
-
     def _call(self, op: str, extra_wait: float, **fields) -> tuple[dict, list[np.ndarray]]:
         request_id = next(self._ids)
         deadline = time.monotonic() + self.timeout + extra_wait
@@ -433,20 +400,6 @@ class Client(SocketOwner):
 
 
 
-# ---- decoding replies and stream messages into Frames ----
-
-def frames_of(header: dict, images: list[np.ndarray], still_valid: Callable | None = None) -> list[Frame]:
-    timing, path = header.get("timing", {}), header.get("path", NETWORK)
-    try:
-        return [
-            Frame(img, m["camera"], m["frame_id"], m["t_capture"], m["t_stored"],
-                  m["generation"], timing, m.get("t_available"), path, still_valid)
-            for m, img in zip(header["frames"], images)
-        ]
-    except KeyError as exc:
-        raise ProtocolError(f"frame metadata lacks {exc}") from None
-
-
 def _timeout_ms(timeout: float | None, timeout_ms: float | None) -> float | None:
     """A request's own timeout for the wire (ms), from ``timeout`` in seconds as everywhere in
     this API; ``timeout_ms``, the old name, still works but warns."""
@@ -457,21 +410,30 @@ def _timeout_ms(timeout: float | None, timeout_ms: float | None) -> float | None
     return None if timeout is None else timeout * 1000
 
 
-def tuple_of(header: dict, images: list[np.ndarray], still_valid: Callable | None = None) -> FrameTuple:
-    frames = frames_of(header, images, still_valid)
-    return FrameTuple({f.camera: f for f in frames}, header.get("t_request"), header.get("timing", {}),
-                      header.get("missing", ()))
+def _last_needed(op: str, fields: dict) -> int | None:
+    """The latest moment (caller's clock) whose frames a request asks for, if it names one."""
+    if op == "sequence" and fields["kind"] == "range":
+        return fields["end"]
+    at = fields.get("at")
+    if op == "sequence" and fields["kind"] == "interval" and at is not None and fields["count"] \
+            and fields["interval_ms"] and fields["interval_ms"] > 0:
+        return at + int((fields["count"] - 1) * fields["interval_ms"] * 1e6)
+    return at
 
 
-def sequence_of(header: dict, images: list[np.ndarray], still_valid: Callable | None = None,
-                single: bool = False) -> list:
-    frames = frames_of(header, images, still_valid)
-    groups = header.get("groups", [])
-    timing = header.get("timing", {})
-    if single:
-        return [frames[g[0]] for g in groups]
-    return [FrameTuple({frames[i].camera: frames[i] for i in g}, t, timing)
-            for g, t in zip(groups, header.get("targets", [None] * len(groups)))]
+def fixed_mapping(caller_clock: str | None, service: dict) -> ClockEstimate | None:
+    """The mapping when no estimate is needed: the service reads the very clock the caller
+    does (same kernel, and for CLOCK_MONOTONIC the same time namespace), or both read a
+    clock kept in step across hosts (realtime, tai). None: it must be estimated."""
+    service_clock = service.get("clock") or timebase.DEFAULT
+    if caller_clock != service_clock:
+        return None
+    same_kernel = service.get("boot_id") is not None and service.get("boot_id") == boot_id()
+    if caller_clock == "monotonic":
+        namespace = time_namespace()
+        return IDENTITY if same_kernel and namespace is not None and service.get("time_namespace") == namespace \
+            else None
+    return ClockEstimate(0, method=SAME_CLOCK if same_kernel else SHARED)
 
 
 def _same_moment(op: str, fields: dict, header: dict) -> dict:

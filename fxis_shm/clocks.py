@@ -10,11 +10,17 @@
   transfer delay >= capture, so the fit runs through the lower envelope of the
   pairs (the least delayed frames), not their mean.
 
-Pure: the clocks are read by the caller and passed in.
+- ``PtpClock``: a camera whose clock PTP keeps on the cell's grandmaster (IEEE 1588
+  time, TAI ns: what GigE Vision cameras with PTP enabled stamp). Nothing to fit: its
+  timestamps are moved into the service's clock by the difference between the two
+  clocks read now, which is 0 when the service runs on ``--clock tai``.
+
+Pure: the clocks are read by the caller and passed in (``PtpClock`` gets a function).
 """
 from __future__ import annotations
 
 import collections
+from typing import Callable
 
 
 def wall_to_monotonic(wall_ns: int, monotonic_now_ns: int, wall_now_ns: int) -> int:
@@ -60,3 +66,21 @@ class DeviceClockFit:
         if not self._pairs:
             raise ValueError("no frames fitted yet")
         return int(round(self.offset + self.drift * device_ticks * self.tick_ns))
+
+
+class PtpClock:
+    """``DeviceClockFit``'s interface for a PTP-disciplined camera: ``clocks()`` returns
+    (service clock now, CLOCK_TAI now), read together."""
+
+    def __init__(self, clocks: Callable[[], tuple[int, int]], tick_ns: float = 1.0):
+        self._clocks, self.tick_ns = clocks, tick_ns
+
+    def __len__(self) -> int:
+        return 1  # nothing to learn: ready from the first frame
+
+    def add(self, device_ticks: int, host_ns: int) -> None:
+        """Nothing to fit: PTP already put the camera on the cell's time."""
+
+    def to_host(self, device_ticks: int) -> int:
+        service_now, tai_now = self._clocks()
+        return round(device_ticks * self.tick_ns) + service_now - tai_now

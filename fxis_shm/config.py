@@ -53,6 +53,7 @@ class ServiceConfig:
     curve_secret: str | None = None  # the service's NAME.key_secret: CURVE on every socket
     curve_clients: str | None = None  # folder of the public keys of the clients allowed in
     insecure_bind: bool = False  # allow non-loopback endpoints without CURVE
+    clock: str = "monotonic"  # the clock every time of the service is in (fxis_shm.timebase)
 
     @property
     def exposed(self) -> list[str]:
@@ -115,7 +116,7 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
     file_values = dict(file_values or {})
     flags = {k: v for k, v in (flags or {}).items() if v not in (None, [], ())}
     known = {"name", "endpoint", "pub", "events", "slots", "cameras", "restart_limit", "log_level",
-             "curve_secret", "curve_clients", "insecure_bind",
+             "curve_secret", "curve_clients", "insecure_bind", "clock",
              *SERVICE_SETTINGS}
     unknown = sorted(set(file_values) - known)
     if unknown:
@@ -159,6 +160,12 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
     if "restart_limit" in values:
         config = replace(config, restart_limit=_check_int("restart_limit", values["restart_limit"], 0))
     config = _security(config, values)
+    if "clock" in values:
+        from .timebase import CLOCK_IDS
+
+        if values["clock"] not in CLOCK_IDS:
+            raise ConfigError(f"clock must be one of {', '.join(CLOCK_IDS)}, got {values['clock']!r}")
+        config = replace(config, clock=values["clock"])
     if "log_level" in values:
         level = str(values["log_level"]).upper()
         if level not in ("DEBUG", "INFO", "WARNING", "ERROR"):

@@ -13,13 +13,12 @@ from __future__ import annotations
 import json
 import logging
 import threading
-import time
 from typing import Callable
 
 import zmq
 from zmq.auth.thread import ThreadAuthenticator
 
-from . import naming, ordering, protocol
+from . import naming, ordering, protocol, timebase
 from .cameras import FRAME_FIELDS, CameraHandle
 from .engine import FRAME_OPS, Action, Failure, Reply, RequestEngine, Trigger
 from .errors import Code, ConfigError, ProtocolError
@@ -88,7 +87,7 @@ class Coordinator:
         self.engine = RequestEngine(self.cameras, spec.get("settings", {}))
         self.settings = self.engine.settings
         self.copyout = CopyOut(self.cameras, self.settings)
-        self.started_ns = time.monotonic_ns()
+        self.started_ns = timebase.now()
         self.requests_served = 0
         self.events_dropped = 0
         self.boot_id = boot_id()
@@ -132,9 +131,9 @@ class Coordinator:
                 if self.events is not None and self.events in events:
                     self._drain(self.events, self._on_event)
                 if updated or self._due():
-                    self._carry_out(self.engine.on_frames(updated, time.monotonic_ns()))
+                    self._carry_out(self.engine.on_frames(updated, timebase.now()))
                 if updated:
-                    self.streams.on_frames(updated, time.monotonic_ns())
+                    self.streams.on_frames(updated, timebase.now())
         finally:
             for sock in reversed(closing):
                 sock.close()
@@ -160,11 +159,11 @@ class Coordinator:
         wake = self.engine.next_wake()
         if wake is None:
             return 200
-        return max(0, min(200, (wake - time.monotonic_ns()) // 1_000_000 + 1))
+        return max(0, min(200, (wake - timebase.now()) // 1_000_000 + 1))
 
     def _due(self) -> bool:
         wake = self.engine.next_wake()
-        return wake is not None and wake <= time.monotonic_ns()
+        return wake is not None and wake <= timebase.now()
 
     def _drain_subscriptions(self) -> None:
         while True:
@@ -183,7 +182,7 @@ class Coordinator:
             except zmq.Again:
                 return
             try:
-                handle(frames, time.monotonic_ns())
+                handle(frames, timebase.now())
             except Exception:  # no message may take the service down
                 log.exception("a message could not be handled; dropped")
 
@@ -221,7 +220,7 @@ class Coordinator:
         op = request["op"]
         try:
             if op not in FRAME_OPS:
-                self._reply(respond, request, getattr(self, f"_op_{op}")(request))
+                self._reply(respond, request, getattr(self, f"_op_{op}")(request, t_received))
                 return
             local = self.boot_id is not None and request.get("local") == self.boot_id
             self._carry_out(self.engine.submit(request, t_received, respond, client=client, local=local))
@@ -246,18 +245,20 @@ class Coordinator:
         try:
             body, images = self.copyout.reply(reply)
         except Overwritten:  # the ring came round during the copy: the engine plans again
-            self._carry_out(self.engine.retry(reply, time.monotonic_ns()))
+            self._carry_out(self.engine.retry(reply, timebase.now()))
             return
         self._reply(reply.pending.ticket, reply.pending.request, body, images)
 
-    def _op_status(self, request: dict) -> dict:
-        now = time.monotonic_ns()
+    def _op_status(self, request: dict, t_received: int) -> dict:
+        now = timebase.now()
         return {
             "op": "status",
             "service": self.service,
             "now": now,
             "boot_id": self.boot_id,
             "time_namespace": self.time_namespace,
+            "clock": timebase.service_clock(),
+            "encoded": self.copyout.encoded.status(),
             "ring_ordering": ordering.MODE,
             "uptime_s": round((now - self.started_ns) / 1e9, 3),
             "endpoint": self.endpoint,
@@ -286,10 +287,12 @@ class Coordinator:
         except (OSError, ValueError):
             return None
 
-    def _op_time(self, request: dict) -> dict:
-        return {"op": "time", "now": time.monotonic_ns(), "boot_id": self.boot_id}
+    def _op_time(self, request: dict, t_received: int) -> dict:
+        """The clock now, and when the request was received: a caller estimating our clock
+        against its own takes both (an NTP-style exchange of four timestamps)."""
+        return {"op": "time", "received": t_received, "now": timebase.now(), "boot_id": self.boot_id}
 
-    def _op_frames(self, request: dict) -> dict:
+    def _op_frames(self, request: dict, t_received: int) -> dict:
         """Every camera's frame times without pixels, for callers that choose frames
         themselves (a client over several services)."""
         names = request["cameras"] or list(self.cameras)
@@ -297,7 +300,7 @@ class Coordinator:
         if unknown:
             raise ProtocolError(f"unknown camera(s) {unknown}; known: {sorted(self.cameras)}",
                                 Code.UNKNOWN_CAMERA)
-        now = time.monotonic_ns()
+        now = timebase.now()
         return {"op": "frames", "now": now, "columns": list(FRAME_FIELDS),
                 "cameras": {n: self.cameras[n].timeline(now) for n in names}}
 
@@ -305,7 +308,7 @@ class Coordinator:
 
     def _reply(self, respond, request: dict, body: dict, images: list = ()) -> None:
         if "timing" in body:
-            body["timing"]["sent"] = time.monotonic_ns()
+            body["timing"]["sent"] = timebase.now()
         self.requests_served += 1
         respond(protocol.encode_reply(request["id"], body, images))
 

@@ -3,12 +3,13 @@ copies of chosen frames out of them, into pooled buffers handed to ZeroMQ (or, f
 client on this kernel, where each frame is, so that it copies the frame itself)."""
 from __future__ import annotations
 
-import time
 
-from . import protocol
+from . import protocol, timebase
 from .bufferpool import BufferPool
 from .cameras import CameraHandle
 from .decisions import Reject, check_not_empty
+from .encodecache import EncodeCache
+from .encoding import RAW
 from .engine import Reply
 from .errors import Code
 from .ring import Overwritten, Snapshot
@@ -24,6 +25,7 @@ class CopyOut:
         self.cameras = cameras
         self.settings = settings
         self.buffers = buffers or BufferPool()
+        self.encoded = EncodeCache()
 
     def period(self, cam: str) -> int:
         return self.cameras[cam].period_ns
@@ -50,24 +52,26 @@ class CopyOut:
         REFS (where each frame is, for a client on this kernel) or VIEWS (read-only views
         of the slots, for a reader in this process); default REFS for a local client."""
         p, plan = reply.pending, reply.plan
-        searched = time.monotonic_ns()
+        searched = timebase.now()
         how = how or (REFS if p.local else COPY)
-        frames, images, position = self.copy(reply.snapshots, plan.picks, how)
+        frames, images, position = self.copy(reply.snapshots, plan.picks, how,
+                                             p.request.get("encoding") or RAW, p.request.get("quality"))
         body = {**plan.body, "frames": frames}
         if plan.groups is not None:
             body["groups"] = [[position[pick] for pick in group] for group in plan.groups]
         body["timing"] = {
             "searched": searched, "received": p.t_received, "waited": reply.t_decided,
-            "copied": time.monotonic_ns(),
+            "copied": timebase.now(),
             "cameras": {c: {"waited": p.ready_at.get(c, reply.t_decided)} for c in p.cameras},
         }
         if how == REFS:
             body["delivery"] = protocol.LOCAL
         return body, images
 
-    def copy(self, snaps: dict, picks: list[tuple[str, int]], how: str = COPY) -> tuple[list, list, dict]:
-        """Copy each distinct (camera, snapshot index) once: metadata, images, and each pick's position.
-        With REFS nothing is copied: the metadata says where each frame is."""
+    def copy(self, snaps: dict, picks: list[tuple[str, int]], how: str = COPY,
+             encoding: str = RAW, quality: int | None = None) -> tuple[list, list, dict]:
+        """Copy each distinct (camera, snapshot index) once: metadata, images (in ``encoding``),
+        and each pick's position. With REFS nothing is copied: the metadata says where each frame is."""
         frames, images, position = [], [], {}
         for cam, i in picks:
             if (cam, i) in position:
@@ -75,6 +79,8 @@ class CopyOut:
             position[(cam, i)] = len(frames)
             frames.append(self._reference(cam, snaps[cam], i) if how == REFS else
                           self._copied(cam, snaps[cam], i, len(images), images, how == VIEWS))
+            if encoding != RAW and how == COPY:
+                frames[-1], images[-1] = self.encode(frames[-1], images[-1], encoding, quality)
         return frames, images, position
 
     def _copied(self, cam: str, snap: Snapshot, i: int, buffer: int, images: list, view: bool) -> dict:
@@ -92,6 +98,11 @@ class CopyOut:
         meta = snap.frame_meta(i)
         return protocol.frame_meta(cam, meta.frame_id, meta.t_capture, meta.t_stored,
                                    meta.generation, image, buffer, meta.t_available)
+
+    def encode(self, meta: dict, image, encoding: str, quality: int | None) -> tuple[dict, bytes]:
+        """A copied frame (checked whole) in ``encoding``, encoded once for every reply and stream."""
+        data = self.encoded.get((meta["camera"], meta["generation"], meta["frame_id"]), image, encoding, quality)
+        return protocol.encoded_meta(meta, encoding, len(data)), data
 
     def _reference(self, cam: str, snap: Snapshot, i: int) -> dict:
         reader = self.cameras[cam].reader

@@ -195,6 +195,8 @@ class RequestEngine:
                 raise Reject(Code.CAMERA_DOWN, f"every requested camera is down: {p.missing}")
         if request.get("at") is not None:
             p.t_star = request["at"]
+        elif request.get("t_call") is not None:  # the moment of the call: the request's travel time removed
+            p.t_star = min(request["t_call"], p.t_star)
         latest = self._latest_needed(p)
         horizon_ms = self.settings["horizon_ms"]
         if latest - now > horizon_ms * 1e6:

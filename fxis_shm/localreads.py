@@ -20,7 +20,7 @@ from __future__ import annotations
 import time
 from typing import Callable
 
-from . import protocol
+from . import protocol, timebase
 from .bufferpool import BufferPool
 from .cameras import CameraHandle
 from .copyout import COPY, VIEWS, CopyOut
@@ -38,6 +38,8 @@ def same_clock(status: dict, our_boot_id: str | None = None) -> str | None:
     ours = boot_id() if our_boot_id is None else our_boot_id
     if status.get("boot_id") is None or status.get("boot_id") != ours:
         return "the service runs on another kernel"
+    if (status.get("clock") or timebase.DEFAULT) != "monotonic":
+        return None  # time namespaces set CLOCK_MONOTONIC (and BOOTTIME) apart, not REALTIME or TAI
     namespace = time_namespace()
     if namespace is None or status.get("time_namespace") != namespace:
         return "the service runs in another time namespace (its CLOCK_MONOTONIC is not ours)"
@@ -64,6 +66,8 @@ class LocalReads:
         except BaseException:
             self.close()
             raise
+        self.now = timebase.reader(status.get("clock") or timebase.DEFAULT)  # the service's clock
+        self.wire_clock = timebase.WIRE_NAMES[status.get("clock") or timebase.DEFAULT]
         self.engine = RequestEngine(self.cameras, status.get("settings"))
         self.copyout = CopyOut(self.cameras, self.engine.settings, BufferPool(max_pooled_bytes))
 
@@ -79,29 +83,30 @@ class LocalReads:
                copy: bool = True) -> tuple[dict, list, Callable[[], bool] | None]:
         """The reply header, images and (for views) a validity check, as the coordinator would
         send them. Raises the service's errors, or RequestTimeout at ``deadline_ns``."""
-        request = protocol.request_of(op, id=None, **fields)
+        # the frames stay raw: nothing travels, so compressing would only cost
+        request = protocol.request_of(op, id=None, **{k: v for k, v in fields.items() if k not in ("encoding", "quality")})
         # Write counts read before every look the engine takes: a frame stored after a look
         # shows as a changed count, however soon after the look it came.
         seen = {c: h.reader.field("write_count") for c, h in self.cameras.items() if h.reader is not None}
-        actions = self.engine.submit(request, time.monotonic_ns(), ticket=op)
+        actions = self.engine.submit(request, self.now(), ticket=op)
         while True:
             reply = settled(actions)
             if reply is not None:
                 try:
                     body, images = self.copyout.reply(reply, COPY if copy else VIEWS)
                 except Overwritten:  # the ring came round during the copy: plan again
-                    actions = self.engine.retry(reply, time.monotonic_ns())
+                    actions = self.engine.retry(reply, self.now())
                     continue
-                body["timing"]["sent"] = time.monotonic_ns()
-                header = {"ok": True, "clock": protocol.CLOCK, **body}
+                body["timing"]["sent"] = self.now()
+                header = {"ok": True, "clock": self.wire_clock, **body}
                 return header, images, None if copy else self._validity(reply)
-            now = time.monotonic_ns()
+            now = self.now()
             if now >= deadline_ns:
                 self.engine.cancel_all()
                 raise RequestTimeout(f"no answer to {op!r} from the rings within the client's timeout")
             waiting = {c for p in self.engine.pending for c in p.cameras}
             updated = self._wait_for_frames(waiting, min(deadline_ns, self.engine.next_wake() or now), seen)
-            actions = self.engine.on_frames(updated, time.monotonic_ns())
+            actions = self.engine.on_frames(updated, self.now())
 
     def _wait_for_frames(self, cameras: set[str], until_ns: int, seen: dict[str, int]) -> set[str]:
         """The cameras whose write count moved on from ``seen`` before ``until_ns`` (empty: none
@@ -110,13 +115,13 @@ class LocalReads:
         counts = {c: seen.get(c, -1) for c in readers}
         due = min((_next_due(r) for r in readers.values()), default=until_ns)  # before the look below
         if all(r.field("write_count") == counts[c] for c, r in readers.items()):  # else: no nap
-            nap_ns = min(due - WAKE_MARGIN_NS, until_ns) - time.monotonic_ns()
+            nap_ns = min(due - WAKE_MARGIN_NS, until_ns) - self.now()
             if nap_ns > 0:
                 time.sleep(nap_ns / 1e9)
         while True:
             now_counts = {c: r.field("write_count") for c, r in readers.items()}
             updated = {c for c, n in now_counts.items() if n != counts[c]}
-            if updated or time.monotonic_ns() >= until_ns:
+            if updated or self.now() >= until_ns:
                 seen.update(now_counts)
                 return updated
             time.sleep(POLL_S)

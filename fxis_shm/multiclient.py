@@ -16,11 +16,12 @@ from typing import Callable, Sequence
 from . import protocol
 from .client import Client, FrameTuple, _timeout_ms, frames_of, sequence_of, tuple_of
 from .engine import Reply, RequestEngine
-from .errors import ConfigError, FxisError, Overwritten, RequestTimeout
-from .localreads import same_clock, settled
+from .errors import Code, ConfigError, FxisError, Overwritten, RequestTimeout, ServiceError
+from .localreads import settled
 from .remotecamera import RemoteCamera
 
 LOOK_AGAIN_NS = 1_000_000  # after a frame was due, look for it this often
+SILENT_FOR_S = 1.0  # a service that did not answer counts as down this long before it is asked again
 
 
 class MultiClient:
@@ -28,17 +29,17 @@ class MultiClient:
     ``latest`` and ``sequence`` over the cameras of every service. Camera names must be
     unique across the services. Times are in the caller's clock (``clock``)."""
 
-    def __init__(self, endpoints: Sequence[str], *, timeout: float = 2.0, clock: Callable[[], int] = time.monotonic_ns,
-                 clock_offset: Callable[[Client, dict, Callable[[], int]], int] | None = None, **client_options):
+    def __init__(self, endpoints: Sequence[str], *, timeout: float = 2.0,
+                 clock: Callable[[], int] | str | None = None, **client_options):
         if not endpoints:
             raise ConfigError("a client over several services needs at least one endpoint")
-        self.timeout, self.clock = timeout, clock
-        self._offset_of = clock_offset or estimate_offset
-        self.clients = [Client(e, timeout=timeout, **client_options) for e in endpoints]
+        self.timeout = timeout
+        self.clients = [Client(e, timeout=timeout, clock=clock, **client_options) for e in endpoints]
+        self.clock = self.clients[0].clock
         self._pool = ThreadPoolExecutor(max_workers=len(self.clients), thread_name_prefix="fxis-multi")
         try:
             self.owner: dict[str, Client] = {}
-            self.offsets: dict[str, int] = {}
+            self._silent: dict[Client, float] = {}  # services that did not answer, until when they count as down
             for client in self.clients:
                 self._learn(client)
         except BaseException:
@@ -54,7 +55,12 @@ class MultiClient:
                 raise ConfigError(f"camera {name!r} is served by both {self.owner[name].endpoint} and "
                                   f"{client.endpoint}: camera names must be unique across services")
             self.owner[name] = client
-        self.offsets[client.endpoint] = self._offset_of(client, status, self.clock)
+        client.clock_estimate()  # the first estimate now, not in the first request
+
+    @property
+    def clocks(self) -> dict:
+        """Each service's clock against the caller's (see ``Client.clocks``)."""
+        return {c.endpoint: c.clock_estimate() for c in self.clients}
 
     def close(self) -> None:
         self._pool.shutdown(wait=True)
@@ -131,15 +137,25 @@ class MultiClient:
     def _describe(self, names) -> None:
         """Ask every service concerned, at once, for its cameras' frame times."""
         by_client: dict[Client, list[str]] = {}
+        now = time.monotonic()
         for name in names:
-            by_client.setdefault(self.owner[name], []).append(name)
+            client = self.owner[name]
+            if self._silent.get(client, 0.0) <= now:  # a silent service is asked again after a while
+                by_client.setdefault(client, []).append(name)
         for client, described in zip(by_client, self._pool.map(_frame_times, by_client, by_client.values())):
+            if isinstance(described, Exception):
+                # Its cameras are down for a moment: waiting for it again in every retry and every
+                # request would let the other services' chosen frames leave their rings meanwhile.
+                self._silent[client] = time.monotonic() + SILENT_FOR_S
+            else:
+                self._silent.pop(client, None)
             for name in by_client[client]:
                 if isinstance(described, Exception):
                     self.cameras[name].unreachable(f"at {client.endpoint} does not answer ({described})")
                 else:
+                    now = self.clock()  # the offset now: over a ring's span, drift moves it by microseconds
                     self.cameras[name].describe(described["cameras"][name], described["columns"],
-                                                self.offsets[client.endpoint])
+                                                client.clock_estimate().to_service(now) - now)
 
     def _fetch(self, reply: Reply) -> tuple[dict, list]:
         """The reply header and images of a plan: each chosen frame fetched from its service,
@@ -153,10 +169,12 @@ class MultiClient:
             fetched.update(group)
         frames, images = [], []
         for k, (cam, i) in enumerate(picks):
-            frame, offset = fetched[cam, self.cameras[cam].service_row(i)["frame_id"]], self.cameras[cam].offset_ns
-            frames.append(protocol.frame_meta(cam, frame.frame_id, frame.t_capture - offset, frame.t_stored - offset,
-                                              frame.generation, frame.image, k,
-                                              None if frame.t_available is None else frame.t_available - offset))
+            frame = fetched[cam, self.cameras[cam].service_row(i)["frame_id"]]
+            meta = protocol.frame_meta(cam, frame.frame_id, frame.t_capture, frame.t_stored, frame.generation,
+                                       frame.image, k, frame.t_available)
+            frames.append({**meta, "encoding": frame.encoding, "service_t_capture": frame.service_t_capture,
+                           "service_t_stored": frame.service_t_stored,
+                           "service_t_available": frame.service_t_available})
             images.append(frame.image)
         position = {pick: k for k, pick in enumerate(picks)}
         header = {**reply.plan.body, "frames": frames,
@@ -170,7 +188,12 @@ def _fetch_frames(client: Client, wanted: list[tuple[str, dict]]) -> dict:
     """The frames ``wanted`` of one service, by (camera, frame id); Overwritten if one is gone."""
     fetched = {}
     for cam, row in wanted:
-        frame = client.image(cam, at=row["t_capture"], wait="none")
+        try:
+            frame = client.image(cam, at=row["t_capture"], wait="none")
+        except ServiceError as exc:
+            if exc.code != Code.OUT_OF_RANGE:
+                raise
+            raise Overwritten(f"frame {row['frame_id']} of {cam!r} left its ring before it could be fetched") from None
         if frame.frame_id != row["frame_id"] or frame.generation != row["generation"]:
             raise Overwritten(f"frame {row['frame_id']} of {cam!r} left its ring before it could be fetched")
         fetched[cam, frame.frame_id] = frame
@@ -182,18 +205,3 @@ def _frame_times(client: Client, names: list[str]) -> dict | Exception:
         return client.frame_times(names)
     except FxisError as exc:
         return exc
-
-
-def estimate_offset(client: Client, status: dict, clock: Callable[[], int], exchanges: int = 8) -> int:
-    """The service's clock minus ``clock``: exactly 0 where it provably is the same clock,
-    else from the exchange with the shortest round trip (half of it is the uncertainty)."""
-    if clock is time.monotonic_ns and same_clock(status) is None:
-        return 0
-    best = None
-    for _ in range(exchanges):
-        sent = clock()
-        there = client.time()
-        back = clock()
-        if best is None or back - sent < best[0]:
-            best = (back - sent, there - (sent + back) // 2)
-    return best[1]

@@ -13,6 +13,8 @@ from typing import Any, Callable, Sequence
 
 import numpy as np
 
+from . import encoding as codec
+from . import timebase
 from .errors import Code, ProtocolError
 from .selection import SYNC_MODES
 from .sequences import DIRECTIONS, KINDS as SEQUENCE_KINDS
@@ -136,8 +138,21 @@ _COMMON: dict[str, tuple[Check, Any]] = {
     "op": (_name, None),
     "id": (_optional(_request_id), None),
 }
+def _quality(field, v):
+    if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 100:
+        _fail(field, f"must be an integer from 1 to 100, got {v!r}")
+    return v
+
+
+# How the pixels travel in a reply (the local fast path always leaves them raw in the rings).
+_ENCODED: dict[str, tuple[Check, Any]] = {
+    "encoding": (_choice(codec.ENCODINGS), codec.RAW),
+    "quality": (_optional(_quality), None),  # JPEG only; None: the codec's default
+}
 _WAITING: dict[str, tuple[Check, Any]] = {
     "at": (_optional(_int), None),
+    # the moment the caller made a call without "at", in the service's clock: t* then (travel time)
+    "t_call": (_optional(_int), None),
     "wait": (_optional(_choice(WAIT_MODES)), None),  # None: the service's default
     "timeout_ms": (_optional(_timeout), None),
 }
@@ -146,7 +161,7 @@ _WAITING: dict[str, tuple[Check, Any]] = {
 # with where the frames are instead of their pixels (the local fast path).
 _LOCAL: dict[str, tuple[Check, Any]] = {"local": (_optional(_boot_id), None)}
 OPS: dict[str, dict[str, tuple[Check, Any]]] = {
-    "image": {"camera": (_name, ...), **_WAITING, **_LOCAL},
+    "image": {"camera": (_name, ...), **_WAITING, **_LOCAL, **_ENCODED},
     "tuple": {
         "cameras": (_optional(_names), None),
         "sync": (_optional(_choice(SYNC_MODES)), None),
@@ -154,8 +169,9 @@ OPS: dict[str, dict[str, tuple[Check, Any]]] = {
         "partial": (_optional(_boolean), None),
         **_WAITING,
         **_LOCAL,
+        **_ENCODED,
     },
-    "latest": {"cameras": (_optional(_names), None), **_LOCAL},
+    "latest": {"cameras": (_optional(_names), None), **_LOCAL, **_ENCODED},
     "sequence": {
         "camera": (_optional(_name), None),
         "cameras": (_optional(_names), None),
@@ -167,8 +183,10 @@ OPS: dict[str, dict[str, tuple[Check, Any]]] = {
         "end": (_optional(_int), None),
         "sync": (_optional(_choice(SYNC_MODES)), None),
         "at": (_optional(_int), None),
+        "t_call": (_optional(_int), None),
         "timeout_ms": (_optional(_timeout), None),
         **_LOCAL,
+        **_ENCODED,
     },
     "status": {},
     "time": {},
@@ -272,25 +290,33 @@ def encode_event(op: str, reply_topic: str, **fields) -> list[bytes]:
 
 
 # ---- stream topics ----
-# "frames/<camera>|" and "tuples|", optionally decimated: "frames/<camera>@<hz>|", "tuples@<hz>|".
-# The closing "|" keeps ZeroMQ's prefix matching from mixing a stream with its decimated forms.
+# "frames/<camera>|" and "tuples|", optionally decimated ("@<hz>") and compressed (":jpeg<quality>",
+# ":png"): "frames/cam0@10:jpeg90|", "tuples:png|". The closing "|" keeps ZeroMQ's prefix
+# matching from mixing a stream with its other forms.
 
 @dataclass(frozen=True)
 class StreamTopic:
     kind: str  # "frames" or "tuples"
     camera: str | None
     rate_hz: float | None
+    encoding: str = codec.RAW
+    quality: int | None = None  # JPEG only
 
     def __str__(self) -> str:
         base = "tuples" if self.kind == "tuples" else f"frames/{self.camera}"
-        return base + (f"@{self.rate_hz:g}" if self.rate_hz else "") + "|"
+        rate = f"@{self.rate_hz:g}" if self.rate_hz else ""
+        coded = "" if self.encoding == codec.RAW else f":{self.encoding}"
+        if self.encoding == codec.JPEG:
+            coded += str(self.quality or codec.DEFAULT_JPEG_QUALITY)
+        return f"{base}{rate}{coded}|"
 
 
 def parse_stream_topic(topic: str) -> StreamTopic | None:
     """The stream a subscription names, or None if it names none."""
     if not topic.endswith("|"):
         return None
-    base, _, rate = topic[:-1].partition("@")
+    rest, _, coded = topic[:-1].partition(":")
+    base, _, rate = rest.partition("@")
     rate_hz = None
     if rate:
         try:
@@ -299,10 +325,19 @@ def parse_stream_topic(topic: str) -> StreamTopic | None:
             return None
         if not 0 < rate_hz < 1e6:
             return None
+    encoding, quality = codec.RAW, None
+    if coded:
+        encoding = coded.rstrip("0123456789")
+        digits = coded[len(encoding):]
+        if encoding not in (codec.JPEG, codec.PNG) or (digits and encoding != codec.JPEG):
+            return None
+        quality = int(digits) if digits else None
+        if quality is not None and not 1 <= quality <= 100:
+            return None
     if base == "tuples":
-        return StreamTopic("tuples", None, rate_hz)
+        return StreamTopic("tuples", None, rate_hz, encoding, quality)
     if base.startswith("frames/") and len(base) > len("frames/"):
-        return StreamTopic("frames", base[len("frames/"):], rate_hz)
+        return StreamTopic("frames", base[len("frames/"):], rate_hz, encoding, quality)
     return None
 
 
@@ -341,9 +376,14 @@ def frame_ref(
             "ring": ring, "instance": int(instance), "slot": int(slot), "seq": int(seq)}
 
 
+def encoded_meta(meta: dict, encoding: str, nbytes: int) -> dict:
+    """A frame's metadata when its buffer holds the image in ``encoding`` (``nbytes`` long)."""
+    return meta if encoding == codec.RAW else {**meta, "encoding": encoding, "bytes": int(nbytes)}
+
+
 def encode_reply(request_id, body: dict, buffers: Sequence = ()) -> list:
     """A success reply: the header frame, then one frame per buffer (sent as is, not copied)."""
-    header = {"v": VERSION, "id": request_id, "ok": True, "clock": CLOCK, **body}
+    header = {"v": VERSION, "id": request_id, "ok": True, "clock": timebase.wire_name(), **body}
     return [json.dumps(header).encode(), *buffers]
 
 
@@ -388,6 +428,11 @@ def _image(meta: dict, buffers: Sequence) -> np.ndarray:
         raise ProtocolError(f"frame metadata does not match the buffers: {exc!r}") from None
     if meta["dtype"] not in DTYPES:
         raise ProtocolError(f"unsupported dtype {meta['dtype']!r}")
+    encoding = meta.get("encoding", codec.RAW)
+    if encoding != codec.RAW:
+        if encoding not in codec.ENCODINGS:
+            raise ProtocolError(f"a frame in unknown encoding {encoding!r}")
+        return codec.decode(buf, encoding, shape, dtype.name)
     expected = math.prod(shape) * dtype.itemsize
     view = memoryview(buf)
     if view.nbytes != expected:

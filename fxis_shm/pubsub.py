@@ -23,7 +23,8 @@ import numpy as np
 import zmq
 
 from . import protocol
-from .client import FrameTuple, SocketOwner, connected_socket, frames_of, sequence_of, tuple_of
+from .client import FrameTuple, SocketOwner, checked_encoding, connected_socket, frames_of, sequence_of, tuple_of
+from .encoding import JPEG, RAW
 from .security import ClientKeys
 from .errors import ProtocolError, RequestTimeout, service_error
 from .protocol import StreamTopic
@@ -75,6 +76,11 @@ class Message:
         return sequence_of(self.header, self.images, single=single)
 
 
+def _stream(kind: str, camera: str | None, rate_hz: float | None, encoding: str, quality: int | None) -> StreamTopic:
+    checked_encoding(encoding, quality)
+    return StreamTopic(kind, camera, rate_hz, encoding, quality if encoding == JPEG else None)
+
+
 class Subscriber(SocketOwner):
     """A SUB socket with a bounded queue; iterate it or call ``receive``."""
 
@@ -98,13 +104,15 @@ class Subscriber(SocketOwner):
         self._topics.add(topic)
         return topic
 
-    def frames(self, camera: str, rate_hz: float | None = None) -> str:
-        """Subscribe to every frame of ``camera`` (or ``rate_hz`` of them per second)."""
-        return self.topic(str(StreamTopic("frames", camera, rate_hz)))
+    def frames(self, camera: str, rate_hz: float | None = None, *, encoding: str = RAW,
+               quality: int | None = None) -> str:
+        """Subscribe to every frame of ``camera`` (or ``rate_hz`` of them per second), its
+        pixels raw or compressed (``encoding="jpeg"`` with ``quality``, or ``"png"``)."""
+        return self.topic(str(_stream("frames", camera, rate_hz, encoding, quality)))
 
-    def tuples(self, rate_hz: float | None = None) -> str:
+    def tuples(self, rate_hz: float | None = None, *, encoding: str = RAW, quality: int | None = None) -> str:
         """Subscribe to synchronized tuples of all cameras as they complete."""
-        return self.topic(str(StreamTopic("tuples", None, rate_hz)))
+        return self.topic(str(_stream("tuples", None, rate_hz, encoding, quality)))
 
     def unsubscribe(self, topic: str) -> None:
         self._sock.setsockopt(zmq.UNSUBSCRIBE, topic.encode())

@@ -37,12 +37,9 @@ class RemoteCamera:
                       "reason": f"camera {self.name!r} is down: its service {self.service} {why}"}
 
     def service_row(self, i: int) -> dict[str, int]:
-        """Frame ``i`` of the last snapshot as the service knows it (its own clock)."""
+        """Frame ``i`` of the last snapshot: its id, generation and times (the caller's clock)."""
         rec = self._snapshot.meta[i]
-        row = {k: int(rec[k]) for k in ("frame_id", "generation", *_TIMES)}
-        for k in _TIMES:
-            row[k] += self.offset_ns
-        return row
+        return {k: int(rec[k]) for k in ("frame_id", "generation", *_TIMES)}
 
     # ---- what the request engine reads (fxis_shm.engine.CameraSource) ----
 

@@ -30,7 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 import posix_ipc
 
-from . import naming, ordering
+from . import naming, ordering, timebase
 from .errors import Overwritten, RingError
 from .timesearch import Timeline
 
@@ -197,7 +197,7 @@ class RingWriter(_Mapping):
         h = self.header
         h["generation"] = int(h["generation"]) + 1
         h["writer_pid"] = os.getpid()
-        h["generation_started_ns"] = h["heartbeat_ns"] = time.monotonic_ns()
+        h["generation_started_ns"] = h["heartbeat_ns"] = timebase.now()
         h["nominal_period_ns"] = nominal_period_ns
         if int(h["period_ns"]) <= 0:
             h["period_ns"] = nominal_period_ns
@@ -262,7 +262,7 @@ class RingWriter(_Mapping):
         ordering.fence_release()  # the slot reads as being written before any of its new bytes show
         np.copyto(self.slot_image(slot), image, casting="no")
         rec = self.table[slot]
-        t_stored = time.monotonic_ns()
+        t_stored = timebase.now()
         rec["frame_id"], rec["t_capture"], rec["t_stored"] = frame_id, t_capture, t_stored
         rec["t_available"] = t_capture if t_available is None else t_available
         rec["generation"] = self.generation
@@ -296,12 +296,12 @@ class RingWriter(_Mapping):
         h = self.header
         self.generation = int(h["generation"]) + 1
         h["generation"] = self.generation
-        h["generation_started_ns"] = time.monotonic_ns()
+        h["generation_started_ns"] = timebase.now()
         self._last, self._samples = None, 0
         return self.generation
 
     def heartbeat(self) -> None:
-        self.header["heartbeat_ns"] = time.monotonic_ns()
+        self.header["heartbeat_ns"] = timebase.now()
 
     def count(self, field: str, n: int = 1) -> None:
         """Add to one of the counters frames_captured, frames_dropped, hook_errors."""

@@ -14,6 +14,7 @@ from dataclasses import dataclass, field
 from . import protocol
 from .decimation import Decimator, every_frame
 from .decisions import Reject
+from .encoding import RAW
 from .copyout import CopyOut
 from .protocol import StreamTopic, parse_stream_topic
 from .ring import Overwritten
@@ -68,11 +69,13 @@ class Streams:
             except (Reject, Overwritten) as exc:
                 log.debug("stream %s skipped a round: %s", topic, exc)
 
-    def _copy(self, snap, cam: str, i: int, copies: dict):
+    def _copy(self, snap, cam: str, i: int, copies: dict, topic: StreamTopic):
         key = (cam, snap.first_write + i)
         if key not in copies:
             frames, images, _ = self.copyout.copy({cam: snap}, [(cam, i)])
             copies[key] = (frames[0], images[0])
+        if topic.encoding != RAW:
+            return self.copyout.encode(*copies[key], topic.encoding, topic.quality)
         return copies[key]
 
     def _send(self, topic: str, state: _StreamState, metas: list, images: list, extra: dict,
@@ -92,7 +95,7 @@ class Streams:
         for i in range(first_new, len(snap.timeline)):
             if not state.decimator.offer(snap.timeline.at(i), period):
                 continue
-            meta, image = self._copy(snap, cam, i, copies)
+            meta, image = self._copy(snap, cam, i, copies, state.topic)
             self._send(topic, state, [meta], [image], {}, period)
         state.last_write = snap.first_write + len(snap.timeline) - 1
 
@@ -109,7 +112,7 @@ class Streams:
         state.last_key, state.last_t_max = key, max(sel.t.values())
         if not state.decimator.offer(t_ref, period):
             return
-        pairs = [self._copy(snaps[c], c, sel.index[c], copies) for c in cams]
+        pairs = [self._copy(snaps[c], c, sel.index[c], copies, state.topic) for c in cams]
         self._send(topic, state, [m for m, _ in pairs], [img for _, img in pairs],
                    {"t_request": t_ref, "skew_ns": sel.skew_ns}, period)
 

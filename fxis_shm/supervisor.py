@@ -19,7 +19,7 @@ import tempfile
 import threading
 import time
 
-from . import naming
+from . import naming, timebase
 from .config import ServiceConfig
 
 log = logging.getLogger("supervisor")
@@ -137,11 +137,11 @@ class Supervisor:
         self.config = config
         self.out = out
         self.stop = threading.Event()
-        origin = time.monotonic_ns()
+        origin = timebase.reader(config.clock)()  # the synthetic cameras' shared time origin
         self.cameras = [
             Child("camera", f"camera {c.name!r}", {
                 "service": config.name, "camera": c.name, "kind": c.kind,
-                "options": c.options, "slots": config.slots, "time_origin_ns": origin,
+                "options": c.options, "slots": config.slots, "time_origin_ns": origin, "clock": config.clock,
             }, config.log_level, key=f"camera:{c.name}")
             for c in config.cameras
         ]
@@ -150,7 +150,7 @@ class Supervisor:
             "events": config.events,
             "curve_secret": config.curve_secret, "curve_clients": config.curve_clients,
             "cameras": {c.name: {"kind": c.kind} for c in config.cameras},
-            "settings": config.settings,
+            "settings": config.settings, "clock": config.clock,
         }, config.log_level, key="coordinator")
         self.events: list[dict] = []  # the latest exits and restarts, for status
 

@@ -10,6 +10,7 @@ import sys
 import threading
 from typing import Callable
 
+from fxis_shm import timebase
 from fxis_shm.tether import die_with_parent
 
 class Ready:
@@ -44,6 +45,7 @@ def child_main(role: str, run: Callable[[dict, Ready, threading.Event], None]) -
         stream=sys.stderr,
     )
     log = logging.getLogger(role)
+    timebase.use(spec.get("clock", timebase.DEFAULT))  # before any frame or request is stamped
     stop = threading.Event()
     parent = os.getppid()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())

@@ -9,7 +9,7 @@ import time
 
 import posix_ipc
 
-from fxis_shm import naming
+from fxis_shm import naming, timebase
 from fxis_shm.ring import FLAG_TRIGGERED, FrameLayout, RingWriter
 
 from . import processing
@@ -61,7 +61,7 @@ def _layout(camera, process, stop) -> tuple:
         capture = camera.grab(_GRAB_TIMEOUT_S)
         if capture is None:
             continue
-        t_available = time.monotonic_ns()
+        t_available = timebase.now()
         image, error = (capture.image, None) if process.hook is None else \
             processing.run_hook(process.hook, capture.image)
         if error:
@@ -89,7 +89,7 @@ def _stream(camera, process, ring: RingWriter, stop: threading.Event, first=None
             ring.heartbeat()
         else:
             ring.count("frames_captured")
-            if not process.submit(capture, time.monotonic_ns()):
+            if not process.submit(capture, timebase.now()):
                 ring.count("frames_dropped")  # every processing process is busy
         for item in process.ready():
             _store(ring, item)

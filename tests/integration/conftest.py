@@ -10,16 +10,20 @@ from fxis_shm.launch import ServiceProcess
 SMALL = "width=64,height=48"
 
 
-@pytest.fixture(scope="module")
-def two_cameras():
-    """A shared service with two small synthetic cameras at 50 fps, for tests that only read."""
-    svc = ServiceProcess(["--camera", f"cam0=synthetic:fps=50,{SMALL}",
-                          "--camera", f"cam1=synthetic:fps=50,phase_ms=1,{SMALL}"],
-                         stderr=open(os.devnull, "w"))
+def module_service(args: list[str]):
+    """A service shared by a module's tests (yield from it in a module-scoped fixture)."""
+    svc = ServiceProcess(args, stderr=open(os.devnull, "w"))
     svc.start()
     yield svc
     svc.stop()
     assert_nothing_left(svc.name)
+
+
+@pytest.fixture(scope="module")
+def two_cameras():
+    """A shared service with two small synthetic cameras at 50 fps, for tests that only read."""
+    yield from module_service(["--camera", f"cam0=synthetic:fps=50,{SMALL}",
+                               "--camera", f"cam1=synthetic:fps=50,phase_ms=1,{SMALL}"])
 
 
 def child_pids(svc, role: str) -> list[int]:

@@ -15,7 +15,8 @@ pytestmark = pytest.mark.integration
 def test_status_prints_a_table(two_cameras):
     result = fxis("status", "--endpoint", two_cameras.endpoint)
     assert result.returncode == 0, result.stderr
-    header, *rows = result.stdout.splitlines()[1:]
+    clock, header, *rows = result.stdout.splitlines()[1:]
+    assert clock.startswith("clock monotonic: same clock, offset from this host's monotonic +0.000 ms")
     assert header.split()[:4] == ["camera", "kind", "alive", "shape"]
     assert [r.split()[:4] for r in rows] == [["cam0", "synthetic", "yes", "48x64"],
                                              ["cam1", "synthetic", "yes", "48x64"]]
@@ -23,7 +24,10 @@ def test_status_prints_a_table(two_cameras):
 
 def test_status_json(two_cameras):
     result = fxis("status", "--endpoint", two_cameras.endpoint, "--json")
-    assert json.loads(result.stdout)["service"] == two_cameras.name
+    status = json.loads(result.stdout)
+    assert status["service"] == two_cameras.name and status["clock"] == "monotonic"
+    assert status["clock_mapping"] == {"method": "same clock", "offset_ns": 0, "drift_ppm": 0.0,
+                                       "uncertainty_ns": 0, "samples": 0}
 
 
 def test_status_without_a_service_fails_clearly():

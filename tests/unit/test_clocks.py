@@ -40,3 +40,15 @@ def test_device_fit_restarts_when_the_device_clock_goes_back():
 def test_device_fit_needs_a_frame():
     with pytest.raises(ValueError):
         DeviceClockFit().to_host(1)
+
+
+def test_a_ptp_camera_s_time_is_moved_into_the_service_clock_as_it_is():
+    from fxis_shm.clocks import PtpClock
+
+    tai_minus_service = 37 * 10**9 + 123  # e.g. a service on CLOCK_REALTIME
+    clock = PtpClock(lambda: (1_000_000, 1_000_000 + tai_minus_service))
+    clock.add(5, 10**12)  # nothing is fitted: arrival times do not move it
+    assert len(clock) == 1
+    assert clock.to_host(2_000_000_000_000) == 2_000_000_000_000 - tai_minus_service
+    ticks = PtpClock(lambda: (0, 0), tick_ns=8.0)  # a camera counting 125 MHz ticks
+    assert ticks.to_host(1000) == 8000

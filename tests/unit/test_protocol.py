@@ -43,12 +43,13 @@ def rejected(frames, code=Code.BAD_REQUEST) -> str:
 
 # ---- requests: round trips ----
 
+ENCODED = {"encoding": "raw", "quality": None}
 REQUEST_DEFAULTS = {
-    "image": {"id": None, "camera": ..., "at": None, "wait": None, "timeout_ms": None,
-              "local": None},
+    "image": {"id": None, "camera": ..., "at": None, "t_call": None, "wait": None, "timeout_ms": None,
+              "local": None, **ENCODED},
     "tuple": {"id": None, "cameras": None, "sync": None, "max_skew_ms": None, "partial": None,
-              "at": None, "wait": None, "timeout_ms": None, "local": None},
-    "latest": {"id": None, "cameras": None, "local": None},
+              "at": None, "t_call": None, "wait": None, "timeout_ms": None, "local": None, **ENCODED},
+    "latest": {"id": None, "cameras": None, "local": None, **ENCODED},
     "status": {"id": None},
     "time": {"id": None},
 }

@@ -94,3 +94,24 @@ def test_an_image_too_small_for_a_stamp_is_refused(shape, dtype):
     with pytest.raises(ValueError):
         write_stamp(image, 1)
     assert not image.any()
+
+
+@pytest.mark.parametrize("shape", [(240, 320), (1024, 1360), (1024, 1360, 3)])
+@pytest.mark.parametrize("quality", [75, 90])
+def test_the_block_stamp_survives_jpeg(shape, quality):
+    from fxis_shm import encoding as codec
+
+    image = np.random.default_rng(1).integers(0, 256, shape, dtype=np.uint8)
+    write_stamp(image, 0x1_2345_6789)
+    back = codec.decode(codec.encode(image, "jpeg", quality), "jpeg", image.shape, "uint8")
+    assert read_stamp(back) == 0x2345_6789  # after lossy compression: the low 32 bits
+
+
+def test_a_torn_image_reads_as_none_even_by_its_blocks():
+    image = np.zeros((240, 320), np.uint8)
+    write_stamp(image, 7)
+    other = np.zeros_like(image)
+    write_stamp(other, 8)
+    image[120:] = other[120:]  # the bottom half from another frame
+    image[0, 0] ^= 1  # and the byte stamp spoiled, as compression would
+    assert read_stamp(image) is None

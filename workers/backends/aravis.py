@@ -38,7 +38,8 @@ from typing import Any
 
 import numpy as np
 
-from fxis_shm.clocks import DeviceClockFit, wall_to_monotonic
+from fxis_shm.clocks import DeviceClockFit, PtpClock, wall_to_monotonic
+from fxis_shm import timebase
 from fxis_shm.options import Option, boolean, choice, number, text
 from fxis_shm.ring import FrameLayout
 
@@ -127,9 +128,9 @@ class AravisCamera(Camera):
                               "GigE Vision packet size in bytes (default: as negotiated)"),
         "trigger": Option(choice("free", "software"), "free",
                           "free-running, or one frame per software trigger (TriggerSoftware)"),
-        "timestamp": Option(choice("host", "device"), "host",
-                            "t_capture from the host's arrival time, or the camera's clock mapped "
-                            "onto the host's (docs/cameras.md)"),
+        "timestamp": Option(choice("host", "device", "ptp"), "host",
+                            "t_capture from the host's arrival time, the camera's clock mapped "
+                            "onto the host's, or the camera's PTP time as it is (docs/cameras.md)"),
     }
 
     def __init__(self, name: str, options: dict[str, Any], time_origin_ns: int):
@@ -341,6 +342,8 @@ class AravisCamera(Camera):
         self._ids = FrameCounter(0xFFFF if self._gv else None)
         self._failed_since_good = 0
         self._clock = None
+        if self.options["timestamp"] == "ptp":
+            self._clock = PtpClock(timebase.service_and_tai)  # Aravis gives device timestamps in ns
         if self.options["timestamp"] == "device":
             # Aravis gives device timestamps in ns: it converts GigE Vision ticks with the
             # camera's timestamp tick frequency (USB3 Vision timestamps are ns already).
@@ -375,9 +378,9 @@ class AravisCamera(Camera):
                 raise CameraLost("Aravis lost the control channel (control-lost)")
             remaining = deadline - time.monotonic()
             buffer = self._stream.timeout_pop_buffer(max(0, int(remaining * 1e6)))
-            mono_before = time.monotonic_ns()
+            mono_before = timebase.now()
             wall_now = time.time_ns()
-            mono_now = (mono_before + time.monotonic_ns()) // 2
+            mono_now = (mono_before + timebase.now()) // 2
             if buffer is None:
                 self._check_alive()
                 return None

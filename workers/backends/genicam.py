@@ -30,7 +30,8 @@ import logging
 import os
 import time
 
-from fxis_shm.clocks import DeviceClockFit
+from fxis_shm.clocks import DeviceClockFit, PtpClock
+from fxis_shm import timebase
 from fxis_shm.options import Option, boolean, choice, number, text
 from fxis_shm.ring import FrameLayout
 
@@ -117,9 +118,9 @@ class GenicamCamera(Camera):
                                             "(default: as set)"),
         "trigger": Option(choice("free", "software"), "free",
                           "free-running, or one frame per software trigger (needs TriggerSoftware)"),
-        "timestamp": Option(choice("host", "device"), "host",
+        "timestamp": Option(choice("host", "device", "ptp"), "host",
                             "host: fetch time; device: the buffer's device timestamp, fitted onto "
-                            "the host clock"),
+                            "the host clock; ptp: the device's PTP time as it is"),
         "raw": Option(boolean, False, "keep colour and Bayer data as delivered (no BGR conversion)"),
     }
 
@@ -133,7 +134,7 @@ class GenicamCamera(Camera):
         self._k = -1  # the last frame index handed out; continues across reopenings
         self._last_device_id: int | None = None
         self._incomplete = 0
-        self._fit: DeviceClockFit | None = None
+        self._fit: DeviceClockFit | PtpClock | None = None
         self._device_ns = True  # the buffers' timestamps are in ns (else in ticks)
         self._last_frame_s = 0.0
         self._pixel_format = ""
@@ -363,7 +364,7 @@ class GenicamCamera(Camera):
             self._ia.add_callback(self._ia.Events.INCOMPLETE_BUFFER, _incomplete_counter(core, self))
             self._ia.start()
             self._last_frame_s = time.monotonic()
-            if self.options["timestamp"] == "device":
+            if self.options["timestamp"] in ("device", "ptp"):
                 self._fit = None
                 self._check_device_timestamps()
         except BaseException:
@@ -405,7 +406,8 @@ class GenicamCamera(Camera):
                 raise self._refuse("timestamp", "the device's timestamp tick frequency is unknown; "
                                                 "it allows timestamp=host only")
             tick_ns = 1e9 / frequency
-        self._fit = DeviceClockFit(tick_ns=tick_ns)
+        self._fit = PtpClock(timebase.service_and_tai, tick_ns) if self.options["timestamp"] == "ptp" \
+            else DeviceClockFit(tick_ns=tick_ns)
 
     def grab(self, timeout: float) -> Capture | None:
         _, genapi, gentl = _sdk()
@@ -418,7 +420,7 @@ class GenicamCamera(Camera):
         if buffer is None:
             self._check_alive()
             return None
-        t_host = time.monotonic_ns()
+        t_host = timebase.now()
         self._last_frame_s = time.monotonic()
         with buffer:  # re-queued on exit: everything we keep is copied out before
             try:

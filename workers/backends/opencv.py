@@ -35,6 +35,7 @@ import time
 import cv2
 import numpy as np
 
+from fxis_shm import timebase
 from fxis_shm.options import Option, boolean, choice, number, text
 from fxis_shm.ring import FrameLayout
 
@@ -207,7 +208,7 @@ class OpenCVCamera(Camera):
             if self._ended:
                 time.sleep(timeout)  # nothing more will come: wait without spinning
             return None
-        now = time.monotonic_ns()
+        now = timebase.now()
         if not self._period_ns:  # rate=max: stamped when decoded
             due = now
         else:
@@ -328,7 +329,7 @@ class _LiveReader:
         failures = 0
         while not self._stop.is_set():
             ok = self.cap.grab()
-            t_arrival = time.monotonic_ns()
+            t_arrival = timebase.now()
             if ok:
                 ok, frame = self.cap.retrieve()
             if not ok or frame is None:

@@ -29,6 +29,7 @@ from fractions import Fraction
 
 import numpy as np
 
+from fxis_shm import timebase
 from fxis_shm.options import Option, choice, number
 from fxis_shm.ring import FrameLayout
 from fxis_shm.stamp import write_stamp
@@ -103,7 +104,7 @@ class SyntheticCamera(Camera):
         return 0 if self.supports_trigger else round(self._period)
 
     def trigger(self) -> None:
-        self._triggers.put(time.monotonic_ns())
+        self._triggers.put(timebase.now())
 
     def open(self) -> None:
         lay = self.layout
@@ -116,7 +117,7 @@ class SyntheticCamera(Camera):
             pattern = (np.stack(planes, axis=-1) & 255).astype(np.uint8)
             self._pattern = pattern[..., 0] if lay.channels == 1 else pattern
         self._image = np.empty(lay.shape, np.uint8)
-        self._k = self._index_at(time.monotonic_ns())
+        self._k = self._index_at(timebase.now())
 
     def _draw_board(self, width: int, height: int) -> np.ndarray:
         """A canvas ``2 * sway`` px wider than the image: frame k shows a window of it."""
@@ -154,9 +155,9 @@ class SyntheticCamera(Camera):
     def grab(self, timeout: float) -> Capture | None:
         if self.supports_trigger:
             return self._grab_triggered(timeout)
-        give_up = time.monotonic_ns() + int(timeout * 1e9)
+        give_up = timebase.now() + int(timeout * 1e9)
         while True:
-            now = time.monotonic_ns()
+            now = timebase.now()
             late = self._index_at(now - int(self._period)) - self._k
             if late > 0:  # we fell more than a frame behind: those frames are lost
                 self.frames_dropped += late

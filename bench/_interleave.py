@@ -1,0 +1,109 @@
+"""Timing contenders interleaved: every round times one sample of each contender, in a random
+order, each after a random sleep, so a drift of the machine's speed hits all of them alike.
+
+Not a public module; imported as ``_interleave`` (scripts) or ``bench._interleave`` (package).
+"""
+from __future__ import annotations
+
+import os
+import random
+import resource
+import sys
+import time
+import traceback
+from dataclasses import dataclass, field
+from typing import Any, Callable
+
+import numpy as np
+
+if __package__:
+    from . import _common as common
+else:  # run as a script, or loaded from its path
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    import _common as common
+
+
+@dataclass
+class Contender:
+    """``fn()`` is timed; ``check(result)`` runs afterwards, untimed, and raises if it is wrong."""
+
+    name: str
+    fn: Callable[[], Any]
+    check: Callable[[Any], None] = lambda result: None
+    samples: list = field(default_factory=list)  # ms, None for a failed sample
+    faults: list = field(default_factory=list)  # minor page faults of this process per sample
+    errors: list = field(default_factory=list)  # (sample index, error)
+    first_traceback: str | None = None
+    warmup_failed: int = 0
+
+
+def minor_faults() -> int:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_minflt
+
+
+def time_once(c: Contender) -> tuple[float | None, int, str | None, str | None]:
+    """One sample: (ms or None, minor page faults during the call, error or None, traceback
+    or None); never raises."""
+    f0 = minor_faults()
+    try:
+        t0 = time.perf_counter_ns()
+        result = c.fn()
+        elapsed = time.perf_counter_ns() - t0
+        faults = minor_faults() - f0
+        c.check(result)
+        del result
+        return elapsed / common.NS_PER_MS, faults, None, None
+    except Exception as exc:  # recorded and counted, never raised
+        return None, minor_faults() - f0, common.describe_error(exc), traceback.format_exc()
+
+
+def record(c: Contender, sample: tuple) -> None:
+    ms, faults, error, tb = sample
+    c.samples.append(ms)
+    c.faults.append(faults)
+    if error is not None:
+        c.errors.append((len(c.samples) - 1, error))
+        c.first_traceback = c.first_traceback or tb
+
+
+def time_contenders(contenders: list[Contender], n: int, warmup: int, rng: random.Random,
+                    sleep_max_ms: float, desc: str) -> None:
+    """``warmup`` then ``n`` rounds; each round one sample of every contender in a random order."""
+    for _ in range(warmup):
+        for c in contenders:
+            c.warmup_failed += time_once(c)[2] is not None
+    with common.progress(n * len(contenders), desc) as bar:
+        for _ in range(n):
+            for c in rng.sample(contenders, len(contenders)):
+                common.sleep_ms(rng.uniform(0.0, sleep_max_ms))
+                record(c, time_once(c))
+                bar.update(1)
+
+
+def cycle(items: list) -> Callable[[], Any]:
+    """Returns the next of ``items`` on every call, round and round."""
+    state = {"i": -1}
+
+    def next_item():
+        state["i"] = (state["i"] + 1) % len(items)
+        return items[state["i"]]
+
+    return next_item
+
+
+def result_of(c: Contender) -> dict:
+    """What the JSON keeps of a contender: summary, failures and every raw sample."""
+    ok = [v for v in c.samples if v is not None]
+    return {"summary_ms": common.summary(ok), "failed": len(c.errors), "warmup_failed": c.warmup_failed,
+            "errors": c.errors[:20], "first_traceback": c.first_traceback,
+            "minor_faults_median": float(np.median(c.faults)) if c.faults else None,
+            "samples_ms": c.samples, "minor_faults": c.faults}
+
+
+def median(results: dict, name: str) -> float | None:
+    r = results.get(name)
+    return r["summary_ms"]["median"] if r else None
+
+
+def ratio(a: float | None, b: float | None) -> float | None:
+    return a / b if a is not None and b else None

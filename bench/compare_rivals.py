@@ -1,0 +1,171 @@
+"""The contenders bench/compare.py times fxis against: imagezmq (a hub in a child process),
+a multiprocessing.Queue server, and the two floors, a plain copy and a copy into reused buffers.
+
+Each contender moves the frames of a "source" tuple (copies taken from the service once).
+"""
+from __future__ import annotations
+
+import contextlib
+import os
+import queue
+import sys
+import time
+from typing import Any, Callable
+
+import numpy as np
+
+if __package__:
+    from ._interleave import Contender, cycle
+else:  # run as a script, or loaded from its path
+    sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
+    from _interleave import Contender, cycle
+
+IMZ, IMZ_PER_IMAGE, IMZ_1 = "imagezmq", "imagezmq per image (sample / N)", "imagezmq 1 image"
+MPQ, COPY, REUSED = "mp.Queue", "plain copy (fresh arrays)", "copy into reused buffers"
+COPY_CONTROL = "plain copy, ipc phase (control)"
+CHILD_START_S = 30.0
+
+
+# ---- child processes: the imagezmq hub and the multiprocessing.Queue server -------------------
+
+def hub_main(address: str, ready) -> None:
+    """An ImageHub that answers every image with b"OK" (runs in a child process)."""
+    import imagezmq
+
+    hub = imagezmq.ImageHub(open_port=address)
+    ready.set()
+    while True:
+        hub.recv_image()
+        hub.send_reply(b"OK")
+
+
+def queue_server_main(source: list[list[np.ndarray]], requests, replies, ready) -> None:
+    """For each (id, k) request, puts (id, the frames of source tuple k) on ``replies``."""
+    ready.set()
+    while True:
+        req = requests.get()
+        if req is None:
+            return
+        req_id, k = req
+        replies.put((req_id, source[k % len(source)]))
+
+
+@contextlib.contextmanager
+def child(ctx, target: Callable, *args) -> Any:
+    """A daemon child process running ``target(*args, ready)``, started when it says it is
+    ready, terminated (then killed) on exit whatever happened."""
+    ready = ctx.Event()
+    proc = ctx.Process(target=target, args=(*args, ready), daemon=True)
+    proc.start()
+    try:
+        deadline = time.monotonic() + CHILD_START_S
+        while not ready.wait(0.1):
+            if proc.exitcode is not None:
+                raise RuntimeError(f"{target.__name__} exited with code {proc.exitcode} during start-up")
+            if time.monotonic() > deadline:
+                raise RuntimeError(f"{target.__name__} did not start within {CHILD_START_S:.0f} s")
+        yield proc
+    finally:
+        proc.terminate()
+        proc.join(5)
+        if proc.is_alive():
+            proc.kill()
+            proc.join(5)
+
+
+class TimedSender:
+    """imagezmq.ImageSender whose REQ socket gives up after ``timeout`` s (then it is rebuilt:
+    a REQ socket that missed its reply cannot send again)."""
+
+    def __init__(self, address: str, timeout: float):
+        self.address, self.timeout = address, timeout
+        self.sender = None
+        self._open()
+
+    def _open(self) -> None:
+        import imagezmq
+        import zmq
+
+        self.sender = imagezmq.ImageSender(connect_to=self.address)
+        for opt, value in ((zmq.RCVTIMEO, int(self.timeout * 1000)),
+                           (zmq.SNDTIMEO, int(self.timeout * 1000)), (zmq.LINGER, 0)):
+            self.sender.zmq_socket.setsockopt(opt, value)
+
+    def send(self, images: list[np.ndarray]) -> None:
+        import zmq
+
+        for j, image in enumerate(images):
+            try:
+                reply = self.sender.send_image(f"cam{j}", image)
+            except zmq.Again:
+                self.close()
+                self._open()
+                raise TimeoutError(f"imagezmq hub gave no reply within {self.timeout:g} s") from None
+            if reply != b"OK":
+                raise RuntimeError(f"imagezmq hub replied {reply!r}")
+
+    def close(self) -> None:
+        if self.sender is not None:
+            self.sender.close()
+            self.sender = None
+
+
+class QueueClient:
+    """Asks the queue server for a source tuple; a late reply to an earlier request is skipped."""
+
+    def __init__(self, requests, replies, timeout: float):
+        self.requests, self.replies, self.timeout = requests, replies, timeout
+        self._id = 0
+
+    def get(self, k: int) -> list[np.ndarray]:
+        self._id += 1
+        self.requests.put((self._id, k))
+        deadline = time.monotonic() + self.timeout
+        while True:
+            try:
+                req_id, frames = self.replies.get(timeout=max(0.0, deadline - time.monotonic()))
+            except queue.Empty:
+                raise TimeoutError(f"mp.Queue server gave no reply within {self.timeout:g} s") from None
+            if req_id == self._id:
+                return frames
+
+
+# ---- the contenders ---------------------------------------------------------------------------
+
+def frames_check(n: int, shape: tuple) -> Callable[[Any], None]:
+    def check(images):
+        if len(images) != n or any(im.shape != shape for im in images):
+            raise AssertionError(f"got {len(images)} images of {[im.shape for im in images]}, "
+                                 f"expected {n} of {shape}")
+    return check
+
+
+def copy_contenders(source: list[list[np.ndarray]], name: str = COPY) -> list[Contender]:
+    """The two floors: fresh copies, and copies into buffers allocated (and faulted) once."""
+    n, shape = len(source[0]), source[0][0].shape
+    fresh_next, reused_next = cycle(source), cycle(source)
+    dest = [np.zeros_like(f) for f in source[0]]
+
+    def fresh():
+        return [f.copy() for f in fresh_next()]
+
+    def reused():
+        for d, f in zip(dest, reused_next()):
+            np.copyto(d, f)
+        return dest
+
+    return [Contender(name, fresh, frames_check(n, shape)),
+            Contender(REUSED, reused, frames_check(n, shape))]
+
+
+def imagezmq_contenders(sender: TimedSender, source: list[list[np.ndarray]]) -> list[Contender]:
+    tuples_next = cycle(source)
+    images_next = cycle([f for tup in source for f in tup])
+    return [Contender(IMZ, lambda: sender.send(tuples_next())),
+            Contender(IMZ_1, lambda: sender.send([images_next()]))]
+
+
+def queue_contender(qc: QueueClient, source: list[list[np.ndarray]]) -> Contender:
+    index_next = cycle(list(range(len(source))))
+    return Contender(MPQ, lambda: qc.get(index_next()),
+                     frames_check(len(source[0]), source[0][0].shape))

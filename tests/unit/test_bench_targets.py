@@ -1,0 +1,61 @@
+"""The benches' verdicts: local wake-up times and compare.py's target ratios (pure functions)."""
+import pathlib
+import sys
+
+import pytest
+
+BENCH = pathlib.Path(__file__).resolve().parents[2] / "bench"
+
+
+@pytest.fixture(scope="module")
+def bench_modules():
+    sys.path.insert(0, str(BENCH))
+    try:
+        import compare_report
+        import latency_wake
+        import scaling
+        yield {"compare_report": compare_report, "latency_wake": latency_wake, "scaling": scaling}
+    finally:
+        sys.path.remove(str(BENCH))
+
+
+def test_a_request_waited_only_if_a_frame_it_returns_was_stored_after_it_was_made(bench_modules):
+    wake_of = bench_modules["latency_wake"].wake_of
+    assert wake_of(1_000, 9_000, [500, 900]) == {"waited": False, "wake_ms": None}
+    # the last frame stored after the request (at 6_000 ns) counts: 3_000 ns = 0.003 ms
+    assert wake_of(1_000, 9_000, [4_000, 6_000, 800]) == {"waited": True, "wake_ms": 0.003}
+
+
+def test_wake_targets_judge_median_and_p99_of_copied_and_zero_copy_apart(bench_modules):
+    wake = bench_modules["latency_wake"]
+    summary = {"all, copied": {"wake_ms": {"median": 0.4, "p99": 2.5}},
+               "all, zero-copy": {"wake_ms": {"median": None, "p99": None}}}
+    verdicts = {t["target"]: (t["passed"], t["ratio"]) for t in wake.targets(summary)}
+    assert verdicts["local wake-up median, copied"] == (True, pytest.approx(0.8))
+    assert verdicts["local wake-up p99, copied"] == (False, pytest.approx(1.25))
+    assert verdicts["local wake-up median, zero-copy"] == (None, None)
+
+
+def result(median_ms):
+    return {"summary_ms": {"median": median_ms}}
+
+
+def test_compare_targets_are_ratios_of_medians_against_their_limits(bench_modules):
+    report = bench_modules["compare_report"]
+    fx, rv = sys.modules["compare_fxis"], sys.modules["compare_rivals"]
+    res = {fx.LOCAL: result(1.2), rv.COPY: result(1.0), fx.LOCAL_VIEW: result(0.05), fx.TIME: result(0.2),
+           fx.TCP: result(3.0), rv.IMZ_1: result(1.0), rv.IMZ: result(2.0)}
+    got = {(t["contender"], t["reference"]): t for t in report.targets({report.TARGET_SCENARIO: res})}
+    assert got[fx.LOCAL, rv.COPY]["pass"] is True and got[fx.LOCAL, rv.COPY]["ratio"] == pytest.approx(1.2)
+    assert got[fx.LOCAL_VIEW, fx.TIME]["pass"] is True  # 0.25 <= 0.3
+    assert got[fx.TCP, rv.IMZ_1]["pass"] is False  # 3.0 > 2.0
+    assert got[fx.TCP, rv.IMZ]["pass"] is False  # 1.5 > 1.2
+    assert got[fx.LATEST, rv.COPY]["pass"] is None  # not measured: no verdict
+    assert "n/a" in report.targets_table(list(got.values()))
+
+
+def test_the_scaling_help_describes_every_section_from_its_module(bench_modules):
+    scaling = bench_modules["scaling"]
+    text = scaling.description()
+    for name, module in scaling.SECTIONS.items():
+        assert f"  {name:<8} " + module.__doc__.strip().splitlines()[0] in text
