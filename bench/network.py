@@ -47,11 +47,11 @@ import time
 
 if __package__:
     from . import _common as common
-    from . import latency
+    from . import latency_paper as paper
 else:  # run as a script, or loaded from its path
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     import _common as common
-    import latency
+    import latency_paper as paper
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # for tests.hosts
 from tests.hosts import HostsUnavailable, Lab  # noqa: E402
 
@@ -84,7 +84,7 @@ def parser() -> argparse.ArgumentParser:
     t2.add_argument("-n", "--requests", type=common.positive_int, default=100, help="requests per configuration")
     t2.add_argument("--sleep-ms", type=common.nonnegative_float, default=180.0, help="tau_sleep, ms")
     t2.add_argument("--fluct-ms", type=common.nonnegative_float, default=50.0, help="tau_mf, ms")
-    t2.add_argument("--policies", type=latency.parse_policies, default="ours",
+    t2.add_argument("--policies", type=paper.parse_policies, default="ours",
                     help="comma list of paper, ours (or 'both')")
     tu = p.add_argument_group("tuples")
     tu.add_argument("--tuple-requests", type=common.positive_int, default=1000)
@@ -102,10 +102,6 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
-def verdict(passed: bool | None) -> str:
-    return {True: "PASS", False: "FAIL", None: "N/A "}[passed]
-
-
 # ---- the clock estimates, watched in the background ---------------------------------------
 
 class ClockWatch:
@@ -118,6 +114,7 @@ class ClockWatch:
         self._thread = threading.Thread(target=self._loop, name="clock-watch", daemon=True)
 
     def watch(self, label: str, client: Client, endpoint: str, true_offset_ns: int) -> None:
+        client.clocks  # the first estimate here: later reads in the thread only read it
         self._watched.append((label, client, endpoint, true_offset_ns))
         if self.started is None:
             self.started = time.monotonic()
@@ -167,7 +164,7 @@ def print_clock(report: dict, minutes: float) -> None:
                        title="clock estimate error against the true offset, ms", digits=4))
     t = report["target"]
     watched = t["watched_s"] / 60
-    print(f"  {verdict(t['passed'])} clock: p99 |error| {common.fmt(t['p99_abs_error_ms'], 4)} <= "
+    print(f"  {common.verdict(t['passed'])} clock: p99 |error| {common.fmt(t['p99_abs_error_ms'], 4)} <= "
           f"{CLOCK_TARGET_MS} ms over {watched:.1f} min" + ("" if watched >= minutes - 1e-9 else
                                                             f" (short of --minutes {minutes:g})"))
 
@@ -175,20 +172,21 @@ def print_clock(report: dict, minutes: float) -> None:
 # ---- table2 ---------------------------------------------------------------------------------
 
 def table_ii(args, configs: dict[str, Client], exp, kinds_of: dict) -> dict:
-    """Table II per configuration, and the remote ones' means against the one host's."""
+    """Table II per configuration (label -> client), the configurations' requests interleaved
+    (bench/latency_paper.py's run, with the labels as its "paths") so they see the same conditions."""
+    records = paper.run(args, configs, exp, kinds_of, 0, 0)  # t* and frame times: the caller's clock
     out = {}
-    for label, client in configs.items():
-        records = latency.run(args, client, exp, kinds_of, 0, 0)  # t* and frame times: our clock
+    for label in configs:
         out[label] = {}
         for pol in args.policies:
-            recs = [r for r in records if r["policy"] == pol and r["error"] is None]
-            rows = latency.policy_rows(recs, exp)
+            mine = [r for r in records if (r["policy"], r["path"]) == (pol, label)]
+            recs = [r for r in mine if r["error"] is None]
+            rows = paper.policy_rows(recs, exp)
             out[label][pol] = {"rows": rows, "spikes": sum(r["spike"] for r in recs),
-                               "failed": sum(r["policy"] == pol and r["error"] is not None for r in records),
-                               "rtt_ms": common.summary(r["rtt_ms"] for r in recs),
-                               "records": [r for r in records if r["policy"] == pol]}
+                               "failed": len(mine) - len(recs), "rtt_ms": common.summary(r["rtt_ms"] for r in recs),
+                               "paths": sorted({r["came_by"] for r in recs}), "records": mine}
             print()
-            print(f"[{label}] " + latency.format_table_ii(pol, rows, exp, len(recs)))
+            print(paper.format_table_ii((pol, label), rows, exp, len(recs)))
     return out
 
 
@@ -209,7 +207,7 @@ def compare_table_ii(result: dict, policies: list[str]) -> list[dict]:
                 passed = None if diff is None else abs(diff) <= TABLE_II_TOLERANCE_MS
                 targets.append({"policy": pol, "config": label, "metric": metric, "diff_ms": diff,
                                 "passed": passed})
-                row += [mean, diff, verdict(passed)]
+                row += [mean, diff, common.verdict(passed)]
             rows.append(row)
         header = ["metric", "one host"] + [h for label in remote for h in (label, "diff", "")]
         print()
@@ -219,8 +217,9 @@ def compare_table_ii(result: dict, policies: list[str]) -> list[dict]:
             spikes = r[pol]["spikes"]
             targets.append({"policy": pol, "config": label, "metric": "spikes", "value": spikes,
                             "passed": spikes == 0})
-            print(f"  {verdict(spikes == 0)} [{label}] {pol}: {spikes} spike(s); round trip mean "
-                  f"{common.fmt(r[pol]['rtt_ms']['mean'])} ms; failed {r[pol]['failed']}")
+            print(f"  {common.verdict(spikes == 0)} [{label}] {pol}: {spikes} spike(s); round trip mean "
+                  f"{common.fmt(r[pol]['rtt_ms']['mean'])} ms; came by {'/'.join(r[pol]['paths'])}; "
+                  f"failed {r[pol]['failed']}")
     return targets
 
 
@@ -245,10 +244,10 @@ def two_host_tuples(args, client: Client, offsets: dict[str, int], rng: random.R
             records.append(rec)
             bar.update(1)
     ok = [r for r in records if r["error"] is None]
-    exp = latency.Experiment(cams, args.fps, [0.0] * len(cams), args.jitter_ms)
-    phases = latency.observed_phases(ok, exp)
+    exp = paper.Experiment(cams, args.fps, [0.0] * len(cams), args.jitter_ms)
+    phases = paper.observed_phases(ok, exp)
     least = phases["min_covering_arc_ms"] if phases else None
-    limit = None if least is None else least + latency.SPIKE_MARGIN_MS
+    limit = None if least is None else least + paper.SPIKE_MARGIN_MS
     spikes = sum(r["true_skew_ms"] > limit for r in ok) if ok else None
     out = {"cameras": cams, "requests": len(records), "failed": len(records) - len(ok),
            "least_allowed_skew_ms": least, "spike_limit_ms": limit, "spikes": spikes,
@@ -265,7 +264,7 @@ def two_host_tuples(args, client: Client, offsets: dict[str, int], rng: random.R
                                             for k in ("n", "min", "median", "p99", "max"))]],
                        title=f"two-host tuples {' + '.join(cams)}, ms; least the cameras allow "
                              f"{common.fmt(least)} ms", digits=3))
-    print(f"  {verdict(out['passed'])} two hosts: {spikes} spike(s) (true skew > {common.fmt(limit)} ms) in "
+    print(f"  {common.verdict(out['passed'])} two hosts: {spikes} spike(s) (true skew > {common.fmt(limit)} ms) in "
           f"{len(ok)} requests (target: 0 in >= 1000); failed {out['failed']}")
     return out
 
@@ -300,7 +299,7 @@ def sizes(args, host, clients: dict[str, Client], cams: list[str]) -> dict:
         passed = ratio <= limit
         out["targets"].append({"rate": rate, "rtt_ratio": ratio, "bytes_ratio": bytes_ratio, "limit": limit,
                                "passed": passed})
-        print(f"  {verdict(passed)} {rate}: JPEG/raw round trip {ratio:.3f}x <= {limit}x "
+        print(f"  {common.verdict(passed)} {rate}: JPEG/raw round trip {ratio:.3f}x <= {limit}x "
               f"(bytes {common.fmt(bytes_ratio, 3)}x)")
     return out
 
@@ -329,7 +328,7 @@ def main(argv: list[str] | None = None) -> int:
     out = common.ensure_dir(args.out)
     rng = random.Random(args.seed)
     names = ["cam0", "cam1"]
-    exp = latency.Experiment(names, args.fps, [0.0, 1.0], args.jitter_ms)
+    exp = paper.Experiment(names, args.fps, [0.0, 1.0], args.jitter_ms)
     cam_flags = common.synthetic_camera_flags(names, args.fps, args.width, args.height, [0.0, 1.0],
                                               args.jitter_ms) + ["--slots", str(args.slots)]
     host_info, started = common.host_info(), time.time()

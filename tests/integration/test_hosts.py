@@ -200,13 +200,14 @@ def test_compressed_frames_over_the_link_keep_shape_and_stamp(emulated_hosts, en
         packed = client.image("a", at=raw.t_capture, wait="none", encoding=encoding, quality=90)
         packed_bytes = host.link_bytes()["from_host"] - before
         assert packed.path == "network" and packed.frame_id == raw.frame_id
+        assert packed.encoding == encoding and raw.encoding == "raw"
         assert packed.image.shape == raw.image.shape and packed.image.dtype == raw.image.dtype
         assert read_stamp(packed.image) == packed.frame_id
         error = np.abs(packed.image.astype(np.int16) - raw.image.astype(np.int16))
         if encoding == "png":
             assert error.max() == 0  # lossless
-        else:
-            assert error.mean() <= 2.0  # q90 on the synthetic pattern: under 2 grey levels on average
+        else:  # the stated error of JPEG q>=75 on the synthetic pattern (colour: 4:2:0 chroma)
+            assert error.mean() < (1.5 if pixel_format == "mono8" else 6)
         assert packed_bytes < raw_bytes / 2  # what the link carried, counted by the shaper
 
 
