@@ -10,11 +10,15 @@ Host A (clock +offset) runs cam0 and cam1, as bench/latency.py's service (20 fps
 mono8, phases 0 and 1 ms, jitter +/-0.3 ms, 20 slots); host B (clock +2*offset) runs cam2.
 This process is the client, on the root namespace's clock. Parts (--parts):
 
-  table2  the paper's Table II (bench/latency.py: same sleeps, metrics and spike rule), policy
-          "ours" unless --policies says otherwise, --requests requests per configuration:
-          one host (the same cameras served on this host; the client reads locally),
-          remote raw and remote JPEG (host A over 1 Gbit). Target: the remote means of
-          eps_b, |eps_j| and tau_w within 0.5 ms of the one-host means; 0 spikes.
+  table2  the paper's Table II (bench/latency_paper.py's request and metrics, its sleeps and
+          spike rule), policy "ours" unless --policies says otherwise, for three configurations:
+          one host (the same cameras served on this host; the client reads locally), remote raw
+          and remote JPEG (host A over 1 Gbit). --requests rounds; in each round every
+          configuration, after its own random sleep, calls at the same phase of its cameras'
+          frame period (drawn per round), so the configurations are compared request by request
+          (paired) rather than by means that wander over a frame period. Target: the remote
+          means of eps_b, |eps_j| and tau_w within 0.5 ms of the one host's (paired mean
+          difference, printed with its standard error); 0 spikes.
   tuples  --tuple-requests tuples of cam0 (host A) and cam2 (host B) through one client over
           both services, each after a sleep U[0, 2 x --tuple-sleep-ms]. The true skew comes
           from the services' own stamps and the exact offsets; the least the cameras allow is
@@ -83,7 +87,9 @@ def parser() -> argparse.ArgumentParser:
                    help="host A's clock is this many seconds ahead of ours, host B's twice as many")
     p.add_argument("--quality", type=int, default=90, help="JPEG quality")
     t2 = p.add_argument_group("table2 (as bench/latency.py)")
-    t2.add_argument("-n", "--requests", type=common.positive_int, default=100, help="requests per configuration")
+    t2.add_argument("-n", "--requests", type=common.positive_int, default=300,
+                    help="rounds, each one request per configuration (the paper: 100 requests; tau_w "
+                         "spreads over a frame period, so telling 0.5 ms apart takes a few hundred)")
     t2.add_argument("--sleep-ms", type=common.nonnegative_float, default=180.0, help="tau_sleep, ms")
     t2.add_argument("--fluct-ms", type=common.nonnegative_float, default=50.0, help="tau_mf, ms")
     t2.add_argument("--policies", type=paper.parse_policies, default="ours",
