@@ -35,7 +35,8 @@ This process is the client, on the root namespace's clock. Parts (--parts):
           have passed. Error = the estimate's mapping of "now" minus the true one.
           Target: p99 |error| <= 0.1 ms.
 
-Prints a table per part with PASS/FAIL per target; writes network.json to --out.
+Prints a table per part with PASS/FAIL per target; writes network.json to --out, and the
+services' logs to network-logs/ and network.local.log there.
 Exit status: 0 when the run completed; 1 if a request failed (or, with --strict, a target
 failed; or emulated hosts cannot be made here); 2 on bad flags.
 """
@@ -46,6 +47,7 @@ import contextlib
 import math
 import os
 import random
+import shutil
 import statistics
 import sys
 import threading
@@ -425,7 +427,9 @@ def main(argv: list[str] | None = None) -> int:
     print(common.code_line(host_info["code"]))
     try:
         with contextlib.ExitStack() as stack:
-            lab = stack.enter_context(Lab(log_dir=out))
+            logs = os.path.join(out, "network-logs")  # the emulated hosts' service logs, of this run only
+            shutil.rmtree(logs, ignore_errors=True)
+            lab = stack.enter_context(Lab(log_dir=common.ensure_dir(logs)))
             stack.callback(watch.stop)
             a = lab.host(clock_offset_s=args.offset_s, rate="1gbit")
             svc_a = a.service(*cam_flags)

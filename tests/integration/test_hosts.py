@@ -219,7 +219,7 @@ def test_the_two_hosts_example_runs(emulated_hosts):
 
     run = Path(__file__).resolve().parents[2] / "examples" / "two_hosts" / "run.py"
     done = subprocess.run([sys.executable, str(run), "-n", "3", "--width", "320", "--height", "240",
-                           "--encoding", "jpeg"], capture_output=True, text=True, timeout=180)
+                           "--encoding", "jpeg"], capture_output=True, text=True, timeout=100)
     report = f"stdout:\n{done.stdout}\nstderr:\n{done.stderr}"
     assert done.returncode == 0, report
     assert done.stdout.rstrip().endswith("OK"), report
