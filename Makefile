@@ -1,11 +1,12 @@
 # Two entry points for a newcomer on a fresh machine (see README.md):
 #   make demo   set everything up, start the default service, run the paper's experiment
 #   make test   set everything up and run the whole test suite
+#   make lint   ruff (lint) over the tree, mypy --strict over the modules pyproject.toml lists
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 
-.PHONY: setup demo test clean
+.PHONY: setup demo test lint clean
 
 setup: $(VENV)/.installed
 
@@ -13,14 +14,18 @@ $(VENV)/.installed: pyproject.toml setup.py fxis_shm/_ordered.c scripts/install-
 	bash scripts/install-system-packages.sh
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[test,bench,aravis,genicam]"
+	$(BIN)/python -m pip install --quiet -e ".[test,bench,aravis,genicam,record]"
 	touch $@
 
 demo: setup
 	$(BIN)/python bench/latency.py
 
-test: setup
+test: setup lint
 	$(BIN)/python -m pytest
+
+lint: setup
+	$(BIN)/ruff check .
+	$(BIN)/mypy
 
 clean:
 	rm -rf $(VENV) build *.egg-info bench/results

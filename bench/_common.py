@@ -16,7 +16,7 @@ import random
 import subprocess
 import sys
 import time
-from typing import Iterable, Iterator, Sequence
+from collections.abc import Iterable, Iterator, Sequence
 
 import numpy as np
 
@@ -95,6 +95,25 @@ def nonnegative_float(text: str) -> float:
     if not value >= 0:
         raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
     return value
+
+
+def int_list(text: str) -> list[int]:
+    """An argparse type: comma-separated integers >= 0."""
+    values = [int(v) for v in text.split(",") if v.strip()]
+    if not values or min(values) < 0:
+        raise argparse.ArgumentTypeError(f"expected comma-separated integers >= 0, got {text!r}")
+    return values
+
+
+def name_list(choices: tuple[str, ...]):
+    """An argparse type: a comma-separated subset of ``choices``, in the order of ``choices``."""
+    def parse(text: str) -> list[str]:
+        names = [v.strip() for v in text.split(",") if v.strip()]
+        unknown = [n for n in names if n not in choices]
+        if unknown or not names:
+            raise argparse.ArgumentTypeError(f"choose from {','.join(choices)}, got {text!r}")
+        return [c for c in choices if c in names]
+    return parse
 
 
 def synthetic_camera_flags(names: Sequence[str], fps: float, width: int, height: int,

@@ -30,11 +30,7 @@ MB = 1e6
 
 # ---- list-valued flags -----------------------------------------------------------------------
 
-def int_list(text: str) -> list[int]:
-    values = [int(v) for v in text.split(",") if v.strip()]
-    if not values or min(values) < 0:
-        raise argparse.ArgumentTypeError(f"expected comma-separated integers >= 0, got {text!r}")
-    return values
+int_list = common.int_list  # the scaling modules take every list type from this module
 
 
 def positive_int_list(text: str) -> list[int]:
@@ -66,15 +62,7 @@ def size_list(text: str) -> list[tuple[int, int]]:
     return sizes
 
 
-def name_list(choices: tuple[str, ...]):
-    def parse(text: str) -> list[str]:
-        names = [v.strip() for v in text.split(",") if v.strip()]
-        unknown = [n for n in names if n not in choices]
-        if unknown or not names:
-            raise argparse.ArgumentTypeError(f"choose from {','.join(choices)}, got {text!r}")
-        return [c for c in choices if c in names]
-    return parse
-
+name_list = common.name_list
 
 
 # ---- clients and requests --------------------------------------------------------------------

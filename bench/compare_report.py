@@ -9,7 +9,7 @@ import numpy as np
 if __package__:
     from . import _common as common
     from ._interleave import median, ratio
-    from .compare_fxis import (IPC, LATEST, LATEST_VIEW, LOCAL, LOCAL_VIEW, SCENARIOS, TCP, TIME)
+    from .compare_fxis import IPC, LATEST, LATEST_VIEW, LOCAL, LOCAL_VIEW, SCENARIOS, TCP, TIME
     from .compare_rivals import COPY, IMZ, IMZ_1, IMZ_PER_IMAGE, MPQ, REUSED
 else:  # run as a script, or loaded from its path
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))

@@ -225,12 +225,12 @@ def summarise(run: dict) -> dict:
     return rows
 
 
-def plot(runs: list[dict], summaries: list[dict], path: str, title: str) -> None:
+def plot(runs: list[dict], path: str, title: str) -> None:
     plt = common.pyplot()
     import numpy as np
 
     fig, ax = plt.subplots(figsize=(9, 5))
-    for run, summ in zip(runs, summaries):
+    for run in runs:
         for cam in CAMERAS:
             x = np.sort([common.ms(r["t_stored"] - r["t_capture"]) for r in run["frames"][cam]])
             if x.size:
@@ -302,7 +302,7 @@ def main(argv: list[str] | None = None) -> int:
         "unaccounted": unaccounted,
         "runs": runs,
     })
-    plot(runs, summaries, png_path, title)
+    plot(runs, png_path, title)
     print(f"wrote {json_path} and {png_path}")
     return common.EXIT_FAILED if errors or unaccounted else common.EXIT_OK
 

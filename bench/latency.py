@@ -61,20 +61,51 @@ import time
 if __package__:
     from . import _common as common, latency_wake as wake
     from .latency_figures import figures
-    from .latency_paper import (COLUMNS, PAPER_TABLE_II, PATHS, POLICIES, Experiment, by_series,
-                                check_targets, format_table_ii, format_targets, label, observed_phases,
-                                parse_paths, parse_phases, parse_policies, policy_rows, run, series_of)
+    from .latency_paper import (
+        COLUMNS,
+        PAPER_TABLE_II,
+        PATHS,
+        POLICIES,
+        Experiment,
+        by_series,
+        check_targets,
+        format_table_ii,
+        format_targets,
+        label,
+        observed_phases,
+        parse_paths,
+        parse_phases,
+        parse_policies,
+        policy_rows,
+        run,
+        series_of,
+    )
 else:  # run as a script, or loaded from its path
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     import _common as common
     import latency_wake as wake
     from latency_figures import figures
-    from latency_paper import (COLUMNS, PAPER_TABLE_II, PATHS, POLICIES, Experiment, by_series,
-                               check_targets, format_table_ii, format_targets, label, observed_phases,
-                               parse_paths, parse_phases, parse_policies, policy_rows, run, series_of)
+    from latency_paper import (
+        COLUMNS,
+        PAPER_TABLE_II,
+        PATHS,
+        POLICIES,
+        Experiment,
+        by_series,
+        check_targets,
+        format_table_ii,
+        format_targets,
+        label,
+        observed_phases,
+        parse_paths,
+        parse_phases,
+        parse_policies,
+        policy_rows,
+        run,
+        series_of,
+    )
 
 from fxis_shm import Client
-
 
 # ---- command line ----------------------------------------------------------------------------
 

@@ -44,7 +44,7 @@ def parse_phases(text: str) -> list[float]:
     try:
         phases = [float(x) for x in text.split(",") if x.strip()]
     except ValueError:
-        raise argparse.ArgumentTypeError(f"expected a comma list of numbers (ms), got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected a comma list of numbers (ms), got {text!r}") from None
     if not phases:
         raise argparse.ArgumentTypeError("expected at least one phase")
     return phases

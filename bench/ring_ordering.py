@@ -46,8 +46,8 @@ def measure(args) -> dict:
     import numpy as np
 
     from fxis_shm import ordering
-    from fxis_shm.ring import FrameLayout, RingReader, RingWriter
     from fxis_shm.naming import remove_leftovers
+    from fxis_shm.ring import FrameLayout, RingReader, RingWriter
 
     service = f"ro{os.getpid()}"
     layout = FrameLayout(args.height, args.width)

@@ -40,8 +40,7 @@ import textwrap
 import time
 
 if __package__:
-    from . import _common as common, _scaling as shared
-    from . import scaling_cameras, scaling_clients, scaling_fps, scaling_size
+    from . import _common as common, _scaling as shared, scaling_cameras, scaling_clients, scaling_fps, scaling_size
 else:  # run as a script, or loaded from its path
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     import _common as common

@@ -42,7 +42,7 @@ def active_worker(conn) -> None:
         window = {}
         go = threading.Event()
 
-        def client_thread(j: int) -> None:
+        def client_thread(j: int, task=task, records=records, ready=ready, go=go, window=window) -> None:
             with shared.make_client(task["endpoint"], task["timeout"], task["path"]) as client:
                 try:
                     client.status()
@@ -110,7 +110,7 @@ class ActiveClients:
         return records, start, end
 
     def close(self) -> None:
-        for proc, conn in self.workers:
+        for _, conn in self.workers:
             with contextlib.suppress(OSError):
                 conn.send(None)
         for proc, conn in self.workers:

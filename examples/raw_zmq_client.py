@@ -49,7 +49,9 @@ class RawClient:
         """service clock minus local CLOCK_MONOTONIC, from the fastest round trip."""
         best = None
         for _ in range(samples):
-            t0 = time.monotonic_ns(); now = self.call("time")[0]["now"]; t1 = time.monotonic_ns()
+            t0 = time.monotonic_ns()
+            now = self.call("time")[0]["now"]
+            t1 = time.monotonic_ns()
             if best is None or t1 - t0 < best[0]:
                 best = (t1 - t0, now - (t0 + t1) // 2)
         return best
@@ -70,9 +72,10 @@ def main(endpoint):
         for meta in reply["frames"]:
             img = images[meta["camera"]]
             stamp = int.from_bytes(img[0].tobytes()[:8], "little")  # synthetic cameras stamp row 0
+            synthetic = status["cameras"][meta["camera"]]["kind"] == "synthetic"
             print(f"  {meta['camera']}: frame {meta['frame_id']} eps "
                   f"{(reply['t_request'] - meta['t_capture']) / 1e6:+.3f} ms {img.shape} {img.dtype}"
-                  + (f" stamp ok={stamp == meta['frame_id']}" if status["cameras"][meta["camera"]]["kind"] == "synthetic" else ""))
+                  + (f" stamp ok={stamp == meta['frame_id']}" if synthetic else ""))
     name = next(iter(status["cameras"]))
     reply, images = c.call("image", camera=name, wait="none")
     print(f"image {name}: frame {reply['frames'][0]['frame_id']} {images[name].shape}; latest:",

@@ -1,11 +1,23 @@
 """fxis-shm: multi-camera acquisition into shared-memory rings, served as
 time-synchronized images over ZeroMQ. The public API is what ``__all__`` names
 (README.md, "The public API")."""
+from . import _sourcetree
 from .client import Client, Frame, FrameTuple
 from .clockmap import ClockEstimate
 from .errors import (
-    CameraDown, ConfigError, FrameTimeout, FxisError, InvalidArgument, LocalPathUnavailable, Overwritten,
-    ProtocolError, RequestTimeout, RingError, ServiceError, SkewExceeded, UnknownCamera,
+    CameraDown,
+    ConfigError,
+    FrameTimeout,
+    FxisError,
+    InvalidArgument,
+    LocalPathUnavailable,
+    Overwritten,
+    ProtocolError,
+    RequestTimeout,
+    RingError,
+    ServiceError,
+    SkewExceeded,
+    UnknownCamera,
 )
 from .multiclient import MultiClient
 from .pubsub import EventPublisher, Message, Subscriber, handshake
@@ -20,3 +32,5 @@ __all__ = [
     "RingError", "Overwritten", "InvalidArgument",
 ]
 __version__ = "0.1.0"
+
+_sourcetree.install(__path__[0])  # fxis_shm.workers from a source checkout, too

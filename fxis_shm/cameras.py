@@ -2,8 +2,6 @@
 the worker replaces it), whether its worker is alive, and its status."""
 from __future__ import annotations
 
-import time
-
 import numpy as np
 import posix_ipc
 

@@ -1,15 +1,18 @@
-"""The ``fxis`` command: run, status, grab, clean."""
+"""The ``fxis`` command: run, status, grab, record, clean."""
 from __future__ import annotations
 
 import argparse
 import json
 import logging
 import os
+import subprocess
 import sys
+import textwrap
 
-from . import naming
+from . import defaults, naming
+from .camerakinds import KINDS, PROCESS_OPTIONS
 from .client import Client
-from .config import DEFAULT_ENDPOINT, build_config, load_toml
+from .config import build_config, load_toml
 from .errors import ConfigError, FxisError
 
 EXIT_USAGE = 2
@@ -99,6 +102,38 @@ def _grab(args) -> int:
     return 0
 
 
+def _record(args) -> int:
+    from . import encoding
+    from .recorder import Recorder, RecordSettings, summary_table
+
+    def usage(message: str) -> int:
+        print(f"fxis record: {message}", file=sys.stderr)
+        return EXIT_USAGE
+
+    for flag, value in (("--seconds", args.seconds), ("--frames", args.frames), ("--rate", args.rate)):
+        if value is not None and not value > 0:
+            return usage(f"{flag} must be > 0, got {value}")
+    if args.quality is not None and args.encoding != encoding.JPEG:
+        return usage("--quality applies to --encoding jpeg only")
+    if args.quality is not None and not 1 <= args.quality <= 100:
+        return usage(f"--quality must be from 1 to 100, got {args.quality}")
+    cameras = [c.strip() for c in args.cameras.split(",") if c.strip()] if args.cameras else None
+    if args.cameras is not None and not cameras:
+        return usage("--cameras names no camera")
+    settings = RecordSettings(
+        out=args.out, endpoint=args.endpoint, cameras=cameras, seconds=args.seconds, frames=args.frames,
+        rate_hz=args.rate, tuples=args.tuples, encoding=args.encoding,
+        quality=args.quality or encoding.DEFAULT_JPEG_QUALITY)
+    with Client(args.endpoint, timeout=args.timeout) as client:
+        try:
+            recorder = Recorder(settings, client)
+        except ConfigError as exc:
+            return usage(str(exc))
+        summary = recorder.run()
+    print(summary_table(summary))
+    return 0
+
+
 def _keys(args) -> int:
     from .security import create_keys
 
@@ -108,11 +143,23 @@ def _keys(args) -> int:
 
 
 def _cameras(args) -> int:
-    from .workers.backends import discover_all
+    from .camerakinds import DISCOVERY_MODULE
 
-    found, unavailable = discover_all()
+    try:
+        child = subprocess.run([sys.executable, "-m", DISCOVERY_MODULE], stdin=subprocess.DEVNULL,
+                               capture_output=True, text=True, timeout=args.timeout)
+    except subprocess.TimeoutExpired:
+        print(f"fxis cameras: the backends did not finish looking within {args.timeout:g} s "
+              "(--timeout)", file=sys.stderr)
+        return 1
+    if child.returncode != 0:
+        print(f"fxis cameras: looking for cameras failed (exit code {child.returncode}):\n"
+              f"{child.stderr.strip()}", file=sys.stderr)
+        return 1
+    listing = json.loads(child.stdout)
+    found, unavailable = listing["cameras"], listing["unavailable"]
     if args.json:
-        print(json.dumps({"cameras": found, "unavailable": unavailable}, indent=2))
+        print(json.dumps(listing, indent=2))
         return 0
     if found:
         rows = [["kind", "id (device=...)", "model", "format"]] + [
@@ -141,6 +188,16 @@ def _clean(args) -> int:
     return 0
 
 
+def _kinds_help() -> str:
+    """The camera kinds --camera takes, and their keys (docs/cameras.md tells more)."""
+    lines = [f"camera kinds (KIND) and their keys (any kind also takes {', '.join(PROCESS_OPTIONS)}):"]
+    for kind in KINDS.values():
+        lines += [f"  {kind.name:<10} {kind.description}",
+                  *textwrap.wrap(", ".join(kind.options), 88, initial_indent=" " * 13,
+                                 subsequent_indent=" " * 13)]
+    return "\n".join(lines)
+
+
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(
         prog="fxis", description="Multi-camera acquisition service: synchronized images on request.")
@@ -148,29 +205,32 @@ def parser() -> argparse.ArgumentParser:
 
     run = sub.add_parser("run", help="start the service (default: two synthetic cameras)",
                          description="Start camera workers and the coordinator; Ctrl-C stops them "
-                                     "and removes their shared memory.")
-    run.add_argument("--name", help="service name (default fxis); names its shared memory")
+                                     "and removes their shared memory.",
+                         epilog=_kinds_help(), formatter_class=argparse.RawDescriptionHelpFormatter)
+    run.add_argument("--name", help=f"service name (default {defaults.SERVICE}); names its shared memory")
     run.add_argument("--camera", action="append", metavar="NAME=KIND[:key=value,...]",
                      help="a camera, e.g. left=synthetic:fps=30,phase_ms=5 (repeatable)")
-    run.add_argument("--endpoint", help=f"request/reply endpoint (default {DEFAULT_ENDPOINT})")
-    run.add_argument("--pub", help="publish endpoint (default tcp://127.0.0.1:5556)")
-    run.add_argument("--events", help="endpoint receiving request events (default tcp://127.0.0.1:5557)")
-    run.add_argument("--slots", type=int, help="frames held per camera ring (default 20)")
+    run.add_argument("--endpoint", help=f"request/reply endpoint (default {defaults.ENDPOINT})")
+    run.add_argument("--pub", help=f"publish endpoint (default {defaults.PUB})")
+    run.add_argument("--events", help=f"endpoint receiving request events (default {defaults.EVENTS})")
+    run.add_argument("--slots", type=int, help=f"frames held per camera ring (default {defaults.SLOTS})")
     run.add_argument("--config", metavar="FILE.toml", help="settings file (flags override it)")
     run.add_argument("--clock", choices=("monotonic", "realtime", "tai"),
                      help="the clock of every time the service gives and takes (default monotonic); "
                           "realtime or tai where PTP or chrony keeps the cell's hosts in step "
                           "(docs/deployment.md)")
-    run.add_argument("--restart-limit", type=int, help="restarts of a crashed process before giving up (default 5)")
-    run.add_argument("--log-level", help="DEBUG, INFO (default), WARNING or ERROR")
+    run.add_argument("--restart-limit", type=int,
+                     help=f"restarts of a crashed process before giving up (default {defaults.RESTART_LIMIT})")
+    run.add_argument("--log-level", help=f"DEBUG, INFO, WARNING or ERROR (default {defaults.LOG_LEVEL})")
     run.add_argument("--curve-secret", metavar="FILE", help="the service's NAME.key_secret: CurveZMQ on every socket")
-    run.add_argument("--curve-clients", metavar="DIR", help="folder of the public keys (.key) of the clients allowed in")
+    run.add_argument("--curve-clients", metavar="DIR",
+                     help="folder of the public keys (.key) of the clients allowed in")
     run.add_argument("--insecure-bind", action="store_true",
                      help="allow endpoints reachable from other hosts without CurveZMQ (prints a warning)")
     run.set_defaults(func=_run)
 
     def client_args(sp):
-        sp.add_argument("--endpoint", default=DEFAULT_ENDPOINT, help=f"service endpoint (default {DEFAULT_ENDPOINT})")
+        sp.add_argument("--endpoint", default=defaults.ENDPOINT, help=f"service endpoint (default {defaults.ENDPOINT})")
         sp.add_argument("--timeout", type=float, default=3.0, help="seconds to wait for the reply (default 3)")
 
     status = sub.add_parser("status", help="show the cameras and the service")
@@ -185,17 +245,44 @@ def parser() -> argparse.ArgumentParser:
     grab.add_argument("--at", type=int, help="t* in ns of the service's CLOCK_MONOTONIC (default now)")
     grab.set_defaults(func=_grab)
 
+    record = sub.add_parser(
+        "record", help="record the cameras into a rosbag2 bag (MCAP) for Foxglove, ros2 bag, rosbags",
+        description="Record every frame of the cameras (or one synchronized tuple per step with "
+                    "--tuples) into a rosbag2 folder with MCAP storage: /NAME/image_raw "
+                    "(sensor_msgs/msg/Image) or /NAME/image_raw/compressed (JPEG), stamps in the "
+                    "service's CLOCK_MONOTONIC. Ctrl-C ends the recording with a valid bag. "
+                    "Replay it with a camera of kind bag (docs/recording.md).")
+    client_args(record)
+    record.add_argument("--out", required=True, metavar="DIR", help="the bag folder to create (must not exist)")
+    record.add_argument("--cameras", metavar="A,B", help="comma-separated cameras (default all)")
+    until = record.add_mutually_exclusive_group()
+    until.add_argument("--seconds", type=float, metavar="S", help="stop after S seconds (default: at Ctrl-C)")
+    until.add_argument("--frames", type=int, metavar="N",
+                       help="stop after N frames per camera (N tuples with --tuples)")
+    record.add_argument("--rate", type=float, metavar="HZ",
+                        help="thin each camera to HZ on purpose (default every frame); with --tuples, "
+                             "the step rate (default the slowest camera's)")
+    record.add_argument("--tuples", action="store_true",
+                        help="one synchronized tuple per step: its images share the step's stamp, "
+                             "and /fxis/tuples lists their frame ids")
+    record.add_argument("--encoding", choices=("raw", "jpeg"), default="raw",
+                        help="raw: sensor_msgs/Image (default); jpeg: sensor_msgs/CompressedImage")
+    record.add_argument("--quality", type=int, metavar="Q", help="JPEG quality 1-100 (default 90)")
+    record.set_defaults(func=_record)
+
     keys = sub.add_parser("keys", help="make a CurveZMQ key pair (for a service or a client)")
     keys.add_argument("--out", required=True, metavar="DIR", help="folder to write NAME.key and NAME.key_secret into")
-    keys.add_argument("--name", default="fxis", help="file name of the pair (default fxis)")
+    keys.add_argument("--name", default=defaults.SERVICE, help=f"file name of the pair (default {defaults.SERVICE})")
     keys.set_defaults(func=_keys)
 
     cameras = sub.add_parser("cameras", help="list the cameras the installed backends can reach")
     cameras.add_argument("--json", action="store_true", help="print the list as JSON")
+    cameras.add_argument("--timeout", type=float, default=30.0,
+                         help="seconds the backends may take to look (default 30)")
     cameras.set_defaults(func=_cameras)
 
     clean = sub.add_parser("clean", help="remove shared memory left by a crashed service")
-    clean.add_argument("--name", default="fxis", help="service name (default fxis)")
+    clean.add_argument("--name", default=defaults.SERVICE, help=f"service name (default {defaults.SERVICE})")
     clean.set_defaults(func=_clean)
     return p
 

@@ -20,24 +20,30 @@ from __future__ import annotations
 import itertools
 import time
 import warnings
-from typing import Callable
+from collections.abc import Callable
 
 import numpy as np
 import zmq
 
-from . import encoding as codec
-from . import protocol, timebase
+from . import defaults, encoding as codec, protocol, timebase
 from .clockmap import IDENTITY, SAME_CLOCK, SHARED, ClockEstimate
 from .clocktracker import ClockTracker
-from .errors import (CameraDown, InvalidArgument, LocalPathUnavailable, Overwritten, ProtocolError,
-                     RequestTimeout, UnknownCamera, service_error)
-from .frames import (LOCAL, NETWORK, Frame, FrameTuple, ReleasedImage, frames_of, in_caller_clock,  # noqa: F401
-                     sequence_of, tuple_of)
+from .errors import (
+    CameraDown,
+    InvalidArgument,
+    LocalPathUnavailable,
+    Overwritten,
+    ProtocolError,
+    RequestTimeout,
+    UnknownCamera,
+    service_error,
+)
+from .frames import LOCAL, NETWORK, Frame, FrameTuple, ReleasedImage, frames_of, in_caller_clock, sequence_of, tuple_of  # noqa: F401
 from .localpath import LocalRings, LocalUnavailable, boot_id, time_namespace
 from .localreads import LocalReads
 from .security import ClientKeys
 
-DEFAULT_ENDPOINT = "tcp://127.0.0.1:5555"
+DEFAULT_ENDPOINT = defaults.ENDPOINT
 LOCAL_MODES = ("auto", "off", "require")
 _LOCAL_ATTEMPTS = 3  # requests re-asked after a torn local copy before giving up
 _LOCAL_RETRY_S = 10.0  # after the rings could not be opened, the network path this long

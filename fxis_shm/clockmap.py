@@ -61,7 +61,7 @@ class ClockEstimate:
     def to_caller(self, t_service: int) -> int:
         return self.at_ns + round((t_service - self.offset_ns - self.at_ns) / (1 + self.drift_ppm * 1e-6))
 
-    def as_dict(self) -> dict:
+    def as_dict(self) -> dict[str, object]:
         return {"method": self.method, "offset_ns": self.offset_ns, "drift_ppm": round(self.drift_ppm, 3),
                 "uncertainty_ns": self.uncertainty_ns, "samples": self.samples}
 

@@ -20,7 +20,7 @@ Pure: the clocks are read by the caller and passed in (``PtpClock`` gets a funct
 from __future__ import annotations
 
 import collections
-from typing import Callable
+from collections.abc import Callable
 
 
 def wall_to_monotonic(wall_ns: int, monotonic_now_ns: int, wall_now_ns: int) -> int:

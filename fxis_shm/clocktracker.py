@@ -8,7 +8,7 @@ is current. A service that stops answering leaves the last estimate in place.
 from __future__ import annotations
 
 import threading
-from typing import Callable
+from collections.abc import Callable
 
 import zmq
 

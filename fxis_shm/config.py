@@ -9,27 +9,22 @@ import sys
 from dataclasses import dataclass, field, replace
 from typing import Any
 
+from . import defaults
+from .camerakinds import camera_options
+from .engine import REQUEST_DEFAULTS
 from .errors import ConfigError
 from .naming import check_name
-from .options import parse_options, split_key_values
+from .options import split_key_values
 
 if sys.version_info >= (3, 11):
     import tomllib
 else:  # pragma: no cover
     import tomli as tomllib
 
-DEFAULT_ENDPOINT = "tcp://127.0.0.1:5555"
-DEFAULT_PUB = "tcp://127.0.0.1:5556"
-DEFAULT_EVENTS = "tcp://127.0.0.1:5557"
-DEFAULT_SLOTS = 20
-DEFAULT_CAMERAS = ("cam0=synthetic", "cam1=synthetic")
 ZERO_ALLOWED = {"sync_tolerance_ms"}  # 0: always the least skew, however far from t*
-# Request defaults that the config may change (see engine.REQUEST_DEFAULTS)
-SERVICE_SETTINGS = {
-    "sync": str, "wait": str, "timeout_ms": float, "max_skew_ms": float,
-    "horizon_ms": float, "sync_tolerance_ms": float, "max_pending": int,
-    "max_sequence_frames": int, "max_pending_per_client": int,
-}
+# The request defaults a config may change, each of its default's type (max_skew_ms, None
+# by default, takes a number of ms)
+SERVICE_SETTINGS = {key: float if value is None else type(value) for key, value in REQUEST_DEFAULTS.items()}
 
 
 @dataclass(frozen=True)
@@ -41,15 +36,15 @@ class CameraSpec:
 
 @dataclass(frozen=True)
 class ServiceConfig:
-    name: str = "fxis"
-    endpoint: str = DEFAULT_ENDPOINT
-    pub: str = DEFAULT_PUB
-    events: str = DEFAULT_EVENTS
-    slots: int = DEFAULT_SLOTS
+    name: str = defaults.SERVICE
+    endpoint: str = defaults.ENDPOINT
+    pub: str = defaults.PUB
+    events: str = defaults.EVENTS
+    slots: int = defaults.SLOTS
     cameras: tuple[CameraSpec, ...] = ()
     settings: dict[str, Any] = field(default_factory=dict)
-    restart_limit: int = 5  # restarts of one process before the supervisor gives up on it
-    log_level: str = "INFO"
+    restart_limit: int = defaults.RESTART_LIMIT
+    log_level: str = defaults.LOG_LEVEL
     curve_secret: str | None = None  # the service's NAME.key_secret: CURVE on every socket
     curve_clients: str | None = None  # folder of the public keys of the clients allowed in
     insecure_bind: bool = False  # allow non-loopback endpoints without CURVE
@@ -64,15 +59,11 @@ class ServiceConfig:
 
 
 def _camera(name: str, kind: str, raw: dict) -> CameraSpec:
-    from fxis_shm.workers.backends import backend_class
-    from fxis_shm.workers.processing import PROCESS_OPTIONS
-
     try:
         check_name("camera", name)
     except ValueError as exc:
         raise ConfigError(str(exc)) from None
-    cls = backend_class(kind)
-    return CameraSpec(name, kind, parse_options(name, kind, {**cls.OPTIONS, **PROCESS_OPTIONS}, raw))
+    return CameraSpec(name, kind, camera_options(name, kind, raw))
 
 
 def parse_camera_flag(flag: str) -> CameraSpec:
@@ -134,7 +125,7 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
         spec = parse_camera_flag(flag)
         cameras[spec.name] = spec
     if not cameras:
-        cameras = {s.name: s for s in map(parse_camera_flag, DEFAULT_CAMERAS)}
+        cameras = {s.name: s for s in map(parse_camera_flag, defaults.CAMERAS)}
     values = {**file_values, **flags}
     settings = {}
     for key, kind in SERVICE_SETTINGS.items():

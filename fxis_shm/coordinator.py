@@ -13,18 +13,19 @@ from __future__ import annotations
 import json
 import logging
 import threading
-from typing import Callable
+from collections.abc import Callable
 
 import zmq
 from zmq.auth.thread import ThreadAuthenticator
 
 from . import naming, ordering, protocol, timebase
 from .cameras import FRAME_FIELDS, CameraHandle
+from .childspec import CoordinatorSpec
+from .copyout import CopyOut
 from .engine import FRAME_OPS, Action, Failure, Reply, RequestEngine, Trigger
 from .errors import Code, ConfigError, ProtocolError
 from .framewatch import FrameWatch
 from .localpath import boot_id, time_namespace
-from .copyout import CopyOut
 from .ring import Overwritten
 from .security import load_pair, make_server
 from .streams import Streams
@@ -72,19 +73,18 @@ def _readable_field(frame: bytes, name: str, kinds: tuple):
 
 
 class Coordinator:
-    def __init__(self, spec: dict):
-        self.service = spec["service"]
-        self.endpoint = spec["endpoint"]
-        self.pub_endpoint = spec["pub"]
-        self.events_endpoint = spec.get("events")
+    def __init__(self, spec: CoordinatorSpec):
+        self.service = spec.service
+        self.endpoint = spec.endpoint
+        self.pub_endpoint = spec.pub
+        self.events_endpoint = spec.events
         self.curve = None
-        if spec.get("curve_secret"):
-            self.curve = (load_pair(spec["curve_secret"]), spec["curve_clients"])
+        if spec.curve_secret:
+            self.curve = (load_pair(spec.curve_secret), spec.curve_clients)
         self.cameras = {
-            name: CameraHandle(self.service, name, cam["kind"])
-            for name, cam in spec["cameras"].items()
+            name: CameraHandle(self.service, name, kind) for name, kind in spec.cameras.items()
         }
-        self.engine = RequestEngine(self.cameras, spec.get("settings", {}))
+        self.engine = RequestEngine(self.cameras, spec.settings)
         self.settings = self.engine.settings
         self.copyout = CopyOut(self.cameras, self.settings)
         self.started_ns = timebase.now()

@@ -3,7 +3,6 @@ copies of chosen frames out of them, into pooled buffers handed to ZeroMQ (or, f
 client on this kernel, where each frame is, so that it copies the frame itself)."""
 from __future__ import annotations
 
-
 from . import protocol, timebase
 from .bufferpool import BufferPool
 from .cameras import CameraHandle
@@ -15,7 +14,6 @@ from .errors import Code
 from .ring import Overwritten, Snapshot
 from .selection import Selection, radius_for, select, tolerance_for
 from .timesearch import Timeline
-
 
 COPY, REFS, VIEWS = "copy", "refs", "views"  # how a reply carries its frames
 

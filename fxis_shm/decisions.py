@@ -10,8 +10,9 @@ Pure: snapshots, camera states, settings and ``now`` in; a ``Wait`` or a
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping, Protocol
+from typing import Any, Protocol
 
 from . import sequences
 from .errors import Code

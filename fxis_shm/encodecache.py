@@ -15,10 +15,10 @@ from . import encoding as codec
 class EncodeCache:
     def __init__(self, size: int = 64):
         self.size = size
-        self._entries: OrderedDict[tuple, bytes] = OrderedDict()
+        self._entries: OrderedDict[tuple[object, ...], bytes] = OrderedDict()
         self.encoded = self.reused = 0
 
-    def get(self, frame: tuple, image: np.ndarray, encoding: str, quality: int | None) -> bytes:
+    def get(self, frame: tuple[str, int, int], image: np.ndarray, encoding: str, quality: int | None) -> bytes:
         """``image`` (the frame ``frame`` = (camera, generation, frame_id), checked whole) in ``encoding``."""
         quality = codec.DEFAULT_JPEG_QUALITY if quality is None else quality
         key = (*frame, encoding, quality if encoding == codec.JPEG else None)
@@ -34,5 +34,5 @@ class EncodeCache:
             self._entries.popitem(last=False)
         return data
 
-    def status(self) -> dict:
+    def status(self) -> dict[str, int]:
         return {"encoded": self.encoded, "reused": self.reused}

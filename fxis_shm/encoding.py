@@ -49,8 +49,9 @@ def encode(image: np.ndarray, encoding: str, quality: int = DEFAULT_JPEG_QUALITY
     return data.tobytes()
 
 
-def decode(data: bytes | memoryview, encoding: str, shape: tuple[int, ...], dtype: str) -> np.ndarray:
-    """The frame back from its bytes, with the ``shape`` and ``dtype`` it was sent with."""
+def decode(data: bytes | memoryview, encoding: str, shape: tuple[int, ...] | None, dtype: str | None) -> np.ndarray:
+    """The frame back from its bytes, with the ``shape`` and ``dtype`` it was sent with
+    (None for both: as the JPEG or PNG data says, for a file whose frames come unannounced)."""
     if encoding == RAW:
         image = np.frombuffer(data, dtype=dtype)
     else:
@@ -58,7 +59,9 @@ def decode(data: bytes | memoryview, encoding: str, shape: tuple[int, ...], dtyp
         if decoded is None:
             raise ProtocolError(f"the {encoding} data of a frame could not be decoded")
         image = np.asarray(decoded)
-    if image.size != int(np.prod(shape)) or image.dtype.name != dtype:
+        if shape is None and dtype is None:
+            return image
+    if shape is None or image.size != int(np.prod(shape)) or image.dtype.name != dtype:
         raise ProtocolError(
-            f"a {encoding} frame decoded to {image.shape} {image.dtype.name}, expected {tuple(shape)} {dtype}")
+            f"a {encoding} frame decoded to {image.shape} {image.dtype.name}, expected {shape} {dtype}")
     return image.reshape(shape)

@@ -19,8 +19,9 @@ integer passed in.
 from __future__ import annotations
 
 import logging
+from collections.abc import Mapping
 from dataclasses import dataclass, field
-from typing import Any, Mapping, Protocol
+from typing import Any, Protocol
 
 from . import sequences
 from .decisions import Context, Plan, Reject, Wait, check_size, decide, sequence_spec

@@ -36,6 +36,10 @@ class ConfigError(FxisError):
     """A setting is invalid; the message names the setting."""
 
 
+class SpecError(FxisError):
+    """A child process was given a spec it cannot use (another version, a bad field)."""
+
+
 class InvalidArgument(FxisError, ValueError):
     """A function was called with a value it cannot take; the message says which."""
 

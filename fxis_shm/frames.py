@@ -7,9 +7,8 @@ there and keeps the service's own as ``service_t_*``.
 """
 from __future__ import annotations
 
-from collections.abc import Mapping
+from collections.abc import Callable, Iterator, Mapping
 from dataclasses import dataclass, field
-from typing import Callable, Iterator
 
 import numpy as np
 
@@ -54,7 +53,7 @@ class Frame:
             release_buffer(self.image)
             self.image = ReleasedImage(f"the image of frame {self.frame_id} of {self.camera!r}")
 
-    def __enter__(self) -> "Frame":
+    def __enter__(self) -> Frame:
         return self
 
     def __exit__(self, *exc) -> None:
@@ -102,7 +101,7 @@ class FrameTuple(Mapping):
         for frame in self._frames.values():
             frame.release()
 
-    def __enter__(self) -> "FrameTuple":
+    def __enter__(self) -> FrameTuple:
         return self
 
     def __exit__(self, *exc) -> None:

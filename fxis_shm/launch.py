@@ -29,6 +29,7 @@ class ServiceProcess:
     def __init__(self, args: list[str] = (), name: str | None = None,
                  endpoint: str | None = None, pub: str | None = None, events: str | None = None,
                  ready_timeout: float = 30.0, stderr=None, client_keys=None,
+                 python: str = sys.executable, env: dict[str, str] | None = None,
                  wrapper: list[str] = ()):
         self.name = name or f"t{os.getpid()}x{time.monotonic_ns() % 10**6}"
         self.endpoint = endpoint or f"tcp://127.0.0.1:{free_tcp_port()}"
@@ -39,14 +40,15 @@ class ServiceProcess:
         self.ready_timeout = ready_timeout
         self.stderr = stderr
         self.client_keys = client_keys  # for a service with CurveZMQ
+        self.python, self.env = python, env  # the interpreter and environment of `fxis run`
         # a command that runs the service (e.g. in other namespaces: tests/hosts.py); it must
         # exec it, not fork, so that SIGTERM reaches the service
         self.wrapper = list(wrapper)
         self.proc: subprocess.Popen | None = None
 
-    def start(self) -> "ServiceProcess":
+    def start(self) -> ServiceProcess:
         self.proc = subprocess.Popen(
-            [*self.wrapper, sys.executable, "-m", "fxis_shm.cli", "run", *self.args],
+            [*self.wrapper, self.python, "-m", "fxis_shm.cli", "run", *self.args], env=self.env,
             stdout=subprocess.DEVNULL, stderr=self.stderr, stdin=subprocess.DEVNULL,
             preexec_fn=die_with_parent,  # a killed launcher takes its service along
         )
@@ -61,7 +63,8 @@ class ServiceProcess:
                 except RequestTimeout:
                     if time.monotonic() > deadline:
                         self.stop()
-                        raise ServiceNotStarted(f"service did not answer within {self.ready_timeout} s")
+                        raise ServiceNotStarted(
+                            f"service did not answer within {self.ready_timeout} s") from None
 
     def client(self, timeout: float = 2.0) -> Client:
         return Client(self.endpoint, timeout=timeout, keys=self.client_keys)
@@ -79,7 +82,7 @@ class ServiceProcess:
                 self.proc.wait()
         return self.proc.returncode
 
-    def __enter__(self) -> "ServiceProcess":
+    def __enter__(self) -> ServiceProcess:
         return self.start()
 
     def __exit__(self, *exc) -> None:

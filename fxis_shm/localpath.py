@@ -61,7 +61,7 @@ class SlotRef:
     seq: int
 
     @classmethod
-    def of(cls, meta: dict) -> "SlotRef":
+    def of(cls, meta: dict) -> SlotRef:
         try:
             return cls(str(meta["ring"]), int(meta["instance"]), int(meta["slot"]), int(meta["seq"]))
         except (KeyError, TypeError, ValueError) as exc:

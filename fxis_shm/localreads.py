@@ -18,7 +18,7 @@ What only the coordinator can do (software triggers) still goes to it.
 from __future__ import annotations
 
 import time
-from typing import Callable
+from collections.abc import Callable
 
 from . import protocol, timebase
 from .bufferpool import BufferPool
@@ -84,7 +84,8 @@ class LocalReads:
         """The reply header, images and (for views) a validity check, as the coordinator would
         send them. Raises the service's errors, or RequestTimeout at ``deadline_ns``."""
         # the frames stay raw: nothing travels, so compressing would only cost
-        request = protocol.request_of(op, id=None, **{k: v for k, v in fields.items() if k not in ("encoding", "quality")})
+        raw = {k: v for k, v in fields.items() if k not in ("encoding", "quality")}
+        request = protocol.request_of(op, id=None, **raw)
         # Write counts read before every look the engine takes: a frame stored after a look
         # shows as a changed count, however soon after the look it came.
         seen = {c: h.reader.field("write_count") for c, h in self.cameras.items() if h.reader is not None}

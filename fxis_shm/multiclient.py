@@ -10,8 +10,8 @@ until the next frame of a camera it waits for is due, and looks again.
 from __future__ import annotations
 
 import time
+from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
-from typing import Callable, Sequence
 
 from . import protocol
 from .client import Client, FrameTuple, _timeout_ms, frames_of, sequence_of, tuple_of
@@ -77,13 +77,15 @@ class MultiClient:
 
     def image(self, camera: str, *, at: int | None = None, wait: str | None = None,
               timeout: float | None = None):
-        return frames_of(*self._answer("image", camera=camera, at=at, wait=wait, timeout_ms=_timeout_ms(timeout, None)))[0]
+        return frames_of(*self._answer("image", camera=camera, at=at, wait=wait,
+                                       timeout_ms=_timeout_ms(timeout, None)))[0]
 
     def tuple(self, cameras: list[str] | None = None, *, at: int | None = None, sync: str | None = None,
               wait: str | None = None, max_skew_ms: float | None = None, timeout: float | None = None,
               partial: bool = False) -> FrameTuple:
         return tuple_of(*self._answer("tuple", cameras=cameras, at=at, sync=sync, wait=wait,
-                                      max_skew_ms=max_skew_ms, timeout_ms=_timeout_ms(timeout, None), partial=partial or None))
+                                      max_skew_ms=max_skew_ms, timeout_ms=_timeout_ms(timeout, None),
+                                      partial=partial or None))
 
     def latest(self, cameras: list[str] | None = None) -> FrameTuple:
         return tuple_of(*self._answer("latest", cameras=cameras))

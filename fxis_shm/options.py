@@ -5,8 +5,9 @@ Pure: raw values in, typed values out, ConfigError naming the camera and key.
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Any, Callable, Mapping
+from typing import Any
 
 from .errors import ConfigError
 
@@ -20,7 +21,7 @@ class Option:
 
 def number(kind: type = float, minimum: float | None = None, maximum: float | None = None,
            exclusive_min: bool = False) -> Callable[[Any], Any]:
-    def parse(value):
+    def parse(value: Any) -> Any:
         if isinstance(value, bool):
             raise ValueError(f"expected a number, got {value!r}")
         try:
@@ -40,14 +41,14 @@ def number(kind: type = float, minimum: float | None = None, maximum: float | No
 
 
 def choice(*options: str) -> Callable[[Any], str]:
-    def parse(value):
+    def parse(value: Any) -> str:
         if value not in options:
             raise ValueError(f"must be one of {', '.join(options)}; got {value!r}")
-        return value
+        return str(value)
     return parse
 
 
-def boolean(value) -> bool:
+def boolean(value: Any) -> bool:
     if isinstance(value, bool):
         return value
     text = str(value).strip().lower()
@@ -58,7 +59,7 @@ def boolean(value) -> bool:
     raise ValueError(f"expected true or false, got {value!r}")
 
 
-def text(value) -> str:
+def text(value: Any) -> str:
     if not isinstance(value, (str, int)):
         raise ValueError(f"expected text, got {value!r}")
     return str(value)
@@ -73,7 +74,7 @@ def parse_options(camera: str, kind: str, schema: Mapping[str, Option],
             f"camera {camera!r}: unknown key(s) {', '.join(unknown)} for kind {kind!r}; "
             f"known keys: {', '.join(sorted(schema))}"
         )
-    parsed = {}
+    parsed: dict[str, Any] = {}
     for key, opt in schema.items():
         if key not in raw:
             parsed[key] = opt.default

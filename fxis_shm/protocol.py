@@ -8,13 +8,13 @@ from __future__ import annotations
 
 import json
 import math
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass
-from typing import Any, Callable, Sequence
+from typing import Any
 
 import numpy as np
 
-from . import encoding as codec
-from . import timebase
+from . import encoding as codec, timebase
 from .errors import Code, ProtocolError
 from .selection import SYNC_MODES
 from .sequences import DIRECTIONS, KINDS as SEQUENCE_KINDS
@@ -404,7 +404,7 @@ def decode_reply(frames: Sequence) -> tuple[dict, list[np.ndarray]]:
     if not isinstance(header, dict) or header.get("v") != VERSION or "ok" not in header:
         raise ProtocolError("reply header is not a version-1 reply")
     buffers = frames[1:]
-    images = []
+    images: list[np.ndarray] = []
     if not isinstance(header.get("frames", []), list):
         raise ProtocolError("reply field 'frames' must be a list")
     if header.get("delivery") == LOCAL:

@@ -22,15 +22,15 @@ from dataclasses import dataclass
 import numpy as np
 import zmq
 
-from . import protocol
+from . import defaults, protocol
 from .client import FrameTuple, SocketOwner, checked_encoding, connected_socket, frames_of, sequence_of, tuple_of
 from .encoding import JPEG, RAW
-from .security import ClientKeys
 from .errors import ProtocolError, RequestTimeout, service_error
 from .protocol import StreamTopic
+from .security import ClientKeys
 
-DEFAULT_PUB = "tcp://127.0.0.1:5556"
-DEFAULT_EVENTS = "tcp://127.0.0.1:5557"
+DEFAULT_PUB = defaults.PUB
+DEFAULT_EVENTS = defaults.EVENTS
 
 
 @dataclass

@@ -6,9 +6,9 @@ Pure: a ``frames`` reply and a clock offset in; snapshots and camera states out.
 """
 from __future__ import annotations
 
-import numpy as np
-
 from typing import Any
+
+import numpy as np
 
 from .ring import SLOT, Snapshot
 from .timesearch import Timeline

@@ -24,7 +24,6 @@ from __future__ import annotations
 
 import mmap
 import os
-import time
 from dataclasses import dataclass
 
 import numpy as np
@@ -79,7 +78,7 @@ class FrameLayout:
     dtype: str = "uint8"
 
     @classmethod
-    def of(cls, image: np.ndarray) -> "FrameLayout":
+    def of(cls, image: np.ndarray) -> FrameLayout:
         if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] not in (1, 3, 4)):
             raise ValueError(f"an image must be (h, w) or (h, w, 1|3|4), got {image.shape}")
         channels = 1 if image.ndim == 2 else image.shape[2]
@@ -335,7 +334,7 @@ class RingReader(_Mapping):
                 raise RingError(f"semaphore of ring {self.name} does not exist") from None
 
     @classmethod
-    def named(cls, name: str) -> "RingReader":
+    def named(cls, name: str) -> RingReader:
         """The ring of segment ``name`` (as a reply of the local fast path names it), without its semaphore."""
         reader = cls.__new__(cls)
         reader.semaphore = None

@@ -57,7 +57,7 @@ class ClientKeys:
     secret: bytes
 
     @classmethod
-    def from_files(cls, server_key: str, client_secret: str) -> "ClientKeys":
+    def from_files(cls, server_key: str, client_secret: str) -> ClientKeys:
         return cls(load_public(server_key), *load_pair(client_secret))
 
     def apply(self, sock: zmq.Socket) -> None:

@@ -11,8 +11,8 @@ Pure: timelines and numbers in, a Selection out.
 """
 from __future__ import annotations
 
+from collections.abc import Iterator, Mapping
 from dataclasses import dataclass
-from typing import Iterator, Mapping
 
 from .timesearch import Timeline
 
@@ -100,13 +100,13 @@ def select_joint(
             left += 1
         if len(inside) == len(timelines):
             windows.append((left, right))
-    best_skew = min(events[r][0] - events[l][0] for l, r in windows)
+    best_skew = min(events[end][0] - events[start][0] for start, end in windows)
     best: tuple[tuple[int, int], Selection] | None = None
-    for l, r in windows:
-        if events[r][0] - events[l][0] > best_skew + tolerance_ns:
+    for start, end in windows:
+        if events[end][0] - events[start][0] > best_skew + tolerance_ns:
             continue
         per_cam: dict[str, list[int]] = {}
-        for _, cam, i in events[l : r + 1]:
+        for _, cam, i in events[start : end + 1]:
             per_cam.setdefault(cam, []).append(i)
         index = {cam: _closest_in(timelines[cam], idx, t_star) for cam, idx in per_cam.items()}
         sel = Selection(index, {cam: timelines[cam].at(i) for cam, i in index.items()}, best_skew)

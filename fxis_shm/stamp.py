@@ -23,7 +23,8 @@ STAMP_BYTES = 16
 
 
 def _row_bytes(image: np.ndarray, row: int) -> np.ndarray:
-    return image[row].reshape(-1).view(np.uint8)
+    row_bytes: np.ndarray = image[row].reshape(-1).view(np.uint8)
+    return row_bytes
 
 
 def _encode(frame_id: int) -> np.ndarray:
@@ -36,7 +37,7 @@ BLOCK_BITS = 64  # 32 bits of the id and their complement
 MARGIN = 8  # px between the byte stamp's row and a block band
 
 
-def _bands(shape: tuple) -> tuple[int, int, int] | None:
+def _bands(shape: tuple[int, ...]) -> tuple[int, int, int] | None:
     """(blocks per band row, band height, bottom band's first row), or None if the image is too small."""
     per_row = shape[1] // BLOCK
     if per_row < 1:

@@ -12,10 +12,10 @@ import logging
 from dataclasses import dataclass, field
 
 from . import protocol
+from .copyout import CopyOut
 from .decimation import Decimator, every_frame
 from .decisions import Reject
 from .encoding import RAW
-from .copyout import CopyOut
 from .protocol import StreamTopic, parse_stream_topic
 from .ring import Overwritten
 from .selection import JOINT

@@ -20,6 +20,7 @@ import threading
 import time
 
 from . import naming, timebase
+from .childspec import CameraWorkerSpec, ChildSpec, CoordinatorSpec
 from .config import ServiceConfig
 
 log = logging.getLogger("supervisor")
@@ -76,11 +77,10 @@ def service_running(service: str) -> bool:
 class Child:
     """One supervised process and its restart bookkeeping."""
 
-    def __init__(self, role: str, label: str, spec: dict, log_level: str, key: str):
-        self.role, self.label, self.spec, self.key = role, label, spec, key
+    def __init__(self, spec: ChildSpec, label: str, key: str):
+        self.spec, self.label, self.key = spec, label, key
         self.state = "starting"
         self.last_exit: int | None = None
-        self.log_level = log_level
         self.proc: subprocess.Popen | None = None
         self.restarts = 0
         self.backoff = BACKOFF_FIRST_S
@@ -90,12 +90,9 @@ class Child:
 
     def start(self) -> None:
         read_fd, write_fd = os.pipe()
-        spec = {**self.spec, "ready_fd": write_fd, "log_level": self.log_level}
         try:
-            self.proc = subprocess.Popen(
-                [sys.executable, "-m", f"fxis_shm.workers.{self.role}", json.dumps(spec)],
-                pass_fds=(write_fd,), stdin=subprocess.DEVNULL,
-            )
+            self.proc = subprocess.Popen(self.spec.command(write_fd), pass_fds=(write_fd,),
+                                         stdin=subprocess.DEVNULL)
         finally:
             os.close(write_fd)
         self._ready_fd = read_fd
@@ -138,20 +135,18 @@ class Supervisor:
         self.out = out
         self.stop = threading.Event()
         origin = timebase.reader(config.clock)()  # the synthetic cameras' shared time origin
+        common = {"service": config.name, "log_level": config.log_level, "clock": config.clock}
         self.cameras = [
-            Child("camera", f"camera {c.name!r}", {
-                "service": config.name, "camera": c.name, "kind": c.kind,
-                "options": c.options, "slots": config.slots, "time_origin_ns": origin, "clock": config.clock,
-            }, config.log_level, key=f"camera:{c.name}")
+            Child(CameraWorkerSpec(**common, camera=c.name, kind=c.kind, options=c.options,
+                                   slots=config.slots, time_origin_ns=origin),
+                  f"camera {c.name!r}", key=f"camera:{c.name}")
             for c in config.cameras
         ]
-        self.coordinator = Child("coordinator", "coordinator", {
-            "service": config.name, "endpoint": config.endpoint, "pub": config.pub,
-            "events": config.events,
-            "curve_secret": config.curve_secret, "curve_clients": config.curve_clients,
-            "cameras": {c.name: {"kind": c.kind} for c in config.cameras},
-            "settings": config.settings, "clock": config.clock,
-        }, config.log_level, key="coordinator")
+        self.coordinator = Child(CoordinatorSpec(
+            **common, endpoint=config.endpoint, pub=config.pub, events=config.events,
+            cameras={c.name: c.kind for c in config.cameras}, settings=config.settings,
+            curve_secret=config.curve_secret, curve_clients=config.curve_clients,
+        ), "coordinator", key="coordinator")
         self.events: list[dict] = []  # the latest exits and restarts, for status
 
     @property

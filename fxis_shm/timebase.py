@@ -10,7 +10,7 @@ function returning int ns.
 from __future__ import annotations
 
 import time
-from typing import Callable
+from collections.abc import Callable
 
 from .errors import InvalidArgument
 

@@ -10,8 +10,8 @@ Pure: arrays and numbers in, indices out.
 from __future__ import annotations
 
 import bisect
+from collections.abc import Sequence
 from dataclasses import dataclass, field
-from typing import Sequence
 
 
 @dataclass(frozen=True)

@@ -15,8 +15,8 @@ Pure: the camera states, timelines and ``now`` are passed in; nothing reads a cl
 """
 from __future__ import annotations
 
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass
-from typing import Callable, Mapping
 
 from .selection import Selection
 from .timesearch import Timeline

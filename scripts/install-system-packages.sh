@@ -6,11 +6,12 @@
 # - aravis-tools, whose arv-fake-gv-camera-0.8 is the GigE Vision camera
 #   emulator the backend tests run against; iproute2 for loopback addresses;
 #   util-linux for unshare (a client in its own mount namespace, test_localpath);
-#   gcc, which builds the ring's memory-ordering helper (fxis_shm/_ordered.c).
+#   gcc, which builds the ring's memory-ordering helper (fxis_shm/_ordered.c);
+# - libturbojpeg0, the TurboJPEG library PyTurboJPEG loads (bench/jpeg_codecs.py measures it).
 # Runs as root (or with sudo); does nothing when everything is present.
 set -euo pipefail
 
-wanted=(gir1.2-aravis-0.8 aravis-tools libgirepository1.0-dev libcairo2-dev pkg-config iproute2 util-linux gcc)
+wanted=(gir1.2-aravis-0.8 aravis-tools libgirepository1.0-dev libcairo2-dev pkg-config iproute2 util-linux gcc libturbojpeg0)
 python3 -c "import venv, ensurepip" 2>/dev/null || wanted+=(python3-venv)
 
 missing=()

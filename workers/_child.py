@@ -1,17 +1,23 @@
-"""What every child process of the supervisor shares: its spec from argv, logging,
-the readiness handshake, and stopping on SIGTERM or when the supervisor dies."""
+"""What every child process of the supervisor shares: its typed spec from argv
+(fxis_shm.childspec), logging, the readiness handshake, and stopping on SIGTERM
+or when the supervisor dies."""
 from __future__ import annotations
 
-import json
 import logging
 import os
 import signal
 import sys
 import threading
-from typing import Callable
+from collections.abc import Callable
+from typing import TypeVar
 
 from fxis_shm import timebase
+from fxis_shm.childspec import ChildSpec
+from fxis_shm.errors import SpecError
 from fxis_shm.tether import die_with_parent
+
+S = TypeVar("S", bound=ChildSpec)
+
 
 class Ready:
     """The readiness pipe: one line, ``ok`` or ``error <message>``, then closed."""
@@ -36,16 +42,23 @@ class Ready:
         self._send("error " + message)
 
 
-def child_main(role: str, run: Callable[[dict, Ready, threading.Event], None]) -> None:
-    """Entry point of a child: ``python -m fxis_shm.workers.X '<json spec>'``."""
-    spec = json.loads(sys.argv[1])
+def child_main(spec_class: type[S], run: Callable[[S, Ready, threading.Event], None]) -> None:
+    """Entry point of a child: ``python -m MODULE '<json spec>' READY_FD``."""
+    role = spec_class.ROLE
+    ready = Ready(int(sys.argv[2]) if len(sys.argv) > 2 else None)
+    try:
+        spec = spec_class.from_json(sys.argv[1] if len(sys.argv) > 1 else "")
+    except SpecError as exc:
+        ready.fail(str(exc))
+        print(f"fxis {role}: {exc}", file=sys.stderr)
+        sys.exit(2)
     logging.basicConfig(
-        level=spec.get("log_level", "INFO"),
+        level=spec.log_level,
         format=f"%(asctime)s {role} %(levelname)s %(message)s",
         stream=sys.stderr,
     )
     log = logging.getLogger(role)
-    timebase.use(spec.get("clock", timebase.DEFAULT))  # before any frame or request is stamped
+    timebase.use(spec.clock)  # before any frame or request is stamped
     stop = threading.Event()
     parent = os.getppid()
     signal.signal(signal.SIGTERM, lambda *_: stop.set())
@@ -53,7 +66,6 @@ def child_main(role: str, run: Callable[[dict, Ready, threading.Event], None]) -
     die_with_parent()  # even after kill -9 of the supervisor
     if os.getppid() != parent:
         return
-    ready = Ready(spec.get("ready_fd"))
     try:
         run(spec, ready, stop)
     except Exception as exc:  # report any start-up failure through the handshake

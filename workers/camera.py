@@ -10,6 +10,7 @@ import time
 import posix_ipc
 
 from fxis_shm import naming, timebase
+from fxis_shm.childspec import CameraWorkerSpec
 from fxis_shm.ring import FLAG_TRIGGERED, FrameLayout, RingWriter
 
 from . import processing
@@ -24,18 +25,18 @@ _FIRST_FRAME_TIMEOUT_S = 10.0
 _RECONNECT_FIRST_S, _RECONNECT_MAX_S = 0.5, 10.0
 
 
-def run(spec: dict, ready: Ready, stop: threading.Event) -> None:
-    name = spec["camera"]
-    camera = backend_class(spec["kind"])(name, spec["options"], spec["time_origin_ns"])
-    process = processing.pipeline(spec["options"])
+def run(spec: CameraWorkerSpec, ready: Ready, stop: threading.Event) -> None:
+    name = spec.camera
+    camera = backend_class(spec.kind)(name, spec.options, spec.time_origin_ns)
+    process = processing.pipeline(camera.options)
     camera.open()
     try:
         first, layout, hook_errors = _layout(camera, process, stop)
-        ring = RingWriter(spec["service"], name, layout, spec["slots"], camera.nominal_period_ns)
+        ring = RingWriter(spec.service, name, layout, spec.slots, camera.nominal_period_ns)
         ring.count("hook_errors", hook_errors)
         ring.set_flags(FLAG_TRIGGERED if camera.supports_trigger else 0)
-        triggers = _TriggerListener(spec["service"], camera, stop) if camera.supports_trigger else None
-        log.info("camera %s (%s) streaming %s into %s, generation %d", name, spec["kind"], layout,
+        triggers = _TriggerListener(spec.service, camera, stop) if camera.supports_trigger else None
+        log.info("camera %s (%s) streaming %s into %s, generation %d", name, spec.kind, layout,
                  ring.name, ring.generation)
         ready.ok()
         try:
@@ -172,4 +173,4 @@ class _TriggerListener:
 
 
 if __name__ == "__main__":
-    child_main("camera", run)
+    child_main(CameraWorkerSpec, run)

@@ -3,14 +3,15 @@ from __future__ import annotations
 
 import threading
 
+from fxis_shm.childspec import CoordinatorSpec
 from fxis_shm.coordinator import Coordinator
 
 from ._child import Ready, child_main
 
 
-def run(spec: dict, ready: Ready, stop: threading.Event) -> None:
+def run(spec: CoordinatorSpec, ready: Ready, stop: threading.Event) -> None:
     Coordinator(spec).serve(stop, on_ready=ready.ok)
 
 
 if __name__ == "__main__":
-    child_main("coordinator", run)
+    child_main(CoordinatorSpec, run)

@@ -16,27 +16,12 @@ import importlib
 import logging
 import multiprocessing
 import time
+from collections.abc import Callable
 from dataclasses import dataclass
-from typing import Callable
 
 import numpy as np
 
-from fxis_shm.options import Option, number
-
 log = logging.getLogger("camera")
-
-
-def hook_path(value) -> str:
-    module, sep, function = str(value).partition(":")
-    if not sep or not module or not function.isidentifier():
-        raise ValueError(f"expected package.module:function, got {value!r}")
-    return str(value)
-
-
-PROCESS_OPTIONS = {
-    "process": Option(hook_path, None, "package.module:function run on every frame before it is stored"),
-    "process_workers": Option(number(int, 1, 64), 1, "processes that run the hook side by side"),
-}
 
 
 def load_hook(path: str) -> Callable[[np.ndarray], np.ndarray | None]:

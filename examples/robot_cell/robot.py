@@ -30,8 +30,7 @@ from dataclasses import dataclass
 import numpy as np
 import zmq
 
-from fxis_shm import RequestTimeout
-from fxis_shm import EventPublisher, Subscriber, handshake
+from fxis_shm import EventPublisher, RequestTimeout, Subscriber, handshake
 
 PAIRS_TOPIC = "cell/pairs"  # where the service answers our events, and the vision node listens
 RESULTS_TOPIC = "cell/results"  # what the vision node publishes

@@ -24,6 +24,7 @@ import time
 from pathlib import Path
 
 import robot
+
 from fxis_shm import RequestTimeout
 from fxis_shm.launch import ServiceProcess, free_tcp_port
 

@@ -33,8 +33,7 @@ import cv2
 import numpy as np
 import zmq
 
-from fxis_shm import FxisError, RequestTimeout
-from fxis_shm import EventPublisher, Message, Subscriber, handshake
+from fxis_shm import EventPublisher, FxisError, Message, RequestTimeout, Subscriber, handshake
 
 PAIRS_TOPIC = "cell/pairs"
 RESULTS_TOPIC = "cell/results"

@@ -69,7 +69,7 @@ def gvcp_serial(address: str, timeout: float = 0.2) -> str | None:
                 status, answer, _, ack_id = struct.unpack(">HHHH", reply[:8])
                 if answer == 0x0085 and ack_id == req_id and status == 0:
                     return reply[12:28].split(b"\0")[0].decode(errors="replace")
-        except (socket.timeout, ConnectionRefusedError, OSError):
+        except (TimeoutError, ConnectionRefusedError, OSError):
             return None
     return None
 
@@ -87,7 +87,7 @@ class Emulator:
         """The id Aravis gives it (what `fxis cameras` lists and device=... takes)."""
         return f"Aravis-Fake-{self.serial}"
 
-    def start(self) -> "Emulator":
+    def start(self) -> Emulator:
         other = gvcp_serial(self.address)
         if other is not None:
             raise RuntimeError(f"a GigE Vision device (serial {other!r}) already answers on "

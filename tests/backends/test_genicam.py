@@ -14,9 +14,8 @@ try:  # `make test` installs the genicam extra; without it these tests must fail
 except ImportError as exc:
     raise ImportError(f"the genicam tests need the genicam extra: pip install -e '.[genicam]' ({exc})") from exc
 
-from fxis_shm.options import parse_options  # noqa: E402
-from fxis_shm.workers.backends.genicam import (  # noqa: E402
-    GENTL_PATH_VAR, GenicamCamera, image_layout, producers_from_env, to_image)
+from fxis_shm.camerakinds import GENTL_PATH_VAR, camera_options  # noqa: E402
+from fxis_shm.workers.backends.genicam import GenicamCamera, image_layout, producers_from_env, to_image  # noqa: E402
 
 from ..conftest import wait_until  # noqa: E402
 from .conftest import fxis  # noqa: E402
@@ -53,7 +52,7 @@ def statuses(svc) -> dict:
 
 
 def camera(**raw) -> GenicamCamera:
-    options = parse_options("g", "genicam", GenicamCamera.OPTIONS, {"cti": VIKY, **raw})
+    options = camera_options("g", "genicam", {"cti": VIKY, **raw})
     return GenicamCamera("g", options, time.monotonic_ns())
 
 

@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from fxis_shm import procstat
-from fxis_shm.options import parse_options
+from fxis_shm.camerakinds import camera_options
 from fxis_shm.workers.backends.base import Camera, CameraLost
 from fxis_shm.workers.backends.opencv import OpenCVCamera
 
@@ -141,7 +141,7 @@ def test_a_looping_file_goes_on_past_its_end(start_service, video):
 def test_a_stream_that_ends_is_lost_and_reopened(video):
     """A URL is a live source: read by a thread, stamped on arrival; when it stops
     delivering, grab raises CameraLost, and open() starts it again."""
-    options = parse_options("v", "opencv", OpenCVCamera.OPTIONS, {"source": "file://" + video})
+    options = camera_options("v", "opencv", {"source": "file://" + video})
     camera = OpenCVCamera("v", options, time.monotonic_ns())
     camera.open()
     captures = []
@@ -178,7 +178,7 @@ def test_the_worker_reconnects_a_lost_stream(start_service, video):
 
 
 def test_mono8_frames_are_grey(video):
-    options = parse_options("v", "opencv", OpenCVCamera.OPTIONS,
+    options = camera_options("v", "opencv",
                             {"source": video, "rate": "max", "pixel_format": "mono8"})
     camera = OpenCVCamera("v", options, time.monotonic_ns())
     camera.open()
@@ -193,7 +193,7 @@ def test_mono8_frames_are_grey(video):
 
 
 def test_a_finished_file_returns_none_without_spinning(video):
-    options = parse_options("v", "opencv", OpenCVCamera.OPTIONS, {"source": video, "rate": "max"})
+    options = camera_options("v", "opencv", {"source": video, "rate": "max"})
     camera = OpenCVCamera("v", options, time.monotonic_ns())
     camera.open()
     try:
@@ -233,7 +233,7 @@ def test_file_keys_on_a_device_and_device_keys_on_a_file_are_refused(video):
                      ({"source": "0", "loop": "true"}, "'loop'"),
                      ({}, "'source'")):
         with pytest.raises(ValueError, match=key):
-            OpenCVCamera("v", parse_options("v", "opencv", OpenCVCamera.OPTIONS, raw), 0)
+            OpenCVCamera("v", camera_options("v", "opencv", raw), 0)
 
 
 def test_discover_lists_capture_devices_only():

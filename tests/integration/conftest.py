@@ -2,10 +2,10 @@ import os
 
 import pytest
 
-from ..conftest import assert_nothing_left, start_service  # noqa: F401  (shared fixtures)
-
 from fxis_shm import procstat
 from fxis_shm.launch import ServiceProcess
+
+from ..conftest import assert_nothing_left, start_service  # noqa: F401  (shared fixtures)
 
 SMALL = "width=64,height=48"
 

@@ -6,6 +6,7 @@ import posix_ipc
 import pytest
 
 from fxis_shm import naming, read_stamp
+from fxis_shm.camerakinds import KINDS
 
 from .test_lifecycle import fxis
 
@@ -40,7 +41,7 @@ def test_grab_saves_pngs_and_metadata(two_cameras, tmp_path):
     assert result.returncode == 0, result.stderr
     meta = json.loads((tmp_path / "tuple.json").read_text())
     assert set(meta["frames"]) == {"cam0", "cam1"}
-    for name, frame in meta["frames"].items():
+    for frame in meta["frames"].values():
         image = cv2.imread(str(tmp_path / frame["file"]), cv2.IMREAD_UNCHANGED)
         assert image.shape == tuple(frame["shape"])
         assert read_stamp(image) == frame["frame_id"]
@@ -59,6 +60,13 @@ def test_clean_refuses_while_running(two_cameras):
     result = fxis("clean", "--name", two_cameras.name)
     assert result.returncode == 1 and "running" in result.stderr
     assert naming.leftovers(two_cameras.name)
+
+
+def test_run_help_lists_every_camera_kind_and_its_keys():
+    result = fxis("run", "--help")
+    for kind in KINDS.values():
+        assert f"{kind.name:<10} {kind.description}" in result.stdout
+        assert all(key in result.stdout for key in kind.options)
 
 
 def test_help_lists_commands():

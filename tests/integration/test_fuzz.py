@@ -5,8 +5,7 @@ import random
 
 import pytest
 import zmq
-from hypothesis import HealthCheck, given, settings
-from hypothesis import strategies as st
+from hypothesis import HealthCheck, given, settings, strategies as st
 
 from fxis_shm import read_stamp
 from fxis_shm.protocol import encode_request
@@ -54,8 +53,9 @@ def mutate(rng: random.Random, template: bytes) -> list[bytes]:
 
 @pytest.fixture(scope="module")
 def service():
-    from fxis_shm.launch import ServiceProcess
     import subprocess
+
+    from fxis_shm.launch import ServiceProcess
 
     svc = ServiceProcess(["--camera", f"a=synthetic:fps=50,{SMALL}", "--camera", f"b=synthetic:fps=50,{SMALL}"],
                          stderr=subprocess.DEVNULL).start()

@@ -149,7 +149,7 @@ def test_a_released_frame_gives_its_buffer_back_and_cannot_be_used_after(two_cam
             assert read_stamp(frame.image) == frame.frame_id
             address = frame.image.ctypes.data
         with pytest.raises(FxisError, match="was released"):
-            frame.image.shape
+            _ = frame.image.shape
         held = client.image("cam0")  # held: not released, still referenced
         assert held.image.ctypes.data == address  # the released buffer, reused at once
         with client.tuple() as pair:

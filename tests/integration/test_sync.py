@@ -14,8 +14,9 @@ PHASE = 1_000_000  # cam1 1 ms behind cam0, like the paper's cameras
 
 @pytest.fixture(scope="module")
 def paper_cameras():
-    from fxis_shm.launch import ServiceProcess
     import os
+
+    from fxis_shm.launch import ServiceProcess
 
     svc = ServiceProcess(["--camera", f"cam0=synthetic:{SMALL}",
                           "--camera", f"cam1=synthetic:phase_ms=1,{SMALL}"],

@@ -5,15 +5,13 @@ import pytest
 
 from fxis_shm.config import build_config, load_toml, parse_camera_flag
 from fxis_shm.errors import ConfigError
-from fxis_shm.options import (
-    Option, boolean, choice, number, parse_options, split_key_values, text,
-)
+from fxis_shm.options import Option, boolean, choice, number, parse_options, split_key_values, text
 
 SYNTHETIC_DEFAULTS = {
     "fps": 20.0, "width": 1360, "height": 1024, "pixel_format": "mono8",
     "phase_ms": 0.0, "jitter_ms": 0.0, "drop": 0.0, "seed": 0,
     "pattern": "stripes", "shift_px": 0, "trigger": "free",
-    "process": None, "process_workers": 1,  # generic to every kind (workers/processing.py)
+    "process": None, "process_workers": 1,  # generic to every kind (camerakinds.PROCESS_OPTIONS)
 }
 
 

@@ -33,11 +33,11 @@ class TableCamera:
         self.down: str | None = None
         self.generation = 1
 
-    def add(self, t_capture: int, t_stored: int | None = None) -> "TableCamera":
+    def add(self, t_capture: int, t_stored: int | None = None) -> TableCamera:
         self.frames.append((t_capture, t_capture + DELAY if t_stored is None else t_stored, self.generation))
         return self
 
-    def add_periodic(self, first: int, count: int, phase: int = 0) -> "TableCamera":
+    def add_periodic(self, first: int, count: int, phase: int = 0) -> TableCamera:
         for k in range(first, first + count):
             self.add(phase + k * self.period_ns)
         return self

@@ -11,15 +11,15 @@ from fxis_shm.protocol import (
     CLOCK,
     MAX_HEADER_BYTES,
     VERSION,
+    decode_event,
     decode_reply,
     decode_request,
     encode_error,
+    encode_event,
     encode_reply,
     encode_request,
     frame_meta,
     frame_ref,
-    decode_event,
-    encode_event,
 )
 
 

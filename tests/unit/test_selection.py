@@ -4,10 +4,10 @@ from __future__ import annotations
 import itertools
 
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 
 from fxis_shm.selection import INDEPENDENT, JOINT, select, select_independent, select_joint
+
 from .timeline_helpers import MS, periodic, ring
 
 PERIOD_20FPS = 50 * MS

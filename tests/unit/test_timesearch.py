@@ -4,10 +4,10 @@ from __future__ import annotations
 import bisect
 
 import pytest
-from hypothesis import given, settings
-from hypothesis import strategies as st
+from hypothesis import given, settings, strategies as st
 
 from fxis_shm.timesearch import Timeline
+
 from .timeline_helpers import brute_nearest, ring
 
 STEP = 100  # spacing of the frames in the hand-made rings

@@ -6,9 +6,16 @@ import pytest
 from fxis_shm.selection import select_independent, select_joint
 from fxis_shm.timesearch import Timeline
 from fxis_shm.waitpolicy import (
-    AUTO, NEXT, NONE, CameraState, give_up_time, waiting_for, waiting_for_selection,
+    AUTO,
+    NEXT,
+    NONE,
+    CameraState,
+    give_up_time,
+    waiting_for,
+    waiting_for_selection,
     with_predictions,
 )
+
 from .timeline_helpers import MS
 
 PERIOD = 50 * MS

@@ -38,9 +38,9 @@ from typing import Any
 
 import numpy as np
 
-from fxis_shm.clocks import DeviceClockFit, PtpClock, wall_to_monotonic
 from fxis_shm import timebase
-from fxis_shm.options import Option, boolean, choice, number, text
+from fxis_shm.camerakinds import ARAVIS_PIXEL_FORMATS
+from fxis_shm.clocks import DeviceClockFit, PtpClock, wall_to_monotonic
 from fxis_shm.ring import FrameLayout
 
 from .base import Camera, CameraLost, Capture
@@ -66,9 +66,7 @@ def load_aravis():
 
 
 # The formats this backend stores (a subset of the GenICam table).
-PIXEL_FORMATS = {name: GENICAM_FORMATS[name] for name in (
-    "Mono8", "Mono10", "Mono12", "Mono16", "RGB8", "BGR8",
-    "BayerRG8", "BayerGR8", "BayerGB8", "BayerBG8")}
+PIXEL_FORMATS = {name: GENICAM_FORMATS[name] for name in ARAVIS_PIXEL_FORMATS}
 
 N_BUFFERS = 12  # frames Aravis can hold for us; ~0.6 s at 20 fps if the worker stalls
 MIN_SOCKET_BUFFER = 1 << 20  # bytes; the kernel caps it at net.core.rmem_max
@@ -110,28 +108,6 @@ class FrameCounter:
 
 class AravisCamera(Camera):
     kind = "aravis"
-    OPTIONS = {
-        "device": Option(text, None, "camera id as `fxis cameras` lists it (default: the first camera found)"),
-        "fps": Option(number(float, 0, exclusive_min=True), None, "frames per second (AcquisitionFrameRate; "
-                      "default: as the camera is set)"),
-        "width": Option(number(int, 1, 65535), None, "image width in pixels (default: as set)"),
-        "height": Option(number(int, 1, 65535), None, "image height in pixels (default: as set)"),
-        "offset_x": Option(number(int, 0, 65535), None, "left edge of the region, pixels"),
-        "offset_y": Option(number(int, 0, 65535), None, "top edge of the region, pixels"),
-        "pixel_format": Option(choice(*PIXEL_FORMATS), None,
-                               f"one of {', '.join(PIXEL_FORMATS)} (default: as set); Bayer becomes BGR, "
-                               "RGB8 becomes BGR, unless raw=true"),
-        "raw": Option(boolean, False, "store Bayer mosaics and RGB8 as the camera sends them"),
-        "exposure_us": Option(number(float, 0, exclusive_min=True), None, "exposure time, microseconds (turns auto off)"),
-        "gain": Option(number(float, 0), None, "gain, in the camera's unit (usually dB; turns auto off)"),
-        "packet_size": Option(number(int, 64, 65535), None,
-                              "GigE Vision packet size in bytes (default: as negotiated)"),
-        "trigger": Option(choice("free", "software"), "free",
-                          "free-running, or one frame per software trigger (TriggerSoftware)"),
-        "timestamp": Option(choice("host", "device", "ptp"), "host",
-                            "t_capture from the host's arrival time, the camera's clock mapped "
-                            "onto the host's, or the camera's PTP time as it is (docs/cameras.md)"),
-    }
 
     def __init__(self, name: str, options: dict[str, Any], time_origin_ns: int):
         super().__init__(name, options, time_origin_ns)

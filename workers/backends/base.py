@@ -2,12 +2,13 @@
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
+from collections.abc import Mapping
 from dataclasses import dataclass
-from typing import Any, ClassVar, Mapping
+from typing import Any, ClassVar
 
 import numpy as np
 
-from fxis_shm.options import Option
+from fxis_shm.camerakinds import camera_options
 from fxis_shm.ring import FrameLayout
 
 
@@ -29,13 +30,13 @@ class Capture:
 class Camera(ABC):
     """A source of frames, run inside its own camera worker process."""
 
-    kind: ClassVar[str]
-    OPTIONS: ClassVar[Mapping[str, Option]]
+    kind: ClassVar[str]  # its entry in fxis_shm.camerakinds, which declares its options
     note: str = ""  # a short line the worker shows as the camera's status note ("" for none)
 
     def __init__(self, name: str, options: Mapping[str, Any], time_origin_ns: int):
         self.name = name
-        self.options = dict(options)
+        # Typed, checked and completed with defaults (options not given may be left out or None)
+        self.options = camera_options(name, self.kind, {k: v for k, v in options.items() if v is not None})
         self.time_origin_ns = time_origin_ns
         self.frames_dropped = 0  # frames the camera lost before delivering them
 
@@ -49,7 +50,7 @@ class Camera(ABC):
         Raises CameraLost if the camera is gone; incomplete frames are not returned
         but counted in ``frames_dropped``."""
 
-    def close(self) -> None:
+    def close(self) -> None:  # noqa: B027 (not abstract: a camera with nothing to release keeps it)
         """Stop acquiring and release the device."""
 
     _layout: FrameLayout | None = None  # backends set these when the camera is opened

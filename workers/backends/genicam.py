@@ -30,9 +30,9 @@ import logging
 import os
 import time
 
-from fxis_shm.clocks import DeviceClockFit, PtpClock
 from fxis_shm import timebase
-from fxis_shm.options import Option, boolean, choice, number, text
+from fxis_shm.camerakinds import GENTL_PATH_VAR
+from fxis_shm.clocks import DeviceClockFit, PtpClock
 from fxis_shm.ring import FrameLayout
 
 from .base import Camera, CameraLost, Capture
@@ -40,7 +40,6 @@ from .pixelformats import PIXEL_FORMATS, image_layout, to_image
 
 log = logging.getLogger("camera")
 
-GENTL_PATH_VAR = "GENICAM_GENTL64_PATH"
 _INSTALL_HINT = "the genicam backend needs harvesters and genicam: pip install 'fxis-shm[genicam]'"
 _PROBE_AFTER_S = 1.0  # without frames this long, check that the device still answers
 _FIRST_FRAME_S = 5.0  # how long start-up waits for a frame when it must look at one
@@ -97,32 +96,6 @@ def _short(exc: Exception) -> str:
 
 class GenicamCamera(Camera):
     kind = "genicam"
-    OPTIONS = {
-        "cti": Option(text, None, f"GenTL producer: a .cti file or a folder of them "
-                                  f"(default: the folders of ${GENTL_PATH_VAR})"),
-        "device": Option(text, None, "serial number, device id, user-defined name or index "
-                                     "(default: the first device)"),
-        "fps": Option(number(float, 0, 100_000, exclusive_min=True), None,
-                      "AcquisitionFrameRate (default: as the device is set)"),
-        "width": Option(number(int, 1, 65535), None, "Width in pixels (default: as set)"),
-        "height": Option(number(int, 1, 65535), None, "Height in pixels (default: as set)"),
-        "offset_x": Option(number(int, 0, 65535), None,
-                           "OffsetX (default: as set; 0 when width is given)"),
-        "offset_y": Option(number(int, 0, 65535), None,
-                           "OffsetY (default: as set; 0 when height is given)"),
-        "pixel_format": Option(text, None, "PFNC name the device offers, e.g. Mono8, BayerRG8 "
-                                           "(default: as set)"),
-        "exposure_us": Option(number(float, 0, exclusive_min=True), None,
-                              "ExposureTime in microseconds, ExposureAuto off (default: as set)"),
-        "gain": Option(number(float), None, "Gain in the device's unit (dB per SFNC), GainAuto off "
-                                            "(default: as set)"),
-        "trigger": Option(choice("free", "software"), "free",
-                          "free-running, or one frame per software trigger (needs TriggerSoftware)"),
-        "timestamp": Option(choice("host", "device", "ptp"), "host",
-                            "host: fetch time; device: the buffer's device timestamp, fitted onto "
-                            "the host clock; ptp: the device's PTP time as it is"),
-        "raw": Option(boolean, False, "keep colour and Bayer data as delivered (no BGR conversion)"),
-    }
 
     def __init__(self, name, options, time_origin_ns):
         super().__init__(name, options, time_origin_ns)
@@ -385,11 +358,11 @@ class GenicamCamera(Camera):
                                f"its timestamps (timestamp=device)")
         with buffer:
             try:
-                buffer.module.timestamp_ns
+                _ = buffer.module.timestamp_ns  # raises if the buffers carry no ns timestamp
                 self._device_ns = True
             except gentl.GenericException:
                 try:
-                    buffer.module.timestamp
+                    _ = buffer.module.timestamp
                 except gentl.GenericException as exc:
                     raise self._refuse("timestamp", f"the device does not timestamp its buffers "
                                                     f"({_short(exc)}); it allows timestamp=host only") from None
@@ -471,7 +444,7 @@ class GenicamCamera(Camera):
         try:
             node = self._ia.remote_device.node_map.Width
             node.node.invalidate_node()
-            node.value
+            _ = node.value  # a read the device must answer
         except (gentl.GenericException, genapi.GenericException) as exc:
             raise CameraLost(f"the device does not answer: {_short(exc)}") from None
 

@@ -36,7 +36,6 @@ import cv2
 import numpy as np
 
 from fxis_shm import timebase
-from fxis_shm.options import Option, boolean, choice, number, text
 from fxis_shm.ring import FrameLayout
 
 from .base import Camera, CameraLost, Capture
@@ -46,19 +45,6 @@ log = logging.getLogger("camera")
 _LIVE_FAILURES = 25  # consecutive failed reads (about 1 s at >= 25 ms each) before a source is lost
 _LIVE_RETRY_S = 0.04
 _OPEN_TIMEOUT_MS = 5000
-
-
-def rate(value) -> str | float:
-    """``file`` (the file's own rate), ``max`` (as fast as it decodes) or frames per second."""
-    if isinstance(value, str) and value.strip().lower() in ("file", "max"):
-        return value.strip().lower()
-    try:
-        fps = float(value)
-    except (TypeError, ValueError):
-        raise ValueError(f"expected file, max or a number of frames per second, got {value!r}") from None
-    if isinstance(value, bool) or not math.isfinite(fps) or fps <= 0:
-        raise ValueError(f"expected file, max or a number of frames per second > 0, got {value!r}")
-    return fps
 
 
 def source_kind(source: str) -> str:
@@ -72,17 +58,6 @@ def source_kind(source: str) -> str:
 
 class OpenCVCamera(Camera):
     kind = "opencv"
-    OPTIONS = {
-        "source": Option(text, None, "a device index (0 = /dev/video0), a video file or a URL"),
-        "rate": Option(rate, "file", "files: file (their own frame rate), max (as fast as they "
-                                     "decode) or frames per second"),
-        "loop": Option(boolean, False, "files: start again at the end (false: stop delivering)"),
-        "width": Option(number(int, 1, 65535), None, "devices: requested width (default: as set)"),
-        "height": Option(number(int, 1, 65535), None, "devices: requested height (default: as set)"),
-        "fps": Option(number(float, 0, 10_000, exclusive_min=True), None,
-                      "devices: requested frame rate (default: as set)"),
-        "pixel_format": Option(choice("bgr8", "mono8"), "bgr8", "bgr8 or mono8 (converted with cv2)"),
-    }
 
     def __init__(self, name, options, time_origin_ns):
         super().__init__(name, options, time_origin_ns)
@@ -96,8 +71,8 @@ class OpenCVCamera(Camera):
         if self._kind != "device":
             for key in ("width", "height", "fps"):
                 if self.options[key] is not None:
-                    raise ValueError(f"camera {name!r}: key {key!r} applies to devices only; "
-                                     f"{'use rate= for a file' if key == 'fps' else 'a ' + self._kind + ' has its own size'}")
+                    hint = "use rate= for a file" if key == "fps" else f"a {self._kind} has its own size"
+                    raise ValueError(f"camera {name!r}: key {key!r} applies to devices only; {hint}")
         if self._kind != "file":
             for key, default in (("rate", "file"), ("loop", False)):
                 if self.options[key] != default:

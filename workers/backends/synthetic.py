@@ -30,7 +30,6 @@ from fractions import Fraction
 import numpy as np
 
 from fxis_shm import timebase
-from fxis_shm.options import Option, choice, number
 from fxis_shm.ring import FrameLayout
 from fxis_shm.stamp import write_stamp
 
@@ -49,24 +48,6 @@ def board_square_px(width: int, height: int) -> int:
 
 class SyntheticCamera(Camera):
     kind = "synthetic"
-    OPTIONS = {
-        "fps": Option(number(float, 0, 10_000, exclusive_min=True), 20.0, "frames per second"),
-        "width": Option(number(int, 16, 16384), 1360, "image width in pixels"),
-        "height": Option(number(int, 1, 16384), 1024, "image height in pixels"),
-        "pixel_format": Option(choice("mono8", "bgr8"), "mono8", "mono8 or bgr8"),
-        "phase_ms": Option(number(float), 0.0, "offset of this camera's frame times, ms"),
-        "jitter_ms": Option(number(float, 0), 0.0, "uniform timing noise of the capture time, +/- ms"),
-        "drop": Option(number(float, 0, 1), 0.0, "probability that a frame is lost"),
-        "seed": Option(number(int, 0), 0, "seed of the jitter and drop noise (0: random)"),
-        "pattern": Option(choice("stripes", "chessboard"), "stripes",
-                          "stripes (moving, every frame differs) or chessboard (9x6 inner corners, "
-                          "for cv2.findChessboardCorners)"),
-        "shift_px": Option(number(int, -16384, 16384), 0,
-                           "moves the picture left by this many pixels: the disparity of a stereo "
-                           "pair made of cameras with different shift_px"),
-        "trigger": Option(choice("free", "software"), "free",
-                          "free-running, or one frame per software trigger, captured at the trigger"),
-    }
 
     def __init__(self, name, options, time_origin_ns):
         super().__init__(name, options, time_origin_ns)

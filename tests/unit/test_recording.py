@@ -1,0 +1,71 @@
+"""The recorder's pure decisions (which frames to take, what was missed) and its bag metadata."""
+import sys
+
+import pytest
+
+from fxis_shm import bagfile
+from fxis_shm.errors import ConfigError
+from fxis_shm.recording import Follower, Steps
+
+P = 50_000_000  # a 20 fps camera
+
+
+def rows(ids, generation=1):
+    """``frames`` op rows: frame id k captured at k * P."""
+    return [[k, k * P, k * P + 1, k * P + 1, generation] for k in ids]
+
+
+def test_frames_are_taken_once_from_the_start_on():
+    f = Follower(t_start=3 * P)
+    assert [r[0] for r in f.new_frames(rows(range(0, 6)), P)] == [3, 4, 5]
+    assert [r[0] for r in f.new_frames(rows(range(2, 9)), P)] == [6, 7, 8]
+    assert f.new_frames(rows(range(2, 9)), P) == [] and f.missed == 0
+
+
+def test_frames_that_left_the_ring_before_being_taken_are_missed():
+    f = Follower(t_start=0)
+    f.new_frames(rows(range(0, 5)), P)
+    taken = f.new_frames(rows(range(12, 20)), P)  # the ring came round: 5..11 are gone
+    assert taken[0][0] == 12 and f.missed == 7
+
+
+def test_ids_the_camera_skipped_are_not_the_recorders_misses():
+    f = Follower(t_start=0)
+    f.new_frames(rows([0, 1, 2]), P)
+    assert [r[0] for r in f.new_frames(rows([0, 1, 2, 5, 6]), P)] == [5, 6]  # 3, 4 dropped by the camera
+    assert f.missed == 0
+
+
+def test_a_restarted_camera_counts_afresh():
+    f = Follower(t_start=0)
+    f.new_frames(rows(range(0, 10)), P)
+    restarted = [[k, (20 + k) * P, 0, 0, 2] for k in range(0, 3)]
+    assert [r[0] for r in f.new_frames(restarted, P)] == [0, 1, 2] and f.missed == 0
+
+
+def test_a_rate_thins_on_purpose_without_counting_misses():
+    f = Follower(t_start=0, rate_hz=10)
+    taken = f.new_frames(rows(range(0, 20)), P)
+    assert [r[0] for r in taken] == list(range(0, 20, 2)) and f.missed == 0
+
+
+def test_steps_come_due_and_those_the_rings_lost_are_missed():
+    s = Steps(t0=0, rate_hz=10)
+    assert s.due(now=250_000_000, oldest_held=0, limit=16) == [0, 100_000_000, 200_000_000]
+    s.advance(3)
+    # the recorder stalled: by now the rings hold frames from 0.65 s only
+    assert s.due(now=1_000_000_000, oldest_held=650_000_000, limit=2) == [700_000_000, 800_000_000]
+    assert s.missed == 4 and s.taken == 3
+
+
+def test_metadata_yaml_is_yaml_that_rosbag2_readers_parse():
+    from ruamel.yaml import YAML
+
+    doc = {"a": {"b": 1, "c": "/x/image_raw"}, "l": [{"p": "f.mcap", "n": {"k": 2}}, "s"], "e": {}, "z": []}
+    assert YAML(typ="safe").load(bagfile.to_yaml(doc)) == doc
+
+
+def test_without_the_record_extra_the_error_names_it(monkeypatch, tmp_path):
+    monkeypatch.setitem(sys.modules, "mcap_ros2.writer", None)  # as if not installed
+    with pytest.raises(ConfigError, match=r"extra 'record'.*fxis-shm\[record\]"):
+        bagfile.BagWriter(str(tmp_path / "bag"))

@@ -1,0 +1,169 @@
+"""A recorded topic played into a ring as a camera (``bag:path=DIR,topic=/left/image_raw``).
+
+Plays a rosbag2 bag with MCAP storage (``fxis record``'s, or any with
+sensor_msgs/msg/Image or CompressedImage topics) at the recorded spacing, so vision code
+runs against yesterday's cell as against the live one.
+
+Timing: a message logged at L plays at ``origin + (L - bag start + pass * loop) / speed``
+on CLOCK_MONOTONIC, where the origin is the service's (shared by all its cameras, as the
+synthetic cameras share it) plus ``LEAD_NS``, and bag start and the loop length are the
+bag's own. So
+several ``bag`` cameras of one bag stay in step, as they were recorded: frames recorded
+together play together. ``loop`` is the bag's span plus one mean frame interval of its
+fastest image topic, the same for every topic of the bag. A camera that starts (or
+restarts) late joins the playback where it is now, like a live camera; a frame more
+than one interval late is dropped and counted, as a camera would, to stay in step.
+
+Stamps: ``stamps=now`` (default) stamps each frame with its play time, so a client
+asks for ``at=now`` as of a live camera; ``stamps=recorded`` keeps the recorded
+header.stamp (plus ``pass * loop``, so that stamps keep increasing), for code that
+matches frames with other recorded data: it must then ask for frames by those times
+(``at=``, ``wait="none"``), as the service sees them as long past.
+"""
+from __future__ import annotations
+
+import time
+from contextlib import closing
+
+import numpy as np
+
+from fxis_shm import encoding as codec, rosmsgs, timebase
+from fxis_shm.bagfile import BagReader
+from fxis_shm.errors import ConfigError, FxisError
+from fxis_shm.ring import FrameLayout
+
+from .base import Camera, Capture
+
+_IMAGE_TYPES = (rosmsgs.IMAGE, rosmsgs.COMPRESSED)
+_DEFAULT_INTERVAL_NS = 100_000_000  # the loop's gap for a topic of a single frame
+# The bag starts playing this long after the service's origin: time enough for every camera
+# worker to open, so that the first frame of the bag plays too (a worker that opens later
+# joins the playback where it is).
+LEAD_NS = 2_000_000_000
+
+
+class BagCamera(Camera):
+    kind = "bag"
+
+    def __init__(self, name, options, time_origin_ns):
+        super().__init__(name, options, time_origin_ns)
+        path = self.options["path"]
+        if path is None or not str(path).strip():
+            raise ValueError(f"camera {name!r}: key 'path' is required: a bag folder recorded "
+                             f"with fxis record (or its .mcap file)")
+        try:
+            self._bag = BagReader(str(path).strip())
+        except ConfigError as exc:
+            raise ValueError(f"camera {name!r}: key 'path': {exc}") from None
+        self._topic = self._choose_topic(self.options["topic"])
+        self._compressed = self._bag.topics[self._topic] == rosmsgs.COMPRESSED
+        self._start = self._bag.start_time
+        counts = [self._bag.counts.get(t, 0) for t, kind in self._bag.topics.items() if kind in _IMAGE_TYPES]
+        span = self._bag.end_time - self._start
+        most = max(counts, default=1)
+        interval = span // (most - 1) if most > 1 and span > 0 else _DEFAULT_INTERVAL_NS
+        self._loop_ns = span + interval  # the same for every camera of this bag: they stay in step
+        mine = self._bag.counts.get(self._topic, 0)
+        mean = span / (mine - 1) if mine > 1 and span > 0 else interval
+        self._period_ns = round(mean / self.options["speed"])
+        self._k = 0
+        self._frames = None
+        self._next: tuple[int, int, np.ndarray] | None = None  # (due, t_capture, image)
+        self.note = ""
+
+    def _choose_topic(self, topic) -> str:
+        images = sorted(t for t, kind in self._bag.topics.items() if kind in _IMAGE_TYPES)
+        listing = (f"its image topics: {', '.join(images) or 'none'}; all topics: "
+                   + ", ".join(f"{t} ({kind})" for t, kind in sorted(self._bag.topics.items())))
+        if topic is None or not str(topic).strip():
+            if len(images) != 1:
+                raise ValueError(f"camera {self.name!r}: key 'topic' is required: the bag "
+                                 f"{self._bag.path!r} has {len(images)} image topics; {listing}")
+            return images[0]
+        topic = str(topic).strip()
+        if topic not in self._bag.topics:
+            raise ValueError(f"camera {self.name!r}: key 'topic': no topic {topic!r} in the bag "
+                             f"{self._bag.path!r}; {listing}")
+        if topic not in images:
+            raise ValueError(f"camera {self.name!r}: key 'topic': {topic!r} holds "
+                             f"{self._bag.topics[topic]}, not images; {listing}")
+        if not self._bag.counts.get(topic):
+            raise ValueError(f"camera {self.name!r}: key 'topic': {topic!r} has no messages")
+        return topic
+
+    # -- the Camera interface ------------------------------------------------------------
+
+    def open(self) -> None:
+        with closing(self._bag.messages(self._topic)) as messages:
+            _, first = next(messages)
+        self._layout = FrameLayout.of(self._image(first))
+        self._frames = self._play_from(timebase.now())
+        self._next = None
+
+    def close(self) -> None:
+        if self._frames is not None:
+            self._frames.close()
+            self._frames = None
+
+    def _play_from(self, now: int):
+        """(due, t_capture, message) of each frame to play, from the first due at or after ``now``."""
+        speed = self.options["speed"]
+        origin = self.time_origin_ns + LEAD_NS
+        elapsed = max(0, int((now - origin) * speed))
+        playback, within = divmod(elapsed, self._loop_ns)
+        while self.options["loop"] or playback == 0:
+            for log_time, msg in self._bag.messages(self._topic, self._start + within):
+                offset = log_time - self._start + playback * self._loop_ns
+                due = origin + round(offset / speed)
+                recorded = rosmsgs.stamp_ns(msg.header.stamp) + playback * self._loop_ns
+                yield due, due if self.options["stamps"] == "now" else recorded, msg
+            within = 0
+            playback += 1
+        self.note = f"end of bag {self._bag.path} (loop=false)"
+
+    def _image(self, msg) -> np.ndarray:
+        if self._compressed:
+            return codec.decode(bytes(msg.data), codec.JPEG if "jpeg" in msg.format.lower() else codec.PNG, None, None)
+        return rosmsgs.image_array(msg)
+
+    def _pull(self) -> tuple[int, int, np.ndarray] | None:
+        """The next frame to play with its pixels decoded, or None at the end."""
+        while True:
+            try:
+                due, t_capture, msg = next(self._frames)
+            except StopIteration:
+                return None
+            try:
+                image = self._image(msg)
+            except FxisError as exc:  # one undecodable message: skip it, say why
+                self.frames_dropped += 1
+                self.note = f"a message of {self._topic} could not be played: {exc}"
+                continue
+            if FrameLayout.of(image) != self._layout:
+                self.frames_dropped += 1
+                self.note = f"a frame of {self._topic} is {FrameLayout.of(image)}, not {self._layout}"
+                continue
+            return due, t_capture, image
+
+    def grab(self, timeout: float) -> Capture | None:
+        give_up = timebase.now() + int(timeout * 1e9)
+        while True:
+            if self._next is None:
+                self._next = self._pull()
+            if self._next is None:  # the end of a bag played once
+                time.sleep(max(0, give_up - timebase.now()) / 1e9)
+                return None
+            due, t_capture, image = self._next
+            now = timebase.now()
+            if due < now - self._period_ns:  # more than a frame late: lost, as on a camera
+                self.frames_dropped += 1
+                self._next = None
+                continue
+            if due > give_up:
+                time.sleep(max(0, give_up - now) / 1e9)
+                return None
+            if due > now:
+                time.sleep((due - now) / 1e9)
+            self._next = None
+            self._k += 1
+            return Capture(image, self._k - 1, t_capture)
