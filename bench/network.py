@@ -68,6 +68,7 @@ from fxis_shm import Client  # noqa: E402
 PARTS = ("table2", "tuples", "size")
 TABLE_II_TOLERANCE_MS = 0.5
 CLOCK_TARGET_MS = 0.1
+TUPLE_TARGET_REQUESTS = 1000
 RATIO_TARGETS = {"1gbit": 0.6, "100mbit": 0.25}
 
 
@@ -340,7 +341,7 @@ def two_host_tuples(args, client: Client, offsets: dict[str, int], rng: random.R
            "observed_phases": phases,
            "true_skew_ms": common.summary(r["true_skew_ms"] for r in ok),
            "mapped_minus_true_skew_ms": common.summary(r["mapped_skew_ms"] - r["true_skew_ms"] for r in ok),
-           "passed": None if spikes is None else spikes == 0 and len(records) >= 1000,
+           "passed": None if spikes is None or len(records) < TUPLE_TARGET_REQUESTS else spikes == 0,
            "records": records}
     s = out["true_skew_ms"]
     print()
@@ -351,7 +352,7 @@ def two_host_tuples(args, client: Client, offsets: dict[str, int], rng: random.R
                        title=f"two-host tuples {' + '.join(cams)}, ms; least the cameras allow "
                              f"{common.fmt(least)} ms", digits=3))
     print(f"  {common.verdict(out['passed'])} two hosts: {spikes} spike(s) (true skew > {common.fmt(limit)} ms) in "
-          f"{len(ok)} requests (target: 0 in >= 1000); failed {out['failed']}")
+          f"{len(ok)} requests (target: 0 in >= {TUPLE_TARGET_REQUESTS}; fewer: not judged); failed {out['failed']}")
     return out
 
 
