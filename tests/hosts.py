@@ -337,8 +337,11 @@ def main(argv: list[str] | None = None) -> int:
         removed = remove_leftovers()
         print("removed: " + (", ".join(removed) or "nothing"))
     else:
-        for name in ours(namespaces()) + ours(links()):
+        names = ours(namespaces()) + ours(links())
+        for name in names:
             print(name, "(owner running)" if _owner_alive(name) else "(left over)")
+        if not names:
+            print("no namespaces or links of emulated hosts")
     return 0
 
 
