@@ -260,8 +260,9 @@ def format_table_ii(series: tuple[str, str], rows: dict[str, dict], exp: Experim
         table_rows.append([names.get(key, key), *(s[c] for c in COLUMNS), *paper])
     policy, path = series
     modes = POLICIES[policy]
-    title = (f"Table II, policy {policy!r} (sync={modes['sync']}, wait={modes['wait']}), {path} path "
-             f"(Client(local={PATHS[path]!r})): {n} requests, ms; right: the paper's published numbers")
+    transport = f" path (Client(local={PATHS[path]!r}))" if path in PATHS else ""  # else a label (network.py)
+    title = (f"Table II, policy {policy!r} (sync={modes['sync']}, wait={modes['wait']}), {path}{transport}"
+             f": {n} requests, ms; right: the paper's published numbers")
     return common.table(["metric", *COLUMNS, "paper min", "mean", "max", "std"], table_rows,
                         title=title, separators=[5])
 

@@ -29,7 +29,8 @@ class ServiceProcess:
     def __init__(self, args: list[str] = (), name: str | None = None,
                  endpoint: str | None = None, pub: str | None = None, events: str | None = None,
                  ready_timeout: float = 30.0, stderr=None, client_keys=None,
-                 python: str = sys.executable, env: dict[str, str] | None = None, http: str = "off"):
+                 python: str = sys.executable, env: dict[str, str] | None = None,
+                 wrapper: list[str] = (), http: str = "off"):
         """``http``: the dashboard's HOST:PORT, or "off" (the default: tests and scripts
         running at once must not all claim the same fixed port)."""
         self.name = name or f"t{os.getpid()}x{time.monotonic_ns() % 10**6}"
@@ -43,11 +44,14 @@ class ServiceProcess:
         self.stderr = stderr
         self.client_keys = client_keys  # for a service with CurveZMQ
         self.python, self.env = python, env  # the interpreter and environment of `fxis run`
+        # a command that runs the service (e.g. in other namespaces: tests/hosts.py); it must
+        # exec it, not fork, so that SIGTERM reaches the service
+        self.wrapper = list(wrapper)
         self.proc: subprocess.Popen | None = None
 
     def start(self) -> ServiceProcess:
         self.proc = subprocess.Popen(
-            [self.python, "-m", "fxis_shm.cli", "run", *self.args], env=self.env,
+            [*self.wrapper, self.python, "-m", "fxis_shm.cli", "run", *self.args], env=self.env,
             stdout=subprocess.DEVNULL, stderr=self.stderr, stdin=subprocess.DEVNULL,
             preexec_fn=die_with_parent,  # a killed launcher takes its service along
         )

@@ -4,8 +4,10 @@
 # - Aravis (GigE Vision / USB3 Vision) with its GObject introspection data, and
 #   the headers PyGObject compiles against (the "aravis" extra);
 # - aravis-tools, whose arv-fake-gv-camera-0.8 is the GigE Vision camera
-#   emulator the backend tests run against; iproute2 for loopback addresses;
-#   util-linux for unshare (a client in its own mount namespace, test_localpath);
+#   emulator the backend tests run against; iproute2 for loopback addresses and the
+#   emulated hosts (ip netns, veth links, tc's token bucket: tests/hosts.py);
+#   util-linux for unshare (a client in its own mount namespace, test_localpath; the
+#   emulated hosts' time and mount namespaces);
 #   gcc, which builds the ring's memory-ordering helper (fxis_shm/_ordered.c);
 # - libturbojpeg0, the TurboJPEG library PyTurboJPEG loads (bench/jpeg_codecs.py measures it).
 # Runs as root (or with sudo); does nothing when everything is present.

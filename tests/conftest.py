@@ -65,3 +65,21 @@ def fxis(*args, timeout: float = 60.0) -> subprocess.CompletedProcess:
     """Run the ``fxis`` command line (as a module, so the venv need not be on PATH)."""
     return subprocess.run([sys.executable, "-m", "fxis_shm.cli", *args],
                           capture_output=True, text=True, timeout=timeout)
+
+
+@pytest.fixture
+def emulated_hosts(tmp_path):
+    """A ``tests.hosts.Lab``: emulated hosts (namespaces, own clocks, shaped links), all removed
+    afterwards, also when the test failed. Fails, saying why, where they cannot be made (not
+    root, no time namespaces): these tests need them, and CI runs as root."""
+    from .hosts import HostsUnavailable, Lab
+
+    try:
+        lab = Lab(log_dir=str(tmp_path))
+    except HostsUnavailable as exc:
+        pytest.fail(f"emulated hosts unavailable: {exc}", pytrace=False)
+    with lab:
+        yield lab
+    assert lab.leftovers() == [], "emulated hosts left namespaces or links behind"
+    for svc in (svc for host in lab.hosts for svc in host.services):
+        assert not os.path.exists(lock_path(svc.name)), f"service {svc.name!r} left its lock file"
