@@ -6,11 +6,13 @@
 # - aravis-tools, whose arv-fake-gv-camera-0.8 is the GigE Vision camera
 #   emulator the backend tests run against; iproute2 for loopback addresses;
 #   util-linux for unshare (a client in its own mount namespace, test_localpath);
-#   gcc, which builds the ring's memory-ordering helper (fxis_shm/_ordered.c).
+#   gcc, which builds the ring's memory-ordering helper (fxis_shm/_ordered.c);
+# - chromium, the headless browser the dashboard's browser test drives
+#   (tests/integration/test_dashboard_browser.py).
 # Runs as root (or with sudo); does nothing when everything is present.
 set -euo pipefail
 
-wanted=(gir1.2-aravis-0.8 aravis-tools libgirepository1.0-dev libcairo2-dev pkg-config iproute2 util-linux gcc)
+wanted=(gir1.2-aravis-0.8 aravis-tools libgirepository1.0-dev libcairo2-dev pkg-config iproute2 util-linux gcc chromium)
 python3 -c "import venv, ensurepip" 2>/dev/null || wanted+=(python3-venv)
 
 missing=()
@@ -23,5 +25,5 @@ fi
 sudo=""
 [ "$(id -u)" -eq 0 ] || sudo="sudo"
 echo "installing system packages: ${missing[*]}"
-$sudo apt-get update -qq
-DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}"
+$sudo apt-get -o DPkg::Lock::Timeout=600 update -qq
+DEBIAN_FRONTEND=noninteractive $sudo apt-get -o DPkg::Lock::Timeout=600 install -y -qq --no-install-recommends "${missing[@]}"
