@@ -13,7 +13,7 @@ $(VENV)/.installed: pyproject.toml setup.py fxis_shm/_ordered.c scripts/install-
 	bash scripts/install-system-packages.sh
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[test,bench,aravis,genicam]"
+	$(BIN)/python -m pip install --quiet -e ".[test,bench,aravis,genicam,foxglove]"
 	touch $@
 
 demo: setup
