@@ -46,7 +46,7 @@ def raw_pixels(image: np.ndarray) -> tuple[np.ndarray, str]:
     """The frame as RawImage carries it and the name of its encoding: 8-bit mono, BGR and
     BGRA and 16-bit mono as they are (16-bit little-endian), anything else made displayable."""
     channels = 1 if image.ndim == 2 else image.shape[2]
-    encoding = ENCODINGS.get((image.dtype, channels))
+    encoding = ENCODINGS.get((image.dtype.newbyteorder("="), channels))  # either byte order
     if encoding is None:
         image = displayable(image)
         encoding = ENCODINGS[(image.dtype, 1 if image.ndim == 2 else image.shape[2])]

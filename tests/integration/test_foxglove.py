@@ -19,8 +19,8 @@ from fxis_shm import read_stamp
 from fxis_shm.launch import free_tcp_port
 
 from ..conftest import fxis
+from ..foxglove_decode import message_class
 from .conftest import SMALL
-from google.protobuf import descriptor_pb2, descriptor_pool, message_factory
 from websockets.sync.client import connect
 
 # foxglove-sdk 0.30 speaks "foxglove.sdk.v1"; earlier servers "foxglove.websocket.v1"
@@ -85,12 +85,8 @@ class FoxgloveClient:
             return json.loads(payload)
         assert channel["encoding"] == "protobuf" and channel["schemaEncoding"] == "protobuf"
         if channel["id"] not in self._decoders:
-            files = descriptor_pb2.FileDescriptorSet.FromString(base64.b64decode(channel["schema"]))
-            pool = descriptor_pool.DescriptorPool()
-            for f in files.file:  # dependencies come first
-                pool.Add(f)
-            self._decoders[channel["id"]] = message_factory.GetMessageClass(
-                pool.FindMessageTypeByName(channel["schemaName"]))
+            self._decoders[channel["id"]] = message_class(channel["schemaName"],
+                                                          base64.b64decode(channel["schema"]))
         return self._decoders[channel["id"]].FromString(payload)
 
 
