@@ -10,11 +10,9 @@ import cv2
 import numpy as np
 import pytest
 
-from fxis_shm.launch import free_tcp_port
-
 from .browser import Browser, find_chromium
 from .conftest import child_pids
-from .test_dashboard import CAMERAS, get, service_ok
+from .test_dashboard import dashboard, get  # noqa: F401  (dashboard: a fixture)
 
 # what the page's JavaScript reports of each camera tile
 TILES_JS = """Array.from(document.querySelectorAll('.camera')).map(tile => {
@@ -48,11 +46,8 @@ def browser(tmp_path):
         yield b
 
 
-def test_the_page_shows_every_camera_live_and_a_killed_one_down(start_service, wait, browser, tmp_path):
-    port = free_tcp_port()
-    svc = start_service(*CAMERAS, "--restart-limit", "0", http=f"127.0.0.1:{port}")
-    base = f"http://127.0.0.1:{port}"
-    wait(lambda: service_ok(base), timeout=20, what="the dashboard's first look at the service")
+def test_the_page_shows_every_camera_live_and_a_killed_one_down(dashboard, wait, browser, tmp_path):
+    svc, base = dashboard  # --restart-limit 0: a killed camera stays down
     browser.open(base + "/")
 
     # every camera has a tile with its picture loaded, at the camera's size (none is wider
