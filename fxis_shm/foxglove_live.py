@@ -33,6 +33,7 @@ log = logging.getLogger("foxglove")
 
 RATE_PARAMETER = "rate_hz"
 STATUS_TOPIC = "/fxis/status"
+BACKLOG_MESSAGES = 16  # per client: a slow one loses its oldest pictures; memory stays bounded
 TICK_S = 0.05  # the longest the loop sleeps: how soon a stop or a new rate is seen
 ENCODINGS = {(np.dtype(np.uint8), 1): "mono8", (np.dtype(np.uint8), 3): "bgr8",
              (np.dtype(np.uint8), 4): "bgra8", (np.dtype(np.uint16), 1): "mono16"}
@@ -138,7 +139,7 @@ def serve(feed: LiveFeed, host: str, port: int, rate_hz: float, stop: threading.
     rate = RateParameter(rate_hz)
     server = foxglove.start_server(name=name, host=host, port=port,
                                    capabilities=[Capability.Parameters], server_listener=rate,
-                                   context=context)
+                                   context=context, message_backlog_size=BACKLOG_MESSAGES)
     rate.server = server
     try:
         on_ready()

@@ -46,7 +46,7 @@ def browser(tmp_path):
         yield b
 
 
-def test_the_page_shows_every_camera_live_and_a_killed_one_down(dashboard, wait, browser, tmp_path):
+def test_the_page_shows_every_camera_live_and_a_killed_one_down(browser, dashboard, wait, tmp_path):
     svc, base = dashboard  # --restart-limit 0: a killed camera stays down
     browser.open(base + "/")
 
