@@ -7,6 +7,7 @@ import base64
 import json
 import os
 import signal
+import socket
 import struct
 import subprocess
 import sys
@@ -35,8 +36,9 @@ TOPICS = {"/a/image", "/b/image", "/fxis/status"}
 class FoxgloveClient:
     """The app's side of the protocol: advertised channels, subscriptions, decoded messages."""
 
-    def __init__(self, url: str):
-        self.ws = connect(url, subprotocols=SUBPROTOCOLS, open_timeout=10, max_size=None).__enter__()
+    def __init__(self, url: str, **options):
+        self.ws = connect(url, subprotocols=SUBPROTOCOLS, open_timeout=10, close_timeout=2,
+                          max_size=None, **options).__enter__()
         self.channels: dict[str, dict] = {}  # topic -> advertised channel
         self.subscriptions: dict[int, dict] = {}  # subscription id -> channel
         self.texts: list[dict] = []  # JSON messages other than advertise
@@ -223,3 +225,45 @@ def test_without_the_sdk_the_message_names_the_extra(tmp_path):
                             timeout=60, env=env)
     assert result.returncode == 2, result.stderr
     assert "foxglove-sdk" in result.stderr and "fxis-shm[foxglove]" in result.stderr, result.stderr
+
+
+def test_a_viewer_that_stops_reading_holds_up_nobody(start_service, wait):
+    port = free_tcp_port()
+    svc = start_service("--camera", "a=synthetic:fps=20,width=1280,height=960",  # 1.2 MB pictures
+                        "--foxglove", f"127.0.0.1:{port}")
+    url = f"ws://127.0.0.1:{port}"
+    reader = foxglove_client(url, wait)
+    # a viewer that subscribes and never reads: a small receive buffer and a queue of one
+    # message, so the server's socket to it fills within a few pictures
+    sock = socket.socket()
+    sock.setsockopt(socket.SOL_SOCKET, socket.SO_RCVBUF, 4096)
+    sock.connect(("127.0.0.1", port))
+    stalled = FoxgloveClient(url, sock=sock, max_queue=1)
+    try:
+        stalled.until(lambda _: "/a/image" in stalled.channels, what="the channels advertised")
+        stalled.subscribe(["/a/image"])
+        reader.until(lambda _: "/a/image" in reader.channels, what="the channels advertised")
+        with svc.client() as service:
+            before = service.status()["cameras"]["a"]
+        reader.subscribe(["/a/image"])
+        images(reader, {"/a/image": 50}, timeout=40)  # 60 MB of pictures the other reads none of
+        with svc.client() as service:
+            after = service.status()["cameras"]["a"]
+    finally:
+        stalled.close()
+        reader.close()
+    assert after["frames_stored"] > before["frames_stored"]
+    assert after["frames_dropped"] == before["frames_dropped"]
+
+
+def test_a_port_in_use_stops_start_up_naming_the_foxglove_server():
+    with socket.socket() as busy:
+        busy.bind(("127.0.0.1", 0))
+        busy.listen()
+        port = busy.getsockname()[1]
+        ports = [f"tcp://127.0.0.1:{free_tcp_port()}" for _ in range(3)]
+        result = fxis("run", "--name", f"fox{os.getpid()}", "--camera", f"a=synthetic:{SMALL}",
+                      "--endpoint", ports[0], "--pub", ports[1], "--events", ports[2],
+                      "--http", "off", "--foxglove", f"127.0.0.1:{port}")
+    assert result.returncode == 1
+    assert "foxglove" in result.stderr and "address" in result.stderr.lower(), result.stderr
