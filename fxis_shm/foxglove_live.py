@@ -134,7 +134,7 @@ def serve(feed: LiveFeed, host: str, port: int, rate_hz: float, stop: threading.
           name: str = "fxis") -> None:
     """Serve until ``stop`` is set; ``on_ready`` once listening (a port in use raises)."""
     context = foxglove.Context()  # this server's channels only, not the SDK's global ones
-    cameras = {name: RawImageChannel(image_topic(name), context=context) for name in feed.cameras}
+    cameras = {camera: RawImageChannel(image_topic(camera), context=context) for camera in feed.cameras}
     status = foxglove.Channel(STATUS_TOPIC, context=context)
     rate = RateParameter(rate_hz)
     server = foxglove.start_server(name=name, host=host, port=port,
