@@ -14,7 +14,7 @@ $(VENV)/.installed: pyproject.toml setup.py fxis_shm/_ordered.c scripts/install-
 	bash scripts/install-system-packages.sh
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[test,bench,aravis,genicam,record]"
+	$(BIN)/python -m pip install --quiet -e ".[test,bench,aravis,genicam,record,foxglove]"
 	touch $@
 
 demo: setup

@@ -7,8 +7,8 @@ dashboard; /proc/PID/stat) and of this script, in these stages:
   no dashboard   the service with --http off (the baseline)
   idle           the dashboard running, nobody looking (it samples the status twice a second)
   mjpeg xN       N viewers, each reading every camera's MJPEG stream at --fps (a page open)
-  foxglove       one Foxglove WebSocket subscriber of every channel (only where this build
-                 has ``fxis run --foxglove`` and the ``websockets`` package is installed)
+  foxglove       a Foxglove WebSocket subscriber of every camera's pictures at --fps (where
+                 this build has ``fxis run --foxglove`` and ``websockets`` is installed)
 
 Also counts the frames each stage's viewers received, and the frames the cameras stored
 and dropped, to show the viewers do not slow the cameras. Prints a table, writes
@@ -36,7 +36,7 @@ from fxis_shm import procstat
 from fxis_shm.launch import free_tcp_port
 
 BENCH = "bench (the viewers)"
-FOXGLOVE_SUBPROTOCOL = "foxglove.websocket.v1"
+FOXGLOVE_SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]  # foxglove-sdk >= 0.30, older
 FOXGLOVE_MESSAGE_DATA = 0x01  # the opcode of a binary message carrying a channel's message
 
 
@@ -85,26 +85,35 @@ class MjpegViewer(threading.Thread):
 
 
 class FoxgloveViewer(threading.Thread):
-    """Subscribes to every advertised channel of a Foxglove WebSocket server, counting messages."""
+    """Subscribes to one topic of a Foxglove WebSocket server (a camera's pictures), counting
+    its messages. Connects as soon as the server listens (it starts after the service)."""
 
-    def __init__(self, url: str, stop: threading.Event):
+    def __init__(self, url: str, stop: threading.Event, topic: str, connect_timeout: float = 20.0):
         super().__init__(daemon=True)
-        self.url, self.stop, self.pictures, self.error, self.channels = url, stop, 0, None, 0
+        self.url, self.stop, self.topic, self.pictures, self.error = url, stop, topic, 0, None
+        self.connect_timeout = connect_timeout
 
-    def run(self) -> None:
+    def _connect(self):
         from websockets.sync.client import connect
 
+        deadline = time.monotonic() + self.connect_timeout
+        while True:
+            try:
+                return connect(self.url, subprotocols=FOXGLOVE_SUBPROTOCOLS, open_timeout=10, max_size=None)
+            except ConnectionRefusedError:
+                if time.monotonic() > deadline:
+                    raise
+                time.sleep(0.1)
+
+    def run(self) -> None:
         try:
-            with connect(self.url, subprotocols=[FOXGLOVE_SUBPROTOCOL], open_timeout=10,
-                         max_size=None) as ws:
-                channels = []
-                while not channels:
+            with self._connect() as ws:
+                channel = None
+                while channel is None:
                     message = ws.recv(timeout=10)
                     if isinstance(message, str) and json.loads(message).get("op") == "advertise":
-                        channels = json.loads(message)["channels"]
-                self.channels = len(channels)
-                ws.send(json.dumps({"op": "subscribe", "subscriptions": [
-                    {"id": i, "channelId": c["id"]} for i, c in enumerate(channels)]}))
+                        channel = next((c for c in json.loads(message)["channels"] if c["topic"] == self.topic), None)
+                ws.send(json.dumps({"op": "subscribe", "subscriptions": [{"id": 0, "channelId": channel["id"]}]}))
                 while not self.stop.is_set():
                     with contextlib.suppress(TimeoutError):
                         message = ws.recv(timeout=1)
@@ -127,6 +136,10 @@ def foxglove_available() -> str | None:
         import websockets.sync.client  # noqa: F401
     except ImportError:
         return "the websockets package is not installed (the test extra)"
+    try:
+        import foxglove  # noqa: F401
+    except ImportError:
+        return "the foxglove-sdk package is not installed (the foxglove extra)"
     return None
 
 
@@ -204,8 +217,9 @@ def stages(args, out: str) -> list[dict]:
     why_not = "left out (--no-foxglove)" if args.no_foxglove else foxglove_available()
     if why_not is None:
         fox = f"127.0.0.1:{free_tcp_port()}"
-        results.append(run_stage("foxglove", run_args + ["--foxglove", fox],
-                                 lambda stop: [FoxgloveViewer(f"ws://{fox}", stop)], args, out))
+        results.append(run_stage("foxglove", run_args + ["--foxglove", fox, "--foxglove-rate", f"{args.fps:g}"],
+                                 lambda stop: [FoxgloveViewer(f"ws://{fox}", stop, f"/{c}/image") for c in cams],
+                                 args, out))
     else:
         results.append({"stage": "foxglove", "skipped": why_not})
     return results

@@ -116,15 +116,32 @@ class CoordinatorSpec(ChildSpec):
 
 
 @dataclass(frozen=True, kw_only=True)
-class DashboardSpec(ChildSpec):
-    ROLE = "dashboard"
-    MODULE = "fxis_shm.workers.dashboard"
-    VERSION = 1
+class ViewerSpec(ChildSpec):
+    """What every process showing the cameras (a client of the service) is told."""
 
     endpoint: str  # the coordinator it is a client of
-    http: str  # HOST:PORT it serves
     cameras: dict[str, Any]  # camera name -> {"kind", "fps" configured or None}
     curve_secret: str | None = None  # the service's pair, to connect with under CurveZMQ
 
 
-ROLES: dict[str, type[ChildSpec]] = {cls.ROLE: cls for cls in (CameraWorkerSpec, CoordinatorSpec, DashboardSpec)}
+@dataclass(frozen=True, kw_only=True)
+class DashboardSpec(ViewerSpec):
+    ROLE = "dashboard"
+    MODULE = "fxis_shm.workers.dashboard"
+    VERSION = 1
+
+    http: str  # HOST:PORT it serves
+
+
+@dataclass(frozen=True, kw_only=True)
+class FoxgloveSpec(ViewerSpec):
+    ROLE = "foxglove"
+    MODULE = "fxis_shm.workers.foxglove_server"
+    VERSION = 1
+
+    foxglove: str  # HOST:PORT of its WebSocket server
+    rate_hz: float  # pictures a second per camera, until a viewer sets another rate
+
+
+ROLES: dict[str, type[ChildSpec]] = {
+    cls.ROLE: cls for cls in (CameraWorkerSpec, CoordinatorSpec, DashboardSpec, FoxgloveSpec)}

@@ -12,7 +12,7 @@ import textwrap
 from . import defaults, naming
 from .camerakinds import KINDS, PROCESS_OPTIONS
 from .client import Client
-from .config import build_config, load_toml
+from .config import DEFAULT_FOXGLOVE_RATE_HZ, MAX_FOXGLOVE_RATE_HZ, build_config, load_toml
 from .errors import ConfigError, FxisError
 
 EXIT_USAGE = 2
@@ -29,7 +29,7 @@ def _run(args) -> int:
             "cameras": args.camera, "restart_limit": args.restart_limit,
             "log_level": args.log_level, "curve_secret": args.curve_secret,
             "curve_clients": args.curve_clients, "insecure_bind": args.insecure_bind or None,
-            "clock": args.clock, "http": args.http,
+            "clock": args.clock, "http": args.http, "foxglove": args.foxglove, "foxglove_rate": args.foxglove_rate,
         })
     except ConfigError as exc:
         print(f"fxis run: {exc}", file=sys.stderr)
@@ -226,6 +226,13 @@ def parser() -> argparse.ArgumentParser:
                      help=f"serve the live dashboard (pictures, rates, skew; docs/dashboard.md) here "
                           f"(default {defaults.HTTP}); off: none. Another host's address needs "
                           "--insecure-bind: HTTP has no authentication")
+    run.add_argument("--foxglove", metavar="HOST:PORT|off",
+                     help="serve the cameras to the Foxglove app over its WebSocket protocol here, e.g. "
+                          "127.0.0.1:8765 (default off; needs the foxglove extra). Another host's "
+                          "address needs --insecure-bind: it has no authentication (docs/dashboard.md)")
+    run.add_argument("--foxglove-rate", metavar="HZ",
+                     help=f"pictures a second per camera to Foxglove, at most {MAX_FOXGLOVE_RATE_HZ:g} "
+                          f"(default {DEFAULT_FOXGLOVE_RATE_HZ:g}); the app can change it live (parameter rate_hz)")
     run.set_defaults(func=_run)
 
     def client_args(sp):

@@ -21,7 +21,9 @@ if sys.version_info >= (3, 11):
 else:  # pragma: no cover
     import tomli as tomllib
 
-HTTP_OFF = defaults.HTTP_OFF
+HTTP_OFF = defaults.HTTP_OFF  # of http and foxglove: none
+DEFAULT_FOXGLOVE_RATE_HZ = 10.0  # pictures a second per camera to the Foxglove app
+MAX_FOXGLOVE_RATE_HZ = 60.0
 ZERO_ALLOWED = {"sync_tolerance_ms"}  # 0: always the least skew, however far from t*
 # The request defaults a config may change, each of its default's type (max_skew_ms, None
 # by default, takes a number of ms)
@@ -51,14 +53,16 @@ class ServiceConfig:
     insecure_bind: bool = False  # allow non-loopback endpoints without CURVE
     clock: str = "monotonic"  # the clock every time of the service is in (fxis_shm.timebase)
     http: str = defaults.HTTP  # HOST:PORT of the live dashboard, or "off"
+    foxglove: str = HTTP_OFF  # HOST:PORT of the Foxglove WebSocket server, or "off"
+    foxglove_rate: float = DEFAULT_FOXGLOVE_RATE_HZ
 
     @property
     def exposed(self) -> list[str]:
         """Endpoints reachable from other hosts."""
         from .security import is_loopback
 
-        return [e for e in (self.endpoint, self.pub, self.events, self.http_url)
-                if e is not None and not is_loopback(e)]
+        return [e for e in (self.endpoint, self.pub, self.events, *self.viewer_urls.values())
+                if not is_loopback(e)]
 
     @property
     def http_url(self) -> str | None:
@@ -66,10 +70,21 @@ class ServiceConfig:
         return None if self.http == HTTP_OFF else f"http://{self.http}"
 
     @property
+    def foxglove_url(self) -> str | None:
+        """The Foxglove WebSocket server's address (None: none)."""
+        return None if self.foxglove == HTTP_OFF else f"ws://{self.foxglove}"
+
+    @property
+    def viewer_urls(self) -> dict[str, str]:
+        """Setting -> address of what serves pictures without CurveZMQ (HTTP, WebSocket)."""
+        return {k: v for k, v in (("http", self.http_url), ("foxglove", self.foxglove_url)) if v}
+
+    @property
     def exposed_unencrypted(self) -> list[str]:
         """What other hosts could reach without authentication: every exposed endpoint
-        without CurveZMQ, and the dashboard (HTTP has no CurveZMQ) in any case."""
-        return [e for e in self.exposed if not self.curve_secret or e.startswith("http://")]
+        without CurveZMQ, and the dashboard and Foxglove server (no CurveZMQ) in any case."""
+        viewers = set(self.viewer_urls.values())
+        return [e for e in self.exposed if not self.curve_secret or e in viewers]
 
 
 def _camera(name: str, kind: str, raw: dict) -> CameraSpec:
@@ -95,20 +110,42 @@ def _check_endpoint(setting: str, endpoint: Any) -> str:
     return endpoint
 
 
-def http_address(value: str) -> tuple[str, int]:
-    """``HOST:PORT`` (an IPv6 host in brackets) as (host, port); ConfigError naming ``http``."""
+def http_address(value: str, setting: str = "http") -> tuple[str, int]:
+    """``HOST:PORT`` (an IPv6 host in brackets) as (host, port); ConfigError naming ``setting``."""
     host, sep, port = str(value).rpartition(":")
     host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
     if not sep or not host or not port.isdigit() or not 1 <= int(port) <= 65535:
-        raise ConfigError(f"http {value!r}: expected HOST:PORT (e.g. {defaults.HTTP}) or {HTTP_OFF!r}")
+        raise ConfigError(f"{setting} {value!r}: expected HOST:PORT (e.g. {defaults.HTTP}) or {HTTP_OFF!r}")
     return host, int(port)
 
 
-def _check_http(value: Any) -> str:
+def _check_http(value: Any, setting: str = "http") -> str:
     if value is False or str(value).lower() == HTTP_OFF:  # http = false in TOML reads as off too
         return HTTP_OFF
-    http_address(value)
+    http_address(value, setting)
     return str(value)
+
+
+def check_foxglove_rate(value: Any, setting: str = "foxglove_rate") -> float:
+    """Pictures a second per camera to Foxglove: > 0 and at most MAX_FOXGLOVE_RATE_HZ (a flag's
+    text, or a number from the file or from the app's ``rate_hz`` parameter)."""
+    try:
+        rate = float(value) if isinstance(value, (str, int, float)) and not isinstance(value, bool) else None
+    except ValueError:
+        rate = None
+    if rate is None or not 0 < rate <= MAX_FOXGLOVE_RATE_HZ:  # also refuses nan
+        raise ConfigError(f"{setting} must be a number of pictures a second, > 0 and at most "
+                          f"{MAX_FOXGLOVE_RATE_HZ:g}, got {value!r}")
+    return rate
+
+
+def _check_foxglove_sdk() -> None:
+    """The Foxglove server needs the optional foxglove-sdk package: say how to get it."""
+    try:
+        import foxglove  # noqa: F401
+    except ImportError as exc:
+        raise ConfigError(f"foxglove needs the foxglove-sdk package ({exc}): install the "
+                          "\"foxglove\" extra, pip install 'fxis-shm[foxglove]'") from None
 
 
 def _check_int(setting: str, value: Any, minimum: int) -> int:
@@ -137,7 +174,7 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
     file_values = dict(file_values or {})
     flags = {k: v for k, v in (flags or {}).items() if v not in (None, [], ())}
     known = {"name", "endpoint", "pub", "events", "slots", "cameras", "restart_limit", "log_level",
-             "curve_secret", "curve_clients", "insecure_bind", "clock", "http",
+             "curve_secret", "curve_clients", "insecure_bind", "clock", "http", "foxglove", "foxglove_rate",
              *SERVICE_SETTINGS}
     unknown = sorted(set(file_values) - known)
     if unknown:
@@ -175,6 +212,12 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
         config = replace(config, events=_check_endpoint("events", values["events"]))
     if "http" in values:
         config = replace(config, http=_check_http(values["http"]))
+    if "foxglove" in values:
+        config = replace(config, foxglove=_check_http(values["foxglove"], "foxglove"))
+        if config.foxglove_url:
+            _check_foxglove_sdk()
+    if "foxglove_rate" in values:
+        config = replace(config, foxglove_rate=check_foxglove_rate(values["foxglove_rate"]))
     endpoints = {"endpoint": config.endpoint, "pub": config.pub, "events": config.events}
     if len(set(endpoints.values())) < len(endpoints):
         raise ConfigError(f"endpoint, pub and events need an address each; got {endpoints}")
@@ -238,12 +281,14 @@ def _security(config: ServiceConfig, values: dict) -> ServiceConfig:
     if not isinstance(insecure, bool):
         raise ConfigError(f"insecure_bind must be true or false, got {insecure!r}")
     config = replace(config, insecure_bind=insecure)
-    if config.http_url in config.exposed and not insecure:
-        raise ConfigError(
-            f"http {config.http} can be reached from other hosts, and the dashboard has no "
-            "authentication (CurveZMQ does not cover HTTP): bind it to 127.0.0.1, turn it off "
-            "(http = \"off\"), or give insecure_bind to do it anyway")
-    zmq_exposed = [e for e in config.exposed if e != config.http_url]
+    what = {"http": "the dashboard", "foxglove": "the Foxglove server"}
+    for setting, url in config.viewer_urls.items():
+        if url in config.exposed and not insecure:
+            raise ConfigError(
+                f"{setting} {url.split('://', 1)[1]} can be reached from other hosts, and "
+                f"{what[setting]} has no authentication (CurveZMQ does not cover it): bind it to "
+                f"127.0.0.1, turn it off ({setting} = \"off\"), or give insecure_bind to do it anyway")
+    zmq_exposed = [e for e in config.exposed if e not in config.viewer_urls.values()]
     if zmq_exposed and not secret and not insecure:
         raise ConfigError(
             f"{', '.join(zmq_exposed)} can be reached from other hosts, and images would travel "

@@ -13,12 +13,15 @@ import io
 import logging
 import time
 import zipfile
+from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
 
+from .childspec import ViewerSpec
 from .client import Client
 from .errors import Code, FxisError, UnknownCamera
 from .preview import EncodedCache, RateMeter, SkewHistory, frame_intervals_ms, preview_jpeg, preview_key
-from .security import ClientKeys
+from .security import ClientKeys, load_pair
 from .tuplefiles import tuple_files
 
 log = logging.getLogger("dashboard")
@@ -26,6 +29,17 @@ log = logging.getLogger("dashboard")
 SAMPLE_PERIOD_S = 0.5  # status, rates and plots refresh this often
 REQUEST_TIMEOUT_S = 1.5  # a service silent this long is shown as gone
 INTERVALS_SHOWN = 60  # frame intervals plotted per camera
+T = TypeVar("T")
+
+
+def feed_for(spec: ViewerSpec) -> LiveFeed:
+    """The feed of a viewer process (the dashboard, the Foxglove server) from its spec. With
+    CurveZMQ it connects with the service's own pair: its public key must be among the clients'."""
+    keys = None
+    if spec.curve_secret:
+        public, secret = load_pair(spec.curve_secret)
+        keys = ClientKeys(public, public, secret)
+    return LiveFeed(spec.endpoint, spec.cameras, keys=keys)
 
 
 class LiveFeed:
@@ -58,23 +72,34 @@ class LiveFeed:
 
     # ---- pictures ----
 
-    async def latest_jpeg(self, camera: str, width: int) -> tuple[bytes, tuple]:
-        """The newest frame of ``camera`` as a preview JPEG and its cache key (a new key:
-        a new frame). Raises the client's errors (CameraDown, RequestTimeout, ...)."""
+    async def latest(self, camera: str, make: Callable[..., T], torn: Callable[[T], None] | None = None) -> T:
+        """``make(frame)`` of the newest frame of ``camera``, read without a copy where it can
+        (a view of the ring slot: the camera never waits for a viewer). If the ring came round
+        while ``make`` read the pixels, ``torn(result)`` is told and the newest frame is read
+        again, copied. Raises the client's errors (CameraDown, RequestTimeout, ...)."""
         self.check_camera(camera)
         return await asyncio.get_running_loop().run_in_executor(
-            self._pictures, self._latest_jpeg, camera, width)
+            self._pictures, self._latest, camera, make, torn)
 
-    def _latest_jpeg(self, camera: str, width: int) -> tuple[bytes, tuple]:
-        for copy in (False, True):  # a view first; a copy if the ring came round while encoding
+    def _latest(self, camera: str, make: Callable[..., T], torn: Callable[[T], None] | None) -> T:
+        for copy in (False, True):
             with self._picture_client.latest([camera], copy=copy) as frames:
                 frame = frames[camera]
-                key = preview_key(camera, frame.generation, frame.frame_id, width)
-                data = self.cache.get(key, lambda frame=frame: preview_jpeg(frame.image, width))
+                result = make(frame)
                 if frame.still_valid():
-                    return data, key
-                self.cache.discard(key)
+                    return result
+                if torn:
+                    torn(result)
         raise FxisError(f"the frames of {camera!r} were overwritten while being read twice")
+
+    async def latest_jpeg(self, camera: str, width: int) -> tuple[bytes, tuple]:
+        """The newest frame of ``camera`` as a preview JPEG and its cache key (a new key:
+        a new frame)."""
+        def make(frame) -> tuple[bytes, tuple]:
+            key = preview_key(camera, frame.generation, frame.frame_id, width)
+            return self.cache.get(key, lambda: preview_jpeg(frame.image, width)), key
+
+        return await self.latest(camera, make, torn=lambda result: self.cache.discard(result[1]))
 
     async def tuple_zip(self) -> tuple[bytes, str]:
         """One synchronized tuple of the cameras that are up, as a zip of PNGs and tuple.json

@@ -20,7 +20,7 @@ import threading
 import time
 
 from . import naming, timebase
-from .childspec import CameraWorkerSpec, ChildSpec, CoordinatorSpec, DashboardSpec
+from .childspec import CameraWorkerSpec, ChildSpec, CoordinatorSpec, DashboardSpec, FoxgloveSpec
 from .config import ServiceConfig
 
 log = logging.getLogger("supervisor")
@@ -129,14 +129,19 @@ class Child:
             self.proc.kill()
 
 
-def dashboard_child(config: ServiceConfig, common: dict) -> Child | None:
-    """The live dashboard's process (fxis_shm.dashboard), a client of the service; None when off."""
-    if not config.http_url:
-        return None
-    return Child(DashboardSpec(
-        **common, endpoint=config.endpoint, http=config.http, curve_secret=config.curve_secret,
-        cameras={c.name: {"kind": c.kind, "fps": c.options.get("fps")} for c in config.cameras},
-    ), "dashboard", key="dashboard")
+def viewer_children(config: ServiceConfig, common: dict) -> list[Child]:
+    """The processes that show the cameras, clients of the service like any other: the live
+    dashboard (fxis_shm.dashboard) and the Foxglove server (fxis_shm.foxglove_live), each
+    when its address is not off."""
+    viewer = {**common, "endpoint": config.endpoint, "curve_secret": config.curve_secret,
+              "cameras": {c.name: {"kind": c.kind, "fps": c.options.get("fps")} for c in config.cameras}}
+    children = []
+    if config.http_url:
+        children.append(Child(DashboardSpec(**viewer, http=config.http), "dashboard", key="dashboard"))
+    if config.foxglove_url:
+        children.append(Child(FoxgloveSpec(**viewer, foxglove=config.foxglove, rate_hz=config.foxglove_rate),
+                              "foxglove", key="foxglove"))
+    return children
 
 
 class Supervisor:
@@ -157,12 +162,12 @@ class Supervisor:
             cameras={c.name: c.kind for c in config.cameras}, settings=config.settings,
             curve_secret=config.curve_secret, curve_clients=config.curve_clients,
         ), "coordinator", key="coordinator")
-        self.dashboard = dashboard_child(config, common)
+        self.viewers = viewer_children(config, common)
         self.events: list[dict] = []  # the latest exits and restarts, for status
 
     @property
     def children(self) -> list[Child]:
-        return [*self.cameras, self.coordinator, *([self.dashboard] if self.dashboard else [])]
+        return [*self.cameras, self.coordinator, *self.viewers]
 
     def run(self) -> int:
         """Serve until SIGINT/SIGTERM; returns the process exit code."""
@@ -195,9 +200,9 @@ class Supervisor:
             child.wait_ready()
         self.coordinator.start()
         self.coordinator.wait_ready()
-        if self.dashboard:  # a reader like any client: after the service it reads
-            self.dashboard.start()
-            self.dashboard.wait_ready()
+        for viewer in self.viewers:  # a reader like any client: after the service it reads
+            viewer.start()
+            viewer.wait_ready()
 
     def _announce(self) -> None:
         c = self.config
@@ -209,6 +214,8 @@ class Supervisor:
         lines.append(f"  rings of {c.slots} slots in /dev/shm/fxis.{c.name}.*")
         if c.http_url:
             lines.append(f"  live dashboard on {c.http_url}/")
+        if c.foxglove_url:
+            lines.append(f"  Foxglove WebSocket server on {c.foxglove_url} ({c.foxglove_rate:g} pictures/s per camera)")
         if c.curve_secret:
             lines.append(f"  CurveZMQ: only the clients whose keys are in {c.curve_clients}")
         if c.exposed_unencrypted:

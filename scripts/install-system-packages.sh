@@ -9,11 +9,13 @@
 #   util-linux for unshare (a client in its own mount namespace, test_localpath; the
 #   emulated hosts' time and mount namespaces);
 #   gcc, which builds the ring's memory-ordering helper (fxis_shm/_ordered.c);
-# - libturbojpeg0, the TurboJPEG library PyTurboJPEG loads (bench/jpeg_codecs.py measures it).
+# - libturbojpeg0, the TurboJPEG library PyTurboJPEG loads (bench/jpeg_codecs.py measures it);
+# - chromium, the headless browser the dashboard's browser test drives
+#   (tests/integration/test_dashboard_browser.py).
 # Runs as root (or with sudo); does nothing when everything is present.
 set -euo pipefail
 
-wanted=(gir1.2-aravis-0.8 aravis-tools libgirepository1.0-dev libcairo2-dev pkg-config iproute2 util-linux gcc libturbojpeg0)
+wanted=(gir1.2-aravis-0.8 aravis-tools libgirepository1.0-dev libcairo2-dev pkg-config iproute2 util-linux gcc libturbojpeg0 chromium)
 python3 -c "import venv, ensurepip" 2>/dev/null || wanted+=(python3-venv)
 
 missing=()
@@ -26,5 +28,5 @@ fi
 sudo=""
 [ "$(id -u)" -eq 0 ] || sudo="sudo"
 echo "installing system packages: ${missing[*]}"
-$sudo apt-get update -qq
-DEBIAN_FRONTEND=noninteractive $sudo apt-get install -y -qq --no-install-recommends "${missing[@]}"
+$sudo apt-get -o DPkg::Lock::Timeout=600 update -qq
+DEBIAN_FRONTEND=noninteractive $sudo apt-get -o DPkg::Lock::Timeout=600 install -y -qq --no-install-recommends "${missing[@]}"

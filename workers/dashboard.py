@@ -8,21 +8,16 @@ import threading
 
 from fxis_shm.childspec import DashboardSpec
 from fxis_shm.config import http_address
-from fxis_shm.security import ClientKeys, load_pair
 
 from ._child import Ready, child_main
 
 
 def run(spec: DashboardSpec, ready: Ready, stop: threading.Event) -> None:
     from fxis_shm.dashboard import serve
-    from fxis_shm.livefeed import LiveFeed
+    from fxis_shm.livefeed import feed_for
 
-    keys = None
-    if spec.curve_secret:  # the service's own pair (its public key must be among the clients')
-        public, secret = load_pair(spec.curve_secret)
-        keys = ClientKeys(public, public, secret)
     host, port = http_address(spec.http)
-    feed = LiveFeed(spec.endpoint, spec.cameras, keys=keys)
+    feed = feed_for(spec)
     try:
         asyncio.run(serve(feed, host, port, stop, on_ready=ready.ok))
     finally:

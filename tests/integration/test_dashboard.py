@@ -50,7 +50,11 @@ def jpeg(body: bytes) -> np.ndarray:
 
 @pytest.fixture
 def dashboard(start_service, wait):
-    """A service with two cameras and its dashboard; yields (service, base URL)."""
+    return start_dashboard(start_service, wait)
+
+
+def start_dashboard(start_service, wait):
+    """A service with two cameras and its dashboard: (service, base URL)."""
     port = free_tcp_port()
     svc = start_service(*CAMERAS, "--restart-limit", "0", http=f"127.0.0.1:{port}")
     base = f"http://127.0.0.1:{port}"

@@ -5,7 +5,7 @@ import json
 
 import pytest
 
-from fxis_shm.childspec import ROLES, CameraWorkerSpec, CoordinatorSpec, DashboardSpec
+from fxis_shm.childspec import ROLES, CameraWorkerSpec, CoordinatorSpec, DashboardSpec, FoxgloveSpec
 from fxis_shm.errors import SpecError
 
 CAMERA = CameraWorkerSpec(service="svc", camera="left", kind="synthetic", options={"fps": 20.0},
@@ -77,4 +77,5 @@ def test_coordinator_fields_are_checked_by_type(changes, words):
 
 
 def test_roles_name_their_spec_classes():
-    assert ROLES == {"camera": CameraWorkerSpec, "coordinator": CoordinatorSpec, "dashboard": DashboardSpec}
+    assert ROLES == {"camera": CameraWorkerSpec, "coordinator": CoordinatorSpec, "dashboard": DashboardSpec,
+                     "foxglove": FoxgloveSpec}

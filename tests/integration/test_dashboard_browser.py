@@ -1,0 +1,87 @@
+"""The dashboard in a real browser: headless Chromium loads the page of a real service,
+every camera's picture is drawn and moves, and a camera worker killed with kill -9 is
+shown DOWN. Screenshots are kept in the test's tmp_path (dashboard-*.png)."""
+from __future__ import annotations
+
+import os
+import signal
+
+import cv2
+import numpy as np
+import pytest
+
+from .browser import Browser, find_chromium
+from .conftest import child_pids
+from .test_dashboard import get, start_dashboard
+
+# what the page's JavaScript reports of each camera tile
+TILES_JS = """Array.from(document.querySelectorAll('.camera')).map(tile => {
+  const img = tile.querySelector('img'), box = img.getBoundingClientRect();
+  return {name: tile.dataset.camera, state: tile.dataset.state,
+          badge: tile.querySelector('.badge').textContent, why: tile.querySelector('.why').textContent,
+          loaded: img.complete && img.naturalWidth > 0, natural: [img.naturalWidth, img.naturalHeight],
+          box: {x: box.left + scrollX, y: box.top + scrollY, width: box.width, height: box.height}};
+})"""
+PAGE_WIDTH = 480  # the page's default picture width: wider cameras are scaled down to it
+SIZES = {"a": (320, 240), "b": (64, 48)}  # CAMERAS' sizes, narrower than PAGE_WIDTH: as they are
+
+
+def tiles(browser: Browser) -> dict[str, dict]:
+    return {t["name"]: t for t in browser.evaluate(TILES_JS)}
+
+
+def picture(browser: Browser, tile: dict) -> np.ndarray:
+    """The camera's picture as the browser draws it (a screenshot of its <img>)."""
+    png = browser.screenshot(tile["box"])
+    return cv2.imdecode(np.frombuffer(png, np.uint8), cv2.IMREAD_COLOR)
+
+
+@pytest.fixture
+def browser(tmp_path):
+    executable = find_chromium()
+    if executable is None:
+        pytest.fail("chromium is not installed: the dashboard's browser test needs Debian's "
+                    "chromium package (scripts/install-system-packages.sh installs it)")
+    with Browser(tmp_path / "chromium", executable) as b:
+        yield b
+
+
+def test_the_page_shows_every_camera_live_and_a_killed_one_down(browser, start_service, wait, tmp_path):
+    svc, base = start_dashboard(start_service, wait)  # --restart-limit 0: a killed camera stays down
+    browser.open(base + "/")
+
+    # every camera has a tile with its picture loaded, at the camera's size (none is wider
+    # than the page's default width), live
+    def all_loaded():
+        shown = tiles(browser)
+        return shown if set(shown) == set(SIZES) and all(t["loaded"] for t in shown.values()) else None
+
+    shown = wait(all_loaded, timeout=30, interval=0.2, what="every camera's picture on the page")
+    for name, tile in shown.items():
+        assert tuple(tile["natural"]) == SIZES[name], (name, tile)
+        assert tile["state"] == "up" and tile["badge"] == "live", tile
+        assert tile["box"]["width"] == SIZES[name][0]  # drawn at its own size, not stretched
+    (tmp_path / "dashboard-live.png").write_bytes(browser.screenshot())
+
+    # what the browser draws of each camera is a picture (not a blank box) and it changes
+    first = {name: picture(browser, tile) for name, tile in shown.items()}
+    for name, image in first.items():
+        assert image.shape[:2] == SIZES[name][::-1] and image.std() > 5, f"{name}: a blank picture"
+    for name, tile in shown.items():
+        wait(lambda tile=tile, name=name: not np.array_equal(picture(browser, tile), first[name]), timeout=20,
+             interval=0.2, what=f"camera {name}'s picture to change on the page")
+
+    # kill -9 of camera b's worker (--restart-limit 0: it stays down) shows on the page
+    with svc.client() as client:
+        pid = client.status()["supervisor"]["processes"]["camera:b"]["pid"]
+    assert pid in child_pids(svc, "camera")
+    os.kill(pid, signal.SIGKILL)
+    down = wait(lambda: (lambda t: t["b"]["state"] == "down" and t)(tiles(browser)), timeout=20,
+                interval=0.2, what="camera b shown DOWN on the page")
+    (tmp_path / "dashboard-b-down.png").write_bytes(browser.screenshot())
+    assert down["b"]["badge"] == "DOWN" and down["b"]["why"], down["b"]
+    assert down["a"]["state"] == "up" and down["a"]["badge"] == "live"  # the other goes on
+    before = picture(browser, down["a"])
+    wait(lambda: not np.array_equal(picture(browser, down["a"]), before), timeout=20,
+         interval=0.2, what="camera a's picture to keep changing")
+    assert get(base + "/cameras/b/latest.jpg")[0] == 503

@@ -1,0 +1,27 @@
+"""The Foxglove process: the cameras served to the Foxglove app (fxis_shm.foxglove_live), a
+client of the coordinator and of the rings like any other, supervised and restarted like
+the camera workers and the coordinator."""
+from __future__ import annotations
+
+import threading
+
+from fxis_shm.childspec import FoxgloveSpec
+from fxis_shm.config import http_address
+
+from ._child import Ready, child_main
+
+
+def run(spec: FoxgloveSpec, ready: Ready, stop: threading.Event) -> None:
+    from fxis_shm.foxglove_live import serve
+    from fxis_shm.livefeed import feed_for
+
+    host, port = http_address(spec.foxglove, "foxglove")
+    feed = feed_for(spec)
+    try:
+        serve(feed, host, port, spec.rate_hz, stop, on_ready=ready.ok, name=f"fxis {spec.service}")
+    finally:
+        feed.close()
+
+
+if __name__ == "__main__":
+    child_main(FoxgloveSpec, run)
