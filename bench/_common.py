@@ -4,6 +4,7 @@ tables, JSON and figure output, progress bars.
 Not a public module; the scripts import it as ``_common`` (run as scripts) or
 ``bench._common`` (imported as a package).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -32,6 +33,7 @@ EXIT_OK, EXIT_FAILED, EXIT_USAGE = 0, 1, 2
 
 # ---- command line ----------------------------------------------------------------------------
 
+
 class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescriptionHelpFormatter):
     """Shows defaults and keeps the description's line breaks."""
 
@@ -39,22 +41,33 @@ class HelpFormatter(argparse.ArgumentDefaultsHelpFormatter, argparse.RawDescript
 def add_service_args(p: argparse.ArgumentParser, endpoint_note: str = "") -> None:
     """--endpoint, --out, --timeout, --seed: the same meaning in every benchmark."""
     g = p.add_argument_group("service and output")
-    g.add_argument("--endpoint", metavar="URL",
-                   help="measure the service already running at this endpoint (e.g. "
-                        "tcp://127.0.0.1:5555, on this host) instead of launching one"
-                        + (f"; {endpoint_note}" if endpoint_note else ""))
+    g.add_argument(
+        "--endpoint",
+        metavar="URL",
+        help="measure the service already running at this endpoint (e.g. "
+        "tcp://127.0.0.1:5555, on this host) instead of launching one"
+        + (f"; {endpoint_note}" if endpoint_note else ""),
+    )
     add_output_args(g)
 
 
-def add_output_args(g, out_help: str = "folder for the JSON and PNG files (created if missing; "
-                                       "files are overwritten)",
-                    seed_help: str = "seed of the random sleeps") -> None:
+def add_output_args(
+    g,
+    out_help: str = "folder for the JSON and PNG files (created if missing; files are overwritten)",
+    seed_help: str = "seed of the random sleeps",
+) -> None:
     """--out, --timeout, --seed, into an argument group (or parser) ``g``."""
     g.add_argument("--out", default=DEFAULT_OUT, metavar="DIR", help=out_help)
-    g.add_argument("--timeout", type=positive_float, default=3.0, metavar="S",
-                   help="client timeout per request, seconds (no request can hang longer)")
-    g.add_argument("--seed", type=int, default=None,
-                   help=f"{seed_help} (default: random; the seed used is saved in the JSON)")
+    g.add_argument(
+        "--timeout",
+        type=positive_float,
+        default=3.0,
+        metavar="S",
+        help="client timeout per request, seconds (no request can hang longer)",
+    )
+    g.add_argument(
+        "--seed", type=int, default=None, help=f"{seed_help} (default: random; the seed used is saved in the JSON)"
+    )
 
 
 def parse_args(p: argparse.ArgumentParser, argv: list[str] | None):
@@ -107,18 +120,25 @@ def int_list(text: str) -> list[int]:
 
 def name_list(choices: tuple[str, ...]):
     """An argparse type: a comma-separated subset of ``choices``, in the order of ``choices``."""
+
     def parse(text: str) -> list[str]:
         names = [v.strip() for v in text.split(",") if v.strip()]
         unknown = [n for n in names if n not in choices]
         if unknown or not names:
             raise argparse.ArgumentTypeError(f"choose from {','.join(choices)}, got {text!r}")
         return [c for c in choices if c in names]
+
     return parse
 
 
-def synthetic_camera_flags(names: Sequence[str], fps: float, width: int, height: int,
-                           phases_ms: Sequence[float] | None = None,
-                           jitter_ms: float = 0.0) -> list[str]:
+def synthetic_camera_flags(
+    names: Sequence[str],
+    fps: float,
+    width: int,
+    height: int,
+    phases_ms: Sequence[float] | None = None,
+    jitter_ms: float = 0.0,
+) -> list[str]:
     """``--camera`` flags of ``fxis run`` for synthetic mono8 cameras."""
     flags = []
     for j, name in enumerate(names):
@@ -133,9 +153,11 @@ def synthetic_camera_flags(names: Sequence[str], fps: float, width: int, height:
 
 # ---- the service -----------------------------------------------------------------------------
 
+
 @contextlib.contextmanager
-def service(endpoint: str | None, run_args: list[str], log_path: str,
-            timeout: float, http: str = "off") -> Iterator[tuple[Client, dict]]:
+def service(
+    endpoint: str | None, run_args: list[str], log_path: str, timeout: float, http: str = "off"
+) -> Iterator[tuple[Client, dict]]:
     """A client of the service to measure, and facts about it.
 
     With ``endpoint`` None a service is launched with ``fxis run <run_args>`` (its log goes
@@ -167,12 +189,12 @@ def wait_until_streaming(client: Client, min_frames: int = 3, timeout: float = 1
             status = None
         if status is not None:
             cams = status["cameras"]
-            if cams and all(c["alive"] and (c.get("frames_stored") or 0) >= min_frames
-                            for c in cams.values()):
+            if cams and all(c["alive"] and (c.get("frames_stored") or 0) >= min_frames for c in cams.values()):
                 return status
         if time.monotonic() > deadline:
-            raise RuntimeError(f"the service's cameras did not stream within {timeout:.0f} s: "
-                               f"{status and status['cameras']}")
+            raise RuntimeError(
+                f"the service's cameras did not stream within {timeout:.0f} s: {status and status['cameras']}"
+            )
         time.sleep(0.05)
 
 
@@ -210,8 +232,13 @@ REQUEST_ERRORS = (FxisError,)
 
 
 def host_info() -> dict:
-    return {"python": platform.python_version(), "machine": platform.machine(),
-            "cpus": os.cpu_count(), "platform": platform.platform(), "code": code_version()}
+    return {
+        "python": platform.python_version(),
+        "machine": platform.machine(),
+        "cpus": os.cpu_count(),
+        "platform": platform.platform(),
+        "code": code_version(),
+    }
 
 
 def code_line(code: dict) -> str:
@@ -219,8 +246,9 @@ def code_line(code: dict) -> str:
     if not code["commit"]:
         return "code: not in a git checkout"
     modified = code["modified"] or []
-    return (f"code: commit {code['commit'][:10]}" +
-            (f" with uncommitted changes to {', '.join(modified)}" if modified else " (clean)"))
+    return f"code: commit {code['commit'][:10]}" + (
+        f" with uncommitted changes to {', '.join(modified)}" if modified else " (clean)"
+    )
 
 
 def code_version() -> dict:
@@ -229,19 +257,21 @@ def code_version() -> dict:
 
     def git(*args):
         try:
-            done = subprocess.run(["git", "-C", repo, *args], capture_output=True, text=True,
-                                  timeout=5, check=True)
+            done = subprocess.run(["git", "-C", repo, *args], capture_output=True, text=True, timeout=5, check=True)
         except (OSError, subprocess.SubprocessError):
             return None
         return done.stdout
 
     commit = git("rev-parse", "HEAD")
     changed = git("status", "--porcelain", "--untracked-files=no")
-    return {"commit": commit.strip() if commit else None,
-            "modified": [line[3:] for line in changed.splitlines()] if changed is not None else None}
+    return {
+        "commit": commit.strip() if commit else None,
+        "modified": [line[3:] for line in changed.splitlines()] if changed is not None else None,
+    }
 
 
 # ---- numbers ---------------------------------------------------------------------------------
+
 
 def ms(ns) -> float:
     return ns / NS_PER_MS
@@ -251,8 +281,7 @@ def summary(values: Iterable[float]) -> dict:
     """n, min, mean, median, p99, max and std (sample, ddof=1) of ``values``; None if empty."""
     a = np.asarray(list(values), dtype=float)
     if a.size == 0:
-        return {"n": 0, "min": None, "mean": None, "median": None, "p99": None, "max": None,
-                "std": None}
+        return {"n": 0, "min": None, "mean": None, "median": None, "p99": None, "max": None, "std": None}
     return {
         "n": int(a.size),
         "min": float(a.min()),
@@ -277,12 +306,16 @@ def fmt(value, digits: int = 2) -> str:
     return f"{value:.{digits}f}"
 
 
-def table(header: Sequence[str], rows: Sequence[Sequence], title: str | None = None,
-          digits: int = 2, separators: Sequence[int] = ()) -> str:
+def table(
+    header: Sequence[str],
+    rows: Sequence[Sequence],
+    title: str | None = None,
+    digits: int = 2,
+    separators: Sequence[int] = (),
+) -> str:
     """A plain-text table: first column left-aligned, the others right-aligned;
     a ``|`` is drawn before every column index in ``separators``."""
-    cells = [list(header)] + [[r[0]] + [fmt(v, digits) if not isinstance(v, str) else v
-                                        for v in r[1:]] for r in rows]
+    cells = [list(header)] + [[r[0]] + [fmt(v, digits) if not isinstance(v, str) else v for v in r[1:]] for r in rows]
     widths = [max(len(str(row[i])) for row in cells) for i in range(len(header))]
 
     def line(row):
@@ -300,6 +333,7 @@ def table(header: Sequence[str], rows: Sequence[Sequence], title: str | None = N
 
 
 # ---- files -----------------------------------------------------------------------------------
+
 
 def ensure_dir(path: str) -> str:
     os.makedirs(path, exist_ok=True)
@@ -338,8 +372,7 @@ def progress(total: int, desc: str):
     if sys.stderr.isatty():
         from tqdm import tqdm
 
-        return tqdm(total=total, desc=desc, file=sys.stderr, unit="req", dynamic_ncols=True,
-                    leave=False)
+        return tqdm(total=total, desc=desc, file=sys.stderr, unit="req", dynamic_ncols=True, leave=False)
     return _StageLines(total, desc)
 
 
@@ -354,8 +387,11 @@ class _StageLines:
         self.done += n
 
     def close(self) -> None:
-        print(f"{self.desc}: {self.done} of {self.total} done in {time.monotonic() - self.started:.1f} s",
-              file=sys.stderr, flush=True)
+        print(
+            f"{self.desc}: {self.done} of {self.total} done in {time.monotonic() - self.started:.1f} s",
+            file=sys.stderr,
+            flush=True,
+        )
 
     def __enter__(self):
         return self
@@ -367,4 +403,3 @@ class _StageLines:
 def sleep_ms(duration_ms: float) -> None:
     if duration_ms > 0:
         time.sleep(duration_ms / 1000)
-

@@ -3,6 +3,7 @@ order, each after a random sleep, so a drift of the machine's speed hits all of 
 
 Not a public module; imported as ``_interleave`` (scripts) or ``bench._interleave`` (package).
 """
+
 from __future__ import annotations
 
 import os
@@ -67,8 +68,9 @@ def record(c: Contender, sample: tuple) -> None:
         c.first_traceback = c.first_traceback or tb
 
 
-def time_contenders(contenders: list[Contender], n: int, warmup: int, rng: random.Random,
-                    sleep_max_ms: float, desc: str) -> None:
+def time_contenders(
+    contenders: list[Contender], n: int, warmup: int, rng: random.Random, sleep_max_ms: float, desc: str
+) -> None:
     """``warmup`` then ``n`` rounds; each round one sample of every contender in a random order."""
     for _ in range(warmup):
         for c in contenders:
@@ -95,10 +97,16 @@ def cycle(items: list) -> Callable[[], Any]:
 def result_of(c: Contender) -> dict:
     """What the JSON keeps of a contender: summary, failures and every raw sample."""
     ok = [v for v in c.samples if v is not None]
-    return {"summary_ms": common.summary(ok), "failed": len(c.errors), "warmup_failed": c.warmup_failed,
-            "errors": c.errors[:20], "first_traceback": c.first_traceback,
-            "minor_faults_median": float(np.median(c.faults)) if c.faults else None,
-            "samples_ms": c.samples, "minor_faults": c.faults}
+    return {
+        "summary_ms": common.summary(ok),
+        "failed": len(c.errors),
+        "warmup_failed": c.warmup_failed,
+        "errors": c.errors[:20],
+        "first_traceback": c.first_traceback,
+        "minor_faults_median": float(np.median(c.faults)) if c.faults else None,
+        "samples_ms": c.samples,
+        "minor_faults": c.faults,
+    }
 
 
 def median(results: dict, name: str) -> float | None:

@@ -3,6 +3,7 @@ past-tuple requests and their summary, one service log per section, list-valued 
 
 Not a public module; imported as ``_scaling`` (scripts) or ``bench._scaling`` (package).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -67,6 +68,7 @@ name_list = common.name_list
 
 # ---- clients and requests --------------------------------------------------------------------
 
+
 def local_supported() -> bool:
     """Whether this Client can choose its transport (the local= keyword)."""
     return "local" in inspect.signature(Client.__init__).parameters  # (Client's __new__ takes **kwargs)
@@ -100,7 +102,9 @@ def timed(client: Client, request=past_tuple) -> dict:
     rtt = time.monotonic_ns() - t_send
     timing = reply.timing or {}
     return {
-        "t_send": t_send, "rtt_ns": rtt, "error": None,
+        "t_send": t_send,
+        "rtt_ns": rtt,
+        "error": None,
         "service_ns": timing["sent"] - timing["received"] if "sent" in timing and "received" in timing else None,
         "waited_ns": timing["waited"] - timing["received"] if "waited" in timing and "received" in timing else None,
         "bytes": sum(f.image.nbytes for f in reply.values()),
@@ -109,8 +113,9 @@ def timed(client: Client, request=past_tuple) -> dict:
     }
 
 
-def time_requests(client: Client, n: int, rng: random.Random, sleep_max_ms: float, warmup: int,
-                  desc: str, request=past_tuple) -> list[dict]:
+def time_requests(
+    client: Client, n: int, rng: random.Random, sleep_max_ms: float, warmup: int, desc: str, request=past_tuple
+) -> list[dict]:
     """``warmup`` unrecorded then ``n`` timed requests, each after a random sleep."""
     for _ in range(warmup):
         timed(client, request)
@@ -130,7 +135,8 @@ def latency_summary(records: list[dict]) -> dict:
     for r in ok:
         paths[str(r.get("path"))] = paths.get(str(r.get("path")), 0) + 1
     return {
-        "requests": len(records), "failed": len(records) - len(ok),
+        "requests": len(records),
+        "failed": len(records) - len(ok),
         "rtt_ms": common.summary(common.ms(r["rtt_ns"]) for r in ok),
         "service_ms": common.summary(common.ms(r["service_ns"]) for r in ok if r.get("service_ns") is not None),
         "waited": sum(1 for r in ok if (r.get("waited_ns") or 0) > 1_000_000),
@@ -140,8 +146,8 @@ def latency_summary(records: list[dict]) -> dict:
     }
 
 
-
 # ---- services ----------------------------------------------------------------------------------
+
 
 class Logs:
     """One log file per section; every service of the section appends to it."""
@@ -176,8 +182,7 @@ def measure_paths(args, endpoint: str, rng: random.Random, desc: str) -> dict:
     out = {}
     for path in usable_paths(args.paths):
         with make_client(endpoint, args.timeout, path) as client:
-            records = time_requests(client, args.requests, rng, args.sleep_max_ms, args.warmup,
-                                    f"{desc} {path}")
+            records = time_requests(client, args.requests, rng, args.sleep_max_ms, args.warmup, f"{desc} {path}")
         out[path] = {"summary": latency_summary(records), "records": records}
     return out
 
@@ -192,12 +197,14 @@ def sanity_line(points: list[dict]) -> str:
     waited = sum(s["waited"] for _, s in summaries)
     total = sum(s["requests"] - s["failed"] for _, s in summaries)
     other = sum(n for path, s in summaries for seen, n in s["paths"].items() if seen not in (path, "None"))
-    return (f"past tuples that waited > 1 ms for a frame: {waited} of {total}; "
-            f"replies on another transport than asked: {other}")
-
+    return (
+        f"past tuples that waited > 1 ms for a frame: {waited} of {total}; "
+        f"replies on another transport than asked: {other}"
+    )
 
 
 # ---- figures -------------------------------------------------------------------------------
+
 
 def plain_numbers(*axes_of) -> None:
     """Tick labels 2, 10, 64 rather than 2^1, 10^1 on log-scaled axes."""
@@ -206,4 +213,3 @@ def plain_numbers(*axes_of) -> None:
     for axis in axes_of:
         axis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f"{v:g}"))
         axis.set_minor_formatter(ticker.NullFormatter())
-

@@ -59,6 +59,7 @@ The pieces: compare_fxis.py (fxis's contenders, the tcp and ipc phases), compare
 (imagezmq, mp.Queue, the copies), compare_report.py (tables, targets, figure), _interleave.py
 (the interleaved timing).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -83,25 +84,30 @@ else:  # run as a script, or loaded from its path
 
 # ---- command line ----------------------------------------------------------------------------
 
+
 def scenario_list(text: str) -> list[str]:
     names = [v.strip() for v in text.split(",") if v.strip()]
     unknown = [n for n in names if n not in SCENARIOS]
     if not names or unknown:
-        raise argparse.ArgumentTypeError(f"expected a comma-separated subset of {', '.join(SCENARIOS)}, "
-                                         f"got {text!r}")
+        raise argparse.ArgumentTypeError(f"expected a comma-separated subset of {', '.join(SCENARIOS)}, got {text!r}")
     return list(dict.fromkeys(names))
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="compare.py", description=__doc__,
-                                formatter_class=common.HelpFormatter)
-    p.add_argument("-n", "--samples", type=common.positive_int, default=300,
-                   help="measured samples of each contender per scenario")
+    p = argparse.ArgumentParser(prog="compare.py", description=__doc__, formatter_class=common.HelpFormatter)
+    p.add_argument(
+        "-n", "--samples", type=common.positive_int, default=300, help="measured samples of each contender per scenario"
+    )
     p.add_argument("--warmup", type=int, default=10, help="unrecorded samples of each contender first")
-    p.add_argument("--scenarios", type=scenario_list, default=list(SCENARIOS),
-                   help="comma-separated: " + ", ".join(SCENARIOS))
-    p.add_argument("--sleep-max-ms", type=common.nonnegative_float, default=5.0,
-                   help="each sample follows a sleep drawn from U[0, this] ms")
+    p.add_argument(
+        "--scenarios", type=scenario_list, default=list(SCENARIOS), help="comma-separated: " + ", ".join(SCENARIOS)
+    )
+    p.add_argument(
+        "--sleep-max-ms",
+        type=common.nonnegative_float,
+        default=5.0,
+        help="each sample follows a sleep drawn from U[0, this] ms",
+    )
     p.add_argument("--slots", type=common.positive_int, default=20, help="frames per camera ring")
     common.add_output_args(p.add_argument_group("output"), seed_help="seed of the order and sleeps")
     return p
@@ -109,11 +115,17 @@ def parser() -> argparse.ArgumentParser:
 
 # ---- one scenario ----------------------------------------------------------------------------
 
+
 def per_image(result: dict, n: int) -> dict:
     """imagezmq's N-image samples divided by N."""
     samples = [v / n if v is not None else None for v in result["samples_ms"]]
-    return {**result, "summary_ms": common.summary(v for v in samples if v is not None),
-            "samples_ms": samples, "derived": f"{IMZ} samples / {n}", "minor_faults_median": None}
+    return {
+        **result,
+        "summary_ms": common.summary(v for v in samples if v is not None),
+        "samples_ms": samples,
+        "derived": f"{IMZ} samples / {n}",
+        "minor_faults_median": None,
+    }
 
 
 def run_scenario(args, scenario: str, rng, out: str) -> tuple[dict, dict]:
@@ -134,6 +146,7 @@ def report_errors(results: dict) -> None:
 
 
 # ---- main ------------------------------------------------------------------------------------
+
 
 def main(argv: list[str] | None = None) -> int:
     p = parser()
@@ -156,31 +169,50 @@ def main(argv: list[str] | None = None) -> int:
         print()
         print(report.scenario_table(scenario, all_results[scenario], SCENARIOS[scenario][0]))
         control = median(all_results[scenario], COPY_CONTROL)
-        print(f"({IPC} ran on its own service after the others; the plain copy timed beside it: "
-              f"median {common.fmt(control, 3)} ms, vs {common.fmt(median(all_results[scenario], COPY), 3)} "
-              "ms in the main phase)")
+        print(
+            f"({IPC} ran on its own service after the others; the plain copy timed beside it: "
+            f"median {common.fmt(control, 3)} ms, vs {common.fmt(median(all_results[scenario], COPY), 3)} "
+            "ms in the main phase)"
+        )
         report_errors(all_results[scenario])
     tlist = report.targets(all_results)
     print()
     print(report.targets_table(tlist))
-    empty = [f"{s}: {name}" for s, res in all_results.items() for name, r in res.items()
-             if r["summary_ms"]["n"] == 0]
+    empty = [f"{s}: {name}" for s, res in all_results.items() for name, r in res.items() if r["summary_ms"]["n"] == 0]
     for e in empty:
         print(f"every sample failed: {e}")
 
     json_path, png_path = os.path.join(out, "compare.json"), os.path.join(out, "compare.png")
-    common.write_json(json_path, {
-        "benchmark": "compare", "started_unix": started,
-        "argv": sys.argv[1:] if argv is None else list(argv),
-        "settings": dict(vars(args)), "seed": args.seed, "host": host,
-        "clock": "samples are time.perf_counter_ns() around the timed call, in ms; None = failed",
-        "scenarios": {s: {"cameras": SCENARIOS[s][0], "width": SCENARIOS[s][1], "height": SCENARIOS[s][2],
-                          **facts[s], "contenders": all_results[s]} for s in all_results},
-        "broken_scenarios": broken, "targets": tlist,
-    })
+    common.write_json(
+        json_path,
+        {
+            "benchmark": "compare",
+            "started_unix": started,
+            "argv": sys.argv[1:] if argv is None else list(argv),
+            "settings": dict(vars(args)),
+            "seed": args.seed,
+            "host": host,
+            "clock": "samples are time.perf_counter_ns() around the timed call, in ms; None = failed",
+            "scenarios": {
+                s: {
+                    "cameras": SCENARIOS[s][0],
+                    "width": SCENARIOS[s][1],
+                    "height": SCENARIOS[s][2],
+                    **facts[s],
+                    "contenders": all_results[s],
+                }
+                for s in all_results
+            },
+            "broken_scenarios": broken,
+            "targets": tlist,
+        },
+    )
     if all_results:
-        report.plot(all_results, png_path, f"compare: median and p99 per contender, {args.samples} samples "
-                                           f"each, seed {args.seed}")
+        report.plot(
+            all_results,
+            png_path,
+            f"compare: median and p99 per contender, {args.samples} samples each, seed {args.seed}",
+        )
         print(f"wrote {json_path} and {png_path}")
     else:
         print(f"wrote {json_path}")

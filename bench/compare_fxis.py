@@ -6,6 +6,7 @@ latest, each copied or as zero-copy views), the `time` round trip to the coordin
 imagezmq, mp.Queue and the two copy floors carrying frames taken from the service once.
 ipc phase: the same cameras served on an ipc endpoint: fxis tuple ipc and a plain copy.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -28,8 +29,7 @@ else:  # run as a script, or loaded from its path
 from fxis_shm import Client
 from fxis_shm.launch import ServiceProcess, free_tcp_port
 
-SCENARIOS = {"2x1360x1024": (2, 1360, 1024), "4x1360x1024": (4, 1360, 1024),
-             "2x2048x2048": (2, 2048, 2048)}
+SCENARIOS = {"2x1360x1024": (2, 1360, 1024), "4x1360x1024": (4, 1360, 1024), "2x2048x2048": (2, 2048, 2048)}
 FPS = 20.0
 PAST_NS = 150_000_000  # t* of a timed tuple lies this far behind now: its frames are stored
 SOURCE_TUPLES = 10
@@ -42,9 +42,11 @@ TIME = "fxis time round trip (tcp)"
 
 # ---- fxis's contenders -----------------------------------------------------------------------
 
+
 def frames_contender(name: str, call, cameras: list[str], path: str, copy: bool = True) -> Contender:
     """``call()`` returns a FrameTuple; checked: the path asked for, every camera, the synthetic
     cameras' pixel stamps, and for zero-copy views that the slots were not overwritten meanwhile."""
+
     def check(t):
         if t.path != path:
             raise AssertionError(f"the tuple came by the {t.path!r} path, not {path!r} as asked")
@@ -66,6 +68,7 @@ def past_tuple(client: Client, copy: bool = True):
 
 def time_contender(client: Client) -> Contender:
     """The `time` op: the smallest round trip to the coordinator (no frame in it)."""
+
     def check(now):
         if not isinstance(now, int):
             raise AssertionError(f"time() returned {now!r}")
@@ -75,13 +78,16 @@ def time_contender(client: Client) -> Contender:
 
 def local_contenders(client: Client, cameras: list[str]) -> list[Contender]:
     """The same-host client answering from the rings: tuple and latest, copied and as views."""
-    return [frames_contender(LOCAL, past_tuple(client), cameras, "local"),
-            frames_contender(LOCAL_VIEW, past_tuple(client, copy=False), cameras, "local", copy=False),
-            frames_contender(LATEST, client.latest, cameras, "local"),
-            frames_contender(LATEST_VIEW, lambda: client.latest(copy=False), cameras, "local", copy=False)]
+    return [
+        frames_contender(LOCAL, past_tuple(client), cameras, "local"),
+        frames_contender(LOCAL_VIEW, past_tuple(client, copy=False), cameras, "local", copy=False),
+        frames_contender(LATEST, client.latest, cameras, "local"),
+        frames_contender(LATEST_VIEW, lambda: client.latest(copy=False), cameras, "local", copy=False),
+    ]
 
 
 # ---- the services ----------------------------------------------------------------------------
+
 
 def run_args_of(scenario: str, slots: int) -> tuple[list[str], list[str]]:
     n, width, height = SCENARIOS[scenario]
@@ -102,11 +108,14 @@ def take_source(client: Client, cameras: list[str]) -> tuple[list[list[np.ndarra
     """SOURCE_TUPLES consecutive stored tuples, each frame copied into its own array, and
     their frame ids."""
     tuples = client.sequence("consecutive", count=SOURCE_TUPLES, at=time.monotonic_ns() - PAST_NS)
-    return ([[np.array(t[c].image, copy=True) for c in cameras] for t in tuples],
-            [{c: t[c].frame_id for c in cameras} for t in tuples])
+    return (
+        [[np.array(t[c].image, copy=True) for c in cameras] for t in tuples],
+        [{c: t[c].frame_id for c in cameras} for t in tuples],
+    )
 
 
 # ---- the phases ------------------------------------------------------------------------------
+
 
 def tcp_phase(args, scenario: str, rng, out: str) -> tuple[list[Contender], dict, list]:
     """The service on tcp: every contender but ipc, interleaved. Returns the contenders, facts
@@ -125,16 +134,23 @@ def tcp_phase(args, scenario: str, rng, out: str) -> tuple[list[Contender], dict
         stack.enter_context(rivals.child(ctx, rivals.queue_server_main, source, requests, replies))
         sender = rivals.TimedSender(hub_address, args.timeout)
         stack.callback(sender.close)
-        contenders = [frames_contender(TCP, past_tuple(net), cameras, "network"),
-                      time_contender(net),
-                      *local_contenders(loc, cameras),
-                      *rivals.imagezmq_contenders(sender, source),
-                      rivals.queue_contender(rivals.QueueClient(requests, replies, args.timeout), source),
-                      *rivals.copy_contenders(source)]
-        time_contenders(contenders, args.samples, args.warmup, rng, args.sleep_max_ms,
-                        f"{scenario} tcp phase")
-        info = {"endpoint": svc.endpoint, "log": log, "run_args": run_args, "status": status,
-                "source_frame_ids": source_ids, "local_client_paths": dict(loc.paths)}
+        contenders = [
+            frames_contender(TCP, past_tuple(net), cameras, "network"),
+            time_contender(net),
+            *local_contenders(loc, cameras),
+            *rivals.imagezmq_contenders(sender, source),
+            rivals.queue_contender(rivals.QueueClient(requests, replies, args.timeout), source),
+            *rivals.copy_contenders(source),
+        ]
+        time_contenders(contenders, args.samples, args.warmup, rng, args.sleep_max_ms, f"{scenario} tcp phase")
+        info = {
+            "endpoint": svc.endpoint,
+            "log": log,
+            "run_args": run_args,
+            "status": status,
+            "source_frame_ids": source_ids,
+            "local_client_paths": dict(loc.paths),
+        }
         requests.put(None)
     return contenders, info, source
 
@@ -145,12 +161,15 @@ def ipc_phase(args, scenario: str, rng, out: str, source) -> tuple[list[Contende
     sock_path = f"/tmp/fxis-compare-{os.getpid()}.sock"
     log = os.path.join(out, f"compare.{scenario}.ipc.service.log")
     try:
-        with launched(run_args, log, endpoint=f"ipc://{sock_path}") as (svc, status), \
-                Client(svc.endpoint, timeout=args.timeout, local="off") as client:
-            contenders = [frames_contender(IPC, past_tuple(client), cameras, "network"),
-                          rivals.copy_contenders(source, rivals.COPY_CONTROL)[0]]
-            time_contenders(contenders, args.samples, args.warmup, rng, args.sleep_max_ms,
-                            f"{scenario} ipc phase")
+        with (
+            launched(run_args, log, endpoint=f"ipc://{sock_path}") as (svc, status),
+            Client(svc.endpoint, timeout=args.timeout, local="off") as client,
+        ):
+            contenders = [
+                frames_contender(IPC, past_tuple(client), cameras, "network"),
+                rivals.copy_contenders(source, rivals.COPY_CONTROL)[0],
+            ]
+            time_contenders(contenders, args.samples, args.warmup, rng, args.sleep_max_ms, f"{scenario} ipc phase")
             return contenders, {"endpoint": svc.endpoint, "log": log, "status": status}
     finally:
         with contextlib.suppress(FileNotFoundError):

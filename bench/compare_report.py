@@ -1,4 +1,5 @@
 """What bench/compare.py prints and draws: a table per scenario, the targets, the figure."""
+
 from __future__ import annotations
 
 import os
@@ -26,9 +27,12 @@ VIEW_LIMIT = 0.3  # local zero-copy / the `time` round trip
 TCP_LIMIT_1 = 2.0  # tuple over tcp / imagezmq for ONE image
 TCP_LIMIT_N = 1.2  # tuple over tcp / imagezmq carrying the same images
 TARGETS = (  # (contender, reference, limit): median(contender) <= limit x median(reference)
-    (LOCAL, COPY, COPY_LIMIT), (LOCAL_VIEW, TIME, VIEW_LIMIT),
-    (LATEST, COPY, COPY_LIMIT), (LATEST_VIEW, TIME, VIEW_LIMIT),
-    (TCP, IMZ_1, TCP_LIMIT_1), (TCP, IMZ, TCP_LIMIT_N),
+    (LOCAL, COPY, COPY_LIMIT),
+    (LOCAL_VIEW, TIME, VIEW_LIMIT),
+    (LATEST, COPY, COPY_LIMIT),
+    (LATEST_VIEW, TIME, VIEW_LIMIT),
+    (TCP, IMZ_1, TCP_LIMIT_1),
+    (TCP, IMZ, TCP_LIMIT_N),
 )
 
 
@@ -40,16 +44,38 @@ def scenario_table(scenario: str, results: dict, n_cams: int) -> str:
             continue
         s, m = results[name]["summary_ms"], median(results, name)
         faults = results[name].get("minor_faults_median")
-        rows.append([name, s["n"], results[name]["failed"], s["median"], s["p99"],
-                     "-" if faults is None else f"{faults:.0f}",
-                     *(ratio(m, median(results, ref)) for ref in refs)])
+        rows.append(
+            [
+                name,
+                s["n"],
+                results[name]["failed"],
+                s["median"],
+                s["p99"],
+                "-" if faults is None else f"{faults:.0f}",
+                *(ratio(m, median(results, ref)) for ref in refs),
+            ]
+        )
     _, w, h = SCENARIOS[scenario]
     mb = n_cams * w * h / 1e6
     return common.table(
-        ["contender", "ok", "failed", "median ms", "p99 ms", "faults", "x copy", "x reused", "x time",
-         f"x imagezmq({n_cams})", "x imagezmq(1)"],
-        rows, title=f"{scenario}: {n_cams} cameras {w}x{h} mono8, {mb:.2f} MB per tuple",
-        digits=3, separators=(6,))
+        [
+            "contender",
+            "ok",
+            "failed",
+            "median ms",
+            "p99 ms",
+            "faults",
+            "x copy",
+            "x reused",
+            "x time",
+            f"x imagezmq({n_cams})",
+            "x imagezmq(1)",
+        ],
+        rows,
+        title=f"{scenario}: {n_cams} cameras {w}x{h} mono8, {mb:.2f} MB per tuple",
+        digits=3,
+        separators=(6,),
+    )
 
 
 def targets(all_results: dict) -> list[dict]:
@@ -60,19 +86,42 @@ def targets(all_results: dict) -> list[dict]:
     for name, ref, limit in TARGETS:
         value, reference = median(res, name), median(res, ref)
         r = ratio(value, reference)
-        out.append({"target": f"{name} <= {limit:g}x {ref}", "scenario": TARGET_SCENARIO,
-                    "contender": name, "reference": ref, "median_ms": value, "reference_ms": reference,
-                    "ratio": r, "limit": limit, "pass": None if r is None else r <= limit})
+        out.append(
+            {
+                "target": f"{name} <= {limit:g}x {ref}",
+                "scenario": TARGET_SCENARIO,
+                "contender": name,
+                "reference": ref,
+                "median_ms": value,
+                "reference_ms": reference,
+                "ratio": r,
+                "limit": limit,
+                "pass": None if r is None else r <= limit,
+            }
+        )
     return out
 
 
 def targets_table(tlist: list[dict]) -> str:
-    rows = [[t["contender"], t["median_ms"], t["reference"], t["reference_ms"], t["ratio"],
-             f"<= {t['limit']:g}", common.verdict(t["pass"])] for t in tlist]
-    return common.table(["target: median of", "ms", "over the median of", "ms", "ratio", "limit", "verdict"],
-                        rows, digits=3, title=f"targets ({TARGET_SCENARIO}, same run, interleaved)"
-                        + ("" if any(t["median_ms"] is not None for t in tlist)
-                           else f": scenario {TARGET_SCENARIO} not measured"))
+    rows = [
+        [
+            t["contender"],
+            t["median_ms"],
+            t["reference"],
+            t["reference_ms"],
+            t["ratio"],
+            f"<= {t['limit']:g}",
+            common.verdict(t["pass"]),
+        ]
+        for t in tlist
+    ]
+    return common.table(
+        ["target: median of", "ms", "over the median of", "ms", "ratio", "limit", "verdict"],
+        rows,
+        digits=3,
+        title=f"targets ({TARGET_SCENARIO}, same run, interleaved)"
+        + ("" if any(t["median_ms"] is not None for t in tlist) else f": scenario {TARGET_SCENARIO} not measured"),
+    )
 
 
 def plot(all_results: dict, path: str, title: str) -> None:
@@ -93,20 +142,37 @@ def plot(all_results: dict, path: str, title: str) -> None:
                 xs.append(i + (j - (len(names) - 1) / 2) * width)
                 meds.append(s["median"])
                 ups.append(s["p99"] - s["median"])
-        ax.bar(xs, meds, width * 0.92, color=colors[j % len(colors)], label=name,
-               yerr=[np.zeros(len(ups)), ups], capsize=2, error_kw={"elinewidth": 0.8})
+        ax.bar(
+            xs,
+            meds,
+            width * 0.92,
+            color=colors[j % len(colors)],
+            label=name,
+            yerr=[np.zeros(len(ups)), ups],
+            capsize=2,
+            error_kw={"elinewidth": 0.8},
+        )
         labels += [(x, m) for x, m in zip(xs, meds)]
         lowest, highest = min([lowest, *meds]), max([highest, *(m + u for m, u in zip(meds, ups))])
     ax.set_yscale("log")
     bottom = lowest / 3
     ax.set_ylim(bottom, highest * 8)  # room for the legend above the whiskers
     for x, m in labels:  # the median, written at the foot of its bar
-        ax.text(x, bottom * 1.15, f"{m:.3g}", ha="center", va="bottom", rotation=90, fontsize=7,
-                bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8})
+        ax.text(
+            x,
+            bottom * 1.15,
+            f"{m:.3g}",
+            ha="center",
+            va="bottom",
+            rotation=90,
+            fontsize=7,
+            bbox={"boxstyle": "round,pad=0.15", "fc": "white", "ec": "none", "alpha": 0.8},
+        )
     ax.yaxis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f"{v:g}"))
     ax.set_xticks(range(len(scenarios)))
-    ax.set_xticklabels([f"{s}\n({SCENARIOS[s][0]} cameras {SCENARIOS[s][1]}x{SCENARIOS[s][2]} mono8)"
-                        for s in scenarios])
+    ax.set_xticklabels(
+        [f"{s}\n({SCENARIOS[s][0]} cameras {SCENARIOS[s][1]}x{SCENARIOS[s][2]} mono8)" for s in scenarios]
+    )
     ax.set_ylabel("ms per sample (log scale): bar = median, whisker = p99")
     ax.grid(True, axis="y", which="both", alpha=0.3)
     ax.legend(fontsize=8, ncol=4, loc="upper left")

@@ -3,6 +3,7 @@ a multiprocessing.Queue server, and the two floors, a plain copy and a copy into
 
 Each contender moves the frames of a "source" tuple (copies taken from the service once).
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -28,6 +29,7 @@ CHILD_START_S = 30.0
 
 
 # ---- child processes: the imagezmq hub and the multiprocessing.Queue server -------------------
+
 
 def hub_main(address: str, ready) -> None:
     """An ImageHub that answers every image with b"OK" (runs in a child process)."""
@@ -88,8 +90,11 @@ class TimedSender:
         import zmq
 
         self.sender = imagezmq.ImageSender(connect_to=self.address)
-        for opt, value in ((zmq.RCVTIMEO, int(self.timeout * 1000)),
-                           (zmq.SNDTIMEO, int(self.timeout * 1000)), (zmq.LINGER, 0)):
+        for opt, value in (
+            (zmq.RCVTIMEO, int(self.timeout * 1000)),
+            (zmq.SNDTIMEO, int(self.timeout * 1000)),
+            (zmq.LINGER, 0),
+        ):
             self.sender.zmq_socket.setsockopt(opt, value)
 
     def send(self, images: list[np.ndarray]) -> None:
@@ -133,11 +138,12 @@ class QueueClient:
 
 # ---- the contenders ---------------------------------------------------------------------------
 
+
 def frames_check(n: int, shape: tuple) -> Callable[[Any], None]:
     def check(images):
         if len(images) != n or any(im.shape != shape for im in images):
-            raise AssertionError(f"got {len(images)} images of {[im.shape for im in images]}, "
-                                 f"expected {n} of {shape}")
+            raise AssertionError(f"got {len(images)} images of {[im.shape for im in images]}, expected {n} of {shape}")
+
     return check
 
 
@@ -155,18 +161,15 @@ def copy_contenders(source: list[list[np.ndarray]], name: str = COPY) -> list[Co
             np.copyto(d, f)
         return dest
 
-    return [Contender(name, fresh, frames_check(n, shape)),
-            Contender(REUSED, reused, frames_check(n, shape))]
+    return [Contender(name, fresh, frames_check(n, shape)), Contender(REUSED, reused, frames_check(n, shape))]
 
 
 def imagezmq_contenders(sender: TimedSender, source: list[list[np.ndarray]]) -> list[Contender]:
     tuples_next = cycle(source)
     images_next = cycle([f for tup in source for f in tup])
-    return [Contender(IMZ, lambda: sender.send(tuples_next())),
-            Contender(IMZ_1, lambda: sender.send([images_next()]))]
+    return [Contender(IMZ, lambda: sender.send(tuples_next())), Contender(IMZ_1, lambda: sender.send([images_next()]))]
 
 
 def queue_contender(qc: QueueClient, source: list[list[np.ndarray]]) -> Contender:
     index_next = cycle(list(range(len(source))))
-    return Contender(MPQ, lambda: qc.get(index_next()),
-                     frames_check(len(source[0]), source[0][0].shape))
+    return Contender(MPQ, lambda: qc.get(index_next()), frames_check(len(source[0]), source[0][0].shape))

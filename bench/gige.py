@@ -35,6 +35,7 @@ Writes gige.json (settings, status before/after, every frame's times) and gige.p
 arrival->stored) into --out, and the services' logs. Exit status 0 if every frame the cameras
 delivered was stored or counted as dropped and no request failed; 1 otherwise; 2 on bad flags.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -67,32 +68,39 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--width", type=common.positive_int, default=640)
     p.add_argument("--height", type=common.positive_int, default=480)
     p.add_argument("--pixel-format", default="Mono8", help="Mono8, Mono16, RGB8, BayerRG8, ...")
-    p.add_argument("--loss", type=int, default=0, metavar="N",
-                   help="the emulators drop N GVSP packets per thousand (-r N)")
+    p.add_argument(
+        "--loss", type=int, default=0, metavar="N", help="the emulators drop N GVSP packets per thousand (-r N)"
+    )
     p.add_argument("--slots", type=common.positive_int, default=64, help="frames per camera ring")
-    p.add_argument("--poll", type=common.positive_float, default=0.25,
-                   help="seconds between the bench's range requests")
+    p.add_argument(
+        "--poll", type=common.positive_float, default=0.25, help="seconds between the bench's range requests"
+    )
     p.add_argument("--no-hook-run", action="store_true", help="skip the run with the processing hook")
     g = p.add_argument_group("output")
-    g.add_argument("--out", default=common.DEFAULT_OUT, metavar="DIR",
-                   help="folder for gige.json, gige.png and the service logs")
+    g.add_argument(
+        "--out", default=common.DEFAULT_OUT, metavar="DIR", help="folder for gige.json, gige.png and the service logs"
+    )
     g.add_argument("--timeout", type=float, default=3.0, metavar="S", help="client timeout per request")
     return p
 
 
 # ---- the emulators ---------------------------------------------------------------------------
 
+
 @contextlib.contextmanager
 def loopback_address(address: str):
     """``address`` on lo for the duration (added with `ip`, as root, if missing)."""
-    shown = subprocess.run(["ip", "-o", "-4", "addr", "show", "dev", "lo"], capture_output=True,
-                           text=True, check=True).stdout
+    shown = subprocess.run(
+        ["ip", "-o", "-4", "addr", "show", "dev", "lo"], capture_output=True, text=True, check=True
+    ).stdout
     added = f" {address}/" not in shown
     if added:
         done = subprocess.run(["ip", "addr", "add", f"{address}/8", "dev", "lo"], capture_output=True, text=True)
         if done.returncode:
-            raise RuntimeError(f"the second emulator needs {address} on lo: `ip addr add {address}/8 dev lo` "
-                               f"failed (root?): {done.stderr.strip()}")
+            raise RuntimeError(
+                f"the second emulator needs {address} on lo: `ip addr add {address}/8 dev lo` "
+                f"failed (root?): {done.stderr.strip()}"
+            )
     try:
         yield
     finally:
@@ -115,8 +123,9 @@ def emulators(loss: int, log_dir: str):
             for j, address in enumerate(ADDRESSES):
                 args = [EMULATOR, "-i", address, "-s", f"GV{j + 1:02d}"] + (["-r", str(loss)] if loss else [])
                 log = open(os.path.join(log_dir, f"gige.emulator{j}.log"), "wb")
-                procs.append(subprocess.Popen(args, stdout=log, stderr=log, stdin=subprocess.DEVNULL,
-                                              preexec_fn=die_with_parent))
+                procs.append(
+                    subprocess.Popen(args, stdout=log, stderr=log, stdin=subprocess.DEVNULL, preexec_fn=die_with_parent)
+                )
                 log.close()
             time.sleep(0.3)
             for proc in procs:
@@ -132,11 +141,18 @@ def emulators(loss: int, log_dir: str):
 
 # ---- one run -----------------------------------------------------------------------------------
 
+
 def camera_flags(args, device_ids, process: str | None) -> list[str]:
     flags = []
     for name, device in zip(CAMERAS, device_ids):
-        opts = [f"device={device}", f"fps={args.fps:g}", f"width={args.width}", f"height={args.height}",
-                f"pixel_format={args.pixel_format}", "timestamp=host"]
+        opts = [
+            f"device={device}",
+            f"fps={args.fps:g}",
+            f"width={args.width}",
+            f"height={args.height}",
+            f"pixel_format={args.pixel_format}",
+            "timestamp=host",
+        ]
         if process:
             opts.append(f"process={process}")
         flags += ["--camera", f"{name}=aravis:" + ",".join(opts)]
@@ -160,8 +176,11 @@ def collect(client, readers: dict, cursors: dict, frames: dict, end: int, errors
             continue
         for f in reply:
             frames[cam][(f.generation, f.frame_id)] = {
-                "frame_id": f.frame_id, "generation": f.generation, "t_capture": f.t_capture,
-                "t_stored": f.t_stored, "t_available": available.get((f.generation, f.frame_id, f.t_capture)),
+                "frame_id": f.frame_id,
+                "generation": f.generation,
+                "t_capture": f.t_capture,
+                "t_stored": f.t_stored,
+                "t_available": available.get((f.generation, f.frame_id, f.t_capture)),
             }
         if reply:
             cursors[cam] = reply[-1].t_capture + 1
@@ -197,10 +216,18 @@ def measure(args, device_ids, label: str, process: str | None, out: str) -> dict
         finally:
             for reader in readers.values():
                 reader.close()
-    return {"label": label, "process": process, "service": info, "window_ns": [start, end],
-            "status_before": status_before, "status_after": status_after, "errors": errors,
-            "frames": {cam: sorted(frames[cam].values(), key=lambda r: (r["generation"], r["frame_id"]))
-                       for cam in CAMERAS}}
+    return {
+        "label": label,
+        "process": process,
+        "service": info,
+        "window_ns": [start, end],
+        "status_before": status_before,
+        "status_after": status_after,
+        "errors": errors,
+        "frames": {
+            cam: sorted(frames[cam].values(), key=lambda r: (r["generation"], r["frame_id"])) for cam in CAMERAS
+        },
+    }
 
 
 def summarise(run: dict) -> dict:
@@ -215,7 +242,9 @@ def summarise(run: dict) -> dict:
         arrival = [common.ms(r["t_stored"] - r["t_capture"]) for r in recs]
         available = [common.ms(r["t_stored"] - r["t_available"]) for r in recs if r["t_available"] is not None]
         rows[cam] = {
-            "delivered": delivered, "stored": len(recs), "not_stored": delivered - len(recs),
+            "delivered": delivered,
+            "stored": len(recs),
+            "not_stored": delivered - len(recs),
             "dropped": after["frames_dropped"] - before["frames_dropped"],
             "generations": sorted({r["generation"] for r in recs}),
             "arrival_to_stored_ms": common.summary(arrival),
@@ -234,8 +263,12 @@ def plot(runs: list[dict], path: str, title: str) -> None:
         for cam in CAMERAS:
             x = np.sort([common.ms(r["t_stored"] - r["t_capture"]) for r in run["frames"][cam]])
             if x.size:
-                ax.step(x, np.arange(1, x.size + 1) / x.size, where="post",
-                        label=f"{run['label']}, {cam} (median {np.median(x):.2f} ms)")
+                ax.step(
+                    x,
+                    np.arange(1, x.size + 1) / x.size,
+                    where="post",
+                    label=f"{run['label']}, {cam} (median {np.median(x):.2f} ms)",
+                )
     ax.set_xlabel("arrival -> stored, ms (t_stored - t_capture, timestamp=host)")
     ax.set_ylabel("fraction of frames (CDF)")
     ax.set_title(title.replace(" (", "\n("), fontsize=9)
@@ -269,23 +302,55 @@ def main(argv: list[str] | None = None) -> int:
         return common.EXIT_FAILED
 
     summaries = [summarise(run) for run in runs]
-    title = (f"gige: 2 emulated GigE Vision cameras ({EMULATOR}, loopback{f', -r {args.loss}' if args.loss else ''}) "
-             f"{args.width}x{args.height} {args.pixel_format} at {args.fps:g} fps, {args.seconds:g} s per run")
+    title = (
+        f"gige: 2 emulated GigE Vision cameras ({EMULATOR}, loopback{f', -r {args.loss}' if args.loss else ''}) "
+        f"{args.width}x{args.height} {args.pixel_format} at {args.fps:g} fps, {args.seconds:g} s per run"
+    )
     rows = []
     for run, summ in zip(runs, summaries):
         for cam in CAMERAS:
             s = summ[cam]
             a, v = s["arrival_to_stored_ms"], s["available_to_stored_ms"]
-            rows.append([f"{run['label']}  {cam}", s["delivered"], s["stored"], s["not_stored"], s["dropped"],
-                         a["median"], a["p99"], a["max"], v["median"], v["p99"]])
+            rows.append(
+                [
+                    f"{run['label']}  {cam}",
+                    s["delivered"],
+                    s["stored"],
+                    s["not_stored"],
+                    s["dropped"],
+                    a["median"],
+                    a["p99"],
+                    a["max"],
+                    v["median"],
+                    v["p99"],
+                ]
+            )
     print(common.code_line(host["code"]))
     print(title)
-    print(common.table(["run  camera", "delivered", "stored", "not stored", "dropped",
-                        "arr->st med", "p99", "max", "avail->st med", "p99"], rows, digits=2,
-                       separators=(5, 8)))
-    print("delivered: span of the frame ids the camera sent; dropped: frames_dropped counted by the service "
-          "during the run; arr->st: t_stored - t_capture (arrival on the host), avail->st: t_stored - "
-          f"t_available (the worker's share), ms; the hook costs {HOOK_COST_MS:g} ms")
+    print(
+        common.table(
+            [
+                "run  camera",
+                "delivered",
+                "stored",
+                "not stored",
+                "dropped",
+                "arr->st med",
+                "p99",
+                "max",
+                "avail->st med",
+                "p99",
+            ],
+            rows,
+            digits=2,
+            separators=(5, 8),
+        )
+    )
+    print(
+        "delivered: span of the frame ids the camera sent; dropped: frames_dropped counted by the service "
+        "during the run; arr->st: t_stored - t_capture (arrival on the host), avail->st: t_stored - "
+        f"t_available (the worker's share), ms; the hook costs {HOOK_COST_MS:g} ms"
+    )
     errors = [e for run in runs for e in run["errors"]]
     unaccounted = sum(max(0, s["not_stored"] - s["dropped"]) for summ in summaries for s in summ.values())
     print(f"failed requests: {len(errors)}; frames neither stored nor counted as dropped: {unaccounted}")
@@ -293,15 +358,21 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  failed: {e['camera']}: {e['error']}")
 
     json_path, png_path = os.path.join(out, "gige.json"), os.path.join(out, "gige.png")
-    common.write_json(json_path, {
-        "benchmark": "gige", "started_unix": started,
-        "argv": sys.argv[1:] if argv is None else list(argv),
-        "settings": vars(args), "host": host, "hook": {"process": HOOK, "cost_ms": HOOK_COST_MS},
-        "clock": "CLOCK_MONOTONIC ns; t_capture is the host arrival time (timestamp=host)",
-        "summary": [{"label": run["label"], "cameras": summ} for run, summ in zip(runs, summaries)],
-        "unaccounted": unaccounted,
-        "runs": runs,
-    })
+    common.write_json(
+        json_path,
+        {
+            "benchmark": "gige",
+            "started_unix": started,
+            "argv": sys.argv[1:] if argv is None else list(argv),
+            "settings": vars(args),
+            "host": host,
+            "hook": {"process": HOOK, "cost_ms": HOOK_COST_MS},
+            "clock": "CLOCK_MONOTONIC ns; t_capture is the host arrival time (timestamp=host)",
+            "summary": [{"label": run["label"], "cameras": summ} for run, summ in zip(runs, summaries)],
+            "unaccounted": unaccounted,
+            "runs": runs,
+        },
+    )
     plot(runs, png_path, title)
     print(f"wrote {json_path} and {png_path}")
     return common.EXIT_FAILED if errors or unaccounted else common.EXIT_OK

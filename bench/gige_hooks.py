@@ -1,5 +1,6 @@
 """Processing hooks of known cost for bench/gige.py (``process=gige_hooks:sleep_10ms``;
 the benchmark puts bench/ on the camera workers' PYTHONPATH)."""
+
 import time
 
 COST_S = 0.010

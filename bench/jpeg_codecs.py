@@ -30,6 +30,7 @@ frame id from the decoded frame. A second table compares encode + decode at --pi
 Writes jpeg_codecs.json (settings, host, library versions, every sample) into --out.
 Exit status: 0; 1 if a contender gave back a frame of the wrong size; 2 on bad flags.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -65,8 +66,11 @@ class Contender:
 
 
 def _jpeg_line_of_opencv(cv2) -> str:
-    lines = [line.split(":", 1)[1].strip() for line in cv2.getBuildInformation().splitlines()
-             if line.strip().startswith("JPEG:")]
+    lines = [
+        line.split(":", 1)[1].strip()
+        for line in cv2.getBuildInformation().splitlines()
+        if line.strip().startswith("JPEG:")
+    ]
     return lines[0] if lines else "?"
 
 
@@ -82,8 +86,7 @@ def opencv() -> Contender:
     def decode(data, _):
         return cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
 
-    return Contender("opencv", f"opencv {cv2.__version__}, JPEG: {_jpeg_line_of_opencv(cv2)}",
-                     "HxW", encode, decode)
+    return Contender("opencv", f"opencv {cv2.__version__}, JPEG: {_jpeg_line_of_opencv(cv2)}", "HxW", encode, decode)
 
 
 def simplejpeg() -> Contender:
@@ -97,9 +100,14 @@ def simplejpeg() -> Contender:
     def decode(data, like):
         return sj.decode_jpeg(data, colorspace="GRAY" if like.ndim == 2 else "BGR")
 
-    return Contender("simplejpeg", f"simplejpeg {sj.__version__}; encodes with the fast DCT below q96 "
-                     "(TurboJPEG's default; fastdct=False does not change it)", "HxWx1 only (a view of HxW)",
-                     encode, decode)
+    return Contender(
+        "simplejpeg",
+        f"simplejpeg {sj.__version__}; encodes with the fast DCT below q96 "
+        "(TurboJPEG's default; fastdct=False does not change it)",
+        "HxWx1 only (a view of HxW)",
+        encode,
+        decode,
+    )
 
 
 def turbojpeg(accurate: bool = True) -> Contender:
@@ -111,31 +119,42 @@ def turbojpeg(accurate: bool = True) -> Contender:
 
     def encode(image, quality):
         if image.ndim == 2:
-            return codec.encode(image, quality, pixel_format=tj.TJPF_GRAY, jpeg_subsample=tj.TJSAMP_GRAY,
-                                flags=flags)
-        return codec.encode(image, quality, pixel_format=tj.TJPF_BGR, jpeg_subsample=tj.TJSAMP_420,
-                            flags=flags)
+            return codec.encode(image, quality, pixel_format=tj.TJPF_GRAY, jpeg_subsample=tj.TJSAMP_GRAY, flags=flags)
+        return codec.encode(image, quality, pixel_format=tj.TJPF_BGR, jpeg_subsample=tj.TJSAMP_420, flags=flags)
 
     def decode(data, like):
         return codec.decode(data, pixel_format=tj.TJPF_GRAY if like.ndim == 2 else tj.TJPF_BGR)
 
     library = ctypes.util.find_library("turbojpeg") or "libturbojpeg"
-    return Contender("turbojpeg" if accurate else "turbojpeg-fastdct",
-                     f"PyTurboJPEG {tj.__version__} over the system's {library}, "
-                     + ("accurate DCT (TJFLAG_ACCURATEDCT)" if accurate else "its default DCT: fast below q96"),
-                     "HxW", encode, decode)
+    return Contender(
+        "turbojpeg" if accurate else "turbojpeg-fastdct",
+        f"PyTurboJPEG {tj.__version__} over the system's {library}, "
+        + ("accurate DCT (TJFLAG_ACCURATEDCT)" if accurate else "its default DCT: fast below q96"),
+        "HxW",
+        encode,
+        decode,
+    )
 
 
 def fxis() -> Contender:
     from fxis_shm import encoding
 
-    return Contender("fxis", "fxis_shm.encoding.encode / decode", "HxW",
-                     lambda image, q: encoding.encode(image, encoding.JPEG, q),
-                     lambda data, like: encoding.decode(data, encoding.JPEG, like.shape, like.dtype.name))
+    return Contender(
+        "fxis",
+        "fxis_shm.encoding.encode / decode",
+        "HxW",
+        lambda image, q: encoding.encode(image, encoding.JPEG, q),
+        lambda data, like: encoding.decode(data, encoding.JPEG, like.shape, like.dtype.name),
+    )
 
 
-LOADERS = {"opencv": opencv, "simplejpeg": simplejpeg, "turbojpeg": turbojpeg,
-           "turbojpeg-fastdct": lambda: turbojpeg(accurate=False), "fxis": fxis}
+LOADERS = {
+    "opencv": opencv,
+    "simplejpeg": simplejpeg,
+    "turbojpeg": turbojpeg,
+    "turbojpeg-fastdct": lambda: turbojpeg(accurate=False),
+    "fxis": fxis,
+}
 
 
 def load_contenders(names: list[str]) -> list[Contender]:
@@ -145,21 +164,28 @@ def load_contenders(names: list[str]) -> list[Contender]:
         try:
             loaded.append(LOADERS[name]())
         except (ImportError, OSError, RuntimeError) as exc:
-            print(f"jpeg_codecs: skipping {name}: {common.describe_error(exc)} "
-                  f"(pip install -e '.[bench]' and scripts/install-system-packages.sh install it)",
-                  file=sys.stderr)
+            print(
+                f"jpeg_codecs: skipping {name}: {common.describe_error(exc)} "
+                f"(pip install -e '.[bench]' and scripts/install-system-packages.sh install it)",
+                file=sys.stderr,
+            )
     return loaded
 
 
 # ---- frames ----------------------------------------------------------------------------------
+
 
 def synthetic_frame(pattern: str, fmt: str, width: int, height: int) -> tuple[np.ndarray, int]:
     """One frame of the synthetic camera, and the frame id stamped into it."""
     from fxis_shm.options import parse_options
     from fxis_shm.workers.backends.synthetic import SyntheticCamera
 
-    options = parse_options("bench", "synthetic", SyntheticCamera.OPTIONS, {
-        "width": width, "height": height, "pixel_format": fmt, "pattern": pattern, "trigger": "software"})
+    options = parse_options(
+        "bench",
+        "synthetic",
+        SyntheticCamera.OPTIONS,
+        {"width": width, "height": height, "pixel_format": fmt, "pattern": pattern, "trigger": "software"},
+    )
     # an origin 1000 s ago: the frame id is a large number, not 0
     camera = SyntheticCamera("bench", options, time.monotonic_ns() - 1000 * 10**9)
     camera.open()
@@ -215,6 +241,7 @@ def frames(images: list[str], formats: list[str], width: int, height: int, seed:
 
 # ---- measuring -------------------------------------------------------------------------------
 
+
 def psnr(a: np.ndarray, b: np.ndarray) -> float:
     mse = float(np.mean((a.astype(np.float64) - b.astype(np.float64)) ** 2))
     return float("inf") if mse == 0 else 10 * np.log10(255.0**2 / mse)
@@ -227,12 +254,19 @@ def round_trip(contender: Contender, frame: np.ndarray, quality: int) -> dict:
     w1, c1 = time.perf_counter_ns(), time.thread_time_ns()
     back = contender.decode(data, frame)
     w2, c2 = time.perf_counter_ns(), time.thread_time_ns()
-    return {"enc_ns": w1 - w0, "dec_ns": w2 - w1, "enc_cpu_ns": c1 - c0, "dec_cpu_ns": c2 - c1,
-            "data": data, "back": back}
+    return {
+        "enc_ns": w1 - w0,
+        "dec_ns": w2 - w1,
+        "enc_cpu_ns": c1 - c0,
+        "dec_cpu_ns": c2 - c1,
+        "data": data,
+        "back": back,
+    }
 
 
-def describe(contender: Contender, frame: np.ndarray, frame_id: int | None, trip: dict,
-             reference: bytes | None) -> dict:
+def describe(
+    contender: Contender, frame: np.ndarray, frame_id: int | None, trip: dict, reference: bytes | None
+) -> dict:
     """What one round trip shows beyond its time: size, fidelity, shape, stamp."""
     back = trip["back"]
     fits = back is not None and back.size == frame.size and back.dtype == frame.dtype
@@ -254,10 +288,13 @@ def run(args, contenders: list[Contender], source: dict) -> dict:
     cases = [(image, fmt, q) for (image, fmt) in source for q in args.qualities]
     items = [(case, c) for case in cases for c in contenders]
     rng = random.Random(args.seed)
-    results = {(*case, c.name): {"samples": {k: [] for k in ("enc_ns", "dec_ns", "enc_cpu_ns", "dec_cpu_ns")}}
-               for case, c in items}
-    reference = {(image, fmt, q): c.encode(source[image, fmt][0], q)
-                 for (image, fmt, q), c in items if c.name == "opencv"}
+    results = {
+        (*case, c.name): {"samples": {k: [] for k in ("enc_ns", "dec_ns", "enc_cpu_ns", "dec_cpu_ns")}}
+        for case, c in items
+    }
+    reference = {
+        (image, fmt, q): c.encode(source[image, fmt][0], q) for (image, fmt, q), c in items if c.name == "opencv"
+    }
     for (image, fmt, q), c in items:  # a first, unrecorded trip: what it shows, once
         frame, frame_id = source[image, fmt]
         trip = round_trip(c, frame, q)
@@ -276,12 +313,14 @@ def run(args, contenders: list[Contender], source: dict) -> dict:
                     samples[key].append(trip[key])
                 bar.update(1)
     for r in results.values():
-        r["summary_ms"] = {k.replace("_ns", ""): common.summary([common.ms(v) for v in vals])
-                           for k, vals in r["samples"].items()}
+        r["summary_ms"] = {
+            k.replace("_ns", ""): common.summary([common.ms(v) for v in vals]) for k, vals in r["samples"].items()
+        }
     return results
 
 
 # ---- report ----------------------------------------------------------------------------------
+
 
 def yes_no(value) -> str:
     return "-" if value is None else ("yes" if value else "NO")
@@ -291,20 +330,47 @@ def full_table(results: dict) -> str:
     rows = []
     for (image, fmt, q, name), r in results.items():
         s = r["summary_ms"]
-        rows.append([f"{image} {fmt} q{q} {name}", s["enc"]["median"], s["enc"]["p99"], s["dec"]["median"],
-                     s["dec"]["p99"], r["bytes"], r["ratio"], r["psnr_db"], yes_no(r["same_bytes_as_opencv"]),
-                     "x".join(map(str, r["decoded_shape"] or [])), yes_no(r["stamp_ok"])])
+        rows.append(
+            [
+                f"{image} {fmt} q{q} {name}",
+                s["enc"]["median"],
+                s["enc"]["p99"],
+                s["dec"]["median"],
+                s["dec"]["p99"],
+                r["bytes"],
+                r["ratio"],
+                r["psnr_db"],
+                yes_no(r["same_bytes_as_opencv"]),
+                "x".join(map(str, r["decoded_shape"] or [])),
+                yes_no(r["stamp_ok"]),
+            ]
+        )
     rows.sort(key=lambda row: row[0])
-    return common.table(["frame, quality, contender", "enc med", "enc p99", "dec med", "dec p99", "bytes",
-                         "raw/jpeg", "PSNR dB", "=opencv", "decoded", "stamp"], rows,
-                        title="times in ms (wall); '=opencv': the same bytes as OpenCV's; "
-                              "'stamp': read_stamp gives the frame id after the round trip",
-                        separators=(1, 5))
+    return common.table(
+        [
+            "frame, quality, contender",
+            "enc med",
+            "enc p99",
+            "dec med",
+            "dec p99",
+            "bytes",
+            "raw/jpeg",
+            "PSNR dB",
+            "=opencv",
+            "decoded",
+            "stamp",
+        ],
+        rows,
+        title="times in ms (wall); '=opencv': the same bytes as OpenCV's; "
+        "'stamp': read_stamp gives the frame id after the round trip",
+        separators=(1, 5),
+    )
 
 
 def pick_table(results: dict, quality: int) -> tuple[str, dict]:
     """encode + decode medians at ``quality`` (wall and thread CPU time), and each contender's
     speed-up over OpenCV in both, with their geometric means over the frames."""
+
     def medians(r):
         s = r["summary_ms"]
         return s["enc"]["median"] + s["dec"]["median"], s["enc_cpu"]["median"] + s["dec_cpu"]["median"]
@@ -321,13 +387,23 @@ def pick_table(results: dict, quality: int) -> tuple[str, dict]:
             fast_wall, fast_cpu, size = base_wall / wall, base_cpu / cpu, r["bytes"] / base["bytes"]
             speedups.setdefault(name, []).append((fast_wall, fast_cpu))
         rows.append([f"{image} {fmt} {name}", wall, cpu, fast_wall, fast_cpu, size, r["psnr_db"]])
-    geo = {name: {"wall": float(np.exp(np.mean(np.log([w for w, _ in v])))),
-                  "cpu": float(np.exp(np.mean(np.log([c for _, c in v])))) } for name, v in speedups.items()}
-    text = common.table(["frame, contender", "enc+dec ms", "cpu ms", "x speed", "x speed cpu", "x size", "PSNR dB"],
-                        rows, title=f"at quality {quality}: encode + decode, medians of wall and thread CPU "
-                                    f"time; 'x': relative to OpenCV (speed > 1 is faster)", digits=3)
+    geo = {
+        name: {
+            "wall": float(np.exp(np.mean(np.log([w for w, _ in v])))),
+            "cpu": float(np.exp(np.mean(np.log([c for _, c in v])))),
+        }
+        for name, v in speedups.items()
+    }
+    text = common.table(
+        ["frame, contender", "enc+dec ms", "cpu ms", "x speed", "x speed cpu", "x size", "PSNR dB"],
+        rows,
+        title=f"at quality {quality}: encode + decode, medians of wall and thread CPU "
+        f"time; 'x': relative to OpenCV (speed > 1 is faster)",
+        digits=3,
+    )
     text += "\ngeometric mean of the speed-ups over OpenCV (wall, cpu): " + ", ".join(
-        f"{name} {g['wall']:.2f}x {g['cpu']:.2f}x" for name, g in geo.items())
+        f"{name} {g['wall']:.2f}x {g['cpu']:.2f}x" for name, g in geo.items()
+    )
     return text, geo
 
 
@@ -340,22 +416,42 @@ def quality_list(text: str) -> list[int]:
 
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="jpeg_codecs.py", description=__doc__, formatter_class=common.HelpFormatter)
-    p.add_argument("-n", "--rounds", type=common.positive_int, default=50,
-                   help="measured rounds (each one encode and decode of every row)")
+    p.add_argument(
+        "-n",
+        "--rounds",
+        type=common.positive_int,
+        default=50,
+        help="measured rounds (each one encode and decode of every row)",
+    )
     p.add_argument("--warmup", type=int, default=2, help="unrecorded rounds first")
-    p.add_argument("--contenders", type=common.name_list(CONTENDERS), default=",".join(CONTENDERS),
-                   metavar="LIST", help="comma-separated: " + ",".join(CONTENDERS))
-    p.add_argument("--images", type=common.name_list(IMAGES), default=",".join(IMAGES), metavar="LIST",
-                   help="comma-separated: " + ",".join(IMAGES))
+    p.add_argument(
+        "--contenders",
+        type=common.name_list(CONTENDERS),
+        default=",".join(CONTENDERS),
+        metavar="LIST",
+        help="comma-separated: " + ",".join(CONTENDERS),
+    )
+    p.add_argument(
+        "--images",
+        type=common.name_list(IMAGES),
+        default=",".join(IMAGES),
+        metavar="LIST",
+        help="comma-separated: " + ",".join(IMAGES),
+    )
     p.add_argument("--formats", type=common.name_list(FORMATS), default=",".join(FORMATS), metavar="LIST")
     p.add_argument("--qualities", type=quality_list, default="75,90,95", metavar="LIST")
-    p.add_argument("--pick-quality", type=int, default=90,
-                   help="the quality the second table compares at (one of --qualities)")
+    p.add_argument(
+        "--pick-quality", type=int, default=90, help="the quality the second table compares at (one of --qualities)"
+    )
     p.add_argument("--width", type=common.positive_int, default=1360)
     p.add_argument("--height", type=common.positive_int, default=1024)
     p.add_argument("--out", default=common.DEFAULT_OUT, metavar="DIR", help="folder for the JSON file")
-    p.add_argument("--seed", type=int, default=None,
-                   help="seed of the natural frame and of the order (default: random; saved in the JSON)")
+    p.add_argument(
+        "--seed",
+        type=int,
+        default=None,
+        help="seed of the natural frame and of the order (default: random; saved in the JSON)",
+    )
     return p
 
 
@@ -380,8 +476,10 @@ def main(argv: list[str] | None = None) -> int:
     results = run(args, contenders, source)
 
     print(common.code_line(host["code"]))
-    print(f"jpeg_codecs: {args.width}x{args.height}, {args.rounds} rounds interleaved in random order "
-          f"(seed {args.seed}), load average before: {os.getloadavg()[0]:.2f}")
+    print(
+        f"jpeg_codecs: {args.width}x{args.height}, {args.rounds} rounds interleaved in random order "
+        f"(seed {args.seed}), load average before: {os.getloadavg()[0]:.2f}"
+    )
     for c in contenders:
         print(f"  {c.name}: {c.version}; mono8 input: {c.mono_input}")
     print(full_table(results))
@@ -392,18 +490,23 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  failed: {' '.join(map(str, key))}: {error}")
 
     json_path = os.path.join(common.ensure_dir(args.out), "jpeg_codecs.json")
-    common.write_json(json_path, {
-        "benchmark": "jpeg_codecs",
-        "started_unix": started,
-        "argv": sys.argv[1:] if argv is None else list(argv),
-        "settings": vars(args),
-        "host": host,
-        "load_average_after": os.getloadavg(),
-        "contenders": {c.name: {"version": c.version, "mono_input": c.mono_input} for c in contenders},
-        "speedup_over_opencv_geomean": geo,
-        "rows": [{"image": image, "format": fmt, "quality": q, "contender": name,
-                  **{k: v for k, v in r.items()}} for (image, fmt, q, name), r in results.items()],
-    })
+    common.write_json(
+        json_path,
+        {
+            "benchmark": "jpeg_codecs",
+            "started_unix": started,
+            "argv": sys.argv[1:] if argv is None else list(argv),
+            "settings": vars(args),
+            "host": host,
+            "load_average_after": os.getloadavg(),
+            "contenders": {c.name: {"version": c.version, "mono_input": c.mono_input} for c in contenders},
+            "speedup_over_opencv_geomean": geo,
+            "rows": [
+                {"image": image, "format": fmt, "quality": q, "contender": name, **{k: v for k, v in r.items()}}
+                for (image, fmt, q, name), r in results.items()
+            ],
+        },
+    )
     print(f"wrote {json_path}")
     return common.EXIT_FAILED if failed else common.EXIT_OK
 

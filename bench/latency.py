@@ -50,6 +50,7 @@ with --strict if a target failed; 2 on bad flags.
 The pieces: latency_paper.py (the experiment, Table II, targets), latency_wake.py (the local
 waits), latency_figures.py (the figures).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -109,51 +110,85 @@ from fxis_shm import Client
 
 # ---- command line ----------------------------------------------------------------------------
 
+
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="latency.py", description=__doc__,
-                                formatter_class=common.HelpFormatter)
-    p.add_argument("-n", "--requests", type=common.positive_int, default=100,
-                   help="requests per policy (the paper: 100)")
-    p.add_argument("--sleep-ms", type=common.nonnegative_float, default=180.0,
-                   help="tau_sleep: basic sleep before each request, ms")
-    p.add_argument("--fluct-ms", type=common.nonnegative_float, default=50.0,
-                   help="tau_mf: the sleep varies uniformly by +/- this, ms")
-    p.add_argument("--policies", type=parse_policies, default=",".join(POLICIES),
-                   help="comma list of paper, ours (or 'both'); run interleaved in this order")
-    p.add_argument("--paths", type=parse_paths, default=",".join(PATHS),
-                   help="comma list of network, local (or 'both'): the transports every policy is run over")
-    p.add_argument("--wake-requests", type=int, default=25, metavar="N",
-                   help="local waits: requests of each kind (next, future) x (copied, zero-copy); "
-                        "0: not measured (nor without the local path)")
-    p.add_argument("--strict", action="store_true",
-                   help="exit 1 if a target fails on our policy or on the local waits")
+    p = argparse.ArgumentParser(prog="latency.py", description=__doc__, formatter_class=common.HelpFormatter)
+    p.add_argument(
+        "-n", "--requests", type=common.positive_int, default=100, help="requests per policy (the paper: 100)"
+    )
+    p.add_argument(
+        "--sleep-ms",
+        type=common.nonnegative_float,
+        default=180.0,
+        help="tau_sleep: basic sleep before each request, ms",
+    )
+    p.add_argument(
+        "--fluct-ms",
+        type=common.nonnegative_float,
+        default=50.0,
+        help="tau_mf: the sleep varies uniformly by +/- this, ms",
+    )
+    p.add_argument(
+        "--policies",
+        type=parse_policies,
+        default=",".join(POLICIES),
+        help="comma list of paper, ours (or 'both'); run interleaved in this order",
+    )
+    p.add_argument(
+        "--paths",
+        type=parse_paths,
+        default=",".join(PATHS),
+        help="comma list of network, local (or 'both'): the transports every policy is run over",
+    )
+    p.add_argument(
+        "--wake-requests",
+        type=int,
+        default=25,
+        metavar="N",
+        help="local waits: requests of each kind (next, future) x (copied, zero-copy); "
+        "0: not measured (nor without the local path)",
+    )
+    p.add_argument("--strict", action="store_true", help="exit 1 if a target fails on our policy or on the local waits")
     cams = p.add_argument_group("cameras (with --endpoint they must describe the running service)")
-    cams.add_argument("--cameras", type=common.positive_int, default=None,
-                      help="number of synthetic cameras cam0, cam1, ... (default: 2, or as many "
-                           "as --phases lists)")
+    cams.add_argument(
+        "--cameras",
+        type=common.positive_int,
+        default=None,
+        help="number of synthetic cameras cam0, cam1, ... (default: 2, or as many as --phases lists)",
+    )
     cams.add_argument("--fps", type=common.positive_float, default=20.0, help="frame rate of every camera")
-    cams.add_argument("--phases", type=parse_phases, default=None,
-                      help="comma list of phase_ms per camera (default: 0,1 for two cameras; "
-                           "0,1,...,N-1 for N)")
-    cams.add_argument("--jitter-ms", type=common.nonnegative_float, default=0.3,
-                      help="uniform capture-time jitter +/- ms of every camera")
+    cams.add_argument(
+        "--phases",
+        type=parse_phases,
+        default=None,
+        help="comma list of phase_ms per camera (default: 0,1 for two cameras; 0,1,...,N-1 for N)",
+    )
+    cams.add_argument(
+        "--jitter-ms",
+        type=common.nonnegative_float,
+        default=0.3,
+        help="uniform capture-time jitter +/- ms of every camera",
+    )
     cams.add_argument("--width", type=common.positive_int, default=1360)
     cams.add_argument("--height", type=common.positive_int, default=1024)
     cams.add_argument("--slots", type=common.positive_int, default=20, help="frames per camera ring")
-    common.add_service_args(p, "--fps and --phases must then describe it: the cameras' "
-                               "count and fps are checked against its status")
+    common.add_service_args(
+        p, "--fps and --phases must then describe it: the cameras' count and fps are checked against its status"
+    )
     return p
 
 
-
 # ---- main -----------------------------------------------------------------------------------
+
 
 def _service_cameras(status: dict, args, names: list[str]) -> str | None:
     """Why the running service does not match the flags, or None."""
     cams = status["cameras"]
     if sorted(cams) != sorted(names):
-        return (f"the service has cameras {sorted(cams)}, the flags describe {names}; pass "
-                f"--cameras/--phases to match (this bench expects cameras named cam0, cam1, ...)")
+        return (
+            f"the service has cameras {sorted(cams)}, the flags describe {names}; pass "
+            f"--cameras/--phases to match (this bench expects cameras named cam0, cam1, ...)"
+        )
     for name, cam in cams.items():
         fps = cam.get("fps")
         if fps and abs(fps - args.fps) > 0.02 * args.fps:
@@ -164,9 +199,10 @@ def _service_cameras(status: dict, args, names: list[str]) -> str | None:
 def print_targets(series: list[tuple[str, str]], summary: dict) -> bool:
     """Prints the targets of every series, ours first; True if one of ours did not pass."""
     ours = [s for s in series if s[0] == "ours"]
-    for title, chosen in (("targets, checked on our policy (sync=joint, wait=auto):", ours),
-                          ("for reference, the same targets on the paper's policy:",
-                           [s for s in series if s[0] == "paper"])):
+    for title, chosen in (
+        ("targets, checked on our policy (sync=joint, wait=auto):", ours),
+        ("for reference, the same targets on the paper's policy:", [s for s in series if s[0] == "paper"]),
+    ):
         if chosen:
             print(title)
         for ser in chosen:
@@ -190,13 +226,17 @@ def main(argv: list[str] | None = None) -> int:
     names = [f"cam{j}" for j in range(n_cams)]
     exp = Experiment(names, args.fps, phases, args.jitter_ms)
     out = common.ensure_dir(args.out)
-    run_args = common.synthetic_camera_flags(names, args.fps, args.width, args.height, phases,
-                                             args.jitter_ms) + ["--slots", str(args.slots)]
+    run_args = common.synthetic_camera_flags(names, args.fps, args.width, args.height, phases, args.jitter_ms) + [
+        "--slots",
+        str(args.slots),
+    ]
     started = time.time()
     host = common.host_info()  # before the service starts: the code it runs
     try:
-        with common.service(args.endpoint, run_args, os.path.join(out, "latency.service.log"),
-                            args.timeout) as (client, info):
+        with common.service(args.endpoint, run_args, os.path.join(out, "latency.service.log"), args.timeout) as (
+            client,
+            info,
+        ):
             status = common.wait_until_streaming(client)
             if args.endpoint:
                 problem = _service_cameras(status, args, names)
@@ -208,11 +248,16 @@ def main(argv: list[str] | None = None) -> int:
             delay_ns = int(max(c.get("delay_ms") or 0 for c in status["cameras"].values()) * 1e6)
             kinds_of = {cam: c["kind"] for cam, c in status["cameras"].items()}
             with contextlib.ExitStack() as stack:
-                clients = {path: stack.enter_context(Client(info["endpoint"], timeout=args.timeout,
-                                                            local=PATHS[path])) for path in args.paths}
+                clients = {
+                    path: stack.enter_context(Client(info["endpoint"], timeout=args.timeout, local=PATHS[path]))
+                    for path in args.paths
+                }
                 records = run(args, clients, exp, kinds_of, offset_ns, delay_ns)
-                waits = (wake.run(args, clients["local"], names, exp.period_ns)
-                         if "local" in clients and args.wake_requests > 0 else [])
+                waits = (
+                    wake.run(args, clients["local"], names, exp.period_ns)
+                    if "local" in clients and args.wake_requests > 0
+                    else []
+                )
             status_after = client.status()
     except RuntimeError as exc:
         print(f"latency: {exc}", file=sys.stderr)
@@ -224,39 +269,56 @@ def main(argv: list[str] | None = None) -> int:
     bad_stamps = sum(1 for r in records for f in r.get("frames", {}).values() if f["stamp_ok"] is False)
     phases_seen = observed_phases(records, exp)
     cam0 = status["cameras"][names[0]]
-    subtitle = (f"{n_cams} cameras {cam0['shape'][1]}x{cam0['shape'][0]} at {args.fps:g} fps, phases "
-                f"{','.join(f'{x:g}' for x in phases)} ms, jitter +/-{args.jitter_ms:g} ms, "
-                f"{cam0.get('ring_slots')} slots; sleeps {args.sleep_ms:g} +/- {args.fluct_ms:g} ms")
-    print(f"latency: {subtitle}; {args.requests} requests per policy and path, interleaved "
-          f"({' / '.join(map(label, series))}); seed {args.seed}")
+    subtitle = (
+        f"{n_cams} cameras {cam0['shape'][1]}x{cam0['shape'][0]} at {args.fps:g} fps, phases "
+        f"{','.join(f'{x:g}' for x in phases)} ms, jitter +/-{args.jitter_ms:g} ms, "
+        f"{cam0.get('ring_slots')} slots; sleeps {args.sleep_ms:g} +/- {args.fluct_ms:g} ms"
+    )
+    print(
+        f"latency: {subtitle}; {args.requests} requests per policy and path, interleaved "
+        f"({' / '.join(map(label, series))}); seed {args.seed}"
+    )
     print(common.code_line(host["code"]))
-    print(f"tau_ia = {exp.period_ms:.2f} ms; min_allowed_skew = {exp.min_allowed_skew_ms:.2f} ms "
-          f"(shortest arc covering the configured phases mod tau_ia); spike: eps_b > "
-          f"{exp.spike_threshold_ms:.2f} ms")
+    print(
+        f"tau_ia = {exp.period_ms:.2f} ms; min_allowed_skew = {exp.min_allowed_skew_ms:.2f} ms "
+        f"(shortest arc covering the configured phases mod tau_ia); spike: eps_b > "
+        f"{exp.spike_threshold_ms:.2f} ms"
+    )
     if phases_seen:
         rel = ", ".join(f"{cam} {v:.2f}" for cam, v in phases_seen["relative_ms"].items())
-        print(f"observed phases relative to {names[0]} (ms, circular mean of capture times mod tau_ia): "
-              f"{rel}; covering arc {phases_seen['min_covering_arc_ms']:.2f} ms")
+        print(
+            f"observed phases relative to {names[0]} (ms, circular mean of capture times mod tau_ia): "
+            f"{rel}; covering arc {phases_seen['min_covering_arc_ms']:.2f} ms"
+        )
         off = {c: d for c, d in phases_seen["difference_ms"].items() if d > 1.0}
         if off:
-            print("WARNING: observed phases differ from --phases by more than 1 ms: "
-                  + ", ".join(f"{cam} by {d:.2f} ms" for cam, d in off.items()))
+            print(
+                "WARNING: observed phases differ from --phases by more than 1 ms: "
+                + ", ".join(f"{cam} by {d:.2f} ms" for cam, d in off.items())
+            )
 
     summary = {}
     for ser in series:
         recs = by[ser]
         rows = policy_rows(recs, exp)
         summary[label(ser)] = {
-            "policy": ser[0], "path": ser[1], "requests": len(recs),
+            "policy": ser[0],
+            "path": ser[1],
+            "requests": len(recs),
             "failed": sum((r.get("policy"), r.get("path")) == ser for r in failed),
             "not_by_path": sum(r["came_by"] != ser[1] for r in recs),
-            "spikes": sum(r["spike"] for r in recs), "mean_eps_b_ms_for_eps_prime": rows["eps_b"]["mean"],
-            "table_ii_ms": rows, "targets": check_targets(recs, exp),
-            "rtt_ms": common.summary([r["rtt_ms"] for r in recs])}
+            "spikes": sum(r["spike"] for r in recs),
+            "mean_eps_b_ms_for_eps_prime": rows["eps_b"]["mean"],
+            "table_ii_ms": rows,
+            "targets": check_targets(recs, exp),
+            "rtt_ms": common.summary([r["rtt_ms"] for r in recs]),
+        }
         print()
         print(format_table_ii(ser, rows, exp, len(recs)))
-        print(f"spikes ({label(ser)}): {summary[label(ser)]['spikes']} of {len(recs)} requests with eps_b > "
-              f"{exp.spike_threshold_ms:.2f} ms")
+        print(
+            f"spikes ({label(ser)}): {summary[label(ser)]['spikes']} of {len(recs)} requests with eps_b > "
+            f"{exp.spike_threshold_ms:.2f} ms"
+        )
         if summary[label(ser)]["not_by_path"]:
             print(f"WARNING: {summary[label(ser)]['not_by_path']} replies did not come by the {ser[1]} path")
 
@@ -274,31 +336,38 @@ def main(argv: list[str] | None = None) -> int:
         print(f"  failed: {what}: {r['error']}")
 
     json_path = os.path.join(out, "latency.json")
-    common.write_json(json_path, {
-        "benchmark": "latency",
-        "started_unix": started,
-        "argv": sys.argv[1:] if argv is None else list(argv),
-        "settings": vars(args),
-        "experiment": exp.as_dict(),
-        "policies": {pol: POLICIES[pol] for pol in args.policies},
-        "paths": {path: f"Client(local={PATHS[path]!r})" for path in args.paths},
-        "service": info,
-        "host": host,
-        "status_before": status,
-        "status_after": status_after,
-        "clock": "CLOCK_MONOTONIC ns; t_send/t_reply are the bench's time.monotonic_ns(); "
-                 "t_star, t_capture and timing are the service's",
-        "clock_offset_ns": offset_ns,
-        "observed_phases": phases_seen,
-        "paper_table_ii_ms": {k: dict(zip(COLUMNS, v)) for k, v in PAPER_TABLE_II.items()},
-        "summary": summary,
-        "local_waits": {"summary": wait_summary, "targets": wait_targets, "records": waits,
-                        "definition": "wake_ms = t_return - t_stored of the last returned frame stored "
-                                      "after t_send, for requests that waited"},
-        "failed": len(failed),
-        "stamp_mismatches": bad_stamps,
-        "records": records,
-    })
+    common.write_json(
+        json_path,
+        {
+            "benchmark": "latency",
+            "started_unix": started,
+            "argv": sys.argv[1:] if argv is None else list(argv),
+            "settings": vars(args),
+            "experiment": exp.as_dict(),
+            "policies": {pol: POLICIES[pol] for pol in args.policies},
+            "paths": {path: f"Client(local={PATHS[path]!r})" for path in args.paths},
+            "service": info,
+            "host": host,
+            "status_before": status,
+            "status_after": status_after,
+            "clock": "CLOCK_MONOTONIC ns; t_send/t_reply are the bench's time.monotonic_ns(); "
+            "t_star, t_capture and timing are the service's",
+            "clock_offset_ns": offset_ns,
+            "observed_phases": phases_seen,
+            "paper_table_ii_ms": {k: dict(zip(COLUMNS, v)) for k, v in PAPER_TABLE_II.items()},
+            "summary": summary,
+            "local_waits": {
+                "summary": wait_summary,
+                "targets": wait_targets,
+                "records": waits,
+                "definition": "wake_ms = t_return - t_stored of the last returned frame stored "
+                "after t_send, for requests that waited",
+            },
+            "failed": len(failed),
+            "stamp_mismatches": bad_stamps,
+            "records": records,
+        },
+    )
     pngs = figures(records, exp, series, out, subtitle)
     print(f"wrote {json_path}, " + ", ".join(os.path.basename(x) for x in pngs))
     if failed:

@@ -5,6 +5,7 @@ Every request is made by one (policy, path) series: a policy of POLICIES over a 
 PATHS, the network path (Client(local="off"): the coordinator answers) or the local one
 (Client(local="require"): the same-host client answers from the rings itself).
 """
+
 from __future__ import annotations
 
 import argparse
@@ -40,6 +41,7 @@ PATHS = {"network": "off", "local": "require"}  # transport -> Client(local=...)
 
 # ---- the experiment's parameters -------------------------------------------------------------
 
+
 def parse_phases(text: str) -> list[float]:
     try:
         phases = [float(x) for x in text.split(",") if x.strip()]
@@ -52,15 +54,16 @@ def parse_phases(text: str) -> list[float]:
 
 def choice_list(choices: dict):
     """A parser of a comma list of distinct keys of ``choices`` ('both' for all of them)."""
+
     def parse(text: str) -> list[str]:
         names = [x.strip() for x in text.split(",") if x.strip()]
         if names == ["both"]:
             names = list(choices)
         unknown = [x for x in names if x not in choices]
         if unknown or not names or len(set(names)) != len(names):
-            raise argparse.ArgumentTypeError(
-                f"expected a comma list of {', '.join(choices)} (or 'both'), got {text!r}")
+            raise argparse.ArgumentTypeError(f"expected a comma list of {', '.join(choices)} (or 'both'), got {text!r}")
         return names
+
     return parse
 
 
@@ -75,7 +78,6 @@ def min_covering_arc(phases_ms: list[float], period_ms: float) -> float:
     return period_ms - max(gaps)
 
 
-
 class Experiment:
     """The timing the results are judged against."""
 
@@ -88,17 +90,20 @@ class Experiment:
 
     def as_dict(self) -> dict:
         return {
-            "cameras": self.names, "fps": self.fps, "tau_ia_ms": self.period_ms,
-            "phases_ms": self.phases_ms, "jitter_ms": self.jitter_ms,
+            "cameras": self.names,
+            "fps": self.fps,
+            "tau_ia_ms": self.period_ms,
+            "phases_ms": self.phases_ms,
+            "jitter_ms": self.jitter_ms,
             "min_allowed_skew_ms": self.min_allowed_skew_ms,
             "min_allowed_skew_definition": "shortest arc of the frame-period circle covering "
-                                           "every configured phase_ms mod tau_ia (no jitter)",
+            "every configured phase_ms mod tau_ia (no jitter)",
             "spike_threshold_ms": self.spike_threshold_ms,
         }
 
 
-
 # ---- measuring ------------------------------------------------------------------------------
+
 
 def series_of(policies: list[str], paths: list[str]) -> list[tuple[str, str]]:
     """The (policy, path) pairs run, in the order they are interleaved."""
@@ -128,23 +133,30 @@ def measure(client, exp: Experiment, policy: str, kinds_of: dict) -> dict:
     t_star, timing = reply.t_request, reply.timing
     t = {cam: reply[cam].t_capture for cam in exp.names}
     rec.update(
-        t_send=t_send, t_reply=t_reply, rtt_ms=common.ms(t_reply - t_send),
-        t_star=t_star, timing=timing, came_by=reply.path,
-        frames={cam: {"frame_id": reply[cam].frame_id, "t_capture": reply[cam].t_capture,
-                      "t_stored": reply[cam].t_stored,
-                      "stamp_ok": common.stamp_ok(reply[cam], kinds_of.get(cam, ""))}
-                for cam in exp.names},
+        t_send=t_send,
+        t_reply=t_reply,
+        rtt_ms=common.ms(t_reply - t_send),
+        t_star=t_star,
+        timing=timing,
+        came_by=reply.path,
+        frames={
+            cam: {
+                "frame_id": reply[cam].frame_id,
+                "t_capture": reply[cam].t_capture,
+                "t_stored": reply[cam].t_stored,
+                "stamp_ok": common.stamp_ok(reply[cam], kinds_of.get(cam, "")),
+            }
+            for cam in exp.names
+        },
         eps_ms={cam: common.ms(t_star - t[cam]) for cam in exp.names},
         eps_b_ms=common.ms(max(t.values()) - min(t.values())),
-        tau_w_ms={cam: common.ms(timing["cameras"][cam]["waited"] - timing["received"])
-                  for cam in exp.names},
+        tau_w_ms={cam: common.ms(timing["cameras"][cam]["waited"] - timing["received"]) for cam in exp.names},
     )
     rec["spike"] = rec["eps_b_ms"] > exp.spike_threshold_ms
     return rec
 
 
-def fetch_context(client, exp: Experiment, t_star: int, offset_ns: int, delay_ns: int,
-                  reach: int = 2) -> dict:
+def fetch_context(client, exp: Experiment, t_star: int, offset_ns: int, delay_ns: int, reach: int = 2) -> dict:
     """Every camera's frames within ``reach`` periods of t*, as {camera: [[frame_id, t_capture]]}.
 
     Waits until the last of them is stored, then asks for the nearest frames to points half a
@@ -154,8 +166,7 @@ def fetch_context(client, exp: Experiment, t_star: int, offset_ns: int, delay_ns
     common.sleep_ms(common.ms(until_local - time.monotonic_ns()))
     frames: dict[str, dict[int, int]] = {cam: {} for cam in exp.names}
     for k in range(-2 * reach, 2 * reach + 1):
-        reply = client.tuple(exp.names, at=int(t_star + k * exp.period_ns / 2),
-                             sync="independent", wait="none")
+        reply = client.tuple(exp.names, at=int(t_star + k * exp.period_ns / 2), sync="independent", wait="none")
         for cam in exp.names:
             frames[cam][reply[cam].frame_id] = reply[cam].t_capture
     return {cam: sorted([fid, tc] for fid, tc in f.items()) for cam, f in frames.items()}
@@ -191,6 +202,7 @@ def run(args, clients: dict, exp: Experiment, kinds_of: dict, offset_ns: int, de
 
 # ---- results --------------------------------------------------------------------------------
 
+
 def _circular_mean(values_ns: list[int], period_ns: int) -> float:
     angles = [2 * math.pi * (v % period_ns) / period_ns for v in values_ns]
     s, c = sum(map(math.sin, angles)), sum(map(math.cos, angles))
@@ -209,18 +221,23 @@ def observed_phases(records: list[dict], exp: Experiment) -> dict | None:
     ref = mean[exp.names[0]]
     rel = {cam: ((m - ref) % exp.period_ns) / 1e6 for cam, m in mean.items()}
     configured = {cam: (p - exp.phases_ms[0]) % exp.period_ms for cam, p in zip(exp.names, exp.phases_ms)}
-    diff = {cam: abs((rel[cam] - configured[cam] + exp.period_ms / 2) % exp.period_ms - exp.period_ms / 2)
-            for cam in exp.names}
-    return {"relative_ms": rel, "configured_relative_ms": configured, "difference_ms": diff,
-            "min_covering_arc_ms": min_covering_arc(list(rel.values()), exp.period_ms)}
+    diff = {
+        cam: abs((rel[cam] - configured[cam] + exp.period_ms / 2) % exp.period_ms - exp.period_ms / 2)
+        for cam in exp.names
+    }
+    return {
+        "relative_ms": rel,
+        "configured_relative_ms": configured,
+        "difference_ms": diff,
+        "min_covering_arc_ms": min_covering_arc(list(rel.values()), exp.period_ms),
+    }
 
 
 def policy_rows(recs: list[dict], exp: Experiment) -> dict[str, dict]:
     """Table II's rows for one policy's successful requests: name -> summary (ms)."""
     eps_b = [r["eps_b_ms"] for r in recs]
     mean_b = sum(eps_b) / len(eps_b) if eps_b else 0.0
-    rows = {"eps_b": common.summary(eps_b),
-            "eps'_b": common.summary([e for e in eps_b if e < mean_b])}
+    rows = {"eps_b": common.summary(eps_b), "eps'_b": common.summary([e for e in eps_b if e < mean_b])}
     for j, cam in enumerate(exp.names, 1):
         rows[f"|eps_{j}|"] = common.summary([abs(r["eps_ms"][cam]) for r in recs])
     for j, cam in enumerate(exp.names, 1):
@@ -239,15 +256,26 @@ def check_targets(recs: list[dict], exp: Experiment) -> list[dict]:
 
     def target(key, text, value, limit, extra=""):
         passed = None if value is None else value <= limit
-        out.append({"target": key, "text": text, "value_ms": value, "limit_ms": limit,
-                    "passed": passed, "extra": extra})
+        out.append(
+            {"target": key, "text": text, "value_ms": value, "limit_ms": limit, "passed": passed, "extra": extra}
+        )
 
-    target("a", "no spikes: max eps_b <= min_allowed_skew + 2 ms", max(eps_b) if eps_b else None,
-           exp.spike_threshold_ms, f"{spikes} spike(s)")
-    target("b", "mean tau_w (all cameras) <= tau_ia/8 + 1 ms",
-           sum(waits) / len(waits) if waits else None, tau / 8 + 1.0)
-    target("c", "max |eps_j| <= tau_ia/2 + min_allowed_skew + 2 ms", max(eps) if eps else None,
-           tau / 2 + exp.min_allowed_skew_ms + SPIKE_MARGIN_MS)
+    target(
+        "a",
+        "no spikes: max eps_b <= min_allowed_skew + 2 ms",
+        max(eps_b) if eps_b else None,
+        exp.spike_threshold_ms,
+        f"{spikes} spike(s)",
+    )
+    target(
+        "b", "mean tau_w (all cameras) <= tau_ia/8 + 1 ms", sum(waits) / len(waits) if waits else None, tau / 8 + 1.0
+    )
+    target(
+        "c",
+        "max |eps_j| <= tau_ia/2 + min_allowed_skew + 2 ms",
+        max(eps) if eps else None,
+        tau / 2 + exp.min_allowed_skew_ms + SPIKE_MARGIN_MS,
+    )
     return out
 
 
@@ -261,10 +289,13 @@ def format_table_ii(series: tuple[str, str], rows: dict[str, dict], exp: Experim
     policy, path = series
     modes = POLICIES[policy]
     transport = f" path (Client(local={PATHS[path]!r}))" if path in PATHS else ""  # else a label (network.py)
-    title = (f"Table II, policy {policy!r} (sync={modes['sync']}, wait={modes['wait']}), {path}{transport}"
-             f": {n} requests, ms; right: the paper's published numbers")
-    return common.table(["metric", *COLUMNS, "paper min", "mean", "max", "std"], table_rows,
-                        title=title, separators=[5])
+    title = (
+        f"Table II, policy {policy!r} (sync={modes['sync']}, wait={modes['wait']}), {path}{transport}"
+        f": {n} requests, ms; right: the paper's published numbers"
+    )
+    return common.table(
+        ["metric", *COLUMNS, "paper min", "mean", "max", "std"], table_rows, title=title, separators=[5]
+    )
 
 
 def format_targets(name: str, targets: list[dict]) -> list[str]:
@@ -273,7 +304,5 @@ def format_targets(name: str, targets: list[dict]) -> list[str]:
         verdict = f"{common.verdict(t['passed']):4}"
         value = "-" if t["value_ms"] is None else f"{t['value_ms']:.2f}"
         extra = f" ({t['extra']})" if t["extra"] else ""
-        lines.append(f"{verdict} ({t['target']}) {name}: {t['text']}: {value} <= "
-                     f"{t['limit_ms']:.2f} ms{extra}")
+        lines.append(f"{verdict} ({t['target']}) {name}: {t['text']}: {value} <= {t['limit_ms']:.2f} ms{extra}")
     return lines
-

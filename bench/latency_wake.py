@@ -20,6 +20,7 @@ each copied (the default) and zero-copy (copy=False: views, no copy), so the cop
 shows. Targets, on every request that waited, copied and zero-copy apart: median <= 0.5 ms,
 p99 <= 2 ms.
 """
+
 from __future__ import annotations
 
 import os
@@ -56,8 +57,13 @@ def measure(client, kind: str, copy_name: str, names: list[str], period_ns: int,
     t_return = time.monotonic_ns()
     stored = {cam: reply[cam].t_stored for cam in names}
     reply.release()
-    rec.update(t_send=t_send, t_return=t_return, t_stored=stored, came_by=reply.path,
-               **wake_of(t_send, t_return, stored.values()))
+    rec.update(
+        t_send=t_send,
+        t_return=t_return,
+        t_stored=stored,
+        came_by=reply.path,
+        **wake_of(t_send, t_return, stored.values()),
+    )
     return rec
 
 
@@ -83,15 +89,22 @@ def run(args, client, names: list[str], period_ns: int) -> list[dict]:
 
 def summarize(records: list[dict]) -> dict:
     """Per kind and copy, and per copy over both kinds: how many waited, wake-up ms summary."""
+
     def group(recs):
         ok = [r for r in recs if r["error"] is None]
-        return {"requests": len(recs), "failed": len(recs) - len(ok),
-                "not_local": sum(r["came_by"] != "local" for r in ok),
-                "waited": sum(r["waited"] for r in ok),
-                "wake_ms": common.summary(r["wake_ms"] for r in ok if r["waited"])}
+        return {
+            "requests": len(recs),
+            "failed": len(recs) - len(ok),
+            "not_local": sum(r["came_by"] != "local" for r in ok),
+            "waited": sum(r["waited"] for r in ok),
+            "wake_ms": common.summary(r["wake_ms"] for r in ok if r["waited"]),
+        }
 
-    out = {f"{kind}, {c}": group([r for r in records if r["kind"] == kind and r["copy"] == c])
-           for kind in KINDS for c in COPIES}
+    out = {
+        f"{kind}, {c}": group([r for r in records if r["kind"] == kind and r["copy"] == c])
+        for kind in KINDS
+        for c in COPIES
+    }
     out.update({f"all, {c}": group([r for r in records if r["copy"] == c]) for c in COPIES})
     return out
 
@@ -102,23 +115,47 @@ def targets(summary: dict) -> list[dict]:
         s = summary[f"all, {c}"]["wake_ms"]
         for stat, limit in (("median", MEDIAN_LIMIT_MS), ("p99", P99_LIMIT_MS)):
             value = s[stat]
-            out.append({"target": f"local wake-up {stat}, {c}", "value_ms": value, "limit_ms": limit,
-                        "ratio": None if value is None else value / limit,
-                        "passed": None if value is None else value <= limit})
+            out.append(
+                {
+                    "target": f"local wake-up {stat}, {c}",
+                    "value_ms": value,
+                    "limit_ms": limit,
+                    "ratio": None if value is None else value / limit,
+                    "passed": None if value is None else value <= limit,
+                }
+            )
     return out
 
 
 def report(summary: dict, tlist: list[dict]) -> str:
-    rows = [[name, g["requests"], g["failed"], g["waited"], g["wake_ms"]["median"], g["wake_ms"]["p99"],
-             g["wake_ms"]["max"]] for name, g in summary.items()]
-    lines = [common.table(["requests", "n", "failed", "waited", "median ms", "p99 ms", "max ms"], rows,
-                          digits=3, title="local waits: t_stored of the frame waited for -> the local "
-                                          "client returns (requests that waited)")]
+    rows = [
+        [
+            name,
+            g["requests"],
+            g["failed"],
+            g["waited"],
+            g["wake_ms"]["median"],
+            g["wake_ms"]["p99"],
+            g["wake_ms"]["max"],
+        ]
+        for name, g in summary.items()
+    ]
+    lines = [
+        common.table(
+            ["requests", "n", "failed", "waited", "median ms", "p99 ms", "max ms"],
+            rows,
+            digits=3,
+            title="local waits: t_stored of the frame waited for -> the local client returns (requests that waited)",
+        )
+    ]
     not_local = sum(g["not_local"] for name, g in summary.items() if not name.startswith("all"))
     if not_local:
         lines.append(f"WARNING: {not_local} replies did not come by the local path")
-    rows = [[t["target"], t["value_ms"], f"<= {t['limit_ms']:g}", t["ratio"], common.verdict(t["passed"])]
-            for t in tlist]
-    lines += ["", common.table(["target", "ms", "limit ms", "ratio", "verdict"], rows, digits=3,
-                               title="targets, local waits")]
+    rows = [
+        [t["target"], t["value_ms"], f"<= {t['limit_ms']:g}", t["ratio"], common.verdict(t["passed"])] for t in tlist
+    ]
+    lines += [
+        "",
+        common.table(["target", "ms", "limit ms", "ratio", "verdict"], rows, digits=3, title="targets, local waits"),
+    ]
     return "\n".join(lines)

@@ -40,6 +40,7 @@ services' logs to network-logs/ and network.local.log there.
 Exit status: 0 when the run completed; 1 if a request failed (or, with --strict, a target
 failed; or emulated hosts cannot be made here); 2 on bad flags.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -81,24 +82,42 @@ def parse_parts(text: str) -> list[str]:
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="network.py", description=__doc__, formatter_class=common.HelpFormatter)
     p.add_argument("--parts", type=parse_parts, default=",".join(PARTS), help="comma list of " + ", ".join(PARTS))
-    p.add_argument("--minutes", type=common.positive_float, default=5.0,
-                   help="the clock estimate is watched for at least this long (the target: 5)")
+    p.add_argument(
+        "--minutes",
+        type=common.positive_float,
+        default=5.0,
+        help="the clock estimate is watched for at least this long (the target: 5)",
+    )
     p.add_argument("--clock-every", type=common.positive_float, default=0.5, help="clock samples every S s")
-    p.add_argument("--offset-s", type=common.positive_int, default=1000,
-                   help="host A's clock is this many seconds ahead of ours, host B's twice as many")
+    p.add_argument(
+        "--offset-s",
+        type=common.positive_int,
+        default=1000,
+        help="host A's clock is this many seconds ahead of ours, host B's twice as many",
+    )
     p.add_argument("--quality", type=int, default=90, help="JPEG quality")
     t2 = p.add_argument_group("table2 (as bench/latency.py)")
-    t2.add_argument("-n", "--requests", type=common.positive_int, default=300,
-                    help="rounds, each one request per configuration (the paper: 100 requests; tau_w "
-                         "spreads over a frame period, so telling 0.5 ms apart takes a few hundred)")
+    t2.add_argument(
+        "-n",
+        "--requests",
+        type=common.positive_int,
+        default=300,
+        help="rounds, each one request per configuration (the paper: 100 requests; tau_w "
+        "spreads over a frame period, so telling 0.5 ms apart takes a few hundred)",
+    )
     t2.add_argument("--sleep-ms", type=common.nonnegative_float, default=180.0, help="tau_sleep, ms")
     t2.add_argument("--fluct-ms", type=common.nonnegative_float, default=50.0, help="tau_mf, ms")
-    t2.add_argument("--policies", type=paper.parse_policies, default="ours",
-                    help="comma list of paper, ours (or 'both')")
+    t2.add_argument(
+        "--policies", type=paper.parse_policies, default="ours", help="comma list of paper, ours (or 'both')"
+    )
     tu = p.add_argument_group("tuples")
     tu.add_argument("--tuple-requests", type=common.positive_int, default=1000)
-    tu.add_argument("--tuple-sleep-ms", type=common.nonnegative_float, default=40.0,
-                    help="mean sleep before each two-host tuple, ms")
+    tu.add_argument(
+        "--tuple-sleep-ms",
+        type=common.nonnegative_float,
+        default=40.0,
+        help="mean sleep before each two-host tuple, ms",
+    )
     p.add_argument("--size-requests", type=common.positive_int, default=20, help="requests per size configuration")
     cams = p.add_argument_group("cameras")
     cams.add_argument("--fps", type=common.positive_float, default=20.0)
@@ -112,6 +131,7 @@ def parser() -> argparse.ArgumentParser:
 
 
 # ---- the clock estimates, watched in the background ---------------------------------------
+
 
 class ClockWatch:
     """Samples every watched client's estimate for an endpoint against the true offset."""
@@ -140,8 +160,16 @@ class ClockWatch:
                     continue
                 now = time.monotonic_ns()
                 error = estimate.to_service(now) - now - true
-                self.samples.append({"t": now, "client": label, "endpoint": endpoint, "error_ns": error,
-                                     "uncertainty_ns": estimate.uncertainty_ns, "drift_ppm": estimate.drift_ppm})
+                self.samples.append(
+                    {
+                        "t": now,
+                        "client": label,
+                        "endpoint": endpoint,
+                        "error_ns": error,
+                        "uncertainty_ns": estimate.uncertainty_ns,
+                        "drift_ppm": estimate.drift_ppm,
+                    }
+                )
 
     def elapsed_s(self) -> float:
         return 0.0 if self.started is None else time.monotonic() - self.started
@@ -157,25 +185,48 @@ class ClockWatch:
         rows["all"] = self.samples
         out = {}
         for name, samples in rows.items():
-            out[name] = {"abs_error_ms": common.summary(abs(common.ms(s["error_ns"])) for s in samples),
-                         "uncertainty_ms": common.summary(common.ms(s["uncertainty_ns"]) for s in samples)}
+            out[name] = {
+                "abs_error_ms": common.summary(abs(common.ms(s["error_ns"])) for s in samples),
+                "uncertainty_ms": common.summary(common.ms(s["uncertainty_ns"]) for s in samples),
+            }
         p99 = out["all"]["abs_error_ms"]["p99"]
-        out["target"] = {"p99_abs_error_ms": p99, "limit_ms": CLOCK_TARGET_MS,
-                         "watched_s": self.elapsed_s(), "passed": None if p99 is None else p99 <= CLOCK_TARGET_MS}
+        out["target"] = {
+            "p99_abs_error_ms": p99,
+            "limit_ms": CLOCK_TARGET_MS,
+            "watched_s": self.elapsed_s(),
+            "passed": None if p99 is None else p99 <= CLOCK_TARGET_MS,
+        }
         return out
 
 
 def print_clock(report: dict, minutes: float) -> None:
-    rows = [[name, r["abs_error_ms"]["n"], r["abs_error_ms"]["median"], r["abs_error_ms"]["p99"],
-             r["abs_error_ms"]["max"], r["uncertainty_ms"]["median"]]
-            for name, r in report.items() if name != "target"]
-    print(common.table(["client endpoint", "samples", "|err| median", "p99", "max", "uncert. median"], rows,
-                       title="clock estimate error against the true offset, ms", digits=4))
+    rows = [
+        [
+            name,
+            r["abs_error_ms"]["n"],
+            r["abs_error_ms"]["median"],
+            r["abs_error_ms"]["p99"],
+            r["abs_error_ms"]["max"],
+            r["uncertainty_ms"]["median"],
+        ]
+        for name, r in report.items()
+        if name != "target"
+    ]
+    print(
+        common.table(
+            ["client endpoint", "samples", "|err| median", "p99", "max", "uncert. median"],
+            rows,
+            title="clock estimate error against the true offset, ms",
+            digits=4,
+        )
+    )
     t = report["target"]
     watched = t["watched_s"] / 60
-    print(f"  {common.verdict(t['passed'])} clock: p99 |error| {common.fmt(t['p99_abs_error_ms'], 4)} <= "
-          f"{CLOCK_TARGET_MS} ms over {watched:.1f} min" + ("" if watched >= minutes - 1e-9 else
-                                                            f" (short of --minutes {minutes:g})"))
+    print(
+        f"  {common.verdict(t['passed'])} clock: p99 |error| {common.fmt(t['p99_abs_error_ms'], 4)} <= "
+        f"{CLOCK_TARGET_MS} ms over {watched:.1f} min"
+        + ("" if watched >= minutes - 1e-9 else f" (short of --minutes {minutes:g})")
+    )
 
 
 # ---- table2 ---------------------------------------------------------------------------------
@@ -213,8 +264,13 @@ def paired_run(args, configs: dict[str, Client], exp, kinds_of: dict, rng: rando
                     while time.monotonic_ns() < due:  # the last stretch awake: a sleep may overshoot
                         pass
                     rec = paper.measure(client, exp, pol, kinds_of)
-                    rec.update(i=len(records), k=k, path=label, phase_ms=common.ms(phase),
-                               sleep_ms=common.ms(rec["t_send"] - start))
+                    rec.update(
+                        i=len(records),
+                        k=k,
+                        path=label,
+                        phase_ms=common.ms(phase),
+                        sleep_ms=common.ms(rec["t_send"] - start),
+                    )
                     if rec["error"] is None:  # how far from the round's phase the call came (a loaded machine)
                         miss = (rec["t_star"] - anchors[label] - phase) % exp.period_ns
                         rec["phase_miss_ms"] = common.ms(miss - exp.period_ns if miss > exp.period_ns // 2 else miss)
@@ -233,9 +289,14 @@ def table_ii(args, configs: dict[str, Client], exp, kinds_of: dict, rng: random.
             mine = [r for r in records if (r["policy"], r["path"]) == (pol, label)]
             recs = [r for r in mine if r["error"] is None]
             rows = paper.policy_rows(recs, exp)
-            out[label][pol] = {"rows": rows, "spikes": sum(r["spike"] for r in recs),
-                               "failed": len(mine) - len(recs), "rtt_ms": common.summary(r["rtt_ms"] for r in recs),
-                               "paths": sorted({r["came_by"] for r in recs}), "records": mine}
+            out[label][pol] = {
+                "rows": rows,
+                "spikes": sum(r["spike"] for r in recs),
+                "failed": len(mine) - len(recs),
+                "rtt_ms": common.summary(r["rtt_ms"] for r in recs),
+                "paths": sorted({r["came_by"] for r in recs}),
+                "records": mine,
+            }
             print()
             print(paper.format_table_ii((pol, label), rows, exp, len(recs)))
     return out
@@ -253,9 +314,13 @@ def metric_values(rec: dict, exp) -> dict:
 
 def paired_difference(result: dict, label: str, pol: str, metric: str, exp) -> tuple[float | None, float | None]:
     """Mean over rounds of (``label``'s value - the one host's) and its standard error."""
+
     def by_round(config):
-        return {r["k"]: metric_values(r, exp)[metric] for r in result[config][pol]["records"]
-                if r["error"] is None and abs(r["phase_miss_ms"]) <= PHASE_TOLERANCE_MS}
+        return {
+            r["k"]: metric_values(r, exp)[metric]
+            for r in result[config][pol]["records"]
+            if r["error"] is None and abs(r["phase_miss_ms"]) <= PHASE_TOLERANCE_MS
+        }
 
     ours, base = by_round(label), by_round("one host")
     diffs = [ours[k] - base[k] for k in ours.keys() & base.keys()]
@@ -280,35 +345,55 @@ def compare_table_ii(result: dict, policies: list[str], exp) -> list[dict]:
                 other = result[label][pol]["rows"][metric]
                 diff, se = paired_difference(result, label, pol, metric, exp)
                 passed = None if diff is None else abs(diff) <= TABLE_II_TOLERANCE_MS
-                targets.append({"policy": pol, "config": label, "metric": metric, "diff_ms": diff,
-                                "standard_error_ms": se, "passed": passed})
+                targets.append(
+                    {
+                        "policy": pol,
+                        "config": label,
+                        "metric": metric,
+                        "diff_ms": diff,
+                        "standard_error_ms": se,
+                        "passed": passed,
+                    }
+                )
                 row += [other["mean"], diff, se, common.verdict(passed)]
             rows.append(row)
         header = ["metric", "one host"] + [h for label in remote for h in (label, "diff", "+/- SE", "")]
         print()
-        print(common.table(header, rows, title=f"Table II means, policy {pol!r}, ms: remote against one host "
-                                                f"(target |diff| <= {TABLE_II_TOLERANCE_MS} ms; diff: mean over "
-                                                f"paired rounds, SE its standard error)"))
+        print(
+            common.table(
+                header,
+                rows,
+                title=f"Table II means, policy {pol!r}, ms: remote against one host "
+                f"(target |diff| <= {TABLE_II_TOLERANCE_MS} ms; diff: mean over "
+                f"paired rounds, SE its standard error)",
+            )
+        )
         for label, r in result.items():
             late = sum(abs(x.get("phase_miss_ms", 0)) > PHASE_TOLERANCE_MS for x in r[pol]["records"])
             if late:
-                print(f"  [{label}] {late} call(s) more than {PHASE_TOLERANCE_MS} ms off their round's phase "
-                      f"(the machine was busy): those rounds are left out of the differences")
+                print(
+                    f"  [{label}] {late} call(s) more than {PHASE_TOLERANCE_MS} ms off their round's phase "
+                    f"(the machine was busy): those rounds are left out of the differences"
+                )
         worst_se = max((t["standard_error_ms"] or 0) for t in targets if "standard_error_ms" in t)
         if 2 * worst_se > TABLE_II_TOLERANCE_MS:
-            print(f"  note: a standard error of up to {worst_se:.2f} ms: too few requests to tell a "
-                  f"{TABLE_II_TOLERANCE_MS} ms difference from chance; raise -n")
+            print(
+                f"  note: a standard error of up to {worst_se:.2f} ms: too few requests to tell a "
+                f"{TABLE_II_TOLERANCE_MS} ms difference from chance; raise -n"
+            )
         for label, r in result.items():
             spikes = r[pol]["spikes"]
-            targets.append({"policy": pol, "config": label, "metric": "spikes", "value": spikes,
-                            "passed": spikes == 0})
-            print(f"  {common.verdict(spikes == 0)} [{label}] {pol}: {spikes} spike(s); round trip mean "
-                  f"{common.fmt(r[pol]['rtt_ms']['mean'])} ms; came by {'/'.join(r[pol]['paths'])}; "
-                  f"failed {r[pol]['failed']}")
+            targets.append({"policy": pol, "config": label, "metric": "spikes", "value": spikes, "passed": spikes == 0})
+            print(
+                f"  {common.verdict(spikes == 0)} [{label}] {pol}: {spikes} spike(s); round trip mean "
+                f"{common.fmt(r[pol]['rtt_ms']['mean'])} ms; came by {'/'.join(r[pol]['paths'])}; "
+                f"failed {r[pol]['failed']}"
+            )
     return targets
 
 
 # ---- tuples across two hosts ----------------------------------------------------------------
+
 
 def two_host_tuples(args, client: Client, offsets: dict[str, int], rng: random.Random) -> dict:
     cams = list(offsets)
@@ -323,9 +408,11 @@ def two_host_tuples(args, client: Client, offsets: dict[str, int], rng: random.R
                 rec["error"] = common.describe_error(exc)
             else:
                 true = {c: pair[c].service_t_capture - offsets[c] for c in cams}
-                rec.update(frames={c: {"t_capture": true[c], "frame_id": pair[c].frame_id} for c in cams},
-                           true_skew_ms=common.ms(max(true.values()) - min(true.values())),
-                           mapped_skew_ms=common.ms(pair.skew_ns))
+                rec.update(
+                    frames={c: {"t_capture": true[c], "frame_id": pair[c].frame_id} for c in cams},
+                    true_skew_ms=common.ms(max(true.values()) - min(true.values())),
+                    mapped_skew_ms=common.ms(pair.skew_ns),
+                )
             records.append(rec)
             bar.update(1)
     ok = [r for r in records if r["error"] is None]
@@ -334,27 +421,41 @@ def two_host_tuples(args, client: Client, offsets: dict[str, int], rng: random.R
     least = phases["min_covering_arc_ms"] if phases else None
     limit = None if least is None else least + paper.SPIKE_MARGIN_MS
     spikes = sum(r["true_skew_ms"] > limit for r in ok) if ok else None
-    out = {"cameras": cams, "requests": len(records), "failed": len(records) - len(ok),
-           "least_allowed_skew_ms": least, "spike_limit_ms": limit, "spikes": spikes,
-           "observed_phases": phases,
-           "true_skew_ms": common.summary(r["true_skew_ms"] for r in ok),
-           "mapped_minus_true_skew_ms": common.summary(r["mapped_skew_ms"] - r["true_skew_ms"] for r in ok),
-           "passed": None if spikes is None or len(records) < TUPLE_TARGET_REQUESTS else spikes == 0,
-           "records": records}
+    out = {
+        "cameras": cams,
+        "requests": len(records),
+        "failed": len(records) - len(ok),
+        "least_allowed_skew_ms": least,
+        "spike_limit_ms": limit,
+        "spikes": spikes,
+        "observed_phases": phases,
+        "true_skew_ms": common.summary(r["true_skew_ms"] for r in ok),
+        "mapped_minus_true_skew_ms": common.summary(r["mapped_skew_ms"] - r["true_skew_ms"] for r in ok),
+        "passed": None if spikes is None or len(records) < TUPLE_TARGET_REQUESTS else spikes == 0,
+        "records": records,
+    }
     s = out["true_skew_ms"]
     print()
-    print(common.table(["", "n", "min", "median", "p99", "max"],
-                       [["true skew", s["n"], s["min"], s["median"], s["p99"], s["max"]],
-                        ["mapped - true", *(out["mapped_minus_true_skew_ms"][k]
-                                            for k in ("n", "min", "median", "p99", "max"))]],
-                       title=f"two-host tuples {' + '.join(cams)}, ms; least the cameras allow "
-                             f"{common.fmt(least)} ms", digits=3))
-    print(f"  {common.verdict(out['passed'])} two hosts: {spikes} spike(s) (true skew > {common.fmt(limit)} ms) in "
-          f"{len(ok)} requests (target: 0 in >= {TUPLE_TARGET_REQUESTS}; fewer: not judged); failed {out['failed']}")
+    print(
+        common.table(
+            ["", "n", "min", "median", "p99", "max"],
+            [
+                ["true skew", s["n"], s["min"], s["median"], s["p99"], s["max"]],
+                ["mapped - true", *(out["mapped_minus_true_skew_ms"][k] for k in ("n", "min", "median", "p99", "max"))],
+            ],
+            title=f"two-host tuples {' + '.join(cams)}, ms; least the cameras allow {common.fmt(least)} ms",
+            digits=3,
+        )
+    )
+    print(
+        f"  {common.verdict(out['passed'])} two hosts: {spikes} spike(s) (true skew > {common.fmt(limit)} ms) in "
+        f"{len(ok)} requests (target: 0 in >= {TUPLE_TARGET_REQUESTS}; fewer: not judged); failed {out['failed']}"
+    )
     return out
 
 
 # ---- size: raw against JPEG -----------------------------------------------------------------
+
 
 def sizes(args, host, clients: dict[str, Client], cams: list[str]) -> dict:
     out = {"configs": {}, "targets": []}
@@ -370,26 +471,43 @@ def sizes(args, host, clients: dict[str, Client], cams: list[str]) -> dict:
                 rtts.append(common.ms(time.monotonic_ns() - sent))
             per_request = (host.link_bytes()["from_host"] - before) / args.size_requests
             out["configs"][f"{rate} {encoding}"] = {"rtt_ms": common.summary(rtts), "link_bytes": per_request}
-            rows.append([f"{rate} {encoding}", args.size_requests, common.summary(rtts)["mean"],
-                         common.summary(rtts)["p99"], per_request / 1e6])
+            rows.append(
+                [
+                    f"{rate} {encoding}",
+                    args.size_requests,
+                    common.summary(rtts)["mean"],
+                    common.summary(rtts)["p99"],
+                    per_request / 1e6,
+                ]
+            )
     host.set_rate("1gbit")
     print()
-    print(common.table(["link encoding", "n", "rtt mean", "p99", "MB/tuple"], rows,
-                       title=f"round trip (ms) and link bytes per tuple of {' + '.join(cams)} "
-                             f"({args.width}x{args.height} mono8), raw and JPEG q{args.quality}", digits=3))
+    print(
+        common.table(
+            ["link encoding", "n", "rtt mean", "p99", "MB/tuple"],
+            rows,
+            title=f"round trip (ms) and link bytes per tuple of {' + '.join(cams)} "
+            f"({args.width}x{args.height} mono8), raw and JPEG q{args.quality}",
+            digits=3,
+        )
+    )
     for rate, limit in RATIO_TARGETS.items():
         raw, jpeg = (out["configs"][f"{rate} {e}"] for e in clients)
         ratio = jpeg["rtt_ms"]["mean"] / raw["rtt_ms"]["mean"]
         bytes_ratio = jpeg["link_bytes"] / raw["link_bytes"] if raw["link_bytes"] else None
         passed = ratio <= limit
-        out["targets"].append({"rate": rate, "rtt_ratio": ratio, "bytes_ratio": bytes_ratio, "limit": limit,
-                               "passed": passed})
-        print(f"  {common.verdict(passed)} {rate}: JPEG/raw round trip {ratio:.3f}x <= {limit}x "
-              f"(bytes {common.fmt(bytes_ratio, 3)}x)")
+        out["targets"].append(
+            {"rate": rate, "rtt_ratio": ratio, "bytes_ratio": bytes_ratio, "limit": limit, "passed": passed}
+        )
+        print(
+            f"  {common.verdict(passed)} {rate}: JPEG/raw round trip {ratio:.3f}x <= {limit}x "
+            f"(bytes {common.fmt(bytes_ratio, 3)}x)"
+        )
     return out
 
 
 # ---- main -----------------------------------------------------------------------------------
+
 
 def keep_asking(args, client: Client, cams: list[str], watch: ClockWatch, rng: random.Random) -> int:
     """Tuples at the paper's pace until the clock has been watched for --minutes; returns failures."""
@@ -414,15 +532,25 @@ def main(argv: list[str] | None = None) -> int:
     rng = random.Random(args.seed)
     names = ["cam0", "cam1"]
     exp = paper.Experiment(names, args.fps, [0.0, 1.0], args.jitter_ms)
-    cam_flags = common.synthetic_camera_flags(names, args.fps, args.width, args.height, [0.0, 1.0],
-                                              args.jitter_ms) + ["--slots", str(args.slots)]
+    cam_flags = common.synthetic_camera_flags(names, args.fps, args.width, args.height, [0.0, 1.0], args.jitter_ms) + [
+        "--slots",
+        str(args.slots),
+    ]
     host_info, started = common.host_info(), time.time()
-    result = {"benchmark": "network", "started_unix": started, "settings": vars(args), "host": host_info,
-              "experiment": exp.as_dict(), "targets": {}}
+    result = {
+        "benchmark": "network",
+        "started_unix": started,
+        "settings": vars(args),
+        "host": host_info,
+        "experiment": exp.as_dict(),
+        "targets": {},
+    }
     watch = ClockWatch(args.clock_every)
     failed = 0
-    print(f"network: client on this host; host A clock +{args.offset_s} s (cam0, cam1), host B clock "
-          f"+{2 * args.offset_s} s (cam2); links 1 Gbit unless said; seed {args.seed}")
+    print(
+        f"network: client on this host; host A clock +{args.offset_s} s (cam0, cam1), host B clock "
+        f"+{2 * args.offset_s} s (cam2); links 1 Gbit unless said; seed {args.seed}"
+    )
     print(common.code_line(host_info["code"]))
     try:
         with contextlib.ExitStack() as stack:
@@ -432,33 +560,50 @@ def main(argv: list[str] | None = None) -> int:
             stack.callback(watch.stop)
             a = lab.host(clock_offset_s=args.offset_s, rate="1gbit")
             svc_a = a.service(*cam_flags)
-            remote = {enc: stack.enter_context(Client(svc_a.endpoint, timeout=args.timeout, keys=lab.client_keys,
-                                                      encoding=enc, quality=args.quality))
-                      for enc in ("raw", "jpeg")}
+            remote = {
+                enc: stack.enter_context(
+                    Client(
+                        svc_a.endpoint, timeout=args.timeout, keys=lab.client_keys, encoding=enc, quality=args.quality
+                    )
+                )
+                for enc in ("raw", "jpeg")
+            }
             for enc, client in remote.items():
                 watch.watch(f"A {enc}", client, svc_a.endpoint, a.clock_offset_ns)
             status = common.wait_until_streaming(remote["raw"])
             kinds_of = {cam: c["kind"] for cam, c in status["cameras"].items()}
             if "table2" in args.parts:
-                with common.service(None, cam_flags, os.path.join(out, "network.local.log"),
-                                    args.timeout) as (local, _):
+                with common.service(None, cam_flags, os.path.join(out, "network.local.log"), args.timeout) as (
+                    local,
+                    _,
+                ):
                     common.wait_until_streaming(local)
-                    t2 = table_ii(args, {"one host": local, "remote raw": remote["raw"],
-                                         "remote jpeg": remote["jpeg"]}, exp, kinds_of, rng)
+                    t2 = table_ii(
+                        args,
+                        {"one host": local, "remote raw": remote["raw"], "remote jpeg": remote["jpeg"]},
+                        exp,
+                        kinds_of,
+                        rng,
+                    )
                 result["table2"] = t2
                 result["targets"]["table2"] = compare_table_ii(t2, args.policies, exp)
                 failed += sum(r[pol]["failed"] for r in t2.values() for pol in args.policies)
             if "tuples" in args.parts:
                 b = lab.host(clock_offset_s=2 * args.offset_s, rate="1gbit")
-                svc_b = b.service(*common.synthetic_camera_flags(["cam2"], args.fps, args.width, args.height,
-                                                                 [0.0], args.jitter_ms), "--slots", str(args.slots))
-                both = stack.enter_context(Client([svc_a.endpoint, svc_b.endpoint], timeout=args.timeout,
-                                                  keys=lab.client_keys))
+                svc_b = b.service(
+                    *common.synthetic_camera_flags(["cam2"], args.fps, args.width, args.height, [0.0], args.jitter_ms),
+                    "--slots",
+                    str(args.slots),
+                )
+                both = stack.enter_context(
+                    Client([svc_a.endpoint, svc_b.endpoint], timeout=args.timeout, keys=lab.client_keys)
+                )
                 watch.watch("A+B", both, svc_a.endpoint, a.clock_offset_ns)
                 watch.watch("A+B", both, svc_b.endpoint, b.clock_offset_ns)
                 common.wait_until_streaming(both.clients[1])
-                result["tuples"] = two_host_tuples(args, both, {"cam0": a.clock_offset_ns,
-                                                                "cam2": b.clock_offset_ns}, rng)
+                result["tuples"] = two_host_tuples(
+                    args, both, {"cam0": a.clock_offset_ns, "cam2": b.clock_offset_ns}, rng
+                )
                 result["targets"]["tuples"] = result["tuples"]["passed"]
                 failed += result["tuples"]["failed"]
             if "size" in args.parts:

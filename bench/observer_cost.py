@@ -19,6 +19,7 @@ host, per phase the CPU percent of each process, the observer's own output) into
 Exit status 0 when every phase ran; 1 if the service did not stream or an observer failed;
 2 on bad flags.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -51,8 +52,17 @@ class Observer:
 
 
 def fxis_record(*flags: str) -> Callable[[str, str], list[str]]:
-    return lambda endpoint, scratch: [sys.executable, "-m", "fxis_shm.cli", "record", "--endpoint", endpoint,
-                                      "--out", os.path.join(scratch, "bag"), *flags]
+    return lambda endpoint, scratch: [
+        sys.executable,
+        "-m",
+        "fxis_shm.cli",
+        "record",
+        "--endpoint",
+        endpoint,
+        "--out",
+        os.path.join(scratch, "bag"),
+        *flags,
+    ]
 
 
 OBSERVERS = {
@@ -64,8 +74,13 @@ OBSERVERS = {
 
 def parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="observer_cost.py", description=__doc__, formatter_class=common.HelpFormatter)
-    p.add_argument("--observers", nargs="+", choices=list(OBSERVERS), default=["record"],
-                   help="the observers to measure, one phase each, after the idle phase")
+    p.add_argument(
+        "--observers",
+        nargs="+",
+        choices=list(OBSERVERS),
+        default=["record"],
+        help="the observers to measure, one phase each, after the idle phase",
+    )
     p.add_argument("--cameras", type=common.positive_int, default=2, help="synthetic cameras of a launched service")
     p.add_argument("--fps", type=common.positive_float, default=20.0)
     p.add_argument("--size", default="1360x1024", metavar="WxH", help="image size of the cameras")
@@ -89,8 +104,9 @@ def run_phase(name: str, endpoint: str, procs: dict[str, int], args) -> dict:
         time.sleep(args.warmup)
         return {"cpu_percent": measure(procs, args.seconds)}
     with tempfile.TemporaryDirectory(prefix="observer_cost.") as scratch:
-        proc = subprocess.Popen(OBSERVERS[name].command(endpoint, scratch), stdout=subprocess.PIPE,
-                                stderr=subprocess.PIPE, text=True)
+        proc = subprocess.Popen(
+            OBSERVERS[name].command(endpoint, scratch), stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        )
         try:
             time.sleep(args.warmup)
             if proc.poll() is not None:
@@ -121,27 +137,42 @@ def main(argv: list[str] | None = None) -> int:
     out = common.ensure_dir(args.out)
     phases: dict[str, dict] = {}
     try:
-        with common.service(args.endpoint, run_args, os.path.join(out, "observer_cost.service.log"),
-                            args.timeout) as (client, info):
+        with common.service(args.endpoint, run_args, os.path.join(out, "observer_cost.service.log"), args.timeout) as (
+            client,
+            info,
+        ):
             status = common.wait_until_streaming(client)
             procs = service_processes(status, status["supervisor"]["pid"])
             for name in [IDLE, *args.observers]:
-                print(f"phase {name}: {args.warmup:g} s warm-up, {args.seconds:g} s measured ...",
-                      file=sys.stderr, flush=True)
+                print(
+                    f"phase {name}: {args.warmup:g} s warm-up, {args.seconds:g} s measured ...",
+                    file=sys.stderr,
+                    flush=True,
+                )
                 phases[name] = run_phase(name, info["endpoint"], procs, args)
     except (RuntimeError, common.FxisError) as exc:
         print(f"observer_cost.py: {common.describe_error(exc)}", file=sys.stderr)
         return common.EXIT_FAILED
-    rows = sorted({row for phase in phases.values() for row in phase["cpu_percent"]},
-                  key=lambda r: (r == OBSERVER, r))
-    print(common.table(["process (% of a core)", *phases],
-                       [[row, *(phases[ph]["cpu_percent"].get(row) for ph in phases)] for row in rows],
-                       title=f"{args.cameras} camera(s) {width}x{height} at {args.fps:g} fps, "
-                             f"{args.seconds:g} s per phase", digits=1))
+    rows = sorted({row for phase in phases.values() for row in phase["cpu_percent"]}, key=lambda r: (r == OBSERVER, r))
+    print(
+        common.table(
+            ["process (% of a core)", *phases],
+            [[row, *(phases[ph]["cpu_percent"].get(row) for ph in phases)] for row in rows],
+            title=f"{args.cameras} camera(s) {width}x{height} at {args.fps:g} fps, {args.seconds:g} s per phase",
+            digits=1,
+        )
+    )
     print(common.code_line(common.code_version()))
-    common.write_json(os.path.join(out, "observer_cost.json"), {
-        "settings": vars(args), "host": common.host_info(), "service": info,
-        "observers": {n: OBSERVERS[n].what for n in args.observers}, "phases": phases})
+    common.write_json(
+        os.path.join(out, "observer_cost.json"),
+        {
+            "settings": vars(args),
+            "host": common.host_info(),
+            "service": info,
+            "observers": {n: OBSERVERS[n].what for n in args.observers},
+            "phases": phases,
+        },
+    )
     return common.EXIT_OK
 
 

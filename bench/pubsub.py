@@ -16,6 +16,7 @@ unless --endpoint is given, then measures:
 Prints tables; writes pubsub.json and pubsub.png into --out. Exit status 0 if every event
 was answered and every request served, 1 otherwise, 2 on bad flags.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -39,12 +40,9 @@ LIVE_SUBSCRIBERS = 3
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="pubsub.py", description=__doc__,
-                                formatter_class=common.HelpFormatter)
-    p.add_argument("-n", "--events", type=common.positive_int, default=200,
-                   help="request events to measure")
-    p.add_argument("--seconds", type=common.positive_float, default=10.0,
-                   help="how long the stream part runs")
+    p = argparse.ArgumentParser(prog="pubsub.py", description=__doc__, formatter_class=common.HelpFormatter)
+    p.add_argument("-n", "--events", type=common.positive_int, default=200, help="request events to measure")
+    p.add_argument("--seconds", type=common.positive_float, default=10.0, help="how long the stream part runs")
     cams = p.add_argument_group("the launched service (ignored with --endpoint)")
     cams.add_argument("--fps", type=common.positive_float, default=20.0)
     cams.add_argument("--width", type=common.positive_int, default=1360)
@@ -74,9 +72,15 @@ def measure_events(info: dict, n: int, rng: random.Random, timeout: float) -> di
                 print(f"event failed: {common.describe_error(exc)}", file=sys.stderr)
                 continue
             timing = pair.timing
-            records.append({"t_publish": t0, "t_received": t1, "timing": timing,
-                            "skew_ns": pair.skew_ns,
-                            "frames": {c: f.frame_id for c, f in pair.items()}})
+            records.append(
+                {
+                    "t_publish": t0,
+                    "t_received": t1,
+                    "timing": timing,
+                    "skew_ns": pair.skew_ns,
+                    "frames": {c: f.frame_id for c, f in pair.items()},
+                }
+            )
             bar.update()
         bar.close()
     return {"records": records, "failures": failures}
@@ -154,19 +158,29 @@ def report(events: dict, streams: dict, fps: float | None) -> tuple[str, dict]:
         "  the wait for frames": common.summary(waits),
     }
     header = ["events (ms)", "n", "median", "p99", "mean", "min", "max"]
-    text = [common.table(header, [[k, v["n"], v["median"], v["p99"], v["mean"], v["min"], v["max"]]
-                                  for k, v in rows.items()])]
+    text = [
+        common.table(
+            header, [[k, v["n"], v["median"], v["p99"], v["mean"], v["min"], v["max"]] for k, v in rows.items()]
+        )
+    ]
     stream_rows = []
     for i, rec in enumerate(streams["live"]):
         rate = len(rec["seqs"]) / streams["seconds"]
         stream_rows.append([f"live subscriber {i + 1}", len(rec["seqs"]), rate, lost(rec["seqs"])])
     backlog = streams["stalled_backlog"]
     stream_rows.append(["stalled subscriber (backlog read after)", len(backlog), "-", lost(backlog)])
-    text.append(common.table(["tuple stream, 4 subscribers", "messages", "per s", "lost (seq gaps)"],
-                             stream_rows, title=f"\ncamera rate {fps or '?'} fps, over {streams['seconds']:g} s"))
+    text.append(
+        common.table(
+            ["tuple stream, 4 subscribers", "messages", "per s", "lost (seq gaps)"],
+            stream_rows,
+            title=f"\ncamera rate {fps or '?'} fps, over {streams['seconds']:g} s",
+        )
+    )
     req = common.summary(streams["requests"]["latency_ms"])
-    text.append(f"tuple requests meanwhile: {req['n']} served, {streams['requests']['failures']} failed, "
-                f"median {common.fmt(req['median'])} ms, p99 {common.fmt(req['p99'])} ms")
+    text.append(
+        f"tuple requests meanwhile: {req['n']} served, {streams['requests']['failures']} failed, "
+        f"median {common.fmt(req['median'])} ms, p99 {common.fmt(req['p99'])} ms"
+    )
     return "\n".join(text), {"events": rows, "streams": stream_rows, "requests": req}
 
 
@@ -194,8 +208,10 @@ def main(argv: list[str] | None = None) -> int:
     rng = random.Random(seed)
     out = common.ensure_dir(args.out)
     run_args = common.synthetic_camera_flags(["cam0", "cam1"], args.fps, args.width, args.height)
-    with common.service(args.endpoint, run_args, os.path.join(out, "pubsub.service.log"),
-                        args.timeout) as (client, info):
+    with common.service(args.endpoint, run_args, os.path.join(out, "pubsub.service.log"), args.timeout) as (
+        client,
+        info,
+    ):
         status = common.wait_until_streaming(client)
         fps = next(iter(status["cameras"].values())).get("fps")
         events = measure_events(info, args.events, rng, args.timeout)
@@ -203,9 +219,17 @@ def main(argv: list[str] | None = None) -> int:
     text, summary = report(events, streams, fps)
     print(f"pubsub: {common.code_line(common.code_version())}; seed {seed}")
     print(text)
-    common.write_json(os.path.join(out, "pubsub.json"),
-                      {"seed": seed, "info": info, "summary": summary, "events": events,
-                       "streams": streams, "code": common.code_version()})
+    common.write_json(
+        os.path.join(out, "pubsub.json"),
+        {
+            "seed": seed,
+            "info": info,
+            "summary": summary,
+            "events": events,
+            "streams": streams,
+            "code": common.code_version(),
+        },
+    )
     plot(os.path.join(out, "pubsub.png"), events, streams)
     failed = events["failures"] or streams["requests"]["failures"]
     return common.EXIT_FAILED if failed else common.EXIT_OK

@@ -7,6 +7,7 @@ the coordinator. The supervisor restarts a process after a 0.5 s backoff (doubli
 restart within 30 s; this bench waits 31 s between kills of the same process unless
 --quick). Prints median and max per fault; writes recovery.json into --out.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -27,8 +28,9 @@ from fxis_shm.launch import ServiceProcess
 
 
 def coordinator_pid(svc: ServiceProcess) -> int:
-    out = subprocess.run(["pgrep", "-P", str(svc.proc.pid), "-f", "fxis_shm.workers.coordinator"],
-                         capture_output=True, text=True).stdout.split()
+    out = subprocess.run(
+        ["pgrep", "-P", str(svc.proc.pid), "-f", "fxis_shm.workers.coordinator"], capture_output=True, text=True
+    ).stdout.split()
     return int(out[0])
 
 
@@ -52,9 +54,11 @@ def main(argv: list[str] | None = None) -> int:
     out = common.ensure_dir(args.out)
     flags = common.synthetic_camera_flags(["cam0", "cam1"], 20.0, 1360, 1024)
     results = {"camera worker": [], "coordinator": []}
-    with open(os.path.join(out, "recovery.service.log"), "wb") as log, \
-            ServiceProcess(flags + ["--restart-limit", str(2 * args.repeat + 2)], stderr=log) as svc, \
-            svc.client(timeout=0.2) as client:
+    with (
+        open(os.path.join(out, "recovery.service.log"), "wb") as log,
+        ServiceProcess(flags + ["--restart-limit", str(2 * args.repeat + 2)], stderr=log) as svc,
+        svc.client(timeout=0.2) as client,
+    ):
         common.wait_until_streaming(client)
         for i in range(args.repeat):
             if i and not args.quick:
@@ -65,8 +69,14 @@ def main(argv: list[str] | None = None) -> int:
             os.kill(coordinator_pid(svc), signal.SIGKILL)
             results["coordinator"].append(time_to_recover(client, lambda c: c.tuple()))
     rows = [[fault, len(v), common.summary(v)["median"], max(v)] for fault, v in results.items()]
-    print(common.table(["kill -9 of", "n", "median s", "max s"], rows, digits=3,
-                       title="time from the kill to the first successful request"))
+    print(
+        common.table(
+            ["kill -9 of", "n", "median s", "max s"],
+            rows,
+            digits=3,
+            title="time from the kill to the first successful request",
+        )
+    )
     common.write_json(os.path.join(out, "recovery.json"), {"seconds": results, "code": common.code_version()})
     return 0
 

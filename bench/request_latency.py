@@ -19,6 +19,7 @@ sample, timing record and frame) and request_latency.png (a CDF per row) into --
 Exit status: 0 if every request was answered, 1 if any failed (the outputs are still
 written), 2 on bad flags.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -35,22 +36,21 @@ else:  # run as a script, or loaded from its path
 
 KINDS = ("tuple", "tuple_none", "latest")
 LABELS = {"tuple": "tuple (wait=auto)", "tuple_none": "tuple (wait=none)", "latest": "latest"}
-SERVICE_STEPS = (("received", "waited"), ("waited", "searched"), ("searched", "copied"),
-                 ("copied", "sent"))
+SERVICE_STEPS = (("received", "waited"), ("waited", "searched"), ("searched", "copied"), ("copied", "sent"))
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="request_latency.py", description=__doc__,
-                                formatter_class=common.HelpFormatter)
-    p.add_argument("-n", "--requests", type=common.positive_int, default=300,
-                   help="measured requests of each kind")
-    p.add_argument("--sleep-max-ms", type=common.nonnegative_float, default=50.0,
-                   help="each request follows a sleep drawn from U[0, this] ms")
-    p.add_argument("--warmup", type=int, default=5,
-                   help="unrecorded requests of each kind before measuring")
+    p = argparse.ArgumentParser(prog="request_latency.py", description=__doc__, formatter_class=common.HelpFormatter)
+    p.add_argument("-n", "--requests", type=common.positive_int, default=300, help="measured requests of each kind")
+    p.add_argument(
+        "--sleep-max-ms",
+        type=common.nonnegative_float,
+        default=50.0,
+        help="each request follows a sleep drawn from U[0, this] ms",
+    )
+    p.add_argument("--warmup", type=int, default=5, help="unrecorded requests of each kind before measuring")
     cams = p.add_argument_group("the launched service (ignored with --endpoint)")
-    cams.add_argument("--cameras", type=common.positive_int, default=2,
-                      help="synthetic cameras cam0, cam1, ...")
+    cams.add_argument("--cameras", type=common.positive_int, default=2, help="synthetic cameras cam0, cam1, ...")
     cams.add_argument("--fps", type=common.positive_float, default=20.0)
     cams.add_argument("--width", type=common.positive_int, default=1360)
     cams.add_argument("--height", type=common.positive_int, default=1024)
@@ -78,11 +78,20 @@ def measure(client, kind: str, kinds_of: dict) -> dict:
         return rec
     t_reply = time.monotonic_ns()
     rec.update(
-        t_send=t_send, t_reply=t_reply, rtt_ns=t_reply - t_send,
-        t_request=reply.t_request, timing=reply.timing,
-        frames={cam: {"frame_id": f.frame_id, "t_capture": f.t_capture, "t_stored": f.t_stored,
-                      "stamp_ok": common.stamp_ok(f, kinds_of.get(cam, ""))}
-                for cam, f in reply.items()},
+        t_send=t_send,
+        t_reply=t_reply,
+        rtt_ns=t_reply - t_send,
+        t_request=reply.t_request,
+        timing=reply.timing,
+        frames={
+            cam: {
+                "frame_id": f.frame_id,
+                "t_capture": f.t_capture,
+                "t_stored": f.t_stored,
+                "stamp_ok": common.stamp_ok(f, kinds_of.get(cam, "")),
+            }
+            for cam, f in reply.items()
+        },
     )
     return rec
 
@@ -119,15 +128,16 @@ def plot(rows: list[tuple[str, list[float]]], path: str, title: str) -> None:
     fig, axes = plt.subplots(1, 2, figsize=(13, 5), sharey=True)
     client_rows = [r for r in rows if not r[0].startswith("  ")]
     detail_rows = [r for r in rows if r[0].startswith("  ")]
-    for ax, group, heading in ((axes[0], client_rows, "client round trips"),
-                               (axes[1], detail_rows, "tuple (wait=auto): steps")):
+    for ax, group, heading in (
+        (axes[0], client_rows, "client round trips"),
+        (axes[1], detail_rows, "tuple (wait=auto): steps"),
+    ):
         for label, values in group:
             if not values:
                 continue
             x = np.sort(np.asarray(values))
             y = np.arange(1, x.size + 1) / x.size
-            ax.step(np.maximum(x, 1e-3), y, where="post",
-                    label=f"{label.strip()} (median {np.median(x):.2f} ms)")
+            ax.step(np.maximum(x, 1e-3), y, where="post", label=f"{label.strip()} (median {np.median(x):.2f} ms)")
         ax.set_xscale("log")
         ax.xaxis.set_major_formatter(ticker.FuncFormatter(lambda v, _: f"{v:g}"))
         ax.set_xlabel("ms (log scale; 0 is drawn at 0.001)")
@@ -172,8 +182,9 @@ def main(argv: list[str] | None = None) -> int:
     started = time.time()
     host = common.host_info()  # before the service starts: the code it runs
     try:
-        with common.service(args.endpoint, run_args, os.path.join(out, "request_latency.service.log"),
-                            args.timeout) as (client, info):
+        with common.service(
+            args.endpoint, run_args, os.path.join(out, "request_latency.service.log"), args.timeout
+        ) as (client, info):
             status = common.wait_until_streaming(client)
             records = run(args, client, status)
             status_after = client.status()
@@ -189,40 +200,52 @@ def main(argv: list[str] | None = None) -> int:
     cams = status["cameras"]
     first = next(iter(cams.values()))
     shape = "x".join(map(str, first.get("shape", [])[1::-1]))  # width x height
-    title = (f"request latency: {len(cams)} cameras {shape} {first.get('dtype')} at "
-             f"{first.get('fps')} fps, "
-             f"{info['endpoint']}, {args.requests} requests per kind")
+    title = (
+        f"request latency: {len(cams)} cameras {shape} {first.get('dtype')} at "
+        f"{first.get('fps')} fps, "
+        f"{info['endpoint']}, {args.requests} requests per kind"
+    )
 
     summaries = {label.strip(): common.summary(values) for label, values in rows}
     print(common.code_line(host["code"]))
     print(title)
-    print(common.table(
-        ["row (ms)", "n", "median", "p99", "mean", "min", "max"],
-        [[label, s["n"], s["median"], s["p99"], s["mean"], s["min"], s["max"]]
-         for (label, _), s in zip(rows, summaries.values())],
-        digits=3))
-    print(f"tuple (wait=auto) waited > 1 ms for a frame in {waited} of {len(tup)} requests; "
-          f"failed requests: {len(failed)}; frames whose pixel stamp did not match their id: {bad_stamps}")
+    print(
+        common.table(
+            ["row (ms)", "n", "median", "p99", "mean", "min", "max"],
+            [
+                [label, s["n"], s["median"], s["p99"], s["mean"], s["min"], s["max"]]
+                for (label, _), s in zip(rows, summaries.values())
+            ],
+            digits=3,
+        )
+    )
+    print(
+        f"tuple (wait=auto) waited > 1 ms for a frame in {waited} of {len(tup)} requests; "
+        f"failed requests: {len(failed)}; frames whose pixel stamp did not match their id: {bad_stamps}"
+    )
     for r in failed[:10]:
         print(f"  failed: request {r['i']} ({r['kind']}): {r['error']}")
 
     json_path = os.path.join(out, "request_latency.json")
     png_path = os.path.join(out, "request_latency.png")
-    common.write_json(json_path, {
-        "benchmark": "request_latency",
-        "started_unix": started,
-        "argv": sys.argv[1:] if argv is None else list(argv),
-        "settings": {k: v for k, v in vars(args).items()},
-        "service": info,
-        "host": host,
-        "status_before": status,
-        "status_after": status_after,
-        "clock": "CLOCK_MONOTONIC ns; t_send/t_reply are the bench's time.monotonic_ns()",
-        "summary_ms": summaries,
-        "failed": len(failed),
-        "stamp_mismatches": bad_stamps,
-        "records": records,
-    })
+    common.write_json(
+        json_path,
+        {
+            "benchmark": "request_latency",
+            "started_unix": started,
+            "argv": sys.argv[1:] if argv is None else list(argv),
+            "settings": {k: v for k, v in vars(args).items()},
+            "service": info,
+            "host": host,
+            "status_before": status,
+            "status_after": status_after,
+            "clock": "CLOCK_MONOTONIC ns; t_send/t_reply are the bench's time.monotonic_ns()",
+            "summary_ms": summaries,
+            "failed": len(failed),
+            "stamp_mismatches": bad_stamps,
+            "records": records,
+        },
+    )
     plot(rows, png_path, title)
     print(f"wrote {json_path} and {png_path}")
     return common.EXIT_FAILED if failed else common.EXIT_OK

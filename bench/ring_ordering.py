@@ -13,6 +13,7 @@ fxis_shm._ordered helper (what the service uses) and once with plain accesses
 Prints the median of --repeat rounds of --n operations each, in microseconds, and the
 difference the fences make. Exit status 0, or 2 on bad flags.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -65,8 +66,7 @@ def measure(args) -> dict:
         snap = reader.snapshot()
         reader.copy(snap, len(snap.timeline) - 1, out)
 
-    ops = {"write": write, "snapshot": reader.snapshot, "copy": copy,
-           "load": lambda: reader.field("write_count")}
+    ops = {"write": write, "snapshot": reader.snapshot, "copy": copy, "load": lambda: reader.field("write_count")}
     result = {"mode": ordering.MODE}
     try:
         for _ in range(args.slots):
@@ -94,19 +94,39 @@ def main(argv: list[str] | None = None) -> int:
     if args.measure:
         print(json.dumps(measure(args)))
         return common.EXIT_OK
-    child = [sys.executable, os.path.abspath(__file__), "--measure", "-n", str(args.n), "--repeat", str(args.repeat),
-             "--width", str(args.width), "--height", str(args.height), "--slots", str(args.slots)]
+    child = [
+        sys.executable,
+        os.path.abspath(__file__),
+        "--measure",
+        "-n",
+        str(args.n),
+        "--repeat",
+        str(args.repeat),
+        "--width",
+        str(args.width),
+        "--height",
+        str(args.height),
+        "--slots",
+        str(args.slots),
+    ]
     runs = {}
     for label, plain in (("fenced", "0"), ("plain", "1")):
         env = {**os.environ, "FXIS_PLAIN_ORDERING": plain}
         done = subprocess.run(child, env=env, capture_output=True, text=True, check=True)
         runs[label] = json.loads(done.stdout)
-    rows = [[op, f"{runs['plain'][op]:.2f}", f"{runs['fenced'][op]:.2f}",
-             f"{runs['fenced'][op] - runs['plain'][op]:+.2f}"] for op in ("write", "snapshot", "copy", "load")]
-    print(f"ring_ordering: {common.code_line(common.code_version())}; {args.width}x{args.height} mono8, "
-          f"{args.slots} slots; modes {runs['plain']['mode']} vs {runs['fenced']['mode']}")
-    print(common.table(["us per op", "plain", "fenced", "fences cost"], rows,
-                       title=f"median of {args.repeat} rounds of {args.n}"))
+    rows = [
+        [op, f"{runs['plain'][op]:.2f}", f"{runs['fenced'][op]:.2f}", f"{runs['fenced'][op] - runs['plain'][op]:+.2f}"]
+        for op in ("write", "snapshot", "copy", "load")
+    ]
+    print(
+        f"ring_ordering: {common.code_line(common.code_version())}; {args.width}x{args.height} mono8, "
+        f"{args.slots} slots; modes {runs['plain']['mode']} vs {runs['fenced']['mode']}"
+    )
+    print(
+        common.table(
+            ["us per op", "plain", "fenced", "fences cost"], rows, title=f"median of {args.repeat} rounds of {args.n}"
+        )
+    )
     return common.EXIT_OK
 
 

@@ -6,6 +6,7 @@ idle, while one client times -n past tuples: the latency should stay flat;
 each, one Client per thread). Per count: median and p99 latency over every request,
 requests/s, frames/s and MB/s in total.
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -29,6 +30,7 @@ WORKER_WAIT_S = 60.0  # longest a worker process of the active clients waits for
 
 # ---- (b) the active clients' worker processes ------------------------------------------------
 
+
 def active_worker(conn) -> None:
     """Worker process of the active clients: on each task, ``threads`` clients connect, wait
     for the common start, ask past tuples back to back until the end, and report every request."""
@@ -47,8 +49,9 @@ def active_worker(conn) -> None:
                 try:
                     client.status()
                 except common.REQUEST_ERRORS as exc:
-                    records[j].append({"t_send": time.monotonic_ns(), "rtt_ns": 0,
-                                       "error": "connect: " + common.describe_error(exc)})
+                    records[j].append(
+                        {"t_send": time.monotonic_ns(), "rtt_ns": 0, "error": "connect: " + common.describe_error(exc)}
+                    )
                 ready.wait(WORKER_WAIT_S)
                 if go.wait(WORKER_WAIT_S):
                     time.sleep(max(0, window["start"] - time.monotonic_ns()) / 1e9)  # the common start
@@ -94,7 +97,7 @@ class ActiveClients:
 
     def run(self, endpoint: str, clients: int, seconds: float, path: str) -> tuple[list[dict], int, int]:
         """Every request of ``clients`` clients asking for ``seconds``; and the window (ns)."""
-        used = self.workers[:min(clients, len(self.workers))]
+        used = self.workers[: min(clients, len(self.workers))]
         for k, (_, conn) in enumerate(used):
             share = clients // len(used) + (1 if k < clients % len(used) else 0)
             conn.send({"endpoint": endpoint, "timeout": self.timeout, "path": path, "threads": share})
@@ -127,13 +130,15 @@ class ActiveClients:
         self.close()
 
 
-
 # ---- the section -----------------------------------------------------------------------------
+
 
 def run(args, logs: shared.Logs, rng: random.Random) -> dict:
     run_args = shared.camera_args(2, args.clients_fps, 1360, 1024, args.slots)
-    with ActiveClients(min(args.processes, max(args.active_counts)), args.timeout) as pool, \
-            logs.service("clients", run_args, args.timeout) as (svc, status):
+    with (
+        ActiveClients(min(args.processes, max(args.active_counts)), args.timeout) as pool,
+        logs.service("clients", run_args, args.timeout) as (svc, status),
+    ):
         idle = measure_idle(args, svc.endpoint, rng)
         active = [measure_active(args, pool, svc.endpoint, n) for n in args.active_counts]
     return {"status": status, "idle": idle, "active": active}
@@ -148,10 +153,10 @@ def measure_idle(args, endpoint: str, rng: random.Random) -> list[dict]:
                     extra = shared.make_client(endpoint, args.timeout, args.load_path)
                     idle.append(extra)
                     extra.status()  # really connected; from now on it stays idle
-                records = shared.time_requests(client, args.requests, rng, args.sleep_max_ms,
-                                               args.warmup, f"idle clients {count}")
-                points.append({"idle": count, "summary": shared.latency_summary(records),
-                               "records": records})
+                records = shared.time_requests(
+                    client, args.requests, rng, args.sleep_max_ms, args.warmup, f"idle clients {count}"
+                )
+                points.append({"idle": count, "summary": shared.latency_summary(records), "records": records})
     finally:
         for extra in idle:
             extra.close()
@@ -163,10 +168,15 @@ def measure_active(args, pool: ActiveClients, endpoint: str, clients: int) -> di
     ok = [r for r in records if r["error"] is None]
     seconds = (max([r["t_send"] + r["rtt_ns"] for r in ok], default=end) - start) / 1e9
     summary = shared.latency_summary(records)
-    return {"clients": clients, "seconds": seconds, "summary": summary,
-            "requests_per_s": len(ok) / seconds, "frames_per_s": sum(r["frames"] for r in ok) / seconds,
-            "mb_per_s": sum(r["bytes"] for r in ok) / shared.MB / seconds,
-            "rtt_ms": [round(common.ms(r["rtt_ns"]), 3) for r in ok]}
+    return {
+        "clients": clients,
+        "seconds": seconds,
+        "summary": summary,
+        "requests_per_s": len(ok) / seconds,
+        "frames_per_s": sum(r["frames"] for r in ok) / seconds,
+        "mb_per_s": sum(r["bytes"] for r in ok) / shared.MB / seconds,
+        "rtt_ms": [round(common.ms(r["rtt_ns"]), 3) for r in ok],
+    }
 
 
 def idle_flatness(idle: list[dict]) -> dict:
@@ -175,29 +185,67 @@ def idle_flatness(idle: list[dict]) -> dict:
         return {"passed": None, "why": "needs 0 idle clients and another count"}
     most = max(meds)
     ratio = meds[most] / meds[0]
-    return {"most": most, "median_ms": meds[most], "median_none_ms": meds[0], "ratio": ratio,
-            "passed": ratio <= IDLE_MARGIN}
+    return {
+        "most": most,
+        "median_ms": meds[most],
+        "median_none_ms": meds[0],
+        "ratio": ratio,
+        "passed": ratio <= IDLE_MARGIN,
+    }
 
 
 def report(result: dict, args) -> None:
-    rows = [[f"{p['idle']} idle", p["summary"]["requests"], p["summary"]["failed"],
-             p["summary"]["rtt_ms"]["median"], p["summary"]["rtt_ms"]["p99"],
-             p["summary"]["service_ms"]["median"]] for p in result["idle"]]
-    print(common.table(["clients", "n", "failed", "median ms", "p99 ms", "service ms"], rows, digits=2,
-                       title="clients (a): one client times past tuples while others stay idle "
-                             "(2 cameras 1360x1024)"))
-    rows = [[f"{p['clients']} active", p["summary"]["requests"], p["summary"]["failed"],
-             p["summary"]["rtt_ms"]["median"], p["summary"]["rtt_ms"]["p99"], p["summary"]["service_ms"]["median"],
-             p["requests_per_s"], p["frames_per_s"], p["mb_per_s"]] for p in result["active"]]
-    print(common.table(["clients", "requests", "failed", "median ms", "p99 ms", "service ms", "req/s",
-                        "frames/s", "MB/s"], rows, digits=1,
-                       title="clients (b): every client asks past tuples back to back"))
+    rows = [
+        [
+            f"{p['idle']} idle",
+            p["summary"]["requests"],
+            p["summary"]["failed"],
+            p["summary"]["rtt_ms"]["median"],
+            p["summary"]["rtt_ms"]["p99"],
+            p["summary"]["service_ms"]["median"],
+        ]
+        for p in result["idle"]
+    ]
+    print(
+        common.table(
+            ["clients", "n", "failed", "median ms", "p99 ms", "service ms"],
+            rows,
+            digits=2,
+            title="clients (a): one client times past tuples while others stay idle (2 cameras 1360x1024)",
+        )
+    )
+    rows = [
+        [
+            f"{p['clients']} active",
+            p["summary"]["requests"],
+            p["summary"]["failed"],
+            p["summary"]["rtt_ms"]["median"],
+            p["summary"]["rtt_ms"]["p99"],
+            p["summary"]["service_ms"]["median"],
+            p["requests_per_s"],
+            p["frames_per_s"],
+            p["mb_per_s"],
+        ]
+        for p in result["active"]
+    ]
+    print(
+        common.table(
+            ["clients", "requests", "failed", "median ms", "p99 ms", "service ms", "req/s", "frames/s", "MB/s"],
+            rows,
+            digits=1,
+            title="clients (b): every client asks past tuples back to back",
+        )
+    )
 
 
 def targets(result: dict, args) -> list[dict]:
     f = idle_flatness(result["idle"])
-    detail = (f"median {f['median_ms']:.2f} ms with {f['most']} idle clients vs {f['median_none_ms']:.2f} ms "
-              f"with none: {f['ratio']:.2f}x (limit {IDLE_MARGIN:g}x)" if "ratio" in f else f["why"])
+    detail = (
+        f"median {f['median_ms']:.2f} ms with {f['most']} idle clients vs {f['median_none_ms']:.2f} ms "
+        f"with none: {f['ratio']:.2f}x (limit {IDLE_MARGIN:g}x)"
+        if "ratio" in f
+        else f["why"]
+    )
     return [{"target": f"flat with idle clients ({args.load_path})", "passed": f["passed"], "detail": detail}]
 
 

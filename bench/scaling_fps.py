@@ -11,6 +11,7 @@ percent of one core; the total is out of 100 % x cores. The bench's own share an
 the rest of the host's (all cores' busy time from /proc/stat's idle counter, minus
 the service and the bench) are shown too: other load can make cameras fall behind.
 """
+
 from __future__ import annotations
 
 import os
@@ -35,6 +36,7 @@ BENCH, HOST, IDLE = "bench (client)", "host busy", "host idle"  # CPU rows besid
 
 
 # ---- CPU shares from /proc -------------------------------------------------------------------
+
 
 def service_processes(status: dict, supervisor_pid: int) -> dict[str, int]:
     """name -> pid of every process of the service: the supervisor, what it reports, the rest."""
@@ -75,12 +77,16 @@ def cpu_sample(procs: dict[str, int]) -> dict:
 def cpu_percent(before: dict, after: dict, seconds: float) -> dict:
     """Percent of one core per process over ``seconds`` (None if it died meanwhile)."""
     tick = os.sysconf("SC_CLK_TCK")
-    return {name: (after[name] - before[name]) / tick / seconds * 100
-            if before.get(name) is not None and after.get(name) is not None else None for name in before}
-
+    return {
+        name: (after[name] - before[name]) / tick / seconds * 100
+        if before.get(name) is not None and after.get(name) is not None
+        else None
+        for name in before
+    }
 
 
 # ---- one step ------------------------------------------------------------------------------
+
 
 class PacedRequester(threading.Thread):
     """client.tuple() every 1/hz s on its own client (no bursts to catch up)."""
@@ -120,8 +126,7 @@ def run(args, logs: shared.Logs, rng: random.Random) -> dict:
 
 def measure_fps_step(args, logs: shared.Logs, fps: float) -> dict:
     run_args = shared.camera_args(args.fps_cameras, fps, 1360, 1024, args.slots)
-    with logs.service("fps", run_args, args.timeout) as (svc, status), \
-            svc.client(timeout=args.timeout) as client:
+    with logs.service("fps", run_args, args.timeout) as (svc, status), svc.client(timeout=args.timeout) as client:
         requester = PacedRequester(svc.endpoint, args.timeout, args.load_path, args.request_hz)
         requester.start()
         try:
@@ -138,11 +143,22 @@ def measure_fps_step(args, logs: shared.Logs, fps: float) -> dict:
     cpu[HOST] = 100.0 * (os.cpu_count() or 1) - cpu.pop(IDLE)
     service = sum(cpu[name] for name in procs if cpu[name] is not None)
     requests = [r for r in requester.records if t0 <= r["t_send"] < t1]
-    return fps_verdict({"fps": fps, "processes": procs, "cpu_percent": cpu, "cpu_total": service,
-                        "cpu_others": cpu[HOST] - service - (cpu[BENCH] or 0.0),
-                        "cameras": frame_counts(s0, s1, fps), "seconds": (t1 - t0) / 1e9,
-                        "requests": shared.latency_summary(requests), "records": requests,
-                        "status_start": s0, "status_end": s1}, args.request_hz)
+    return fps_verdict(
+        {
+            "fps": fps,
+            "processes": procs,
+            "cpu_percent": cpu,
+            "cpu_total": service,
+            "cpu_others": cpu[HOST] - service - (cpu[BENCH] or 0.0),
+            "cameras": frame_counts(s0, s1, fps),
+            "seconds": (t1 - t0) / 1e9,
+            "requests": shared.latency_summary(requests),
+            "records": requests,
+            "status_start": s0,
+            "status_end": s1,
+        },
+        args.request_hz,
+    )
 
 
 def frame_counts(s0: dict, s1: dict, fps: float) -> dict:
@@ -153,9 +169,13 @@ def frame_counts(s0: dict, s1: dict, fps: float) -> dict:
         c0 = s0["cameras"][cam]
         stored = c1["frames_stored"] - c0["frames_stored"]
         dropped = c1["frames_dropped"] - c0["frames_dropped"]
-        out[cam] = {"expected": expected, "stored": stored, "dropped": dropped,
-                    "alive": c1["alive"] and c1["generation"] == c0["generation"],
-                    "lost": dropped > 0 or stored < expected - FPS_EDGE_FRAMES or not c1["alive"]}
+        out[cam] = {
+            "expected": expected,
+            "stored": stored,
+            "dropped": dropped,
+            "alive": c1["alive"] and c1["generation"] == c0["generation"],
+            "lost": dropped > 0 or stored < expected - FPS_EDGE_FRAMES or not c1["alive"],
+        }
     return out
 
 
@@ -164,7 +184,7 @@ def fps_verdict(step: dict, hz: float) -> dict:
     step["request_hz"] = hz
     step["served_per_s"] = (req["requests"] - req["failed"]) / step["seconds"]
     step["no_loss"] = not any(c["lost"] for c in step["cameras"].values())
-    step["passed"] = (step["no_loss"] and req["failed"] == 0 and step["served_per_s"] >= MIN_SERVED_SHARE * hz)
+    step["passed"] = step["no_loss"] and req["failed"] == 0 and step["served_per_s"] >= MIN_SERVED_SHARE * hz
     return step
 
 
@@ -173,31 +193,71 @@ def report(result: dict, args) -> None:
     for s in result["steps"]:
         cams = s["cameras"].values()
         expected = next(iter(cams))["expected"] if cams else None
-        rows.append([f"{s['fps']:g}", expected, ",".join(str(c["stored"]) for c in cams),
-                     ",".join(str(c["dropped"]) for c in cams), "yes" if s["no_loss"] else "NO",
-                     s["requests"]["requests"], s["requests"]["failed"], s["served_per_s"],
-                     s["requests"]["rtt_ms"]["median"], s["requests"]["rtt_ms"]["p99"], s["cpu_total"],
-                     "PASS" if s["passed"] else "FAIL"])
-    print(common.table(["fps", "expected", "stored per camera", "dropped per camera", "no loss", "requests",
-                        "failed", "req/s", "median ms", "p99 ms", "service CPU %", "step"], rows, digits=1,
-                       title=f"fps: {args.fps_cameras} cameras 1360x1024, {args.seconds:g} s per step, "
-                             f"client.tuple() at {args.request_hz:g}/s ({args.load_path})"))
+        rows.append(
+            [
+                f"{s['fps']:g}",
+                expected,
+                ",".join(str(c["stored"]) for c in cams),
+                ",".join(str(c["dropped"]) for c in cams),
+                "yes" if s["no_loss"] else "NO",
+                s["requests"]["requests"],
+                s["requests"]["failed"],
+                s["served_per_s"],
+                s["requests"]["rtt_ms"]["median"],
+                s["requests"]["rtt_ms"]["p99"],
+                s["cpu_total"],
+                "PASS" if s["passed"] else "FAIL",
+            ]
+        )
+    print(
+        common.table(
+            [
+                "fps",
+                "expected",
+                "stored per camera",
+                "dropped per camera",
+                "no loss",
+                "requests",
+                "failed",
+                "req/s",
+                "median ms",
+                "p99 ms",
+                "service CPU %",
+                "step",
+            ],
+            rows,
+            digits=1,
+            title=f"fps: {args.fps_cameras} cameras 1360x1024, {args.seconds:g} s per step, "
+            f"client.tuple() at {args.request_hz:g}/s ({args.load_path})",
+        )
+    )
     names = []
     for s in result["steps"]:
         names += [n for n in s["cpu_percent"] if n not in names]
     names = [n for n in names if n not in (BENCH, HOST)]
-    rows = [[f"{s['fps']:g}"] + [s["cpu_percent"].get(n) for n in names] +
-            [s["cpu_total"], s["cpu_percent"][BENCH], s["cpu_others"], s["cpu_percent"][HOST]]
-            for s in result["steps"]]
-    print(common.table(["fps"] + names + ["service", "bench", "others", "host"], rows, digits=1,
-                       separators=(len(names) + 1,),
-                       title=f"CPU % of one core per process over each step (out of {100 * (os.cpu_count() or 1)} % "
-                             "for all cores): service = its processes; bench = this client; others = the rest of "
-                             "the host (host busy - service - bench)"))
+    rows = [
+        [f"{s['fps']:g}"]
+        + [s["cpu_percent"].get(n) for n in names]
+        + [s["cpu_total"], s["cpu_percent"][BENCH], s["cpu_others"], s["cpu_percent"][HOST]]
+        for s in result["steps"]
+    ]
+    print(
+        common.table(
+            ["fps"] + names + ["service", "bench", "others", "host"],
+            rows,
+            digits=1,
+            separators=(len(names) + 1,),
+            title=f"CPU % of one core per process over each step (out of {100 * (os.cpu_count() or 1)} % "
+            "for all cores): service = its processes; bench = this client; others = the rest of "
+            "the host (host busy - service - bench)",
+        )
+    )
     busy = [f"{s['fps']:g}" for s in result["steps"] if s["cpu_others"] > BUSY_HOST_PERCENT]
     if busy:
-        print(f"note: other processes used more than {BUSY_HOST_PERCENT:g} % of a core during the steps at "
-              f"{', '.join(busy)} fps: what they lost may be due to that load rather than to the service")
+        print(
+            f"note: other processes used more than {BUSY_HOST_PERCENT:g} % of a core during the steps at "
+            f"{', '.join(busy)} fps: what they lost may be due to that load rather than to the service"
+        )
 
 
 def fps_target(result: dict, args) -> dict:
@@ -206,8 +266,12 @@ def fps_target(result: dict, args) -> dict:
     best = max((s["fps"] for s in steps if s["passed"]), default=None)
     judged = min((s for s in steps if s["fps"] >= args.target_fps), key=lambda s: s["fps"], default=None)
     failed = {f"{s['fps']:g}": step_trouble(s) for s in steps if not s["passed"]}
-    return {"highest_passing_fps": best, "judged_fps": judged and judged["fps"],
-            "passed": judged["passed"] if judged else None, "failed_steps": failed}
+    return {
+        "highest_passing_fps": best,
+        "judged_fps": judged and judged["fps"],
+        "passed": judged["passed"] if judged else None,
+        "failed_steps": failed,
+    }
 
 
 def camera_lost(counts: dict) -> int:
@@ -228,15 +292,23 @@ def step_trouble(step: dict) -> str:
 
 def targets(result: dict, args) -> list[dict]:
     t = fps_target(result, args)
-    return [{"target": f"{args.fps_cameras} cameras 1360x1024 at {args.target_fps:g} fps with no loss "
-                       f"while serving {args.request_hz:g} tuple req/s",
-             "passed": t["passed"], "detail": fps_detail(t, args)}]
+    return [
+        {
+            "target": f"{args.fps_cameras} cameras 1360x1024 at {args.target_fps:g} fps with no loss "
+            f"while serving {args.request_hz:g} tuple req/s",
+            "passed": t["passed"],
+            "detail": fps_detail(t, args),
+        }
+    ]
 
 
 def fps_detail(t: dict, args) -> str:
     best = t["highest_passing_fps"]
-    text = (f"step {t['judged_fps']:g} fps {'passed' if t['passed'] else 'failed'}; " if t["judged_fps"] else
-            f"no step at or above {args.target_fps:g} fps; ")
+    text = (
+        f"step {t['judged_fps']:g} fps {'passed' if t['passed'] else 'failed'}; "
+        if t["judged_fps"]
+        else f"no step at or above {args.target_fps:g} fps; "
+    )
     text += f"highest step with no loss: {f'{best:g} fps' if best else 'none'}"
     if t["failed_steps"]:
         text += "; failed steps: " + "; ".join(f"{fps} fps ({why})" for fps, why in t["failed_steps"].items())
@@ -244,6 +316,7 @@ def fps_detail(t: dict, args) -> str:
 
 
 # ---- figures -------------------------------------------------------------------------------
+
 
 def plot_fps(ax, results, args) -> None:
     steps = results["fps"]["steps"]
@@ -281,7 +354,6 @@ def plot_cpu(ax, results, args) -> None:
     ax.set_ylabel("CPU, % of one core")
     ax.set_title("CPU per service process during each fps step")
     ax.legend(fontsize=6, ncol=2)
-
 
 
 PANELS = [plot_fps, plot_cpu]

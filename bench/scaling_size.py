@@ -2,6 +2,7 @@
 MB per tuple (1 MB = 10^6 bytes) and MB/s = MB per tuple / median round trip (what
 one client asking back to back would get).
 """
+
 from __future__ import annotations
 
 import os
@@ -21,8 +22,14 @@ def run(args, logs: shared.Logs, rng: random.Random) -> dict:
     for width, height in args.sizes:
         run_args = shared.camera_args(2, args.low_fps, width, height, args.slots)
         with logs.service("size", run_args, args.timeout) as (svc, status):
-            points.append({"width": width, "height": height, "status": status,
-                           "paths": shared.measure_paths(args, svc.endpoint, rng, f"size {width}x{height}")})
+            points.append(
+                {
+                    "width": width,
+                    "height": height,
+                    "status": status,
+                    "paths": shared.measure_paths(args, svc.endpoint, rng, f"size {width}x{height}"),
+                }
+            )
     return {"points": points}
 
 
@@ -36,11 +43,26 @@ def report(result: dict, args) -> None:
     for p in result["points"]:
         for path, m in p["paths"].items():
             s = m["summary"]
-            rows.append([f"{p['width']}x{p['height']}  {path}", s["requests"], s["failed"],
-                         (s["bytes"] or 0) / shared.MB, s["rtt_ms"]["median"], s["rtt_ms"]["p99"],
-                         s["service_ms"]["median"], throughput_mb_s(s)])
-    print(common.table(["size  path", "n", "failed", "MB/tuple", "median ms", "p99 ms", "service ms", "MB/s"],
-                       rows, digits=2, title="size: past tuples of 2 mono8 cameras"))
+            rows.append(
+                [
+                    f"{p['width']}x{p['height']}  {path}",
+                    s["requests"],
+                    s["failed"],
+                    (s["bytes"] or 0) / shared.MB,
+                    s["rtt_ms"]["median"],
+                    s["rtt_ms"]["p99"],
+                    s["service_ms"]["median"],
+                    throughput_mb_s(s),
+                ]
+            )
+    print(
+        common.table(
+            ["size  path", "n", "failed", "MB/tuple", "median ms", "p99 ms", "service ms", "MB/s"],
+            rows,
+            digits=2,
+            title="size: past tuples of 2 mono8 cameras",
+        )
+    )
     print(shared.sanity_line(result["points"]))
 
 
@@ -56,8 +78,13 @@ def plot(ax, results, args) -> None:
         ax.plot(x, y, "o-", label=f"{path} median")
         for p, xi, yi in zip(points, x, y):
             mbs = throughput_mb_s(p["paths"][path]["summary"])
-            ax.annotate(f"{p['width']}x{p['height']}\n{common.fmt(mbs, 0)} MB/s", (xi, yi), fontsize=6,
-                        textcoords="offset points", xytext=(4, -10))
+            ax.annotate(
+                f"{p['width']}x{p['height']}\n{common.fmt(mbs, 0)} MB/s",
+                (xi, yi),
+                fontsize=6,
+                textcoords="offset points",
+                xytext=(4, -10),
+            )
     ax.set_xscale("log")
     ax.set_yscale("log")
     shared.plain_numbers(ax.xaxis, ax.yaxis)

@@ -8,6 +8,7 @@ descriptors; plus the cameras' dropped frames and the request latency of the int
 Prints the first and last samples side by side, and the growth; writes soak.json and
 soak.png into --out.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -32,8 +33,13 @@ def service_processes(root: int) -> dict[int, str]:
     procs = {root: "supervisor"}
     for child in procstat.children(root):
         cmd = " ".join(procstat.cmdline(child.pid))
-        procs[child.pid] = "coordinator" if "workers.coordinator" in cmd else \
-            "camera " + cmd.split('"camera": "')[1].split('"')[0] if '"camera": "' in cmd else "other"
+        procs[child.pid] = (
+            "coordinator"
+            if "workers.coordinator" in cmd
+            else "camera " + cmd.split('"camera": "')[1].split('"')[0]
+            if '"camera": "' in cmd
+            else "other"
+        )
     return procs
 
 
@@ -102,14 +108,17 @@ def main(argv: list[str] | None = None) -> int:
                 while True:
                     status = client.status()
                     n = len(latencies)
-                    samples.append({
-                        "t_s": round(time.monotonic() - start, 1),
-                        "processes": sample(svc.proc.pid),
-                        "dropped": sum(c["frames_dropped"] for c in status["cameras"].values()),
-                        "stored": sum(c["frames_stored"] for c in status["cameras"].values()),
-                        "latency_ms": common.summary(latencies[-200:]) if n else None,
-                        "requests": n, "failures": failures[0],
-                    })
+                    samples.append(
+                        {
+                            "t_s": round(time.monotonic() - start, 1),
+                            "processes": sample(svc.proc.pid),
+                            "dropped": sum(c["frames_dropped"] for c in status["cameras"].values()),
+                            "stored": sum(c["frames_stored"] for c in status["cameras"].values()),
+                            "latency_ms": common.summary(latencies[-200:]) if n else None,
+                            "requests": n,
+                            "failures": failures[0],
+                        }
+                    )
                     bar.update()
                     if time.monotonic() - start >= args.minutes * 60:
                         break
@@ -125,19 +134,29 @@ def main(argv: list[str] | None = None) -> int:
     for role in sorted(last["processes"]):
         a, b = first["processes"].get(role, {}), last["processes"][role]
         rows.append([role, a.get("rss_kib", 0) / 1024, b["rss_kib"] / 1024, a.get("fds", 0), b["fds"]])
-    print(common.table(["process", "RSS MiB start", "RSS MiB end", "fds start", "fds end"], rows,
-                       title=f"soak: {args.minutes:g} min, 4 cameras {args.width}x{args.height} at 20 fps, "
-                             f"2 clients, 3 subscribers (1 stalled); samples at {first['t_s']} s and {last['t_s']} s"))
+    print(
+        common.table(
+            ["process", "RSS MiB start", "RSS MiB end", "fds start", "fds end"],
+            rows,
+            title=f"soak: {args.minutes:g} min, 4 cameras {args.width}x{args.height} at 20 fps, "
+            f"2 clients, 3 subscribers (1 stalled); samples at {first['t_s']} s and {last['t_s']} s",
+        )
+    )
     lat = last["latency_ms"] or {}
-    print(f"requests {last['requests']}, failed {last['failures']}; frames stored {last['stored']}, "
-          f"dropped {last['dropped']}; tuple latency of the last 200: median {common.fmt(lat.get('median'))} ms, "
-          f"p99 {common.fmt(lat.get('p99'))} ms")
+    print(
+        f"requests {last['requests']}, failed {last['failures']}; frames stored {last['stored']}, "
+        f"dropped {last['dropped']}; tuple latency of the last 200: median {common.fmt(lat.get('median'))} ms, "
+        f"p99 {common.fmt(lat.get('p99'))} ms"
+    )
     common.write_json(os.path.join(out, "soak.json"), {"samples": samples, "code": common.code_version()})
     plt = common.pyplot()
     fig, ax = plt.subplots(figsize=(9, 4))
     for role in sorted(last["processes"]):
-        ax.plot([s["t_s"] for s in samples], [s["processes"].get(role, {}).get("rss_kib", 0) / 1024 for s in samples],
-                label=role)
+        ax.plot(
+            [s["t_s"] for s in samples],
+            [s["processes"].get(role, {}).get("rss_kib", 0) / 1024 for s in samples],
+            label=role,
+        )
     ax.set(xlabel="s", ylabel="RSS MiB", title="resident memory over the soak")
     ax.legend(fontsize=7)
     fig.tight_layout()

@@ -10,6 +10,7 @@ consecutive messages (median, min, max, in camera periods).
 Writes stream_rates.json into --out. Exit status 0 if every stream delivered its rate within
 one message over the run, 1 otherwise, 2 on bad flags.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -29,12 +30,17 @@ from fxis_shm.pubsub import Subscriber
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="stream_rates.py", description=__doc__,
-                                formatter_class=common.HelpFormatter)
-    p.add_argument("--fps", type=common.positive_float, nargs="+", default=[15, 20, 25, 30, 100],
-                   help="one camera per frame rate")
-    p.add_argument("--rates", type=common.positive_float, nargs="+", default=[1, 7, 10, 12.5, 30],
-                   help="stream rates to ask for, Hz")
+    p = argparse.ArgumentParser(prog="stream_rates.py", description=__doc__, formatter_class=common.HelpFormatter)
+    p.add_argument(
+        "--fps", type=common.positive_float, nargs="+", default=[15, 20, 25, 30, 100], help="one camera per frame rate"
+    )
+    p.add_argument(
+        "--rates",
+        type=common.positive_float,
+        nargs="+",
+        default=[1, 7, 10, 12.5, 30],
+        help="stream rates to ask for, Hz",
+    )
     p.add_argument("--seconds", type=common.positive_float, default=10.0, help="how long each stream is counted")
     common.add_output_args(p)
     return p
@@ -69,8 +75,7 @@ def main(argv: list[str] | None = None) -> int:
         return args
     out = common.ensure_dir(args.out)
     names = {f"cam{fps:g}".replace(".", "_"): fps for fps in args.fps}
-    run_args = [flag for name, fps in names.items()
-                for flag in common.synthetic_camera_flags([name], fps, 64, 48)]
+    run_args = [flag for name, fps in names.items() for flag in common.synthetic_camera_flags([name], fps, 64, 48)]
     streams = {}  # topic -> (label, asked rate, camera-limited rate, period ns)
     for name, fps in names.items():
         for rate in args.rates:
@@ -78,8 +83,7 @@ def main(argv: list[str] | None = None) -> int:
     slowest = min(names.values())
     for rate in args.rates:
         streams[f"tuples@{rate:g}|"] = (f"tuples of {len(names)} cameras", rate, min(rate, slowest), 1e9 / slowest)
-    with common.service(None, run_args, os.path.join(out, "stream_rates.service.log"),
-                        args.timeout) as (client, info):
+    with common.service(None, run_args, os.path.join(out, "stream_rates.service.log"), args.timeout) as (client, info):
         common.wait_until_streaming(client)
         times = measure(info["pub"], list(streams), args.seconds, args.timeout)
     rows, ok, results = [], True, {}
@@ -90,12 +94,24 @@ def main(argv: list[str] | None = None) -> int:
         good = abs(len(ts) - allowed * args.seconds) <= 1
         ok &= good
         results[topic] = {"asked_hz": rate, "allowed_hz": allowed, "messages": len(ts), "delivered_hz": delivered}
-        rows.append([label, f"{rate:g}", f"{allowed:g}", f"{delivered:.2f}",
-                     *(f"{f(gaps):.2f}" if gaps else "-" for f in (statistics.median, min, max)),
-                     "ok" if good else "OFF"])
+        rows.append(
+            [
+                label,
+                f"{rate:g}",
+                f"{allowed:g}",
+                f"{delivered:.2f}",
+                *(f"{f(gaps):.2f}" if gaps else "-" for f in (statistics.median, min, max)),
+                "ok" if good else "OFF",
+            ]
+        )
     print(f"stream_rates: {common.code_line(common.code_version())}; {args.seconds:g} s per stream")
-    print(common.table(["stream", "asked Hz", "allowed Hz", "delivered Hz", "gap med", "gap min", "gap max", ""],
-                       rows, title="gaps in camera periods"))
+    print(
+        common.table(
+            ["stream", "asked Hz", "allowed Hz", "delivered Hz", "gap med", "gap min", "gap max", ""],
+            rows,
+            title="gaps in camera periods",
+        )
+    )
     common.write_json(os.path.join(out, "stream_rates.json"), {"results": results, "code": common.code_version()})
     return common.EXIT_OK if ok else common.EXIT_FAILED
 

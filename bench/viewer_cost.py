@@ -14,6 +14,7 @@ Also counts the frames each stage's viewers received, and the frames the cameras
 and dropped, to show the viewers do not slow the cameras. Prints a table, writes
 viewer_cost.json into --out. Exit status 0, 1 if a stage failed, 2 on bad flags.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -41,25 +42,34 @@ FOXGLOVE_MESSAGE_DATA = 0x01  # the opcode of a binary message carrying a channe
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="viewer_cost.py", description=__doc__,
-                                formatter_class=common.HelpFormatter)
+    p = argparse.ArgumentParser(prog="viewer_cost.py", description=__doc__, formatter_class=common.HelpFormatter)
     p.add_argument("--cameras", type=common.positive_int, default=2, help="synthetic cameras")
     p.add_argument("--camera-fps", type=common.positive_float, default=20.0, help="their frame rate")
     p.add_argument("--width", type=common.positive_int, default=1360, help="their width (px)")
     p.add_argument("--height", type=common.positive_int, default=1024, help="their height (px)")
     p.add_argument("--fps", type=common.positive_float, default=10.0, help="rate each viewer asks for")
     p.add_argument("--preview-width", type=common.positive_int, default=640, help="width of the pictures viewers get")
-    p.add_argument("--viewers", type=common.positive_int, nargs="+", default=[1, 3],
-                   help="numbers of MJPEG viewers, one stage each")
+    p.add_argument(
+        "--viewers",
+        type=common.positive_int,
+        nargs="+",
+        default=[1, 3],
+        help="numbers of MJPEG viewers, one stage each",
+    )
     p.add_argument("--seconds", type=common.positive_float, default=20.0, help="measuring time per stage")
-    p.add_argument("--warmup", type=common.nonnegative_float, default=2.0,
-                   help="seconds between starting a stage's viewers and measuring")
+    p.add_argument(
+        "--warmup",
+        type=common.nonnegative_float,
+        default=2.0,
+        help="seconds between starting a stage's viewers and measuring",
+    )
     p.add_argument("--no-foxglove", action="store_true", help="leave out the Foxglove stage")
     common.add_output_args(p)
     return p
 
 
 # ---- viewers (threads of this process) ----
+
 
 class MjpegViewer(threading.Thread):
     """Reads one MJPEG stream as fast as it comes, counting its pictures."""
@@ -145,6 +155,7 @@ def foxglove_available() -> str | None:
 
 # ---- measuring ----
 
+
 def processes(status: dict) -> dict[str, int]:
     """Label -> pid of every process of the service, and of this script."""
     sup = status["supervisor"]
@@ -176,7 +187,8 @@ def measure_stage(client, viewers: list, seconds: float, warmup: float) -> dict:
     elapsed = t1 - t0
     cpu = {n: None if cpu0[n] is None or cpu1[n] is None else 100.0 * (cpu1[n] - cpu0[n]) / elapsed for n in procs}
     return {
-        "seconds": elapsed, "cpu_percent": cpu,
+        "seconds": elapsed,
+        "cpu_percent": cpu,
         "viewer_pictures_per_s": [(b - a) / elapsed for a, b in zip(pics0, pics1)],
         "viewer_errors": [v.error for v in viewers if v.error],
         "camera_fps": {n: (cams1[n][0] - cams0[n][0]) / elapsed for n in cams1 if n in cams0},
@@ -187,8 +199,9 @@ def measure_stage(client, viewers: list, seconds: float, warmup: float) -> dict:
 def run_stage(name: str, run_args: list[str], make_viewers, args, out: str, http: str = "off") -> dict:
     """Launch a service, start the stage's viewers, measure, stop everything."""
     stop = threading.Event()
-    with common.service(None, run_args, os.path.join(out, f"viewer_cost.{name.split()[0]}.log"),
-                        args.timeout, http=http) as (client, _):
+    with common.service(
+        None, run_args, os.path.join(out, f"viewer_cost.{name.split()[0]}.log"), args.timeout, http=http
+    ) as (client, _):
         common.wait_until_streaming(client)
         if http != "off":  # the dashboard starts after the coordinator answers
             common.wait_for_http(f"http://{http}/dashboard.json", timeout=20)
@@ -211,15 +224,28 @@ def stages(args, out: str) -> list[dict]:
     results.append(run_stage("idle", run_args, lambda stop: [], args, out, http))
     for n in args.viewers:
         urls = [f"http://{http}/cameras/{c}/stream.mjpg?fps={args.fps:g}&width={args.preview_width}" for c in cams]
-        results.append(run_stage(f"mjpeg x{n}", run_args,
-                                 lambda stop, n=n, urls=urls: [MjpegViewer(u, stop) for _ in range(n) for u in urls],
-                                 args, out, http))
+        results.append(
+            run_stage(
+                f"mjpeg x{n}",
+                run_args,
+                lambda stop, n=n, urls=urls: [MjpegViewer(u, stop) for _ in range(n) for u in urls],
+                args,
+                out,
+                http,
+            )
+        )
     why_not = "left out (--no-foxglove)" if args.no_foxglove else foxglove_available()
     if why_not is None:
         fox = f"127.0.0.1:{free_tcp_port()}"
-        results.append(run_stage("foxglove", run_args + ["--foxglove", fox, "--foxglove-rate", f"{args.fps:g}"],
-                                 lambda stop: [FoxgloveViewer(f"ws://{fox}", stop, f"/{c}/image") for c in cams],
-                                 args, out))
+        results.append(
+            run_stage(
+                "foxglove",
+                run_args + ["--foxglove", fox, "--foxglove-rate", f"{args.fps:g}"],
+                lambda stop: [FoxgloveViewer(f"ws://{fox}", stop, f"/{c}/image") for c in cams],
+                args,
+                out,
+            )
+        )
     else:
         results.append({"stage": "foxglove", "skipped": why_not})
     return results
@@ -236,14 +262,29 @@ def report(results: list[dict], args) -> None:
         cpu = r["cpu_percent"]
         cameras = sum(v for n, v in cpu.items() if n.startswith("camera:") and v is not None)
         pictures = r["viewer_pictures_per_s"]
-        rows.append([r["stage"]] + [cpu.get(n) for n in names] + [
-            cameras, min(r["camera_fps"].values(), default=None), sum(r["frames_dropped"].values()),
-            (sum(pictures) / len(pictures)) if pictures else None])
-    print(f"viewer_cost: {common.code_line(common.code_version())}; {args.cameras} camera(s) "
-          f"{args.width}x{args.height} at {args.camera_fps:g} fps; viewers at {args.fps:g} fps, "
-          f"{args.preview_width} px wide; {args.seconds:g} s per stage")
-    print(common.table(["stage"] + names + ["cameras", "cam fps min", "dropped", "pics/s per stream"], rows,
-                       title="CPU % of one core per process", digits=1))
+        rows.append(
+            [r["stage"]]
+            + [cpu.get(n) for n in names]
+            + [
+                cameras,
+                min(r["camera_fps"].values(), default=None),
+                sum(r["frames_dropped"].values()),
+                (sum(pictures) / len(pictures)) if pictures else None,
+            ]
+        )
+    print(
+        f"viewer_cost: {common.code_line(common.code_version())}; {args.cameras} camera(s) "
+        f"{args.width}x{args.height} at {args.camera_fps:g} fps; viewers at {args.fps:g} fps, "
+        f"{args.preview_width} px wide; {args.seconds:g} s per stage"
+    )
+    print(
+        common.table(
+            ["stage"] + names + ["cameras", "cam fps min", "dropped", "pics/s per stream"],
+            rows,
+            title="CPU % of one core per process",
+            digits=1,
+        )
+    )
     for r in results:
         if r.get("skipped"):
             print(f"  {r['stage']}: skipped: {r['skipped']}")
@@ -259,9 +300,14 @@ def main(argv: list[str] | None = None) -> int:
     out = common.ensure_dir(args.out)
     results = stages(args, out)
     report(results, args)
-    common.write_json(os.path.join(out, "viewer_cost.json"), {
-        "settings": {k: v for k, v in vars(args).items() if k != "out"},
-        "host": common.host_info(), "stages": results})
+    common.write_json(
+        os.path.join(out, "viewer_cost.json"),
+        {
+            "settings": {k: v for k, v in vars(args).items() if k != "out"},
+            "host": common.host_info(),
+            "stages": results,
+        },
+    )
     failed = any(r.get("viewer_errors") for r in results)
     return common.EXIT_FAILED if failed else common.EXIT_OK
 

@@ -1,7 +1,8 @@
 """A client written from docs/protocol.md alone: pyzmq + json + numpy, no fxis_shm.
 
-    python examples/raw_zmq_client.py [tcp://127.0.0.1:5555]
+python examples/raw_zmq_client.py [tcp://127.0.0.1:5555]
 """
+
 import itertools
 import json
 import sys
@@ -66,20 +67,26 @@ def main(endpoint):
     at = time.monotonic_ns() + offset + 200_000_000  # t* = 200 ms from now, on the service's clock
     for reply, images in (c.call("tuple", extra_wait_s=0.2, at=at), c.call("tuple", sync="independent")):
         t = reply["timing"]
-        print(f"tuple {reply['sync']}: skew {reply['skew_ns'] / 1e6:.3f} ms, "
-              f"tau_w {(t['waited'] - t['received']) / 1e6:.3f} ms, "
-              f"overhead {(t['sent'] - t['waited']) / 1e6:.3f} ms")
+        print(
+            f"tuple {reply['sync']}: skew {reply['skew_ns'] / 1e6:.3f} ms, "
+            f"tau_w {(t['waited'] - t['received']) / 1e6:.3f} ms, "
+            f"overhead {(t['sent'] - t['waited']) / 1e6:.3f} ms"
+        )
         for meta in reply["frames"]:
             img = images[meta["camera"]]
             stamp = int.from_bytes(img[0].tobytes()[:8], "little")  # synthetic cameras stamp row 0
             synthetic = status["cameras"][meta["camera"]]["kind"] == "synthetic"
-            print(f"  {meta['camera']}: frame {meta['frame_id']} eps "
-                  f"{(reply['t_request'] - meta['t_capture']) / 1e6:+.3f} ms {img.shape} {img.dtype}"
-                  + (f" stamp ok={stamp == meta['frame_id']}" if synthetic else ""))
+            print(
+                f"  {meta['camera']}: frame {meta['frame_id']} eps "
+                f"{(reply['t_request'] - meta['t_capture']) / 1e6:+.3f} ms {img.shape} {img.dtype}"
+                + (f" stamp ok={stamp == meta['frame_id']}" if synthetic else "")
+            )
     name = next(iter(status["cameras"]))
     reply, images = c.call("image", camera=name, wait="none")
-    print(f"image {name}: frame {reply['frames'][0]['frame_id']} {images[name].shape}; latest:",
-          {m["camera"]: m["frame_id"] for m in c.call("latest")[0]["frames"]})
+    print(
+        f"image {name}: frame {reply['frames'][0]['frame_id']} {images[name].shape}; latest:",
+        {m["camera"]: m["frame_id"] for m in c.call("latest")[0]["frames"]},
+    )
     try:
         c.call("image", camera="no-such-camera")
     except RuntimeError as exc:

@@ -7,6 +7,7 @@ statistics, and a metadata record ``fxis`` naming the clock the stamps are in). 
 writer keeps the counts ``metadata.yaml`` needs and writes it when the bag is closed,
 so a bag is valid as soon as ``close`` returns (also after Ctrl-C).
 """
+
 from __future__ import annotations
 
 import json
@@ -30,8 +31,9 @@ def require_mcap(what: str):
         import mcap_ros2.decoder
         import mcap_ros2.writer
     except ImportError as exc:
-        raise ConfigError(f"{what} needs the optional extra 'record' (the mcap and mcap-ros2-support "
-                          f"libraries; {exc}): {EXTRA_HINT}") from None
+        raise ConfigError(
+            f"{what} needs the optional extra 'record' (the mcap and mcap-ros2-support libraries; {exc}): {EXTRA_HINT}"
+        ) from None
     return mcap, mcap_ros2
 
 
@@ -52,8 +54,9 @@ class BagWriter:
     def __post_init__(self):
         mcap, mcap_ros2 = require_mcap("recording")
         if os.path.exists(self.folder) and (not os.path.isdir(self.folder) or os.listdir(self.folder)):
-            raise ConfigError(f"--out {self.folder}: exists and is not an empty folder "
-                              "(a bag is a new folder; choose another name)")
+            raise ConfigError(
+                f"--out {self.folder}: exists and is not an empty folder (a bag is a new folder; choose another name)"
+            )
         os.makedirs(self.folder, exist_ok=True)
         self.file_name = os.path.basename(os.path.normpath(self.folder)) + "_0.mcap"
         self._stream = open(os.path.join(self.folder, self.file_name), "wb")
@@ -73,8 +76,9 @@ class BagWriter:
         if schema is None:
             schema = self._schemas[msgtype] = self._writer.register_msgdef(msgtype, rosmsgs.DEFINITIONS[msgtype])
         counted = self.topics.setdefault(topic, _TopicCount(msgtype))
-        self._writer.write_message(topic, schema, message, log_time=log_time, publish_time=log_time,
-                                   sequence=counted.count)
+        self._writer.write_message(
+            topic, schema, message, log_time=log_time, publish_time=log_time, sequence=counted.count
+        )
         counted.count += 1
         self.bytes_written += size
         self.first_time = log_time if self.first_time is None else min(self.first_time, log_time)
@@ -102,15 +106,29 @@ class BagWriter:
             "starting_time": {"nanoseconds_since_epoch": start},
             "message_count": total,
             "topics_with_message_count": [
-                {"topic_metadata": {"name": topic, "type": t.msgtype, "serialization_format": "cdr",
-                                    "offered_qos_profiles": "", "type_description_hash": ""},
-                 "message_count": t.count}
-                for topic, t in self.topics.items()],
+                {
+                    "topic_metadata": {
+                        "name": topic,
+                        "type": t.msgtype,
+                        "serialization_format": "cdr",
+                        "offered_qos_profiles": "",
+                        "type_description_hash": "",
+                    },
+                    "message_count": t.count,
+                }
+                for topic, t in self.topics.items()
+            ],
             "compression_format": "",
             "compression_mode": "",
             "relative_file_paths": [self.file_name],
-            "files": [{"path": self.file_name, "starting_time": {"nanoseconds_since_epoch": start},
-                       "duration": {"nanoseconds": duration}, "message_count": total}],
+            "files": [
+                {
+                    "path": self.file_name,
+                    "starting_time": {"nanoseconds_since_epoch": start},
+                    "duration": {"nanoseconds": duration},
+                    "message_count": total,
+                }
+            ],
             "custom_data": {k: str(v) for k, v in self.custom_data.items()},
             "ros_distro": self.ros_distro,
         }
@@ -142,6 +160,7 @@ def to_yaml(value, indent: int = 0) -> str:
 
 # ---- reading (the ``bag`` camera) ---------------------------------------------------------------
 
+
 def mcap_file(path: str) -> str:
     """The .mcap file of a bag folder (named in its metadata.yaml), or ``path`` if it is one."""
     if os.path.isfile(path):
@@ -152,8 +171,9 @@ def mcap_file(path: str) -> str:
     if not names:
         raise ConfigError(f"the folder {path!r} holds no .mcap file (is it a bag recorded with MCAP storage?)")
     if len(names) > 1:
-        raise ConfigError(f"the bag {path!r} is split into {len(names)} files; replay reads one: "
-                          f"give path= one of {', '.join(names)}")
+        raise ConfigError(
+            f"the bag {path!r} is split into {len(names)} files; replay reads one: give path= one of {', '.join(names)}"
+        )
     return os.path.join(path, names[0])
 
 
@@ -173,10 +193,10 @@ class BagReader:
         if summary is None or summary.statistics is None:
             raise ConfigError(f"{self.path!r} has no summary (was its recording cut off?)")
         schemas = summary.schemas
-        self.topics = {ch.topic: schemas[ch.schema_id].name if ch.schema_id in schemas else ""
-                       for ch in summary.channels.values()}
-        self.counts = {summary.channels[cid].topic: n
-                       for cid, n in summary.statistics.channel_message_counts.items()}
+        self.topics = {
+            ch.topic: schemas[ch.schema_id].name if ch.schema_id in schemas else "" for ch in summary.channels.values()
+        }
+        self.counts = {summary.channels[cid].topic: n for cid, n in summary.statistics.channel_message_counts.items()}
         self.start_time = summary.statistics.message_start_time
         self.end_time = summary.statistics.message_end_time
         self.metadata = self._metadata()

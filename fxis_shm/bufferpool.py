@@ -14,6 +14,7 @@ of it was dropped) or when the holder gives it back (``release``, behind
 ``Frame.release()`` and ``with frame:``), whichever is first. After ``release``
 the holder must not use the array: the pool may fill it with another frame.
 """
+
 from __future__ import annotations
 
 import math
@@ -42,8 +43,12 @@ class _Lease:
     def __init__(self, memory: np.ndarray, shape: tuple[int, ...], dtype: str):
         self.memory = memory
         self.end = weakref.finalize(self, _no_op)  # alive while the lease lasts; end() ends it
-        self.__array_interface__ = {"data": (memory.ctypes.data, False), "shape": tuple(shape),
-                                    "typestr": np.dtype(dtype).str, "version": 3}
+        self.__array_interface__ = {
+            "data": (memory.ctypes.data, False),
+            "shape": tuple(shape),
+            "typestr": np.dtype(dtype).str,
+            "version": 3,
+        }
 
 
 class BufferPool:

@@ -1,5 +1,6 @@
 """The coordinator's view of one camera: its ring (opened, and re-opened when
 the worker replaces it), whether its worker is alive, and its status."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -116,9 +117,7 @@ class CameraHandle:
             return info
         snap = ring.snapshot()
         period = ring.field("period_ns")
-        newest_stored = (
-            int(snap.meta[snap.slot(len(snap.timeline) - 1)]["t_stored"]) if len(snap.timeline) else None
-        )
+        newest_stored = int(snap.meta[snap.slot(len(snap.timeline) - 1)]["t_stored"]) if len(snap.timeline) else None
         info.update(
             shape=list(ring.layout.shape),
             dtype=ring.layout.dtype,
@@ -147,9 +146,13 @@ class CameraHandle:
             return info
         snap = self.reader.snapshot()
         picked = snap.meta[[snap.slot(i) for i in range(len(snap.timeline))]]
-        info.update(period_ns=self.period_ns, delay_ns=max(0, self.reader.field("delay_ns")),
-                    slots=self.reader.slots, triggered=self.triggered,
-                    frames=np.stack([picked[k].astype(np.int64) for k in FRAME_FIELDS], axis=1).tolist())
+        info.update(
+            period_ns=self.period_ns,
+            delay_ns=max(0, self.reader.field("delay_ns")),
+            slots=self.reader.slots,
+            triggered=self.triggered,
+            frames=np.stack([picked[k].astype(np.int64) for k in FRAME_FIELDS], axis=1).tolist(),
+        )
         return info
 
     def close(self) -> None:
@@ -159,4 +162,3 @@ class CameraHandle:
         if self.reader is not None:
             self.reader.close()
             self.reader = None
-

@@ -6,6 +6,7 @@ A spec names the worker module that runs it, so the supervisor starts children
 by name and never imports them. Adding a role is a ChildSpec subclass here plus
 its module under workers/ (which calls ``workers._child.child_main``).
 """
+
 from __future__ import annotations
 
 import dataclasses
@@ -50,13 +51,18 @@ class ChildSpec:
         if role != cls.ROLE:
             raise SpecError(f"a {cls.ROLE} process was given a spec for {role!r}")
         if version != cls.VERSION:
-            raise SpecError(f"{cls.ROLE} spec version {version!r}, but this {cls.ROLE} reads version "
-                            f"{cls.VERSION}: the supervisor and its workers come from different installs")
+            raise SpecError(
+                f"{cls.ROLE} spec version {version!r}, but this {cls.ROLE} reads version "
+                f"{cls.VERSION}: the supervisor and its workers come from different installs"
+            )
         hints = typing.get_type_hints(cls)
         fields = {f.name: f for f in dataclasses.fields(cls)}
         unknown = sorted(set(data) - set(fields))
-        missing = sorted(name for name, f in fields.items() if name not in data
-                         and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING)
+        missing = sorted(
+            name
+            for name, f in fields.items()
+            if name not in data and f.default is dataclasses.MISSING and f.default_factory is dataclasses.MISSING
+        )
         if unknown or missing:
             raise SpecError(f"{cls.ROLE} spec: unknown field(s) {unknown}, missing field(s) {missing}")
         for name, value in data.items():
@@ -144,4 +150,5 @@ class FoxgloveSpec(ViewerSpec):
 
 
 ROLES: dict[str, type[ChildSpec]] = {
-    cls.ROLE: cls for cls in (CameraWorkerSpec, CoordinatorSpec, DashboardSpec, FoxgloveSpec)}
+    cls.ROLE: cls for cls in (CameraWorkerSpec, CoordinatorSpec, DashboardSpec, FoxgloveSpec)
+}

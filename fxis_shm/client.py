@@ -15,6 +15,7 @@ keeps an estimate of each service's clock against it (fxis_shm.clockmap, kept fr
 in the background by fxis_shm.clocktracker), exactly 0 where the service provably
 reads the same clock.
 """
+
 from __future__ import annotations
 
 import itertools
@@ -59,8 +60,9 @@ def checked_encoding(encoding: str, quality: int | None) -> tuple[str, int | Non
     return encoding, quality
 
 
-def connected_socket(context: zmq.Context | None, kind: int, endpoint: str,
-                     keys: ClientKeys | None = None) -> zmq.Socket:
+def connected_socket(
+    context: zmq.Context | None, kind: int, endpoint: str, keys: ClientKeys | None = None
+) -> zmq.Socket:
     """A client socket: LINGER 0 (closing never blocks), CURVE if keys are given."""
     sock = (context or zmq.Context.instance()).socket(kind)
     sock.setsockopt(zmq.LINGER, 0)
@@ -92,13 +94,22 @@ class Client(SocketOwner):
         """``Client([endpoint_a, endpoint_b])``: one client over several services (MultiClient)."""
         if cls is Client and isinstance(endpoint, (list, tuple)):
             from .multiclient import MultiClient  # imports this module
+
             return MultiClient(endpoint, **kwargs)
         return super().__new__(cls)
 
-    def __init__(self, endpoint: str = DEFAULT_ENDPOINT, timeout: float = 2.0,
-                 context: zmq.Context | None = None, keys: ClientKeys | None = None,
-                 local: str = "auto", *, clock: Callable[[], int] | str | None = None,
-                 encoding: str = codec.RAW, quality: int | None = None):
+    def __init__(
+        self,
+        endpoint: str = DEFAULT_ENDPOINT,
+        timeout: float = 2.0,
+        context: zmq.Context | None = None,
+        keys: ClientKeys | None = None,
+        local: str = "auto",
+        *,
+        clock: Callable[[], int] | str | None = None,
+        encoding: str = codec.RAW,
+        quality: int | None = None,
+    ):
         """``keys``: for a service with CurveZMQ, its public key and this client's pair
         (``ClientKeys.from_files("server.key", "me.key_secret")``).
 
@@ -152,9 +163,18 @@ class Client(SocketOwner):
 
     # ---- operations ----
 
-    def image(self, camera: str, *, at: int | None = None, wait: str | None = None,
-              timeout: float | None = None, copy: bool = True, encoding: str | None = None,
-              quality: int | None = None, timeout_ms: float | None = None) -> Frame:
+    def image(
+        self,
+        camera: str,
+        *,
+        at: int | None = None,
+        wait: str | None = None,
+        timeout: float | None = None,
+        copy: bool = True,
+        encoding: str | None = None,
+        quality: int | None = None,
+        timeout_ms: float | None = None,
+    ) -> Frame:
         """The frame of ``camera`` nearest to ``at`` (ns of the caller's clock; default: the
         moment of this call).
 
@@ -162,33 +182,76 @@ class Client(SocketOwner):
         ``copy=False`` (local path only): the image is a read-only view of the ring slot,
         with no copy at all; check ``frame.still_valid()`` after using it.
         ``encoding``/``quality``: as the client's, for this request."""
-        return frames_of(*self._request("image", timeout, timeout_ms, copy, encoding, quality,
-                                        camera=camera, at=at, wait=wait))[0]
+        return frames_of(
+            *self._request("image", timeout, timeout_ms, copy, encoding, quality, camera=camera, at=at, wait=wait)
+        )[0]
 
-    def tuple(self, cameras: list[str] | None = None, *, at: int | None = None,
-              sync: str | None = None, wait: str | None = None, max_skew_ms: float | None = None,
-              timeout: float | None = None, partial: bool = False, copy: bool = True,
-              encoding: str | None = None, quality: int | None = None,
-              timeout_ms: float | None = None) -> FrameTuple:
+    def tuple(
+        self,
+        cameras: list[str] | None = None,
+        *,
+        at: int | None = None,
+        sync: str | None = None,
+        wait: str | None = None,
+        max_skew_ms: float | None = None,
+        timeout: float | None = None,
+        partial: bool = False,
+        copy: bool = True,
+        encoding: str | None = None,
+        quality: int | None = None,
+        timeout_ms: float | None = None,
+    ) -> FrameTuple:
         """One frame per camera (default: all), nearest to ``at`` (ns of the caller's clock;
         default: the moment of this call) and to each other. With ``partial``, cameras
         that are down are left out (``.missing`` names them) instead of failing the request
         with CameraDown."""
-        return tuple_of(*self._request("tuple", timeout, timeout_ms, copy, encoding, quality, cameras=cameras,
-                                       at=at, sync=sync, wait=wait, max_skew_ms=max_skew_ms,
-                                       partial=partial or None))
+        return tuple_of(
+            *self._request(
+                "tuple",
+                timeout,
+                timeout_ms,
+                copy,
+                encoding,
+                quality,
+                cameras=cameras,
+                at=at,
+                sync=sync,
+                wait=wait,
+                max_skew_ms=max_skew_ms,
+                partial=partial or None,
+            )
+        )
 
-    def latest(self, cameras: list[str] | None = None, *, copy: bool = True, encoding: str | None = None,
-               quality: int | None = None) -> FrameTuple:
+    def latest(
+        self,
+        cameras: list[str] | None = None,
+        *,
+        copy: bool = True,
+        encoding: str | None = None,
+        quality: int | None = None,
+    ) -> FrameTuple:
         """The newest stored frame of each camera, without waiting."""
         return tuple_of(*self._request("latest", None, None, copy, encoding, quality, cameras=cameras))
 
-    def sequence(self, kind: str, *, camera: str | None = None, cameras: list[str] | None = None,
-                 count: int | None = None, direction: str = "before",
-                 interval_ms: float | None = None, start: int | None = None, end: int | None = None,
-                 at: int | None = None, sync: str | None = None, timeout: float | None = None,
-                 copy: bool = True, encoding: str | None = None, quality: int | None = None,
-                 timeout_ms: float | None = None) -> list:
+    def sequence(
+        self,
+        kind: str,
+        *,
+        camera: str | None = None,
+        cameras: list[str] | None = None,
+        count: int | None = None,
+        direction: str = "before",
+        interval_ms: float | None = None,
+        start: int | None = None,
+        end: int | None = None,
+        at: int | None = None,
+        sync: str | None = None,
+        timeout: float | None = None,
+        copy: bool = True,
+        encoding: str | None = None,
+        quality: int | None = None,
+        timeout_ms: float | None = None,
+    ) -> list:
         """Several frames of one ``camera`` (a list of Frame) or tuples of ``cameras``
         (default all; a list of FrameTuple):
 
@@ -197,8 +260,23 @@ class Client(SocketOwner):
         - ``kind="range"``: every frame captured in [start, end] (ns of the caller's clock).
         """
         header, images, check = self._request(
-            "sequence", timeout, timeout_ms, copy, encoding, quality, camera=camera, cameras=cameras, kind=kind,
-            count=count, direction=direction, interval_ms=interval_ms, start=start, end=end, at=at, sync=sync)
+            "sequence",
+            timeout,
+            timeout_ms,
+            copy,
+            encoding,
+            quality,
+            camera=camera,
+            cameras=cameras,
+            kind=kind,
+            count=count,
+            direction=direction,
+            interval_ms=interval_ms,
+            start=start,
+            end=end,
+            at=at,
+            sync=sync,
+        )
         return sequence_of(header, images, check, single=camera is not None)
 
     @property
@@ -214,7 +292,10 @@ class Client(SocketOwner):
             if self._mapping is None:
                 self._tracker = ClockTracker(
                     lambda: connected_socket(self._context, zmq.DEALER, self.endpoint, self._keys),
-                    self.clock, self.endpoint, self.timeout)
+                    self.clock,
+                    self.endpoint,
+                    self.timeout,
+                )
         return self._mapping or self._tracker.estimate()  # type: ignore[union-attr]
 
     def _longest_period_s(self) -> float:
@@ -244,8 +325,16 @@ class Client(SocketOwner):
         assert self._identity is not None
         return self._identity
 
-    def _request(self, op: str, timeout: float | None, timeout_ms: float | None, copy: bool,
-                 encoding: str | None, quality: int | None, **fields) -> tuple[dict, list, Callable | None]:
+    def _request(
+        self,
+        op: str,
+        timeout: float | None,
+        timeout_ms: float | None,
+        copy: bool,
+        encoding: str | None,
+        quality: int | None,
+        **fields,
+    ) -> tuple[dict, list, Callable | None]:
         """A frame request with the caller's times moved into the service's clock, and the
         reply's moved back. Without ``at``, t* is the moment of the call (the request's
         travel time does not count)."""
@@ -308,9 +397,11 @@ class Client(SocketOwner):
                 check = None if copy else (lambda metas=header["frames"]: all(map(self._rings.still_valid, metas)))
                 return header, images, check
             else:
-                raise Overwritten(f"the frames of {op!r} were overwritten in the rings {_LOCAL_ATTEMPTS} "
-                                  "times before this client could copy them (is it starved of CPU, "
-                                  "or are the rings too short?)")
+                raise Overwritten(
+                    f"the frames of {op!r} were overwritten in the rings {_LOCAL_ATTEMPTS} "
+                    "times before this client could copy them (is it starved of CPU, "
+                    "or are the rings too short?)"
+                )
         if self.local == "require":
             raise LocalPathUnavailable(f"the local fast path cannot be used: {self.local_unavailable}")
         return self._network_reply(*self._call(op, extra_wait, **fields))
@@ -377,13 +468,14 @@ class Client(SocketOwner):
         deadline = time.monotonic() + self.timeout + extra_wait
         # A DEALER with no connected peer (service down, or our keys refused) would
         # block in send: wait for it to become writable within our own deadline.
-        unsendable = RequestTimeout(f"could not send {op!r} to {self.endpoint} within "
-                                    f"{self.timeout:.3g} s (is the service running, and are our keys accepted?)")
+        unsendable = RequestTimeout(
+            f"could not send {op!r} to {self.endpoint} within "
+            f"{self.timeout:.3g} s (is the service running, and are our keys accepted?)"
+        )
         if not self._sock.poll(self.timeout * 1000, zmq.POLLOUT):
             raise unsendable
         try:
-            self._sock.send_multipart([b""] + protocol.encode_request(op, id=request_id, **fields),
-                                      flags=zmq.NOBLOCK)
+            self._sock.send_multipart([b""] + protocol.encode_request(op, id=request_id, **fields), flags=zmq.NOBLOCK)
         except zmq.Again:  # the peer went away between the poll and the send
             raise unsendable from None
         while True:
@@ -405,7 +497,6 @@ class Client(SocketOwner):
             return header, images
 
 
-
 def _timeout_ms(timeout: float | None, timeout_ms: float | None) -> float | None:
     """A request's own timeout for the wire (ms), from ``timeout`` in seconds as everywhere in
     this API; ``timeout_ms``, the old name, still works but warns."""
@@ -421,8 +512,14 @@ def _last_needed(op: str, fields: dict) -> int | None:
     if op == "sequence" and fields["kind"] == "range":
         return fields["end"]
     at = fields.get("at")
-    if op == "sequence" and fields["kind"] == "interval" and at is not None and fields["count"] \
-            and fields["interval_ms"] and fields["interval_ms"] > 0:
+    if (
+        op == "sequence"
+        and fields["kind"] == "interval"
+        and at is not None
+        and fields["count"]
+        and fields["interval_ms"]
+        and fields["interval_ms"] > 0
+    ):
         return at + int((fields["count"] - 1) * fields["interval_ms"] * 1e6)
     return at
 
@@ -437,8 +534,9 @@ def fixed_mapping(caller_clock: str | None, service: dict) -> ClockEstimate | No
     same_kernel = service.get("boot_id") is not None and service.get("boot_id") == boot_id()
     if caller_clock == "monotonic":
         namespace = time_namespace()
-        return IDENTITY if same_kernel and namespace is not None and service.get("time_namespace") == namespace \
-            else None
+        return (
+            IDENTITY if same_kernel and namespace is not None and service.get("time_namespace") == namespace else None
+        )
     return ClockEstimate(0, method=SAME_CLOCK if same_kernel else SHARED)
 
 

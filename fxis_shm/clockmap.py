@@ -12,6 +12,7 @@ line through them gives the drift (crystals differ by tens of ppm: 1.5 ms in 30 
 
 Pure: exchanges in, an estimate out; no clock is read here.
 """
+
 from __future__ import annotations
 
 import statistics
@@ -62,8 +63,13 @@ class ClockEstimate:
         return self.at_ns + round((t_service - self.offset_ns - self.at_ns) / (1 + self.drift_ppm * 1e-6))
 
     def as_dict(self) -> dict[str, object]:
-        return {"method": self.method, "offset_ns": self.offset_ns, "drift_ppm": round(self.drift_ppm, 3),
-                "uncertainty_ns": self.uncertainty_ns, "samples": self.samples}
+        return {
+            "method": self.method,
+            "offset_ns": self.offset_ns,
+            "drift_ppm": round(self.drift_ppm, 3),
+            "uncertainty_ns": self.uncertainty_ns,
+            "samples": self.samples,
+        }
 
 
 IDENTITY = ClockEstimate(0)
@@ -77,8 +83,14 @@ class ClockEstimator:
     ``slack``: a burst is good when its round trip is at most ``slack`` times the shortest
     in the window plus ``slack_ns`` (its queueing delay then hardly moves the offset)."""
 
-    def __init__(self, window_ns: int = 120_000_000_000, drift_span_ns: int = 10_000_000_000,
-                 slack: float = 1.5, slack_ns: int = 20_000, max_bursts: int = 512):
+    def __init__(
+        self,
+        window_ns: int = 120_000_000_000,
+        drift_span_ns: int = 10_000_000_000,
+        slack: float = 1.5,
+        slack_ns: int = 20_000,
+        max_bursts: int = 512,
+    ):
         self.window_ns, self.drift_span_ns = window_ns, drift_span_ns
         self.slack, self.slack_ns = slack, slack_ns
         self._best: deque[Exchange] = deque(maxlen=max_bursts)  # the shortest exchange of each burst

@@ -17,6 +17,7 @@
 
 Pure: the clocks are read by the caller and passed in (``PtpClock`` gets a function).
 """
+
 from __future__ import annotations
 
 import collections
@@ -59,8 +60,9 @@ class DeviceClockFit:
             span = (late[0] - early[0]) * self.tick_ns
             self.drift = (late[1] - early[1]) / span if span > 0 else 1.0
         # offset through the least delayed frame of the window
-        self.offset = min(h - self.drift * (d - d0) * self.tick_ns for d, h in self._pairs) \
-            - self.drift * d0 * self.tick_ns
+        self.offset = (
+            min(h - self.drift * (d - d0) * self.tick_ns for d, h in self._pairs) - self.drift * d0 * self.tick_ns
+        )
 
     def to_host(self, device_ticks: int) -> int:
         if not self._pairs:

@@ -5,6 +5,7 @@ The first estimate is made on demand (one burst of ``time`` exchanges, a few ms 
 after that a thread refreshes it every ``refresh_s`` and requests read whatever estimate
 is current. A service that stops answering leaves the last estimate in place.
 """
+
 from __future__ import annotations
 
 import threading
@@ -21,8 +22,14 @@ FIRST_BURST = 16
 
 
 class ClockTracker:
-    def __init__(self, connect: Callable[[], zmq.Socket], clock: Callable[[], int], endpoint: str,
-                 timeout: float = 2.0, refresh_s: float = 1.0):
+    def __init__(
+        self,
+        connect: Callable[[], zmq.Socket],
+        clock: Callable[[], int],
+        endpoint: str,
+        timeout: float = 2.0,
+        refresh_s: float = 1.0,
+    ):
         self._connect, self.clock, self.endpoint = connect, clock, endpoint
         self.timeout, self.refresh_s = timeout, refresh_s
         self._estimator = ClockEstimator()
@@ -91,9 +98,11 @@ class ClockTracker:
         try:
             return Exchange(sent, int(header["received"]), int(header["now"]), back)
         except (KeyError, TypeError, ValueError):
-            raise ProtocolError(f"{self.endpoint} answered 'time' without its receive and send times "
-                                "(an older service?)") from None
+            raise ProtocolError(
+                f"{self.endpoint} answered 'time' without its receive and send times (an older service?)"
+            ) from None
 
     def _silent(self) -> RequestTimeout:
-        return RequestTimeout(f"{self.endpoint} did not answer 'time' within {self.timeout:.3g} s "
-                              "while this client estimated its clock")
+        return RequestTimeout(
+            f"{self.endpoint} did not answer 'time' within {self.timeout:.3g} s while this client estimated its clock"
+        )

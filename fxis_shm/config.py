@@ -2,6 +2,7 @@
 
 Every problem raises ConfigError with a message that names the setting.
 """
+
 from __future__ import annotations
 
 import os
@@ -61,8 +62,7 @@ class ServiceConfig:
         """Endpoints reachable from other hosts."""
         from .security import is_loopback
 
-        return [e for e in (self.endpoint, self.pub, self.events, *self.viewer_urls.values())
-                if not is_loopback(e)]
+        return [e for e in (self.endpoint, self.pub, self.events, *self.viewer_urls.values()) if not is_loopback(e)]
 
     @property
     def http_url(self) -> str | None:
@@ -134,8 +134,9 @@ def check_foxglove_rate(value: Any, setting: str = "foxglove_rate") -> float:
     except ValueError:
         rate = None
     if rate is None or not 0 < rate <= MAX_FOXGLOVE_RATE_HZ:  # also refuses nan
-        raise ConfigError(f"{setting} must be a number of pictures a second, > 0 and at most "
-                          f"{MAX_FOXGLOVE_RATE_HZ:g}, got {value!r}")
+        raise ConfigError(
+            f"{setting} must be a number of pictures a second, > 0 and at most {MAX_FOXGLOVE_RATE_HZ:g}, got {value!r}"
+        )
     return rate
 
 
@@ -144,8 +145,10 @@ def _check_foxglove_sdk() -> None:
     try:
         import foxglove  # noqa: F401
     except ImportError as exc:
-        raise ConfigError(f"foxglove needs the foxglove-sdk package ({exc}): install the "
-                          "\"foxglove\" extra, pip install 'fxis-shm[foxglove]'") from None
+        raise ConfigError(
+            f"foxglove needs the foxglove-sdk package ({exc}): install the "
+            "\"foxglove\" extra, pip install 'fxis-shm[foxglove]'"
+        ) from None
 
 
 def _check_int(setting: str, value: Any, minimum: int) -> int:
@@ -173,9 +176,24 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
     """
     file_values = dict(file_values or {})
     flags = {k: v for k, v in (flags or {}).items() if v not in (None, [], ())}
-    known = {"name", "endpoint", "pub", "events", "slots", "cameras", "restart_limit", "log_level",
-             "curve_secret", "curve_clients", "insecure_bind", "clock", "http", "foxglove", "foxglove_rate",
-             *SERVICE_SETTINGS}
+    known = {
+        "name",
+        "endpoint",
+        "pub",
+        "events",
+        "slots",
+        "cameras",
+        "restart_limit",
+        "log_level",
+        "curve_secret",
+        "curve_clients",
+        "insecure_bind",
+        "clock",
+        "http",
+        "foxglove",
+        "foxglove_rate",
+        *SERVICE_SETTINGS,
+    }
     unknown = sorted(set(file_values) - known)
     if unknown:
         raise ConfigError(f"unknown setting(s) {unknown} in the config file; known: {sorted(known)}")
@@ -185,7 +203,7 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
         raise ConfigError("cameras must be a table of [cameras.NAME] sections")
     for name, raw in file_cameras.items():
         if not isinstance(raw, dict) or "kind" not in raw:
-            raise ConfigError(f"[cameras.{name}] needs kind = \"...\"")
+            raise ConfigError(f'[cameras.{name}] needs kind = "..."')
         raw = dict(raw)
         cameras[name] = _camera(name, raw.pop("kind"), raw)
     for flag in flags.pop("cameras", []):
@@ -265,8 +283,10 @@ def _setting(key: str, kind: type, value: Any):
 def _security(config: ServiceConfig, values: dict) -> ServiceConfig:
     secret, clients = values.get("curve_secret"), values.get("curve_clients")
     if bool(secret) != bool(clients):
-        raise ConfigError("curve_secret and curve_clients go together: the service's secret key "
-                          "file and the folder of the client public keys it accepts")
+        raise ConfigError(
+            "curve_secret and curve_clients go together: the service's secret key "
+            "file and the folder of the client public keys it accepts"
+        )
     if secret:
         from .security import load_pair
 
@@ -287,11 +307,13 @@ def _security(config: ServiceConfig, values: dict) -> ServiceConfig:
             raise ConfigError(
                 f"{setting} {url.split('://', 1)[1]} can be reached from other hosts, and "
                 f"{what[setting]} has no authentication (CurveZMQ does not cover it): bind it to "
-                f"127.0.0.1, turn it off ({setting} = \"off\"), or give insecure_bind to do it anyway")
+                f'127.0.0.1, turn it off ({setting} = "off"), or give insecure_bind to do it anyway'
+            )
     zmq_exposed = [e for e in config.exposed if e not in config.viewer_urls.values()]
     if zmq_exposed and not secret and not insecure:
         raise ConfigError(
             f"{', '.join(zmq_exposed)} can be reached from other hosts, and images would travel "
             "unauthenticated: give curve_secret and curve_clients (see fxis keys), or insecure_bind "
-            "to do it anyway")
+            "to do it anyway"
+        )
     return config

@@ -8,6 +8,7 @@ copy (fxis_shm.copyout) -> reply. A request that must wait stays in the engine
 and is evaluated again when frames arrive or its wake-up time passes, so it
 never delays other clients.
 """
+
 from __future__ import annotations
 
 import json
@@ -81,9 +82,7 @@ class Coordinator:
         self.curve = None
         if spec.curve_secret:
             self.curve = (load_pair(spec.curve_secret), spec.curve_clients)
-        self.cameras = {
-            name: CameraHandle(self.service, name, kind) for name, kind in spec.cameras.items()
-        }
+        self.cameras = {name: CameraHandle(self.service, name, kind) for name, kind in spec.cameras.items()}
         self.engine = RequestEngine(self.cameras, spec.settings)
         self.settings = self.engine.settings
         self.copyout = CopyOut(self.cameras, self.settings)
@@ -119,8 +118,13 @@ class Coordinator:
                 if sock is not None:
                     poller.register(sock, zmq.POLLIN)
             on_ready()
-            log.info("serving %s on %s, publishing on %s, events on %s", sorted(self.cameras),
-                     self.endpoint, self.pub_endpoint, self.events_endpoint or "-")
+            log.info(
+                "serving %s on %s, publishing on %s, events on %s",
+                sorted(self.cameras),
+                self.endpoint,
+                self.pub_endpoint,
+                self.events_endpoint or "-",
+            )
             while not stop.is_set():
                 events = dict(poller.poll(self._poll_timeout_ms()))
                 updated = watch.drain() if watch.pull in events else set()
@@ -206,8 +210,9 @@ class Coordinator:
         except ProtocolError as exc:
             topic = _readable_field(frames[-1], "reply_topic", (str,)) if frames else None
             if topic and not topic.startswith(protocol.RESERVED_TOPICS):
-                self._publish(topic, protocol.encode_error(
-                    _readable_field(frames[-1], "id", (int, str)), exc.code, exc.message))
+                self._publish(
+                    topic, protocol.encode_error(_readable_field(frames[-1], "id", (int, str)), exc.code, exc.message)
+                )
             else:
                 self.events_dropped += 1
             log.warning("dropped a malformed request event: %s", exc.message)
@@ -215,8 +220,9 @@ class Coordinator:
         topic = request["reply_topic"]
         self._start(request, lambda reply: self._publish(topic, reply), t_received)
 
-    def _start(self, request: dict, respond: Callable[[list], None], t_received: int,
-               client: bytes | None = None) -> None:
+    def _start(
+        self, request: dict, respond: Callable[[list], None], t_received: int, client: bytes | None = None
+    ) -> None:
         op = request["op"]
         try:
             if op not in FRAME_OPS:
@@ -298,11 +304,14 @@ class Coordinator:
         names = request["cameras"] or list(self.cameras)
         unknown = [n for n in names if n not in self.cameras]
         if unknown:
-            raise ProtocolError(f"unknown camera(s) {unknown}; known: {sorted(self.cameras)}",
-                                Code.UNKNOWN_CAMERA)
+            raise ProtocolError(f"unknown camera(s) {unknown}; known: {sorted(self.cameras)}", Code.UNKNOWN_CAMERA)
         now = timebase.now()
-        return {"op": "frames", "now": now, "columns": list(FRAME_FIELDS),
-                "cameras": {n: self.cameras[n].timeline(now) for n in names}}
+        return {
+            "op": "frames",
+            "now": now,
+            "columns": list(FRAME_FIELDS),
+            "cameras": {n: self.cameras[n].timeline(now) for n in names},
+        }
 
     # ---- replies ----
 

@@ -1,6 +1,7 @@
 """The coordinator's access to the rings: snapshots of the cameras that are up, and
 copies of chosen frames out of them, into pooled buffers handed to ZeroMQ (or, for a
 client on this kernel, where each frame is, so that it copies the frame itself)."""
+
 from __future__ import annotations
 
 from . import protocol, timebase
@@ -41,8 +42,9 @@ class CopyOut:
 
     def select_frames(self, mode: str, timelines: dict[str, Timeline], t: int) -> Selection:
         periods = {c: self.period(c) for c in timelines}
-        return select(mode, timelines, t, radius_for(periods),
-                      tolerance_for(periods, self.settings["sync_tolerance_ms"]))
+        return select(
+            mode, timelines, t, radius_for(periods), tolerance_for(periods, self.settings["sync_tolerance_ms"])
+        )
 
     def reply(self, reply: Reply, how: str | None = None) -> tuple[dict, list]:
         """The body and images of the reply ``reply`` plans; raises Overwritten if a chosen
@@ -52,13 +54,16 @@ class CopyOut:
         p, plan = reply.pending, reply.plan
         searched = timebase.now()
         how = how or (REFS if p.local else COPY)
-        frames, images, position = self.copy(reply.snapshots, plan.picks, how,
-                                             p.request.get("encoding") or RAW, p.request.get("quality"))
+        frames, images, position = self.copy(
+            reply.snapshots, plan.picks, how, p.request.get("encoding") or RAW, p.request.get("quality")
+        )
         body = {**plan.body, "frames": frames}
         if plan.groups is not None:
             body["groups"] = [[position[pick] for pick in group] for group in plan.groups]
         body["timing"] = {
-            "searched": searched, "received": p.t_received, "waited": reply.t_decided,
+            "searched": searched,
+            "received": p.t_received,
+            "waited": reply.t_decided,
             "copied": timebase.now(),
             "cameras": {c: {"waited": p.ready_at.get(c, reply.t_decided)} for c in p.cameras},
         }
@@ -66,8 +71,14 @@ class CopyOut:
             body["delivery"] = protocol.LOCAL
         return body, images
 
-    def copy(self, snaps: dict, picks: list[tuple[str, int]], how: str = COPY,
-             encoding: str = RAW, quality: int | None = None) -> tuple[list, list, dict]:
+    def copy(
+        self,
+        snaps: dict,
+        picks: list[tuple[str, int]],
+        how: str = COPY,
+        encoding: str = RAW,
+        quality: int | None = None,
+    ) -> tuple[list, list, dict]:
         """Copy each distinct (camera, snapshot index) once: metadata, images (in ``encoding``),
         and each pick's position. With REFS nothing is copied: the metadata says where each frame is."""
         frames, images, position = [], [], {}
@@ -75,8 +86,11 @@ class CopyOut:
             if (cam, i) in position:
                 continue
             position[(cam, i)] = len(frames)
-            frames.append(self._reference(cam, snaps[cam], i) if how == REFS else
-                          self._copied(cam, snaps[cam], i, len(images), images, how == VIEWS))
+            frames.append(
+                self._reference(cam, snaps[cam], i)
+                if how == REFS
+                else self._copied(cam, snaps[cam], i, len(images), images, how == VIEWS)
+            )
             if encoding != RAW and how == COPY:
                 frames[-1], images[-1] = self.encode(frames[-1], images[-1], encoding, quality)
         return frames, images, position
@@ -94,8 +108,9 @@ class CopyOut:
             raise
         images.append(image)
         meta = snap.frame_meta(i)
-        return protocol.frame_meta(cam, meta.frame_id, meta.t_capture, meta.t_stored,
-                                   meta.generation, image, buffer, meta.t_available)
+        return protocol.frame_meta(
+            cam, meta.frame_id, meta.t_capture, meta.t_stored, meta.generation, image, buffer, meta.t_available
+        )
 
     def encode(self, meta: dict, image, encoding: str, quality: int | None) -> tuple[dict, bytes]:
         """A copied frame (checked whole) in ``encoding``, encoded once for every reply and stream."""
@@ -107,6 +122,17 @@ class CopyOut:
         slot, seq = snap.slot(i), snap.seq(i)
         reader.check_slot(slot, seq, "before")  # already gone: choose again rather than send it
         meta = snap.frame_meta(i)
-        return protocol.frame_ref(cam, meta.frame_id, meta.t_capture, meta.t_stored, meta.generation,
-                                  reader.layout.shape, reader.layout.dtype, meta.t_available,
-                                  ring=reader.name, instance=reader.instance, slot=slot, seq=seq)
+        return protocol.frame_ref(
+            cam,
+            meta.frame_id,
+            meta.t_capture,
+            meta.t_stored,
+            meta.generation,
+            reader.layout.shape,
+            reader.layout.dtype,
+            meta.t_available,
+            ring=reader.name,
+            instance=reader.instance,
+            slot=slot,
+            seq=seq,
+        )

@@ -12,6 +12,7 @@ It runs in a process of its own (workers/dashboard.py) and reads through fxis_sh
 newest frame when it is ready for one. Bad parameters get 400, unknown cameras 404, a camera
 down or a silent service 503, each with a message in plain text.
 """
+
 from __future__ import annotations
 
 import asyncio
@@ -64,9 +65,10 @@ async def _status(request: web.Request) -> web.Response:
 
 async def _dashboard(request: web.Request) -> web.Response:
     feed = request.app[FEED]
-    return web.json_response({**feed.view, "endpoint": feed.endpoint, "configured": feed.cameras,
-                              "previews_encoded": feed.cache.encoded},
-                             headers={"Cache-Control": "no-store"})
+    return web.json_response(
+        {**feed.view, "endpoint": feed.endpoint, "configured": feed.cameras, "previews_encoded": feed.cache.encoded},
+        headers={"Cache-Control": "no-store"},
+    )
 
 
 async def _latest(request: web.Request) -> web.Response:
@@ -76,8 +78,11 @@ async def _latest(request: web.Request) -> web.Response:
     except FxisError as exc:
         return _error(exc)
     _, generation, frame_id, _ = key
-    return web.Response(body=data, content_type="image/jpeg", headers={
-        "Cache-Control": "no-store", FRAME_HEADER: f"{generation}:{frame_id}"})
+    return web.Response(
+        body=data,
+        content_type="image/jpeg",
+        headers={"Cache-Control": "no-store", FRAME_HEADER: f"{generation}:{frame_id}"},
+    )
 
 
 async def _stream(request: web.Request) -> web.StreamResponse:
@@ -88,9 +93,9 @@ async def _stream(request: web.Request) -> web.StreamResponse:
         feed.check_camera(camera)
     except FxisError as exc:
         return _error(exc)
-    response = web.StreamResponse(headers={
-        "Content-Type": f"multipart/x-mixed-replace; boundary={BOUNDARY}",
-        "Cache-Control": "no-store"})
+    response = web.StreamResponse(
+        headers={"Content-Type": f"multipart/x-mixed-replace; boundary={BOUNDARY}", "Cache-Control": "no-store"}
+    )
     await response.prepare(request)
     loop = asyncio.get_running_loop()
     sent_key, due = None, loop.time()
@@ -105,8 +110,11 @@ async def _stream(request: web.Request) -> web.StreamResponse:
             if key != sent_key:
                 # write() waits while the viewer's socket buffer is full: a slow viewer holds up
                 # only its own stream, which then skips to the newest frame
-                await response.write(f"--{BOUNDARY}\r\nContent-Type: image/jpeg\r\n"
-                                     f"Content-Length: {len(data)}\r\n\r\n".encode() + data + b"\r\n")
+                await response.write(
+                    f"--{BOUNDARY}\r\nContent-Type: image/jpeg\r\nContent-Length: {len(data)}\r\n\r\n".encode()
+                    + data
+                    + b"\r\n"
+                )
                 sent_key = key
             due = max(due + period, loop.time())  # behind schedule: drop, never catch up
             await asyncio.sleep(due - loop.time())
@@ -118,8 +126,11 @@ async def _tuple_zip(request: web.Request) -> web.Response:
         data, name = await request.app[FEED].tuple_zip()
     except FxisError as exc:
         return _error(exc)
-    return web.Response(body=data, content_type="application/zip", headers={
-        "Content-Disposition": f'attachment; filename="{name}"', "Cache-Control": "no-store"})
+    return web.Response(
+        body=data,
+        content_type="application/zip",
+        headers={"Content-Disposition": f'attachment; filename="{name}"', "Cache-Control": "no-store"},
+    )
 
 
 async def _sample_forever(app: web.Application) -> None:

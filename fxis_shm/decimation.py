@@ -11,6 +11,7 @@ Frames are taken one at a time, as they arrive: frame t is the nearest one to ev
 schedule time from the middle between it and the frame before, up to half a period
 after it (where the next frame becomes nearer). Pure: frame times in, decisions out.
 """
+
 from __future__ import annotations
 
 import math

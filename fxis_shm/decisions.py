@@ -8,6 +8,7 @@ each camera, and answers with the selection that settled the wait.
 Pure: snapshots, camera states, settings and ``now`` in; a ``Wait`` or a
 ``Plan`` out, or ``Reject`` raised (the request ends with that error).
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
@@ -82,8 +83,9 @@ class Request(Protocol):
     def op(self) -> str: ...
 
 
-def decide(p: Request, now: int, snaps: Mapping[str, Snapshot], states: Mapping[str, CameraState],
-           ctx: Context) -> Wait | Plan:
+def decide(
+    p: Request, now: int, snaps: Mapping[str, Snapshot], states: Mapping[str, CameraState], ctx: Context
+) -> Wait | Plan:
     if p.op == "latest":
         check_not_empty(snaps)
         return Plan({"op": "latest"}, [(c, len(snaps[c].timeline) - 1) for c in p.cameras])
@@ -97,11 +99,13 @@ def _chooser(mode: str, ctx: Context) -> Callable[..., Selection]:
 
     def choose(timelines: dict[str, Timeline], t: int, tolerance_ns: int = tolerance) -> Selection:
         return select(mode, timelines, t, radius, tolerance_ns)
+
     return choose
 
 
-def _near(p: Request, now: int, snaps: Mapping[str, Snapshot], states: Mapping[str, CameraState],
-          ctx: Context) -> Wait | Plan:
+def _near(
+    p: Request, now: int, snaps: Mapping[str, Snapshot], states: Mapping[str, CameraState], ctx: Context
+) -> Wait | Plan:
     """image and tuple: one frame per camera near t*."""
     mode = INDEPENDENT if p.op == "image" else ctx.sync
     choose = _chooser(mode, ctx)
@@ -112,8 +116,7 @@ def _near(p: Request, now: int, snaps: Mapping[str, Snapshot], states: Mapping[s
     if p.triggered:  # the triggered frames, and the others' frames around the trigger
         free = {c: s for c, s in states.items() if c not in p.triggered}
         waits = waiting_for(AUTO, p.t_star, now, free)
-        waits.update(waiting_for(NEXT, p.t_star, now, {c: states[c] for c in p.triggered},
-                                 t_arrival=p.t_trigger or 0))
+        waits.update(waiting_for(NEXT, p.t_star, now, {c: states[c] for c in p.triggered}, t_arrival=p.t_trigger or 0))
         waits.update({c: None for c, u in usable.items() if u is None})
     elif ctx.wait == NEXT:
         waits = waiting_for(NEXT, p.t_star, now, states, t_arrival=p.t_received)
@@ -124,8 +127,15 @@ def _near(p: Request, now: int, snaps: Mapping[str, Snapshot], states: Mapping[s
         if not waits:
             stored = choose(timelines, p.t_star)
             waits = waiting_for_selection(
-                p.t_star, now, timelines, states, lambda tls: choose(tls, p.t_star),
-                ctx.radius_ns, ctx.tolerance_ns, stored=stored)
+                p.t_star,
+                now,
+                timelines,
+                states,
+                lambda tls: choose(tls, p.t_star),
+                ctx.radius_ns,
+                ctx.tolerance_ns,
+                stored=stored,
+            )
     else:
         waits = {}
     if waits:
@@ -142,9 +152,11 @@ def _near(p: Request, now: int, snaps: Mapping[str, Snapshot], states: Mapping[s
         if sel.best_skew_ns <= limit:  # the least-skew tuple meets the limit
             sel = choose(timelines, p.t_star, 0)
         if sel.skew_ns > limit:
-            raise Reject(Code.SKEW_EXCEEDED,
-                         f"the best tuple near t* has a skew of {sel.best_skew_ns / 1e6:.3f} ms, "
-                         f"more than max_skew_ms={ctx.max_skew_ms}")
+            raise Reject(
+                Code.SKEW_EXCEEDED,
+                f"the best tuple near t* has a skew of {sel.best_skew_ns / 1e6:.3f} ms, "
+                f"more than max_skew_ms={ctx.max_skew_ms}",
+            )
     picks = [(c, first[c] + i) for c, i in sel.index.items()]  # back to snapshot indices
     body: dict[str, Any] = {"op": p.op, "t_request": p.t_star}
     if p.op == "tuple":
@@ -168,8 +180,9 @@ def _usable(p: Request, cam: str, snap: Snapshot) -> tuple[Timeline, int] | None
     return Timeline(tl.times, tl.physical(first), len(tl) - first), first
 
 
-def _sequence(p: Request, now: int, snaps: Mapping[str, Snapshot], states: Mapping[str, CameraState],
-              ctx: Context) -> Wait | Plan:
+def _sequence(
+    p: Request, now: int, snaps: Mapping[str, Snapshot], states: Mapping[str, CameraState], ctx: Context
+) -> Wait | Plan:
     spec = sequence_spec(p.request, p.t_star)
     waits: dict[str, int | None] = {}
     for cam, state in states.items():
@@ -212,9 +225,13 @@ def _sequence(p: Request, now: int, snaps: Mapping[str, Snapshot], states: Mappi
 
 def sequence_spec(request: dict[str, Any], t_star: int) -> sequences.SequenceSpec:
     return sequences.SequenceSpec(
-        kind=request["kind"], t_star=t_star, count=request["count"] or 1,
-        direction=request["direction"], interval_ns=int((request["interval_ms"] or 0) * 1e6),
-        start=request["start"] or 0, end=request["end"] or 0,
+        kind=request["kind"],
+        t_star=t_star,
+        count=request["count"] or 1,
+        direction=request["direction"],
+        interval_ns=int((request["interval_ms"] or 0) * 1e6),
+        start=request["start"] or 0,
+        end=request["end"] or 0,
     )
 
 
@@ -227,10 +244,12 @@ def check_not_empty(snaps: Mapping[str, Snapshot]) -> None:
 def check_history(cam: str, snap: Snapshot, t_earliest: int, t_received: int, period_ns: int) -> None:
     oldest = snap.timeline.at(0)
     if t_earliest < oldest - period_ns:
-        raise Reject(Code.OUT_OF_RANGE,
-                     f"asks for frames {(oldest - t_earliest) / 1e6:.1f} ms older than the oldest "
-                     f"frame of camera {cam!r}; its ring holds {len(snap.timeline)} frames, the "
-                     f"oldest from {(t_received - oldest) / 1e6:.1f} ms before the request")
+        raise Reject(
+            Code.OUT_OF_RANGE,
+            f"asks for frames {(oldest - t_earliest) / 1e6:.1f} ms older than the oldest "
+            f"frame of camera {cam!r}; its ring holds {len(snap.timeline)} frames, the "
+            f"oldest from {(t_received - oldest) / 1e6:.1f} ms before the request",
+        )
 
 
 def check_size(n_frames: int, limit: int) -> None:

@@ -1,6 +1,7 @@
 """The defaults of the service and of its clients, written once: the config,
 the command line's help, the client and the subscriber refer to these (the
 request defaults a config may change are engine.REQUEST_DEFAULTS)."""
+
 from __future__ import annotations
 
 SERVICE = "fxis"  # names the shared memory, the lock and the key files

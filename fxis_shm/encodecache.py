@@ -3,6 +3,7 @@ small cache of encoded frames keyed by camera, generation, frame id and encoding
 (ROS's image_transport does the same: one compressed variant per frame, not per
 subscriber.) A frame leaves the cache after ``size`` newer encodings; by then the ring
 has usually moved on too."""
+
 from __future__ import annotations
 
 from collections import OrderedDict

@@ -5,6 +5,7 @@ product gives the same bytes for the same frame.
 Pure: arrays in, bytes out (and back). ``raw`` is the frame's bytes as they are; ``jpeg`` takes
 mono8 and bgr8 frames; ``png`` is lossless and also takes 16-bit mono.
 """
+
 from __future__ import annotations
 
 import cv2
@@ -62,6 +63,5 @@ def decode(data: bytes | memoryview, encoding: str, shape: tuple[int, ...] | Non
         if shape is None and dtype is None:
             return image
     if shape is None or image.size != int(np.prod(shape)) or image.dtype.name != dtype:
-        raise ProtocolError(
-            f"a {encoding} frame decoded to {image.shape} {image.dtype.name}, expected {shape} {dtype}")
+        raise ProtocolError(f"a {encoding} frame decoded to {image.shape} {image.dtype.name}, expected {shape} {dtype}")
     return image.reshape(shape)

@@ -16,6 +16,7 @@ at each camera, and the selection that decides it is the one the reply carries.
 Pure: cameras are read through the ``CameraSource`` protocol, and the clock is an
 integer passed in.
 """
+
 from __future__ import annotations
 
 import logging
@@ -127,8 +128,9 @@ class RequestEngine:
 
     # ---- what happens ----
 
-    def submit(self, request: dict[str, Any], now: int, ticket: Any, client: Any = None,
-               local: bool = False) -> list[Action]:
+    def submit(
+        self, request: dict[str, Any], now: int, ticket: Any, client: Any = None, local: bool = False
+    ) -> list[Action]:
         """A request for frames (op image, tuple, latest or sequence) arrived at ``now``."""
         p = Pending(ticket, request, [], now, now, client=client, local=local)
         actions: list[Action] = []
@@ -160,8 +162,7 @@ class RequestEngine:
         """A chosen slot was overwritten while ``reply`` was being copied: plan again."""
         p = reply.pending
         if p.attempts >= COPY_ATTEMPTS:
-            return [Failure(p, Code.INTERNAL,
-                            f"frames were overwritten {COPY_ATTEMPTS} times while being copied")]
+            return [Failure(p, Code.INTERNAL, f"frames were overwritten {COPY_ATTEMPTS} times while being copied")]
         actions: list[Action] = []
         if not self._evaluate(p, now, actions):
             self.pending.append(p)
@@ -201,8 +202,10 @@ class RequestEngine:
         latest = self._latest_needed(p)
         horizon_ms = self.settings["horizon_ms"]
         if latest - now > horizon_ms * 1e6:
-            raise Reject(Code.OUT_OF_RANGE, f"the request needs frames {(latest - now) / 1e6:.1f} ms "
-                                            f"in the future; the horizon is {horizon_ms} ms")
+            raise Reject(
+                Code.OUT_OF_RANGE,
+                f"the request needs frames {(latest - now) / 1e6:.1f} ms in the future; the horizon is {horizon_ms} ms",
+            )
         if p.op == "sequence":
             self._check_sequence(p)
         p.deadline = max(now, latest) + int(self.setting(request, "timeout_ms") * 1e6)
@@ -220,8 +223,7 @@ class RequestEngine:
             names = request.get("cameras") or list(self.cameras)
         unknown = [n for n in names if n not in self.cameras]
         if unknown:
-            raise Reject(Code.UNKNOWN_CAMERA,
-                         f"unknown camera(s) {unknown}; this service has {sorted(self.cameras)}")
+            raise Reject(Code.UNKNOWN_CAMERA, f"unknown camera(s) {unknown}; this service has {sorted(self.cameras)}")
         return names
 
     def _latest_needed(self, p: Pending) -> int:
@@ -238,9 +240,11 @@ class RequestEngine:
         slots = min((s for s in (self.cameras[c].slots for c in p.cameras) if s), default=None)
         if r["kind"] == sequences.CONSECUTIVE and slots is not None and r["count"] >= slots:
             # the oldest slot is always the next one overwritten: one fewer is guaranteed
-            raise Reject(Code.OUT_OF_RANGE,
-                         f"asks for {r['count']} consecutive frames; rings of {slots} slots "
-                         f"hold at most {slots - 1} consecutive frames that can always be read")
+            raise Reject(
+                Code.OUT_OF_RANGE,
+                f"asks for {r['count']} consecutive frames; rings of {slots} slots "
+                f"hold at most {slots - 1} consecutive frames that can always be read",
+            )
 
     # ---- evaluation ----
 

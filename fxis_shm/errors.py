@@ -4,6 +4,7 @@ Every error a caller can see is an ``FxisError``. Errors that the service
 reports travel as ``{"code": ..., "message": ...}`` and are raised on the
 client as ``ServiceError`` (or the subclass registered for that code).
 """
+
 from __future__ import annotations
 
 
@@ -23,9 +24,7 @@ class Code:
     BUSY = "BUSY"  # too many pending requests
     INTERNAL = "INTERNAL"
 
-    ALL = frozenset(
-        v for k, v in vars().items() if k.isupper() and isinstance(v, str)
-    )
+    ALL = frozenset(v for k, v in vars().items() if k.isupper() and isinstance(v, str))
 
 
 class FxisError(Exception):

@@ -11,6 +11,7 @@ It runs in a process of its own (workers/foxglove_server.py) reading through fxi
 frame is read from the ring without a copy and copied once into the message. The rate is a
 setting (--foxglove-rate) and a parameter the app can change live (``rate_hz``).
 """
+
 from __future__ import annotations
 
 import asyncio
@@ -35,8 +36,12 @@ RATE_PARAMETER = "rate_hz"
 STATUS_TOPIC = "/fxis/status"
 BACKLOG_MESSAGES = 16  # per client: a slow one loses its oldest pictures; memory stays bounded
 TICK_S = 0.05  # the longest the loop sleeps: how soon a stop or a new rate is seen
-ENCODINGS = {(np.dtype(np.uint8), 1): "mono8", (np.dtype(np.uint8), 3): "bgr8",
-             (np.dtype(np.uint8), 4): "bgra8", (np.dtype(np.uint16), 1): "mono16"}
+ENCODINGS = {
+    (np.dtype(np.uint8), 1): "mono8",
+    (np.dtype(np.uint8), 3): "bgr8",
+    (np.dtype(np.uint8), 4): "bgra8",
+    (np.dtype(np.uint16), 1): "mono16",
+}
 
 
 def image_topic(camera: str) -> str:
@@ -59,10 +64,15 @@ def raw_pixels(image: np.ndarray) -> tuple[np.ndarray, str]:
 def raw_image(camera: str, image: np.ndarray, t_capture_ns: int) -> RawImage:
     pixels, encoding = raw_pixels(image)
     height, width = pixels.shape[:2]
-    return RawImage(timestamp=Timestamp(*divmod(t_capture_ns, 1_000_000_000)), frame_id=camera,
-                    width=width, height=height, encoding=encoding,
-                    step=width * pixels.itemsize * (1 if pixels.ndim == 2 else pixels.shape[2]),
-                    data=pixels.tobytes())
+    return RawImage(
+        timestamp=Timestamp(*divmod(t_capture_ns, 1_000_000_000)),
+        frame_id=camera,
+        width=width,
+        height=height,
+        encoding=encoding,
+        step=width * pixels.itemsize * (1 if pixels.ndim == 2 else pixels.shape[2]),
+        data=pixels.tobytes(),
+    )
 
 
 class RateParameter(ServerListener):
@@ -94,8 +104,13 @@ class RateParameter(ServerListener):
         return [self.parameter()]
 
 
-async def publish(feed: LiveFeed, cameras: dict[str, RawImageChannel], status: foxglove.Channel,
-                  rate: RateParameter, stop: threading.Event) -> None:
+async def publish(
+    feed: LiveFeed,
+    cameras: dict[str, RawImageChannel],
+    status: foxglove.Channel,
+    rate: RateParameter,
+    stop: threading.Event,
+) -> None:
     """Until ``stop``: each subscribed camera's newest frame not yet sent, at ``rate.hz``;
     the status twice a second while someone subscribes to it."""
     loop = asyncio.get_running_loop()
@@ -114,8 +129,7 @@ async def publish(feed: LiveFeed, cameras: dict[str, RawImageChannel], status: f
         await asyncio.sleep(max(0.0, min(pictures_due, loop.time() + TICK_S) - loop.time()))
 
 
-async def _send_newest(feed: LiveFeed, camera: str, channel: RawImageChannel,
-                       sent: dict[str, tuple[int, int]]) -> None:
+async def _send_newest(feed: LiveFeed, camera: str, channel: RawImageChannel, sent: dict[str, tuple[int, int]]) -> None:
     def make(frame):
         key = (frame.generation, frame.frame_id)
         return key, None if key == sent.get(camera) else raw_image(camera, frame.image, frame.t_capture)
@@ -130,21 +144,27 @@ async def _send_newest(feed: LiveFeed, camera: str, channel: RawImageChannel,
         sent[camera] = key
 
 
-def serve(feed: LiveFeed, host: str, port: int, rate_hz: float, stop: threading.Event, on_ready,
-          name: str = "fxis") -> None:
+def serve(
+    feed: LiveFeed, host: str, port: int, rate_hz: float, stop: threading.Event, on_ready, name: str = "fxis"
+) -> None:
     """Serve until ``stop`` is set; ``on_ready`` once listening (a port in use raises)."""
     context = foxglove.Context()  # this server's channels only, not the SDK's global ones
     cameras = {camera: RawImageChannel(image_topic(camera), context=context) for camera in feed.cameras}
     status = foxglove.Channel(STATUS_TOPIC, context=context)
     rate = RateParameter(rate_hz)
-    server = foxglove.start_server(name=name, host=host, port=port,
-                                   capabilities=[Capability.Parameters], server_listener=rate,
-                                   context=context, message_backlog_size=BACKLOG_MESSAGES)
+    server = foxglove.start_server(
+        name=name,
+        host=host,
+        port=port,
+        capabilities=[Capability.Parameters],
+        server_listener=rate,
+        context=context,
+        message_backlog_size=BACKLOG_MESSAGES,
+    )
     rate.server = server
     try:
         on_ready()
-        log.info("Foxglove WebSocket server on ws://%s:%d (%g pictures/s per camera)",
-                 host, server.port, rate.hz)
+        log.info("Foxglove WebSocket server on ws://%s:%d (%g pictures/s per camera)", host, server.port, rate.hz)
         asyncio.run(publish(feed, cameras, status, rate, stop))
     finally:
         server.stop()

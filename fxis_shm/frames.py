@@ -5,6 +5,7 @@ Times in a Frame are in the caller's clock (``Client(clock=...)``; on the servic
 host and clock, the service's CLOCK_MONOTONIC): ``in_caller_clock`` moves a reply's times
 there and keeps the service's own as ``service_t_*``.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable, Iterator, Mapping
@@ -80,8 +81,14 @@ class ReleasedImage:
 class FrameTuple(Mapping):
     """One frame per camera, chosen together for the request time ``t_request``."""
 
-    def __init__(self, frames: dict[str, Frame], t_request: int | None, timing: dict,
-                 missing: list[str] = (), service_t_request: int | None = None):
+    def __init__(
+        self,
+        frames: dict[str, Frame],
+        t_request: int | None,
+        timing: dict,
+        missing: list[str] = (),
+        service_t_request: int | None = None,
+    ):
         self._frames = frames
         self.t_request = t_request  # t*, in the caller's clock
         self.service_t_request = t_request if service_t_request is None else service_t_request
@@ -129,14 +136,27 @@ class FrameTuple(Mapping):
 
 # ---- decoding replies and stream messages into Frames ----
 
+
 def frames_of(header: dict, images: list[np.ndarray], still_valid: Callable | None = None) -> list[Frame]:
     timing, path = header.get("timing", {}), header.get("path", NETWORK)
     try:
         return [
-            Frame(img, m["camera"], m["frame_id"], m["t_capture"], m["t_stored"],
-                  m["generation"], timing, m.get("t_available"), path, still_valid, m.get("encoding", "raw"),
-                  m.get("service_t_capture", m["t_capture"]), m.get("service_t_stored", m["t_stored"]),
-                  m.get("service_t_available", m.get("t_available")))
+            Frame(
+                img,
+                m["camera"],
+                m["frame_id"],
+                m["t_capture"],
+                m["t_stored"],
+                m["generation"],
+                timing,
+                m.get("t_available"),
+                path,
+                still_valid,
+                m.get("encoding", "raw"),
+                m.get("service_t_capture", m["t_capture"]),
+                m.get("service_t_stored", m["t_stored"]),
+                m.get("service_t_available", m.get("t_available")),
+            )
             for m, img in zip(header["frames"], images)
         ]
     except KeyError as exc:
@@ -163,18 +183,24 @@ def in_caller_clock(header: dict, clock: ClockEstimate) -> dict:
 
 def tuple_of(header: dict, images: list[np.ndarray], still_valid: Callable | None = None) -> FrameTuple:
     frames = frames_of(header, images, still_valid)
-    return FrameTuple({f.camera: f for f in frames}, header.get("t_request"), header.get("timing", {}),
-                      header.get("missing", ()), header.get("service_t_request"))
+    return FrameTuple(
+        {f.camera: f for f in frames},
+        header.get("t_request"),
+        header.get("timing", {}),
+        header.get("missing", ()),
+        header.get("service_t_request"),
+    )
 
 
-def sequence_of(header: dict, images: list[np.ndarray], still_valid: Callable | None = None,
-                single: bool = False) -> list:
+def sequence_of(
+    header: dict, images: list[np.ndarray], still_valid: Callable | None = None, single: bool = False
+) -> list:
     frames = frames_of(header, images, still_valid)
     groups = header.get("groups", [])
     timing = header.get("timing", {})
     if single:
         return [frames[g[0]] for g in groups]
-    return [FrameTuple({frames[i].camera: frames[i] for i in g}, t, timing)
-            for g, t in zip(groups, header.get("targets", [None] * len(groups)))]
-
-
+    return [
+        FrameTuple({frames[i].camera: frames[i] for i in g}, t, timing)
+        for g, t in zip(groups, header.get("targets", [None] * len(groups)))
+    ]

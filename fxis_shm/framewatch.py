@@ -1,5 +1,6 @@
 """Threads that turn each camera's "new frame" semaphore into a ZeroMQ message,
 so the coordinator's single poll loop wakes on frames as it does on requests."""
+
 from __future__ import annotations
 
 import threading
@@ -54,8 +55,7 @@ class FrameWatch:
         self.pull.bind(NOTIFY_ENDPOINT)
         self._stop = threading.Event()
         self._threads = [
-            threading.Thread(target=_watch, args=(ctx, service, cam, self._stop),
-                             name=f"watch-{cam}", daemon=True)
+            threading.Thread(target=_watch, args=(ctx, service, cam, self._stop), name=f"watch-{cam}", daemon=True)
             for cam in cameras
         ]
         for t in self._threads:

@@ -5,6 +5,7 @@ and scripts: ready when it answers ``status``, stopped with SIGTERM on exit.
         with svc.client() as c:
             c.tuple()
 """
+
 from __future__ import annotations
 
 import os
@@ -26,19 +27,40 @@ def free_tcp_port() -> int:
 
 
 class ServiceProcess:
-    def __init__(self, args: list[str] = (), name: str | None = None,
-                 endpoint: str | None = None, pub: str | None = None, events: str | None = None,
-                 ready_timeout: float = 30.0, stderr=None, client_keys=None,
-                 python: str = sys.executable, env: dict[str, str] | None = None,
-                 wrapper: list[str] = (), http: str = "off"):
+    def __init__(
+        self,
+        args: list[str] = (),
+        name: str | None = None,
+        endpoint: str | None = None,
+        pub: str | None = None,
+        events: str | None = None,
+        ready_timeout: float = 30.0,
+        stderr=None,
+        client_keys=None,
+        python: str = sys.executable,
+        env: dict[str, str] | None = None,
+        wrapper: list[str] = (),
+        http: str = "off",
+    ):
         """``http``: the dashboard's HOST:PORT, or "off" (the default: tests and scripts
         running at once must not all claim the same fixed port)."""
         self.name = name or f"t{os.getpid()}x{time.monotonic_ns() % 10**6}"
         self.endpoint = endpoint or f"tcp://127.0.0.1:{free_tcp_port()}"
         self.pub = pub or f"tcp://127.0.0.1:{free_tcp_port()}"
         self.events = events or f"tcp://127.0.0.1:{free_tcp_port()}"
-        self.args = ["--name", self.name, "--endpoint", self.endpoint, "--pub", self.pub,
-                     "--events", self.events, "--http", http, *args]
+        self.args = [
+            "--name",
+            self.name,
+            "--endpoint",
+            self.endpoint,
+            "--pub",
+            self.pub,
+            "--events",
+            self.events,
+            "--http",
+            http,
+            *args,
+        ]
         self.http = http
         self.ready_timeout = ready_timeout
         self.stderr = stderr
@@ -51,8 +73,11 @@ class ServiceProcess:
 
     def start(self) -> ServiceProcess:
         self.proc = subprocess.Popen(
-            [*self.wrapper, self.python, "-m", "fxis_shm.cli", "run", *self.args], env=self.env,
-            stdout=subprocess.DEVNULL, stderr=self.stderr, stdin=subprocess.DEVNULL,
+            [*self.wrapper, self.python, "-m", "fxis_shm.cli", "run", *self.args],
+            env=self.env,
+            stdout=subprocess.DEVNULL,
+            stderr=self.stderr,
+            stdin=subprocess.DEVNULL,
             preexec_fn=die_with_parent,  # a killed launcher takes its service along
         )
         deadline = time.monotonic() + self.ready_timeout
@@ -66,8 +91,7 @@ class ServiceProcess:
                 except RequestTimeout:
                     if time.monotonic() > deadline:
                         self.stop()
-                        raise ServiceNotStarted(
-                            f"service did not answer within {self.ready_timeout} s") from None
+                        raise ServiceNotStarted(f"service did not answer within {self.ready_timeout} s") from None
 
     def client(self, timeout: float = 2.0) -> Client:
         return Client(self.endpoint, timeout=timeout, keys=self.client_keys)

@@ -6,6 +6,7 @@ ring slot, so the cameras never wait for a viewer), the other samples the servic
 second (status, frame times, one synchronized tuple for its skew). The web side
 (fxis_shm.dashboard) awaits these on the event loop.
 """
+
 from __future__ import annotations
 
 import asyncio
@@ -45,8 +46,13 @@ def feed_for(spec: ViewerSpec) -> LiveFeed:
 class LiveFeed:
     """Pictures and figures of one service for every viewer of the dashboard."""
 
-    def __init__(self, endpoint: str, cameras: dict[str, dict], keys: ClientKeys | None = None,
-                 timeout: float = REQUEST_TIMEOUT_S):
+    def __init__(
+        self,
+        endpoint: str,
+        cameras: dict[str, dict],
+        keys: ClientKeys | None = None,
+        timeout: float = REQUEST_TIMEOUT_S,
+    ):
         self.endpoint = endpoint
         self.cameras = cameras  # name -> {"kind", "fps" (configured, or None)}
         self._pictures = ThreadPoolExecutor(1, thread_name_prefix="dashboard-pictures")
@@ -67,8 +73,9 @@ class LiveFeed:
 
     def check_camera(self, camera: str) -> None:
         if camera not in self.cameras:
-            raise UnknownCamera(Code.UNKNOWN_CAMERA, f"no camera {camera!r} in this service; "
-                                                  f"known: {', '.join(sorted(self.cameras))}")
+            raise UnknownCamera(
+                Code.UNKNOWN_CAMERA, f"no camera {camera!r} in this service; known: {', '.join(sorted(self.cameras))}"
+            )
 
     # ---- pictures ----
 
@@ -78,8 +85,7 @@ class LiveFeed:
         while ``make`` read the pixels, ``torn(result)`` is told and the newest frame is read
         again, copied. Raises the client's errors (CameraDown, RequestTimeout, ...)."""
         self.check_camera(camera)
-        return await asyncio.get_running_loop().run_in_executor(
-            self._pictures, self._latest, camera, make, torn)
+        return await asyncio.get_running_loop().run_in_executor(self._pictures, self._latest, camera, make, torn)
 
     def _latest(self, camera: str, make: Callable[..., T], torn: Callable[[T], None] | None) -> T:
         for copy in (False, True):
@@ -95,6 +101,7 @@ class LiveFeed:
     async def latest_jpeg(self, camera: str, width: int) -> tuple[bytes, tuple]:
         """The newest frame of ``camera`` as a preview JPEG and its cache key (a new key:
         a new frame)."""
+
         def make(frame) -> tuple[bytes, tuple]:
             key = preview_key(camera, frame.generation, frame.frame_id, width)
             return self.cache.get(key, lambda: preview_jpeg(frame.image, width)), key
@@ -133,24 +140,32 @@ class LiveFeed:
             status = client.status()
         except FxisError as exc:
             log.debug("status failed: %s", exc)
-            return {**self.view, "service_ok": False,
-                    "error": f"the service at {self.endpoint} does not answer ({exc})"}
+            return {
+                **self.view,
+                "service_ok": False,
+                "error": f"the service at {self.endpoint} does not answer ({exc})",
+            }
         cameras = {}
         for name, cam in status["cameras"].items():
             config = self.cameras.get(name, {})
-            measured = self._rates[name].add(status["now"], cam.get("frames_stored") or 0) \
-                if name in self._rates else None
-            cameras[name] = {"configured_fps": config.get("fps"), "measured_fps": measured,
-                             "intervals_ms": []}
+            measured = (
+                self._rates[name].add(status["now"], cam.get("frames_stored") or 0) if name in self._rates else None
+            )
+            cameras[name] = {"configured_fps": config.get("fps"), "measured_fps": measured, "intervals_ms": []}
         try:
             times = client.frame_times()
             for name, info in times["cameras"].items():
-                cameras[name]["intervals_ms"] = frame_intervals_ms(
-                    info["frames"], times["columns"], INTERVALS_SHOWN)
+                cameras[name]["intervals_ms"] = frame_intervals_ms(info["frames"], times["columns"], INTERVALS_SHOWN)
             with client.tuple(partial=True, copy=False) as tup:
                 if len(tup) > 1:  # one camera has no skew to show
                     self._skews.add(time.monotonic() - self.started, tup.skew_ns)
         except FxisError as exc:  # e.g. every camera down: the status still says why
             log.debug("sampling frames failed: %s", exc)
-        return {"service_ok": True, "error": None, "status": status, "cameras": cameras,
-                "skew_ms": self._skews.points(), "sampled": time.time()}
+        return {
+            "service_ok": True,
+            "error": None,
+            "status": status,
+            "cameras": cameras,
+            "skew_ms": self._skews.points(),
+            "sampled": time.time(),
+        }

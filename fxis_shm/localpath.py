@@ -13,6 +13,7 @@ readable for as long as the ring takes to come round to its slot again
 is the slot itself: valid while ``LocalFrames.still_valid`` says so, which the
 caller checks after using the pixels (the same seqlock, one step later).
 """
+
 from __future__ import annotations
 
 import os
@@ -89,8 +90,9 @@ class LocalRings:
                 raise LocalUnavailable(f"cannot map {ref.ring}: {exc}") from None
             if reader.instance != ref.instance:
                 reader.close()
-                raise LocalUnavailable(f"{ref.ring} here is not the service's ring (another IPC "
-                                       "namespace, or the ring was replaced)")
+                raise LocalUnavailable(
+                    f"{ref.ring} here is not the service's ring (another IPC namespace, or the ring was replaced)"
+                )
             self._readers[ref.ring] = reader
         return reader
 
@@ -102,8 +104,9 @@ class LocalRings:
             ref = SlotRef.of(meta)
             reader = self.reader(ref)
             if list(reader.layout.shape) != meta.get("shape") or reader.layout.dtype != meta.get("dtype"):
-                raise LocalUnavailable(f"{ref.ring} holds {reader.layout}, the reply says "
-                                       f"{meta.get('shape')} {meta.get('dtype')}")
+                raise LocalUnavailable(
+                    f"{ref.ring} holds {reader.layout}, the reply says {meta.get('shape')} {meta.get('dtype')}"
+                )
             if copy:
                 out = self._buffers.take(reader.layout.shape, reader.layout.dtype)
                 images.append(reader.copy_slot(ref.slot, ref.seq, out))

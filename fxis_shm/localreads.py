@@ -15,6 +15,7 @@ reader leaves nothing behind in the ring, and the writer never knows it exists.
 
 What only the coordinator can do (software triggers) still goes to it.
 """
+
 from __future__ import annotations
 
 import time
@@ -61,8 +62,9 @@ class LocalReads:
                 if ring is None:
                     raise LocalUnavailable(handle.last_error)
                 if info.get("instance") is not None and ring.instance != info["instance"]:
-                    raise LocalUnavailable(f"{ring.name} here is not the service's ring (another IPC "
-                                           "namespace, or the ring was replaced)")
+                    raise LocalUnavailable(
+                        f"{ring.name} here is not the service's ring (another IPC namespace, or the ring was replaced)"
+                    )
         except BaseException:
             self.close()
             raise
@@ -76,11 +78,11 @@ class LocalReads:
         if op not in ("image", "tuple") or fields.get("at") is not None:
             return True
         names = [fields["camera"]] if fields.get("camera") else fields.get("cameras") or list(self.cameras)
-        return not any(c in self.cameras and self.cameras[c].slots and self.cameras[c].triggered
-                       for c in names)
+        return not any(c in self.cameras and self.cameras[c].slots and self.cameras[c].triggered for c in names)
 
-    def answer(self, op: str, fields: dict, deadline_ns: int,
-               copy: bool = True) -> tuple[dict, list, Callable[[], bool] | None]:
+    def answer(
+        self, op: str, fields: dict, deadline_ns: int, copy: bool = True
+    ) -> tuple[dict, list, Callable[[], bool] | None]:
         """The reply header, images and (for views) a validity check, as the coordinator would
         send them. Raises the service's errors, or RequestTimeout at ``deadline_ns``."""
         # the frames stay raw: nothing travels, so compressing would only cost
@@ -128,8 +130,9 @@ class LocalReads:
             time.sleep(POLL_S)
 
     def _validity(self, reply: Reply) -> Callable[[], bool]:
-        slots = [(self.cameras[c].reader, reply.snapshots[c].slot(i), reply.snapshots[c].seq(i))
-                 for c, i in reply.plan.picks]
+        slots = [
+            (self.cameras[c].reader, reply.snapshots[c].slot(i), reply.snapshots[c].seq(i)) for c, i in reply.plan.picks
+        ]
         return lambda: all(reader.slot_holds(slot, seq) for reader, slot, seq in slots)
 
     def close(self) -> None:

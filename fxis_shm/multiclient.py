@@ -7,6 +7,7 @@ engine (fxis_shm.engine) over them itself, and then fetches the chosen frames fr
 services at once. Waiting for frames still to come is done here too: the client sleeps
 until the next frame of a camera it waits for is due, and looks again.
 """
+
 from __future__ import annotations
 
 import time
@@ -29,8 +30,14 @@ class MultiClient:
     ``latest`` and ``sequence`` over the cameras of every service. Camera names must be
     unique across the services. Times are in the caller's clock (``clock``)."""
 
-    def __init__(self, endpoints: Sequence[str], *, timeout: float = 2.0,
-                 clock: Callable[[], int] | str | None = None, **client_options):
+    def __init__(
+        self,
+        endpoints: Sequence[str],
+        *,
+        timeout: float = 2.0,
+        clock: Callable[[], int] | str | None = None,
+        **client_options,
+    ):
         if not endpoints:
             raise ConfigError("a client over several services needs at least one endpoint")
         self.timeout = timeout
@@ -52,8 +59,10 @@ class MultiClient:
         status = client.status()
         for name in status["cameras"]:
             if name in self.owner:
-                raise ConfigError(f"camera {name!r} is served by both {self.owner[name].endpoint} and "
-                                  f"{client.endpoint}: camera names must be unique across services")
+                raise ConfigError(
+                    f"camera {name!r} is served by both {self.owner[name].endpoint} and "
+                    f"{client.endpoint}: camera names must be unique across services"
+                )
             self.owner[name] = client
         client.clock_estimate()  # the first estimate now, not in the first request
 
@@ -75,26 +84,51 @@ class MultiClient:
 
     # ---- operations (as Client's, over every service) ----
 
-    def image(self, camera: str, *, at: int | None = None, wait: str | None = None,
-              timeout: float | None = None):
-        return frames_of(*self._answer("image", camera=camera, at=at, wait=wait,
-                                       timeout_ms=_timeout_ms(timeout, None)))[0]
+    def image(self, camera: str, *, at: int | None = None, wait: str | None = None, timeout: float | None = None):
+        return frames_of(
+            *self._answer("image", camera=camera, at=at, wait=wait, timeout_ms=_timeout_ms(timeout, None))
+        )[0]
 
-    def tuple(self, cameras: list[str] | None = None, *, at: int | None = None, sync: str | None = None,
-              wait: str | None = None, max_skew_ms: float | None = None, timeout: float | None = None,
-              partial: bool = False) -> FrameTuple:
-        return tuple_of(*self._answer("tuple", cameras=cameras, at=at, sync=sync, wait=wait,
-                                      max_skew_ms=max_skew_ms, timeout_ms=_timeout_ms(timeout, None),
-                                      partial=partial or None))
+    def tuple(
+        self,
+        cameras: list[str] | None = None,
+        *,
+        at: int | None = None,
+        sync: str | None = None,
+        wait: str | None = None,
+        max_skew_ms: float | None = None,
+        timeout: float | None = None,
+        partial: bool = False,
+    ) -> FrameTuple:
+        return tuple_of(
+            *self._answer(
+                "tuple",
+                cameras=cameras,
+                at=at,
+                sync=sync,
+                wait=wait,
+                max_skew_ms=max_skew_ms,
+                timeout_ms=_timeout_ms(timeout, None),
+                partial=partial or None,
+            )
+        )
 
     def latest(self, cameras: list[str] | None = None) -> FrameTuple:
         return tuple_of(*self._answer("latest", cameras=cameras))
 
-    def sequence(self, kind: str, *, camera: str | None = None, cameras: list[str] | None = None,
-                 timeout: float | None = None, **fields) -> list:
+    def sequence(
+        self,
+        kind: str,
+        *,
+        camera: str | None = None,
+        cameras: list[str] | None = None,
+        timeout: float | None = None,
+        **fields,
+    ) -> list:
         """As ``Client.sequence`` (``count``, ``direction``, ``interval_ms``, ``start``, ``end``, ``at``, ``sync``)."""
-        header, images = self._answer("sequence", kind=kind, camera=camera,
-                                      cameras=cameras, timeout_ms=_timeout_ms(timeout, None), **fields)
+        header, images = self._answer(
+            "sequence", kind=kind, camera=camera, cameras=cameras, timeout_ms=_timeout_ms(timeout, None), **fields
+        )
         return sequence_of(header, images, single=camera is not None)
 
     # ---- one request ----
@@ -125,8 +159,9 @@ class MultiClient:
                 raise RequestTimeout(f"no answer to {op!r} from {len(self.clients)} services within the timeout")
             waiting = {c for p in self.engine.pending for c in p.cameras}
             due = [self.cameras[c].next_stored() for c in waiting]
-            wake = min([deadline, self.engine.next_wake() or deadline,
-                        *(t + LOOK_AGAIN_NS for t in due if t is not None)])
+            wake = min(
+                [deadline, self.engine.next_wake() or deadline, *(t + LOOK_AGAIN_NS for t in due if t is not None)]
+            )
             time.sleep(max(0, wake - now) / 1e9)
             self._describe(waiting)
             actions = self.engine.on_frames(waiting, self.clock())
@@ -156,8 +191,9 @@ class MultiClient:
                     self.cameras[name].unreachable(f"at {client.endpoint} does not answer ({described})")
                 else:
                     now = self.clock()  # the offset now: over a ring's span, drift moves it by microseconds
-                    self.cameras[name].describe(described["cameras"][name], described["columns"],
-                                                client.clock_estimate().to_service(now) - now)
+                    self.cameras[name].describe(
+                        described["cameras"][name], described["columns"], client.clock_estimate().to_service(now) - now
+                    )
 
     def _fetch(self, reply: Reply) -> tuple[dict, list]:
         """The reply header and images of a plan: each chosen frame fetched from its service,
@@ -172,15 +208,32 @@ class MultiClient:
         frames, images = [], []
         for k, (cam, i) in enumerate(picks):
             frame = fetched[cam, self.cameras[cam].service_row(i)["frame_id"]]
-            meta = protocol.frame_meta(cam, frame.frame_id, frame.t_capture, frame.t_stored, frame.generation,
-                                       frame.image, k, frame.t_available)
-            frames.append({**meta, "encoding": frame.encoding, "service_t_capture": frame.service_t_capture,
-                           "service_t_stored": frame.service_t_stored,
-                           "service_t_available": frame.service_t_available})
+            meta = protocol.frame_meta(
+                cam,
+                frame.frame_id,
+                frame.t_capture,
+                frame.t_stored,
+                frame.generation,
+                frame.image,
+                k,
+                frame.t_available,
+            )
+            frames.append(
+                {
+                    **meta,
+                    "encoding": frame.encoding,
+                    "service_t_capture": frame.service_t_capture,
+                    "service_t_stored": frame.service_t_stored,
+                    "service_t_available": frame.service_t_available,
+                }
+            )
             images.append(frame.image)
         position = {pick: k for k, pick in enumerate(picks)}
-        header = {**reply.plan.body, "frames": frames,
-                  "timing": {"received": reply.pending.t_received, "waited": reply.t_decided}}
+        header = {
+            **reply.plan.body,
+            "frames": frames,
+            "timing": {"received": reply.pending.t_received, "waited": reply.t_decided},
+        }
         if reply.plan.groups is not None:
             header["groups"] = [[position[pick] for pick in group] for group in reply.plan.groups]
         return header, images

@@ -5,6 +5,7 @@ the objects of one service can be found (and cleaned) without a registry.
 On Linux, POSIX shared memory appears as ``/dev/shm/<name>`` and a named
 semaphore as ``/dev/shm/sem.<name>``.
 """
+
 from __future__ import annotations
 
 import os
@@ -19,9 +20,7 @@ _NAME_RE = re.compile(r"^[A-Za-z0-9_-]{1,48}$")
 def check_name(kind: str, name: str) -> str:
     """Return ``name`` if it is a valid service or camera name, else raise ValueError."""
     if not isinstance(name, str) or not _NAME_RE.match(name):
-        raise ValueError(
-            f"{kind} name {name!r} is invalid: use 1-48 letters, digits, '_' or '-'"
-        )
+        raise ValueError(f"{kind} name {name!r} is invalid: use 1-48 letters, digits, '_' or '-'")
     return name
 
 
@@ -57,9 +56,7 @@ def leftovers(service: str) -> list[str]:
         return []
     shm = prefix(service)
     sem = "sem." + shm
-    return sorted(
-        os.path.join(SHM_DIR, e) for e in entries if e.startswith(shm) or e.startswith(sem)
-    )
+    return sorted(os.path.join(SHM_DIR, e) for e in entries if e.startswith(shm) or e.startswith(sem))
 
 
 def remove_leftovers(service: str) -> list[str]:
@@ -71,7 +68,7 @@ def remove_leftovers(service: str) -> list[str]:
             if entry.endswith((".json", ".tmp")):
                 os.unlink(path)
             elif entry.startswith("sem."):
-                posix_ipc.unlink_semaphore("/" + entry[len("sem."):])
+                posix_ipc.unlink_semaphore("/" + entry[len("sem.") :])
             else:
                 posix_ipc.unlink_shared_memory("/" + entry)
         except (posix_ipc.ExistentialError, FileNotFoundError):

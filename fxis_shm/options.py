@@ -3,6 +3,7 @@
 
 Pure: raw values in, typed values out, ConfigError naming the camera and key.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
@@ -19,8 +20,9 @@ class Option:
     help: str
 
 
-def number(kind: type = float, minimum: float | None = None, maximum: float | None = None,
-           exclusive_min: bool = False) -> Callable[[Any], Any]:
+def number(
+    kind: type = float, minimum: float | None = None, maximum: float | None = None, exclusive_min: bool = False
+) -> Callable[[Any], Any]:
     def parse(value: Any) -> Any:
         if isinstance(value, bool):
             raise ValueError(f"expected a number, got {value!r}")
@@ -37,6 +39,7 @@ def number(kind: type = float, minimum: float | None = None, maximum: float | No
         if maximum is not None and v > maximum:
             raise ValueError(f"must be <= {maximum}, got {v}")
         return v
+
     return parse
 
 
@@ -45,6 +48,7 @@ def choice(*options: str) -> Callable[[Any], str]:
         if value not in options:
             raise ValueError(f"must be one of {', '.join(options)}; got {value!r}")
         return str(value)
+
     return parse
 
 
@@ -65,8 +69,7 @@ def text(value: Any) -> str:
     return str(value)
 
 
-def parse_options(camera: str, kind: str, schema: Mapping[str, Option],
-                  raw: Mapping[str, Any]) -> dict[str, Any]:
+def parse_options(camera: str, kind: str, schema: Mapping[str, Option], raw: Mapping[str, Any]) -> dict[str, Any]:
     """Typed options with defaults filled in; unknown keys and bad values raise ConfigError."""
     unknown = sorted(set(raw) - set(schema))
     if unknown:

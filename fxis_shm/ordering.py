@@ -11,6 +11,7 @@ install. Without it, rings refuse to open on such a CPU rather than risk torn fr
 ``MODE`` says which is in use: "fenced" (the helper), "x86-tso" (plain accesses,
 correct on x86-64) or None (unsupported: the helper is missing on a weak CPU).
 """
+
 from __future__ import annotations
 
 import os
@@ -45,7 +46,8 @@ def require_supported() -> None:
         raise RingError(
             f"this CPU ({platform.machine()}) orders memory weakly and the ring's fence helper "
             "fxis_shm._ordered is not built: reinstall fxis-shm with a C compiler present "
-            "(pip install -e . builds it)")
+            "(pip install -e . builds it)"
+        )
 
 
 if MODE == "fenced":
@@ -54,11 +56,12 @@ if MODE == "fenced":
     fence_acquire = _ordered.fence_acquire
     fence_release = _ordered.fence_release
 else:
+
     def load_acquire(buffer, offset: int) -> int:
-        return int.from_bytes(buffer[offset:offset + 8], "little")
+        return int.from_bytes(buffer[offset : offset + 8], "little")
 
     def store_release(buffer, offset: int, value: int) -> None:
-        buffer[offset:offset + 8] = value.to_bytes(8, "little")
+        buffer[offset : offset + 8] = value.to_bytes(8, "little")
 
     def fence_acquire() -> None:
         """Nothing to do on x86-64: loads are not reordered with other loads."""

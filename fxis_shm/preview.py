@@ -4,6 +4,7 @@ measured frame rate, and the short histories its plots draw.
 
 Pure: arrays and numbers in, bytes and numbers out. fxis_shm.dashboard does the I/O.
 """
+
 from __future__ import annotations
 
 import math
@@ -129,7 +130,7 @@ def frame_intervals_ms(rows: list[list[int]], columns: list[str], last: int) -> 
     """The intervals between consecutive captures (ms) of the newest ``last`` + 1 frames of
     a ``frames`` op reply (rows oldest first); a gap in frame ids is not an interval."""
     i_id, i_t = columns.index("frame_id"), columns.index("t_capture")
-    rows = rows[-(last + 1):]
+    rows = rows[-(last + 1) :]
     return [round((b[i_t] - a[i_t]) / 1e6, 3) for a, b in zip(rows, rows[1:]) if b[i_id] == a[i_id] + 1]
 
 

@@ -4,6 +4,7 @@ The command name in the second field may hold spaces and parentheses, so the
 fields are counted from the last ``)``. Used by the library (is a camera worker
 alive?), the tests (which processes belong to a service?) and the benches (CPU).
 """
+
 from __future__ import annotations
 
 import os
@@ -36,7 +37,7 @@ def read(pid: int) -> ProcStat | None:
             raw = f.read()
     except OSError:
         return None
-    fields = raw[raw.rfind(b")") + 2:].split()
+    fields = raw[raw.rfind(b")") + 2 :].split()
     # fields[0] is the state (field 3 of proc(5)), [1] the ppid, [11] utime, [12] stime
     return ProcStat(pid, fields[0].decode(), int(fields[1]), int(fields[11]) + int(fields[12]))
 

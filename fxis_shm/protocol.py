@@ -4,6 +4,7 @@ Pure: lists of byte frames in, validated dicts and arrays out (and back).
 Every malformed message raises ``ProtocolError`` with a stable code and a
 message that says what is wrong.
 """
+
 from __future__ import annotations
 
 import json
@@ -29,6 +30,7 @@ LOCAL = "local"  # the delivery of a reply whose frames the client copies from t
 
 
 # ---- field checks: each returns the value or raises ProtocolError ----
+
 
 def _fail(field: str, what: str):
     raise ProtocolError(f"field {field!r} {what}")
@@ -111,12 +113,14 @@ def _choice(options):
         if v not in options:
             _fail(field, f"must be one of {list(options)}, got {v!r}")
         return v
+
     return check
 
 
 def _optional(check):
     def wrapped(field, v):
         return None if v is None else check(field, v)
+
     return wrapped
 
 
@@ -138,6 +142,8 @@ _COMMON: dict[str, tuple[Check, Any]] = {
     "op": (_name, None),
     "id": (_optional(_request_id), None),
 }
+
+
 def _quality(field, v):
     if isinstance(v, bool) or not isinstance(v, int) or not 1 <= v <= 100:
         _fail(field, f"must be an integer from 1 to 100, got {v!r}")
@@ -222,8 +228,9 @@ def decode_event(frames: Sequence[bytes], max_header_bytes: int = MAX_HEADER_BYT
     if len(frames) != 2 or bytes(frames[0]) != EVENT_TOPIC:
         raise ProtocolError(f"a request event is two frames: {EVENT_TOPIC!r} and a JSON header")
     # Event answers go to many subscribers, so they always carry the pixels: no "local".
-    schemas = {op: {**{k: v for k, v in OPS[op].items() if k not in _LOCAL}, "reply_topic": (_topic, ...)}
-               for op in EVENT_OPS}
+    schemas = {
+        op: {**{k: v for k, v in OPS[op].items() if k not in _LOCAL}, "reply_topic": (_topic, ...)} for op in EVENT_OPS
+    }
     return _decode_header(frames[1], max_header_bytes, schemas)
 
 
@@ -294,6 +301,7 @@ def encode_event(op: str, reply_topic: str, **fields) -> list[bytes]:
 # ":png"): "frames/cam0@10:jpeg90|", "tuples:png|". The closing "|" keeps ZeroMQ's prefix
 # matching from mixing a stream with its other forms.
 
+
 @dataclass(frozen=True)
 class StreamTopic:
     kind: str  # "frames" or "tuples"
@@ -328,7 +336,7 @@ def parse_stream_topic(topic: str) -> StreamTopic | None:
     encoding, quality = codec.RAW, None
     if coded:
         encoding = coded.rstrip("0123456789")
-        digits = coded[len(encoding):]
+        digits = coded[len(encoding) :]
         if encoding not in (codec.JPEG, codec.PNG) or (digits and encoding != codec.JPEG):
             return None
         quality = int(digits) if digits else None
@@ -337,14 +345,14 @@ def parse_stream_topic(topic: str) -> StreamTopic | None:
     if base == "tuples":
         return StreamTopic("tuples", None, rate_hz, encoding, quality)
     if base.startswith("frames/") and len(base) > len("frames/"):
-        return StreamTopic("frames", base[len("frames/"):], rate_hz, encoding, quality)
+        return StreamTopic("frames", base[len("frames/") :], rate_hz, encoding, quality)
     return None
 
 
 # ---- replies ----
 
-def _described(camera, frame_id, t_capture, t_stored, generation, shape, dtype: str,
-               t_available) -> dict:
+
+def _described(camera, frame_id, t_capture, t_stored, generation, shape, dtype: str, t_available) -> dict:
     return {
         "camera": camera,
         "frame_id": int(frame_id),
@@ -358,22 +366,46 @@ def _described(camera, frame_id, t_capture, t_stored, generation, shape, dtype: 
 
 
 def frame_meta(
-    camera: str, frame_id: int, t_capture: int, t_stored: int, generation: int,
-    image: np.ndarray, buffer: int, t_available: int | None = None,
+    camera: str,
+    frame_id: int,
+    t_capture: int,
+    t_stored: int,
+    generation: int,
+    image: np.ndarray,
+    buffer: int,
+    t_available: int | None = None,
 ) -> dict:
     """A frame whose pixels travel in buffer frame number ``buffer`` of the reply."""
-    return {**_described(camera, frame_id, t_capture, t_stored, generation, image.shape,
-                         image.dtype.name, t_available), "buffer": buffer}
+    return {
+        **_described(camera, frame_id, t_capture, t_stored, generation, image.shape, image.dtype.name, t_available),
+        "buffer": buffer,
+    }
 
 
 def frame_ref(
-    camera: str, frame_id: int, t_capture: int, t_stored: int, generation: int,
-    shape, dtype: str, t_available: int | None, *, ring: str, instance: int, slot: int, seq: int,
+    camera: str,
+    frame_id: int,
+    t_capture: int,
+    t_stored: int,
+    generation: int,
+    shape,
+    dtype: str,
+    t_available: int | None,
+    *,
+    ring: str,
+    instance: int,
+    slot: int,
+    seq: int,
 ) -> dict:
     """A frame of a local reply: the client copies it out of ``slot`` of the ring
     segment ``ring`` (whose header carries ``instance``) while the slot shows ``seq``."""
-    return {**_described(camera, frame_id, t_capture, t_stored, generation, shape, dtype, t_available),
-            "ring": ring, "instance": int(instance), "slot": int(slot), "seq": int(seq)}
+    return {
+        **_described(camera, frame_id, t_capture, t_stored, generation, shape, dtype, t_available),
+        "ring": ring,
+        "instance": int(instance),
+        "slot": int(slot),
+        "seq": int(seq),
+    }
 
 
 def encoded_meta(meta: dict, encoding: str, nbytes: int) -> dict:
@@ -388,8 +420,7 @@ def encode_reply(request_id, body: dict, buffers: Sequence = ()) -> list:
 
 
 def encode_error(request_id, code: str, message: str) -> list[bytes]:
-    header = {"v": VERSION, "id": request_id, "ok": False,
-              "error": {"code": code, "message": message}}
+    header = {"v": VERSION, "id": request_id, "ok": False, "error": {"code": code, "message": message}}
     return [json.dumps(header).encode()]
 
 

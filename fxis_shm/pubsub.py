@@ -1,16 +1,17 @@
 """Publish/subscribe: receive streams and event answers, publish request events.
 
-    with Subscriber("tcp://127.0.0.1:5556") as sub:
-        sub.tuples(rate_hz=5)               # synchronized tuples, 5 per second
-        for message in sub:                 # raises RequestTimeout after ``timeout``
-            print(message.seq, message.tuple.skew_ns)
+with Subscriber("tcp://127.0.0.1:5556") as sub:
+    sub.tuples(rate_hz=5)               # synchronized tuples, 5 per second
+    for message in sub:                 # raises RequestTimeout after ``timeout``
+        print(message.seq, message.tuple.skew_ns)
 
-    with EventPublisher("tcp://127.0.0.1:5557") as events, Subscriber() as answers:
-        answers.topic("robot1/pairs")
-        handshake(events, answers, "robot1/pairs")   # PUB/SUB connect asynchronously
-        events.request("tuple", "robot1/pairs", at=t_star)
-        pair = answers.receive().tuple
+with EventPublisher("tcp://127.0.0.1:5557") as events, Subscriber() as answers:
+    answers.topic("robot1/pairs")
+    handshake(events, answers, "robot1/pairs")   # PUB/SUB connect asynchronously
+    events.request("tuple", "robot1/pairs", at=t_star)
+    pair = answers.receive().tuple
 """
+
 from __future__ import annotations
 
 import collections
@@ -84,8 +85,14 @@ def _stream(kind: str, camera: str | None, rate_hz: float | None, encoding: str,
 class Subscriber(SocketOwner):
     """A SUB socket with a bounded queue; iterate it or call ``receive``."""
 
-    def __init__(self, endpoint: str = DEFAULT_PUB, timeout: float = 2.0, queue: int = 16,
-                 context: zmq.Context | None = None, keys: ClientKeys | None = None):
+    def __init__(
+        self,
+        endpoint: str = DEFAULT_PUB,
+        timeout: float = 2.0,
+        queue: int = 16,
+        context: zmq.Context | None = None,
+        keys: ClientKeys | None = None,
+    ):
         self.endpoint = endpoint
         self.timeout = timeout
         self._sock = (context or zmq.Context.instance()).socket(zmq.SUB)
@@ -104,8 +111,9 @@ class Subscriber(SocketOwner):
         self._topics.add(topic)
         return topic
 
-    def frames(self, camera: str, rate_hz: float | None = None, *, encoding: str = RAW,
-               quality: int | None = None) -> str:
+    def frames(
+        self, camera: str, rate_hz: float | None = None, *, encoding: str = RAW, quality: int | None = None
+    ) -> str:
         """Subscribe to every frame of ``camera`` (or ``rate_hz`` of them per second), its
         pixels raw or compressed (``encoding="jpeg"`` with ``quality``, or ``"png"``)."""
         return self.topic(str(_stream("frames", camera, rate_hz, encoding, quality)))
@@ -148,12 +156,12 @@ class Subscriber(SocketOwner):
             yield self.receive()
 
 
-
 class EventPublisher(SocketOwner):
     """Publishes request events; the service answers each on its ``reply_topic``."""
 
-    def __init__(self, endpoint: str = DEFAULT_EVENTS, context: zmq.Context | None = None,
-                 keys: ClientKeys | None = None):
+    def __init__(
+        self, endpoint: str = DEFAULT_EVENTS, context: zmq.Context | None = None, keys: ClientKeys | None = None
+    ):
         self.endpoint = endpoint
         self._prefix = secrets.token_hex(4)  # ids stay unique across publishers sharing a topic
         self._ids = (f"{self._prefix}-{n}" for n in itertools.count(1))
@@ -167,9 +175,7 @@ class EventPublisher(SocketOwner):
         return request_id
 
 
-
-def handshake(events: EventPublisher, answers: Subscriber, reply_topic: str,
-              timeout: float = 5.0) -> None:
+def handshake(events: EventPublisher, answers: Subscriber, reply_topic: str, timeout: float = 5.0) -> None:
     """Wait until events reach the service and its answers reach ``answers``
     (subscribed to ``reply_topic``): PUB/SUB connections form asynchronously
     and drop what is sent before."""
@@ -185,9 +191,10 @@ def handshake(events: EventPublisher, answers: Subscriber, reply_topic: str,
                     return
         except RequestTimeout:
             continue
-    raise RequestTimeout(f"no answer on {reply_topic!r} within {timeout} s: is the service "
-                         f"listening on {events.endpoint} and publishing to {answers.endpoint}?")
-
+    raise RequestTimeout(
+        f"no answer on {reply_topic!r} within {timeout} s: is the service "
+        f"listening on {events.endpoint} and publishing to {answers.endpoint}?"
+    )
 
 
 def _drain_probe_answers(answers: Subscriber, probes: set, settle_s: float = 0.05) -> None:

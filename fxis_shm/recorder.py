@@ -7,6 +7,7 @@ synchronized tuples) and writes them. A recorder that falls behind loses frames 
 the ring, and says how many (fxis_shm.recording); it never thins silently.
 Message layout, clock and topics: docs/recording.md.
 """
+
 from __future__ import annotations
 
 import os
@@ -70,13 +71,20 @@ class Recorder:
         self.poll_s = min(_POLL_MAX_S, max(_POLL_MIN_S, min((p for p in periods.values() if p), default=1e8) / 2e9))
 
     def _custom_data(self) -> dict:
-        return {"clock": rosmsgs.CLOCK, "stamps": "header.stamp: capture time"
-                if not self.s.tuples else "header.stamp: the tuple's step time (the same in every image of a tuple)",
-                "log_time": "header.stamp + clock_to_realtime_ns (CLOCK_REALTIME)",
-                "clock_to_realtime_ns": self.to_realtime, "endpoint": self.s.endpoint,
-                "cameras": ",".join(self.cameras), "mode": "tuples" if self.s.tuples else "frames",
-                "rate_hz": self.s.rate_hz or (self.steps.rate_hz if self.s.tuples else "all frames"),
-                "encoding": self.s.encoding, "recorder": "fxis record"}
+        return {
+            "clock": rosmsgs.CLOCK,
+            "stamps": "header.stamp: capture time"
+            if not self.s.tuples
+            else "header.stamp: the tuple's step time (the same in every image of a tuple)",
+            "log_time": "header.stamp + clock_to_realtime_ns (CLOCK_REALTIME)",
+            "clock_to_realtime_ns": self.to_realtime,
+            "endpoint": self.s.endpoint,
+            "cameras": ",".join(self.cameras),
+            "mode": "tuples" if self.s.tuples else "frames",
+            "rate_hz": self.s.rate_hz or (self.steps.rate_hz if self.s.tuples else "all frames"),
+            "encoding": self.s.encoding,
+            "recorder": "fxis record",
+        }
 
     # ---- the loop ----
 
@@ -85,8 +93,11 @@ class Recorder:
         only asks the loop to stop, so it never lands in the middle of writing a message; a
         second Ctrl-C interrupts at once."""
         self._stopping = False
-        previous = {sig: signal.signal(sig, self._ask_to_stop) for sig in (signal.SIGINT, signal.SIGTERM)} \
-            if _main_thread() else {}
+        previous = (
+            {sig: signal.signal(sig, self._ask_to_stop) for sig in (signal.SIGINT, signal.SIGTERM)}
+            if _main_thread()
+            else {}
+        )
         self.progress.stage(f"recording {', '.join(self.cameras)} into {self.s.out}")
         try:
             while not self._stopping and not self._done():
@@ -143,8 +154,9 @@ class Recorder:
         wanted = {r[0] for r in rows}
         try:
             mapping = self.client.clock_estimate()  # the listing is in the service's clock, the API in ours
-            frames = self.client.sequence("range", camera=cam, start=mapping.to_caller(rows[0][1]),
-                                          end=mapping.to_caller(rows[-1][1]))
+            frames = self.client.sequence(
+                "range", camera=cam, start=mapping.to_caller(rows[0][1]), end=mapping.to_caller(rows[-1][1])
+            )
         except (Overwritten, ServiceError) as exc:
             if not _frames_gone(exc):
                 raise
@@ -171,9 +183,13 @@ class Recorder:
         if not times:
             return
         try:
-            tuples = self.client.sequence("interval", cameras=self.cameras, count=len(times),
-                                          interval_ms=self.steps.interval_ns / 1e6,
-                                          at=self.client.clock_estimate().to_caller(times[0]))
+            tuples = self.client.sequence(
+                "interval",
+                cameras=self.cameras,
+                count=len(times),
+                interval_ms=self.steps.interval_ns / 1e6,
+                at=self.client.clock_estimate().to_caller(times[0]),
+            )
         except (Overwritten, ServiceError) as exc:
             if not _frames_gone(exc):
                 raise
@@ -183,9 +199,12 @@ class Recorder:
             with frames:
                 for cam in self.cameras:
                     self._write_image(frames[cam], t_step)
-                self.bag.write(rosmsgs.TUPLES_TOPIC, rosmsgs.TUPLE,
-                               rosmsgs.tuple_message(t_step, [frames[c] for c in self.cameras]),
-                               t_step + self.to_realtime)
+                self.bag.write(
+                    rosmsgs.TUPLES_TOPIC,
+                    rosmsgs.TUPLE,
+                    rosmsgs.tuple_message(t_step, [frames[c] for c in self.cameras]),
+                    t_step + self.to_realtime,
+                )
         self.steps.advance(len(times))
 
     def _write_image(self, frame, t_stamp: int) -> None:
@@ -220,28 +239,43 @@ class Recorder:
             counted = self.bag.topics.get(topic)
             dropped = status.get(cam, {}).get("frames_dropped")
             per_camera[cam] = {
-                "topic": topic, "frames": counted.count if counted else 0,
+                "topic": topic,
+                "frames": counted.count if counted else 0,
                 "missed": None if self.s.tuples else self.followers[cam].missed,
-                "dropped_by_camera": None if dropped is None else dropped - self._dropped_at_start[cam]}
+                "dropped_by_camera": None if dropped is None else dropped - self._dropped_at_start[cam],
+            }
         file_path = os.path.join(self.s.out, self.bag.file_name)
-        return {"out": self.s.out, "seconds": (self._now() - self.t_start) / 1e9,
-                "cameras": per_camera, "tuples": self.steps.taken if self.s.tuples else None,
-                "tuples_missed": self.steps.missed if self.s.tuples else None,
-                "image_bytes": self.bag.bytes_written,
-                "file_bytes": os.path.getsize(file_path) if os.path.exists(file_path) else 0}
+        return {
+            "out": self.s.out,
+            "seconds": (self._now() - self.t_start) / 1e9,
+            "cameras": per_camera,
+            "tuples": self.steps.taken if self.s.tuples else None,
+            "tuples_missed": self.steps.missed if self.s.tuples else None,
+            "image_bytes": self.bag.bytes_written,
+            "file_bytes": os.path.getsize(file_path) if os.path.exists(file_path) else 0,
+        }
 
 
 def summary_table(summary: dict) -> str:
     rows = [["camera", "topic", "frames", "missed", "dropped by camera"]]
     for cam, c in summary["cameras"].items():
-        rows.append([cam, c["topic"], str(c["frames"]), "-" if c["missed"] is None else str(c["missed"]),
-                     "-" if c["dropped_by_camera"] is None else str(c["dropped_by_camera"])])
+        rows.append(
+            [
+                cam,
+                c["topic"],
+                str(c["frames"]),
+                "-" if c["missed"] is None else str(c["missed"]),
+                "-" if c["dropped_by_camera"] is None else str(c["dropped_by_camera"]),
+            ]
+        )
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     lines = ["  ".join(v.ljust(w) for v, w in zip(r, widths)).rstrip() for r in rows]
     if summary["tuples"] is not None:
         lines.append(f"tuples {summary['tuples']}, missed {summary['tuples_missed']}")
-    lines.append(f"{summary['seconds']:.1f} s, {summary['image_bytes'] / 1e6:.1f} MB of images, "
-                 f"bag file {summary['file_bytes'] / 1e6:.1f} MB: {summary['out']}")
+    lines.append(
+        f"{summary['seconds']:.1f} s, {summary['image_bytes'] / 1e6:.1f} MB of images, "
+        f"bag file {summary['file_bytes'] / 1e6:.1f} MB: {summary['out']}"
+    )
     return "\n".join(lines)
 
 

@@ -11,6 +11,7 @@ frame ids are told apart, because only one of them is the recorder's fault:
 
 Pure: frame rows and times in, decisions out.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass, field
@@ -40,8 +41,9 @@ class Follower:
     def new_frames(self, rows: list[list[int]], period_ns: int) -> list[list[int]]:
         """The rows (oldest first, as the ``frames`` op lists them) to take now. Counts
         what fell out of the ring since the last call into ``missed``."""
-        fresh = [r for r in rows if r[T_CAPTURE] >= self.t_start
-                 and (self.last_t is None or r[T_CAPTURE] > self.last_t)]
+        fresh = [
+            r for r in rows if r[T_CAPTURE] >= self.t_start and (self.last_t is None or r[T_CAPTURE] > self.last_t)
+        ]
         if not fresh:
             return []
         first = fresh[0]

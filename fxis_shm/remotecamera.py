@@ -4,6 +4,7 @@ clock, so one engine can choose frames across services whose clocks differ.
 
 Pure: a ``frames`` reply and a clock offset in; snapshots and camera states out.
 """
+
 from __future__ import annotations
 
 from typing import Any
@@ -33,8 +34,11 @@ class RemoteCamera:
 
     def unreachable(self, why: str) -> None:
         """The service did not answer: the camera counts as down until it does."""
-        self._info = {**self._info, "alive": False,
-                      "reason": f"camera {self.name!r} is down: its service {self.service} {why}"}
+        self._info = {
+            **self._info,
+            "alive": False,
+            "reason": f"camera {self.name!r} is down: its service {self.service} {why}",
+        }
 
     def service_row(self, i: int) -> dict[str, int]:
         """Frame ``i`` of the last snapshot: its id, generation and times (the caller's clock)."""
@@ -53,9 +57,12 @@ class RemoteCamera:
 
     def state(self, snapshot: Snapshot) -> CameraState:
         n = len(snapshot.timeline)
-        return CameraState(newest=snapshot.newest, period_ns=self.period_ns,
-                           delay_ns=int(self._info.get("delay_ns", 0)),
-                           newest_stored=int(snapshot.meta["t_stored"][n - 1]) if n else None)
+        return CameraState(
+            newest=snapshot.newest,
+            period_ns=self.period_ns,
+            delay_ns=int(self._info.get("delay_ns", 0)),
+            newest_stored=int(snapshot.meta["t_stored"][n - 1]) if n else None,
+        )
 
     @property
     def period_ns(self) -> int:

@@ -20,6 +20,7 @@ acquire order, with a release fence after the odd ``seq`` and an acquire fence b
 a reader's final checks (fxis_shm.ordering: C11 fences on ARM64, plain accesses on
 x86-64, whose stores and loads keep program order).
 """
+
 from __future__ import annotations
 
 import mmap
@@ -41,21 +42,45 @@ STATE_INIT, STATE_LIVE, STATE_RETIRED = 0, 1, 2
 FLAG_TRIGGERED = 1  # the camera captures when triggered (trigger=software), not free-running
 _PERIOD_SMOOTHING = 16  # EWMA weight 1/16: follows rate changes within a second at 20 fps
 
-HEADER = np.dtype([
-    ("magic", "S8"), ("version", "<u4"), ("state", "<u4"), ("flags", "<u4"), ("_pad", "<u4"),
-    ("height", "<u4"), ("width", "<u4"), ("channels", "<u4"), ("slots", "<u4"),
-    ("dtype", "S8"), ("slot_stride", "<u8"), ("data_offset", "<u8"),
-    ("generation", "<u8"), ("writer_pid", "<u8"), ("write_count", "<u8"),
-    ("instance", "<u8"),  # random, drawn when the segment is created: names this very segment
-    ("heartbeat_ns", "<i8"), ("generation_started_ns", "<i8"),
-    ("period_ns", "<i8"), ("nominal_period_ns", "<i8"), ("delay_ns", "<i8"),
-    ("frames_captured", "<u8"), ("frames_dropped", "<u8"), ("hook_errors", "<u8"),
-    ("status_text", "S256"),
-])
-SLOT = np.dtype([
-    ("seq", "<u8"), ("frame_id", "<u8"), ("t_capture", "<i8"),
-    ("t_stored", "<i8"), ("t_available", "<i8"), ("generation", "<u8"),
-])
+HEADER = np.dtype(
+    [
+        ("magic", "S8"),
+        ("version", "<u4"),
+        ("state", "<u4"),
+        ("flags", "<u4"),
+        ("_pad", "<u4"),
+        ("height", "<u4"),
+        ("width", "<u4"),
+        ("channels", "<u4"),
+        ("slots", "<u4"),
+        ("dtype", "S8"),
+        ("slot_stride", "<u8"),
+        ("data_offset", "<u8"),
+        ("generation", "<u8"),
+        ("writer_pid", "<u8"),
+        ("write_count", "<u8"),
+        ("instance", "<u8"),  # random, drawn when the segment is created: names this very segment
+        ("heartbeat_ns", "<i8"),
+        ("generation_started_ns", "<i8"),
+        ("period_ns", "<i8"),
+        ("nominal_period_ns", "<i8"),
+        ("delay_ns", "<i8"),
+        ("frames_captured", "<u8"),
+        ("frames_dropped", "<u8"),
+        ("hook_errors", "<u8"),
+        ("status_text", "S256"),
+    ]
+)
+SLOT = np.dtype(
+    [
+        ("seq", "<u8"),
+        ("frame_id", "<u8"),
+        ("t_capture", "<i8"),
+        ("t_stored", "<i8"),
+        ("t_available", "<i8"),
+        ("generation", "<u8"),
+    ]
+)
 assert HEADER.itemsize <= HEADER_BYTES and SLOT.itemsize == 48
 WRITE_COUNT_AT = HEADER.fields["write_count"][1]  # byte offsets of the ordered words
 
@@ -121,8 +146,13 @@ class Snapshot:
 
     def frame_meta(self, i: int) -> SlotMeta:
         rec = self.meta[self.slot(i)]
-        return SlotMeta(int(rec["frame_id"]), int(rec["t_capture"]), int(rec["t_stored"]),
-                        int(rec["t_available"]), int(rec["generation"]))
+        return SlotMeta(
+            int(rec["frame_id"]),
+            int(rec["t_capture"]),
+            int(rec["t_stored"]),
+            int(rec["t_available"]),
+            int(rec["generation"]),
+        )
 
     @property
     def newest(self) -> int | None:
@@ -145,16 +175,19 @@ class _Mapping:
 
     def _views(self) -> None:
         h = self.header
-        self.layout = FrameLayout(int(h["height"]), int(h["width"]), int(h["channels"]),
-                                  h["dtype"].item().decode())
+        self.layout = FrameLayout(int(h["height"]), int(h["width"]), int(h["channels"]), h["dtype"].item().decode())
         self.slots = int(h["slots"])
         self.table = np.ndarray((self.slots,), dtype=SLOT, buffer=self._mm, offset=HEADER_BYTES)
-        self.seq = np.ndarray((self.slots,), dtype="<u8", buffer=self._mm,
-                              offset=HEADER_BYTES, strides=(SLOT.itemsize,))
+        self.seq = np.ndarray(
+            (self.slots,), dtype="<u8", buffer=self._mm, offset=HEADER_BYTES, strides=(SLOT.itemsize,)
+        )
         stride = int(h["slot_stride"])
         self.data = np.ndarray(
-            (self.slots, self.layout.nbytes), dtype=np.uint8, buffer=self._mm,
-            offset=int(h["data_offset"]), strides=(stride, 1),
+            (self.slots, self.layout.nbytes),
+            dtype=np.uint8,
+            buffer=self._mm,
+            offset=int(h["data_offset"]),
+            strides=(stride, 1),
         )
 
     def slot_image(self, slot: int) -> np.ndarray:
@@ -186,8 +219,7 @@ def segment_size(layout: FrameLayout, slots: int) -> tuple[int, int, int]:
 class RingWriter(_Mapping):
     """The camera worker's side: creates (or re-attaches to) the ring and stores frames."""
 
-    def __init__(self, service: str, camera: str, layout: FrameLayout, slots: int,
-                 nominal_period_ns: int = 0):
+    def __init__(self, service: str, camera: str, layout: FrameLayout, slots: int, nominal_period_ns: int = 0):
         if slots < 2:
             raise ValueError(f"a ring needs at least 2 slots, got {slots}")
         self.name = naming.ring_name(service, camera)
@@ -218,10 +250,7 @@ class RingWriter(_Mapping):
         if shm is not None:
             try:
                 self._map(shm.fd, shm.size, writable=True)
-                compatible = (
-                    getattr(self, "layout", None) == layout and self.slots == slots
-                    and shm.size == size
-                )
+                compatible = getattr(self, "layout", None) == layout and self.slots == slots and shm.size == size
             except (RingError, ValueError, TypeError):  # not a ring, or truncated
                 compatible = False
             finally:
@@ -252,8 +281,7 @@ class RingWriter(_Mapping):
         h["magic"] = MAGIC
         self._views()
 
-    def write(self, image: np.ndarray, frame_id: int, t_capture: int,
-              t_available: int | None = None) -> int:
+    def write(self, image: np.ndarray, frame_id: int, t_capture: int, t_available: int | None = None) -> int:
         """Store one frame; returns its t_stored. Never blocks on readers."""
         w = self._count
         slot = w % self.slots

@@ -4,6 +4,7 @@ topic names, and the message contents made from a frame.
 
 Pure: frames and numbers in, message dicts out (``mcap_ros2`` serialises them to CDR).
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -15,36 +16,44 @@ TUPLES_TOPIC = "/fxis/tuples"
 CLOCK = "CLOCK_MONOTONIC"
 
 _SEP = "=" * 80 + "\n"
-_HEADER_DEPS = (_SEP + "MSG: std_msgs/Header\n"
-                "builtin_interfaces/Time stamp\n"
-                "string frame_id\n"
-                + _SEP + "MSG: builtin_interfaces/Time\n"
-                "int32 sec\n"
-                "uint32 nanosec\n")
+_HEADER_DEPS = (
+    _SEP + "MSG: std_msgs/Header\n"
+    "builtin_interfaces/Time stamp\n"
+    "string frame_id\n" + _SEP + "MSG: builtin_interfaces/Time\n"
+    "int32 sec\n"
+    "uint32 nanosec\n"
+)
 
 DEFINITIONS = {
-    IMAGE: ("std_msgs/Header header\n"
-            "uint32 height\n"
-            "uint32 width\n"
-            "string encoding\n"
-            "uint8 is_bigendian\n"
-            "uint32 step\n"
-            "uint8[] data\n" + _HEADER_DEPS),
-    COMPRESSED: ("std_msgs/Header header\n"
-                 "string format\n"
-                 "uint8[] data\n" + _HEADER_DEPS),
+    IMAGE: (
+        "std_msgs/Header header\n"
+        "uint32 height\n"
+        "uint32 width\n"
+        "string encoding\n"
+        "uint8 is_bigendian\n"
+        "uint32 step\n"
+        "uint8[] data\n" + _HEADER_DEPS
+    ),
+    COMPRESSED: ("std_msgs/Header header\nstring format\nuint8[] data\n" + _HEADER_DEPS),
     # One synchronized tuple: header.stamp is the step time, which every image of the tuple
     # carries too; each camera's frame id, generation and capture time, in the same order.
-    TUPLE: ("std_msgs/Header header\n"
-            "string[] cameras\n"
-            "uint64[] frame_ids\n"
-            "uint32[] generations\n"
-            "builtin_interfaces/Time[] capture_stamps\n" + _HEADER_DEPS),
+    TUPLE: (
+        "std_msgs/Header header\n"
+        "string[] cameras\n"
+        "uint64[] frame_ids\n"
+        "uint32[] generations\n"
+        "builtin_interfaces/Time[] capture_stamps\n" + _HEADER_DEPS
+    ),
 }
 
 # ROS encoding names (sensor_msgs/image_encodings.hpp) of the layouts the rings hold.
-_ENCODINGS = {(1, "uint8"): "mono8", (3, "uint8"): "bgr8", (4, "uint8"): "bgra8",
-              (1, "uint16"): "mono16", (1, "float32"): "32FC1"}
+_ENCODINGS = {
+    (1, "uint8"): "mono8",
+    (3, "uint8"): "bgr8",
+    (4, "uint8"): "bgra8",
+    (1, "uint16"): "mono16",
+    (1, "float32"): "32FC1",
+}
 _LAYOUTS = {name: layout for layout, name in _ENCODINGS.items()}
 
 
@@ -78,9 +87,15 @@ def ros_encoding(image: np.ndarray) -> str:
 def image_message(image: np.ndarray, t_ns: int, camera: str) -> dict:
     """A sensor_msgs/msg/Image of a frame: step is the bytes of one row."""
     image = np.ascontiguousarray(image)
-    return {"header": header(t_ns, camera), "height": image.shape[0], "width": image.shape[1],
-            "encoding": ros_encoding(image), "is_bigendian": 0,
-            "step": image.strides[0], "data": image.tobytes()}
+    return {
+        "header": header(t_ns, camera),
+        "height": image.shape[0],
+        "width": image.shape[1],
+        "encoding": ros_encoding(image),
+        "is_bigendian": 0,
+        "step": image.strides[0],
+        "data": image.tobytes(),
+    }
 
 
 def compressed_message(jpeg: bytes, t_ns: int, camera: str) -> dict:
@@ -92,9 +107,13 @@ def compressed_message(jpeg: bytes, t_ns: int, camera: str) -> dict:
 
 def tuple_message(t_step: int, frames: list) -> dict:
     """The /fxis/tuples message of one tuple of ``fxis_shm.Frame``s."""
-    return {"header": header(t_step, "fxis"), "cameras": [f.camera for f in frames],
-            "frame_ids": [f.frame_id for f in frames], "generations": [f.generation for f in frames],
-            "capture_stamps": [stamp(f.service_t_capture) for f in frames]}
+    return {
+        "header": header(t_step, "fxis"),
+        "cameras": [f.camera for f in frames],
+        "frame_ids": [f.frame_id for f in frames],
+        "generations": [f.generation for f in frames],
+        "capture_stamps": [stamp(f.service_t_capture) for f in frames],
+    }
 
 
 def image_array(msg) -> np.ndarray:

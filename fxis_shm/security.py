@@ -7,6 +7,7 @@ those clients; every socket of it (requests, publish, events) is a CURVE
 server. Clients (Client, Subscriber, EventPublisher) take the server's public
 key and their own key pair.
 """
+
 from __future__ import annotations
 
 import ipaddress

@@ -9,6 +9,7 @@ the smallest possible skew, and of those the one closest to t*.
 
 Pure: timelines and numbers in, a Selection out.
 """
+
 from __future__ import annotations
 
 from collections.abc import Iterator, Mapping
@@ -82,9 +83,7 @@ def select_joint(
     if len(timelines) == 1:
         return select_independent(timelines, t_star)
     events = sorted(
-        (t, cam, i)
-        for cam, tl in timelines.items()
-        for i, t in _times(tl, _candidates(tl, t_star, radius_ns))
+        (t, cam, i) for cam, tl in timelines.items() for i, t in _times(tl, _candidates(tl, t_star, radius_ns))
     )
     # Two pointers: for every right end, the shortest window holding every camera.
     windows = []

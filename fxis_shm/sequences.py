@@ -14,6 +14,7 @@ chosen jointly around a reference time):
 
 Pure: a timeline and numbers in; reference times, or what is missing, out.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass

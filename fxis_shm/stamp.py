@@ -13,6 +13,7 @@ the id as black and white 8x8 blocks, JPEG's own block size, in a band near the 
 again near the bottom (32 bits of the id, then their complement): ``read_stamp`` falls
 back to them when the bytes do not read, and a torn image still reads as None.
 """
+
 from __future__ import annotations
 
 import numpy as np

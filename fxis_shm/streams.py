@@ -6,6 +6,7 @@ subscriptions). Every message carries the same metadata as a reply plus a
 per-stream ``seq``, so a subscriber that fell behind (its bounded queue lost
 messages) can tell what it missed from seq and frame_id gaps.
 """
+
 from __future__ import annotations
 
 import logging
@@ -78,8 +79,7 @@ class Streams:
             return self.copyout.encode(*copies[key], topic.encoding, topic.quality)
         return copies[key]
 
-    def _send(self, topic: str, state: _StreamState, metas: list, images: list, extra: dict,
-              period_ns: int) -> None:
+    def _send(self, topic: str, state: _StreamState, metas: list, images: list, extra: dict, period_ns: int) -> None:
         state.seq += 1
         frames = [{**m, "buffer": n} for n, m in enumerate(metas)]
         body = {"stream": topic[:-1], "seq": state.seq, "frames": frames, **extra}
@@ -104,8 +104,9 @@ class Streams:
         snaps = self.copyout.snapshots(cams, now)
         t_ref = min(snaps[c].newest for c in cams)  # every camera has frames up to here
         period = max(self.copyout.period(c) for c in cams)
-        sel = self.copyout.select_frames(self.copyout.settings["sync"] or JOINT,
-                                         {c: snaps[c].timeline for c in cams}, t_ref)
+        sel = self.copyout.select_frames(
+            self.copyout.settings["sync"] or JOINT, {c: snaps[c].timeline for c in cams}, t_ref
+        )
         key = tuple(snaps[c].first_write + sel.index[c] for c in cams)
         if key == state.last_key or (state.last_key and max(sel.t.values()) <= state.last_t_max):
             return  # no tuple newer than the last one
@@ -113,8 +114,14 @@ class Streams:
         if not state.decimator.offer(t_ref, period):
             return
         pairs = [self._copy(snaps[c], c, sel.index[c], copies, state.topic) for c in cams]
-        self._send(topic, state, [m for m, _ in pairs], [img for _, img in pairs],
-                   {"t_request": t_ref, "skew_ns": sel.skew_ns}, period)
+        self._send(
+            topic,
+            state,
+            [m for m, _ in pairs],
+            [img for _, img in pairs],
+            {"t_request": t_ref, "skew_ns": sel.skew_ns},
+            period,
+        )
 
 
 def _rate_note(rate_hz: float, period_ns: int) -> dict:

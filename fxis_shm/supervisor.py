@@ -6,6 +6,7 @@ remove what a crashed earlier run left in /dev/shm, start every camera worker
 and wait for its readiness handshake, then the coordinator. Shutdown: ask
 (SIGTERM), wait, kill; then unlink every segment and semaphore of the service.
 """
+
 from __future__ import annotations
 
 import fcntl
@@ -36,8 +37,7 @@ class StartError(Exception):
 
 
 def lock_path(service: str) -> str:
-    return os.path.join(os.environ.get("XDG_RUNTIME_DIR") or tempfile.gettempdir(),
-                        f"fxis-{service}.lock")
+    return os.path.join(os.environ.get("XDG_RUNTIME_DIR") or tempfile.gettempdir(), f"fxis-{service}.lock")
 
 
 class ServiceLock:
@@ -91,8 +91,7 @@ class Child:
     def start(self) -> None:
         read_fd, write_fd = os.pipe()
         try:
-            self.proc = subprocess.Popen(self.spec.command(write_fd), pass_fds=(write_fd,),
-                                         stdin=subprocess.DEVNULL)
+            self.proc = subprocess.Popen(self.spec.command(write_fd), pass_fds=(write_fd,), stdin=subprocess.DEVNULL)
         finally:
             os.close(write_fd)
         self._ready_fd = read_fd
@@ -112,7 +111,7 @@ class Child:
         if line == "ok":
             return
         if line.startswith("error "):
-            raise StartError(f"{self.label}: {line[len('error '):]}")
+            raise StartError(f"{self.label}: {line[len('error ') :]}")
         if not ready:
             raise StartError(f"{self.label} did not become ready within {timeout:.0f} s")
         raise StartError(f"{self.label} exited during start-up (exit code {self.proc.wait(1)})")
@@ -133,14 +132,23 @@ def viewer_children(config: ServiceConfig, common: dict) -> list[Child]:
     """The processes that show the cameras, clients of the service like any other: the live
     dashboard (fxis_shm.dashboard) and the Foxglove server (fxis_shm.foxglove_live), each
     when its address is not off."""
-    viewer = {**common, "endpoint": config.endpoint, "curve_secret": config.curve_secret,
-              "cameras": {c.name: {"kind": c.kind, "fps": c.options.get("fps")} for c in config.cameras}}
+    viewer = {
+        **common,
+        "endpoint": config.endpoint,
+        "curve_secret": config.curve_secret,
+        "cameras": {c.name: {"kind": c.kind, "fps": c.options.get("fps")} for c in config.cameras},
+    }
     children = []
     if config.http_url:
         children.append(Child(DashboardSpec(**viewer, http=config.http), "dashboard", key="dashboard"))
     if config.foxglove_url:
-        children.append(Child(FoxgloveSpec(**viewer, foxglove=config.foxglove, rate_hz=config.foxglove_rate),
-                              "foxglove", key="foxglove"))
+        children.append(
+            Child(
+                FoxgloveSpec(**viewer, foxglove=config.foxglove, rate_hz=config.foxglove_rate),
+                "foxglove",
+                key="foxglove",
+            )
+        )
     return children
 
 
@@ -152,16 +160,29 @@ class Supervisor:
         origin = timebase.reader(config.clock)()  # the synthetic cameras' shared time origin
         common = {"service": config.name, "log_level": config.log_level, "clock": config.clock}
         self.cameras = [
-            Child(CameraWorkerSpec(**common, camera=c.name, kind=c.kind, options=c.options,
-                                   slots=config.slots, time_origin_ns=origin),
-                  f"camera {c.name!r}", key=f"camera:{c.name}")
+            Child(
+                CameraWorkerSpec(
+                    **common, camera=c.name, kind=c.kind, options=c.options, slots=config.slots, time_origin_ns=origin
+                ),
+                f"camera {c.name!r}",
+                key=f"camera:{c.name}",
+            )
             for c in config.cameras
         ]
-        self.coordinator = Child(CoordinatorSpec(
-            **common, endpoint=config.endpoint, pub=config.pub, events=config.events,
-            cameras={c.name: c.kind for c in config.cameras}, settings=config.settings,
-            curve_secret=config.curve_secret, curve_clients=config.curve_clients,
-        ), "coordinator", key="coordinator")
+        self.coordinator = Child(
+            CoordinatorSpec(
+                **common,
+                endpoint=config.endpoint,
+                pub=config.pub,
+                events=config.events,
+                cameras={c.name: c.kind for c in config.cameras},
+                settings=config.settings,
+                curve_secret=config.curve_secret,
+                curve_clients=config.curve_clients,
+            ),
+            "coordinator",
+            key="coordinator",
+        )
         self.viewers = viewer_children(config, common)
         self.events: list[dict] = []  # the latest exits and restarts, for status
 
@@ -219,8 +240,10 @@ class Supervisor:
         if c.curve_secret:
             lines.append(f"  CurveZMQ: only the clients whose keys are in {c.curve_clients}")
         if c.exposed_unencrypted:
-            lines.append(f"  WARNING: {', '.join(c.exposed_unencrypted)} reachable from other hosts "
-                         "WITHOUT authentication or encryption (--insecure-bind)")
+            lines.append(
+                f"  WARNING: {', '.join(c.exposed_unencrypted)} reachable from other hosts "
+                "WITHOUT authentication or encryption (--insecure-bind)"
+            )
         lines.append("  Ctrl-C stops the service.")
         print("\n".join(lines), file=self.out, flush=True)
 
@@ -242,8 +265,12 @@ class Supervisor:
             child.backoff = BACKOFF_FIRST_S
         child.last_exit = code
         if child.restarts >= self.config.restart_limit:
-            log.error("%s exited with code %s; restart limit of %d reached, leaving it down",
-                      child.label, code, self.config.restart_limit)
+            log.error(
+                "%s exited with code %s; restart limit of %d reached, leaving it down",
+                child.label,
+                code,
+                self.config.restart_limit,
+            )
             child.restart_at = float("inf")
             child.state = "given up"
             self._event(child, f"exited with code {code}; restart limit reached, left down")
@@ -277,8 +304,12 @@ class Supervisor:
         state = {
             "pid": os.getpid(),
             "processes": {
-                c.key: {"pid": c.proc.pid if c.proc else None, "state": c.state,
-                        "restarts": c.restarts, "last_exit": c.last_exit}
+                c.key: {
+                    "pid": c.proc.pid if c.proc else None,
+                    "state": c.state,
+                    "restarts": c.restarts,
+                    "last_exit": c.last_exit,
+                }
                 for c in self.children
             },
             "events": self.events,

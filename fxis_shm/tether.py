@@ -1,5 +1,6 @@
 """Tie a child process's life to its parent's (Linux): the kernel signals the
 child when the parent dies, even by kill -9, so nothing outlives its owner."""
+
 from __future__ import annotations
 
 import ctypes

@@ -7,6 +7,7 @@ host reading the same clock needs no estimate of the offset.
 A caller names its own clock the same way (``Client(clock="realtime")``) or passes a
 function returning int ns.
 """
+
 from __future__ import annotations
 
 import time

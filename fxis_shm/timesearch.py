@@ -7,6 +7,7 @@ logical indices, mapped onto physical slots: O(log n) reads of the vector.
 
 Pure: arrays and numbers in, indices out.
 """
+
 from __future__ import annotations
 
 import bisect

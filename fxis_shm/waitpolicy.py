@@ -13,6 +13,7 @@
 
 Pure: the camera states, timelines and ``now`` are passed in; nothing reads a clock.
 """
+
 from __future__ import annotations
 
 from collections.abc import Callable, Mapping
@@ -93,8 +94,13 @@ def with_predictions(tl: Timeline, cam: CameraState, now: int, up_to: int) -> tu
 
 
 def waiting_for_selection(
-    t_star: int, now: int, timelines: Mapping[str, Timeline], cameras: Mapping[str, CameraState],
-    choose: Callable[[dict[str, Timeline]], Selection], radius_ns: int, tolerance_ns: int = 0,
+    t_star: int,
+    now: int,
+    timelines: Mapping[str, Timeline],
+    cameras: Mapping[str, CameraState],
+    choose: Callable[[dict[str, Timeline]], Selection],
+    radius_ns: int,
+    tolerance_ns: int = 0,
     stored: Selection | None = None,
 ) -> dict[str, int | None]:
     """``auto`` for a request answered by ``choose``: the cameras whose frame in the

@@ -63,8 +63,9 @@ def start_service(tmp_path):
 
 def fxis(*args, timeout: float = 60.0) -> subprocess.CompletedProcess:
     """Run the ``fxis`` command line (as a module, so the venv need not be on PATH)."""
-    return subprocess.run([sys.executable, "-m", "fxis_shm.cli", *args],
-                          capture_output=True, text=True, timeout=timeout)
+    return subprocess.run(
+        [sys.executable, "-m", "fxis_shm.cli", *args], capture_output=True, text=True, timeout=timeout
+    )
 
 
 @pytest.fixture

@@ -1,5 +1,6 @@
 """Foxglove messages decoded the way the app decodes them: by the schema the server gives
 (a protobuf FileDescriptorSet), not by classes compiled into the test."""
+
 from __future__ import annotations
 
 from google.protobuf import descriptor_pb2, descriptor_pool, message_factory

@@ -1,4 +1,5 @@
 """Processing hooks used by the tests (``process=tests.hooks:NAME``)."""
+
 import time
 
 import cv2

@@ -31,6 +31,7 @@ a kernel with time namespaces (Linux >= 5.6); ``check_support`` says what is mis
 Used by tests/integration/test_hosts.py (the ``emulated_hosts`` fixture in tests/conftest.py)
 and bench/network.py (with the repository's root on sys.path).
 """
+
 from __future__ import annotations
 
 import contextlib
@@ -69,15 +70,20 @@ class HostsUnavailable(RuntimeError):
 def check_support() -> None:
     """Raise ``HostsUnavailable`` saying why emulated hosts cannot be made here."""
     if os.geteuid() != 0:
-        raise HostsUnavailable("emulated hosts need root (network, mount and time namespaces, veth links, "
-                               "tc): run these tests as root (CI does)")
+        raise HostsUnavailable(
+            "emulated hosts need root (network, mount and time namespaces, veth links, "
+            "tc): run these tests as root (CI does)"
+        )
     missing = [tool for tool in ("ip", "tc", "unshare", "mount") if shutil.which(tool) is None]
     if missing:
-        raise HostsUnavailable(f"emulated hosts need {', '.join(missing)} (iproute2, util-linux): "
-                               f"run scripts/install-system-packages.sh")
+        raise HostsUnavailable(
+            f"emulated hosts need {', '.join(missing)} (iproute2, util-linux): run scripts/install-system-packages.sh"
+        )
     if not os.path.exists("/proc/self/ns/time"):
-        raise HostsUnavailable("emulated hosts need time namespaces (Linux >= 5.6 with CONFIG_TIME_NS); "
-                               f"this kernel is {os.uname().release}")
+        raise HostsUnavailable(
+            "emulated hosts need time namespaces (Linux >= 5.6 with CONFIG_TIME_NS); "
+            f"this kernel is {os.uname().release}"
+        )
 
 
 def _run(*argv: str, check: bool = True) -> subprocess.CompletedProcess:
@@ -91,6 +97,7 @@ def _run(*argv: str, check: bool = True) -> subprocess.CompletedProcess:
 
 
 # ---- what exists: namespaces and links by name ----------------------------------------------
+
 
 def namespaces() -> list[str]:
     return [line.split()[0] for line in _run("ip", "netns", "list").stdout.splitlines() if line.strip()]
@@ -114,6 +121,7 @@ def _owner_alive(name: str) -> bool:
 def _end_processes(netns: str, grace_s: float = 5.0) -> None:
     """End every process in ``netns`` (ours: services and commands run in a host): SIGTERM,
     then SIGKILL whatever is still there after ``grace_s``."""
+
     def pids():
         done = _run("ip", "netns", "pids", netns, check=False)
         return [int(p) for p in done.stdout.split()] if done.returncode == 0 else []
@@ -151,6 +159,7 @@ def remove_leftovers() -> list[str]:
 
 # ---- addresses ------------------------------------------------------------------------------
 
+
 def _free_subnet() -> ipaddress.IPv4Network:
     """A /30 of TEST-NET-2 that no address of the root namespace is in (call under the lock)."""
     used = set()
@@ -177,13 +186,16 @@ def _allocation_lock():
 
 # ---- a host ---------------------------------------------------------------------------------
 
+
 class EmulatedHost:
     """One emulated computer; made by ``Lab.host``."""
 
     def __init__(self, lab: Lab, clock_offset_s: int, rate: str | None):
         if int(clock_offset_s) != clock_offset_s or clock_offset_s < 0:
-            raise ValueError(f"clock_offset_s must be a whole number of seconds >= 0 "
-                             f"(unshare --monotonic takes seconds), got {clock_offset_s!r}")
+            raise ValueError(
+                f"clock_offset_s must be a whole number of seconds >= 0 "
+                f"(unshare --monotonic takes seconds), got {clock_offset_s!r}"
+            )
         self.lab = lab
         k = next(_numbers)
         self.netns = f"{PREFIX}{os.getpid()}h{k}"
@@ -209,8 +221,7 @@ class EmulatedHost:
             subnet = _free_subnet()
             self.gateway, self.address = (str(a) for a in itertools.islice(subnet.hosts(), 2))
             _run("ip", "netns", "add", self.netns)
-            _run("ip", "link", "add", self.link, "type", "veth", "peer", "name", self.inner_link,
-                 "netns", self.netns)
+            _run("ip", "link", "add", self.link, "type", "veth", "peer", "name", self.inner_link, "netns", self.netns)
             _run("ip", "addr", "add", f"{self.gateway}/30", "dev", self.link)
         _run("ip", "link", "set", self.link, "up")
         inside = ("ip", "netns", "exec", self.netns)
@@ -224,8 +235,22 @@ class EmulatedHost:
         """Limit the link to ``rate`` (tc's syntax: "1gbit", "100mbit") each way; None: unlimited."""
         for prefix, dev in (((), self.link), (("ip", "netns", "exec", self.netns), self.inner_link)):
             if rate:
-                _run(*prefix, "tc", "qdisc", "replace", "dev", dev, "root", "tbf", "rate", rate,
-                     "burst", LINK_BURST, "latency", LINK_QUEUE_LATENCY)
+                _run(
+                    *prefix,
+                    "tc",
+                    "qdisc",
+                    "replace",
+                    "dev",
+                    dev,
+                    "root",
+                    "tbf",
+                    "rate",
+                    rate,
+                    "burst",
+                    LINK_BURST,
+                    "latency",
+                    LINK_QUEUE_LATENCY,
+                )
             else:
                 _run(*prefix, "tc", "qdisc", "delete", "dev", dev, "root", check=False)
         self.rate = rate
@@ -233,21 +258,37 @@ class EmulatedHost:
     def link_bytes(self) -> dict:
         """Bytes the link carried so far each way (the shapers' counters, headers included):
         {"to_host": ..., "from_host": ...}; 0 without a rate limit."""
+
         def sent(*prefix, dev):
             out = _run(*prefix, "tc", "-s", "qdisc", "show", "dev", dev).stdout
             found = re.search(r"Sent (\d+) bytes", out)
             return int(found.group(1)) if found and self.rate else 0
 
-        return {"to_host": sent(dev=self.link),
-                "from_host": sent("ip", "netns", "exec", self.netns, dev=self.inner_link)}
+        return {
+            "to_host": sent(dev=self.link),
+            "from_host": sent("ip", "netns", "exec", self.netns, dev=self.inner_link),
+        }
 
     def wrapper(self) -> list[str]:
         """A command prefix that runs a program on this host: its network, clock and /dev/shm.
         Every step execs the next (no fork), so a signal to the child reaches the program."""
-        return ["ip", "netns", "exec", self.netns,
-                "unshare", "--mount", "--propagation", "private",
-                "--time", f"--monotonic={self.clock_offset_s}", "--",
-                "sh", "-c", 'mount -t tmpfs -o mode=1777 fxt-shm /dev/shm && exec "$@"', "fxt-host"]
+        return [
+            "ip",
+            "netns",
+            "exec",
+            self.netns,
+            "unshare",
+            "--mount",
+            "--propagation",
+            "private",
+            "--time",
+            f"--monotonic={self.clock_offset_s}",
+            "--",
+            "sh",
+            "-c",
+            'mount -t tmpfs -o mode=1777 fxt-shm /dev/shm && exec "$@"',
+            "fxt-host",
+        ]
 
     def run(self, argv: Sequence[str], timeout: float = COMMAND_TIMEOUT_S) -> subprocess.CompletedProcess:
         """Run a command on this host and wait for it (output captured as text)."""
@@ -265,8 +306,15 @@ class EmulatedHost:
         self.lab.closing.callback(log.close)
         svc = ServiceProcess(
             [*args, "--curve-secret", self.lab.server_secret, "--curve-clients", self.lab.allowed],
-            name=name, endpoint=endpoint, pub=pub, events=events, ready_timeout=ready_timeout,
-            stderr=log, client_keys=self.lab.client_keys, wrapper=self.wrapper())
+            name=name,
+            endpoint=endpoint,
+            pub=pub,
+            events=events,
+            ready_timeout=ready_timeout,
+            stderr=log,
+            client_keys=self.lab.client_keys,
+            wrapper=self.wrapper(),
+        )
         self.services.append(svc)
         return svc.start()
 
@@ -276,8 +324,10 @@ class EmulatedHost:
         _remove(self.netns, self.link)
 
     def __repr__(self) -> str:
-        return (f"EmulatedHost({self.netns}, {self.address}, clock +{self.clock_offset_s} s, "
-                f"link {self.rate or 'unlimited'})")
+        return (
+            f"EmulatedHost({self.netns}, {self.address}, clock +{self.clock_offset_s} s, "
+            f"link {self.rate or 'unlimited'})"
+        )
 
 
 class Lab:

@@ -1,6 +1,7 @@
 """What every child process of the supervisor shares: its typed spec from argv
 (fxis_shm.childspec), logging, the readiness handshake, and stopping on SIGTERM
 or when the supervisor dies."""
+
 from __future__ import annotations
 
 import logging

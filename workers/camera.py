@@ -1,6 +1,7 @@
 """The camera worker process: one camera, one ring. It owns the ring's writer
 side and stores every frame the camera delivers (after the camera's processing
 hook, if it has one); it never waits for readers."""
+
 from __future__ import annotations
 
 import logging
@@ -36,8 +37,9 @@ def run(spec: CameraWorkerSpec, ready: Ready, stop: threading.Event) -> None:
         ring.count("hook_errors", hook_errors)
         ring.set_flags(FLAG_TRIGGERED if camera.supports_trigger else 0)
         triggers = _TriggerListener(spec.service, camera, stop) if camera.supports_trigger else None
-        log.info("camera %s (%s) streaming %s into %s, generation %d", name, spec.kind, layout,
-                 ring.name, ring.generation)
+        log.info(
+            "camera %s (%s) streaming %s into %s, generation %d", name, spec.kind, layout, ring.name, ring.generation
+        )
         ready.ok()
         try:
             _stream(camera, process, ring, stop, first)
@@ -63,16 +65,18 @@ def _layout(camera, process, stop) -> tuple:
         if capture is None:
             continue
         t_available = timebase.now()
-        image, error = (capture.image, None) if process.hook is None else \
-            processing.run_hook(process.hook, capture.image)
+        image, error = (
+            (capture.image, None) if process.hook is None else processing.run_hook(process.hook, capture.image)
+        )
         if error:
             errors, last_error = errors + 1, f"the process hook failed: {error}"
             continue
         if image is not None:
             first = processing.Processed(image, capture.frame_id, capture.t_capture, t_available)
             return first, FrameLayout.of(image), errors
-    raise TimeoutError(f"camera {camera.name!r} gave no frame to store in "
-                       f"{_FIRST_FRAME_TIMEOUT_S:.0f} s ({last_error})")
+    raise TimeoutError(
+        f"camera {camera.name!r} gave no frame to store in {_FIRST_FRAME_TIMEOUT_S:.0f} s ({last_error})"
+    )
 
 
 def _stream(camera, process, ring: RingWriter, stop: threading.Event, first=None) -> None:
@@ -148,11 +152,11 @@ class _TriggerListener:
     """Fires the camera's software trigger each time the coordinator posts its semaphore."""
 
     def __init__(self, service: str, camera, stop: threading.Event):
-        self._sem = posix_ipc.Semaphore(naming.trigger_name(service, camera.name),
-                                        posix_ipc.O_CREAT, mode=0o600, initial_value=0)
+        self._sem = posix_ipc.Semaphore(
+            naming.trigger_name(service, camera.name), posix_ipc.O_CREAT, mode=0o600, initial_value=0
+        )
         self._stop = stop
-        self._thread = threading.Thread(target=self._listen, args=(camera,), daemon=True,
-                                        name="trigger")
+        self._thread = threading.Thread(target=self._listen, args=(camera,), daemon=True, name="trigger")
         self._thread.start()
 
     def _listen(self, camera) -> None:

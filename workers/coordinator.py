@@ -1,4 +1,5 @@
 """The coordinator process: serves requests from every camera's ring."""
+
 from __future__ import annotations
 
 import threading

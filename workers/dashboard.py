@@ -1,6 +1,7 @@
 """The dashboard process: the live web page of the service (fxis_shm.dashboard), a client
 of the coordinator and of the rings like any other, supervised and restarted like the
 camera workers and the coordinator."""
+
 from __future__ import annotations
 
 import asyncio

@@ -1,6 +1,7 @@
 """``fxis cameras`` runs this as a child process: it asks every backend which
 cameras it reaches and prints ``{"cameras": [...], "unavailable": {...}}`` as
 JSON. A child, so that the camera SDKs load (and may misbehave) outside the CLI."""
+
 from __future__ import annotations
 
 import json

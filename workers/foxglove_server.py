@@ -1,6 +1,7 @@
 """The Foxglove process: the cameras served to the Foxglove app (fxis_shm.foxglove_live), a
 client of the coordinator and of the rings like any other, supervised and restarted like
 the camera workers and the coordinator."""
+
 from __future__ import annotations
 
 import threading

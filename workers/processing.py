@@ -8,6 +8,7 @@ than the frame period (the paper's rule: n workers when (n-1)*period < cost <=
 n*period); frames still enter the ring in capture order. A hook that raises is
 counted (``hook_errors`` in status) and the worker goes on.
 """
+
 from __future__ import annotations
 
 import collections
@@ -111,8 +112,8 @@ class Pool:
         self.n = n
         self.hook = load_hook(path)  # also here, for the first frame, which fixes the layout
         self._pool = concurrent.futures.ProcessPoolExecutor(
-            n, mp_context=multiprocessing.get_context("spawn"),
-            initializer=_pool_init, initargs=(path,))
+            n, mp_context=multiprocessing.get_context("spawn"), initializer=_pool_init, initargs=(path,)
+        )
         self._pending: collections.deque = collections.deque()
         # Start every process (and import the hook there) now, not on the first frames.
         warm = [self._pool.submit(_pool_warm) for _ in range(n)]

@@ -18,6 +18,7 @@ topic of its own, hence ``--pub``), and a ``time`` event on ``cell/pairs``
 comes back through the vision node as a ping on ``cell/results``.
 Times are ns of CLOCK_MONOTONIC: the robot runs on the service's host.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -86,8 +87,7 @@ class ResultFeed:
         self._sock.close()
 
 
-def check_chain(events: EventPublisher, pub: str, feed: ResultFeed, timeout: float,
-                ctx: zmq.Context) -> None:
+def check_chain(events: EventPublisher, pub: str, feed: ResultFeed, timeout: float, ctx: zmq.Context) -> None:
     """Return once events reach the service and vision results reach us; raise RequestTimeout if not."""
     with Subscriber(pub, context=ctx) as probe:
         probe.topic(PROBE_TOPIC)
@@ -99,13 +99,24 @@ def check_chain(events: EventPublisher, pub: str, feed: ResultFeed, timeout: flo
         while (got := feed.receive(retry)) is not None:
             if got[0].get("ping") and got[0].get("request_id") == ping:
                 return
-    raise RequestTimeout(f"no ping came back on {RESULTS_TOPIC!r} from {feed.endpoint} within "
-                         f"{timeout} s: is the vision node running and subscribed to {pub}?")
+    raise RequestTimeout(
+        f"no ping came back on {RESULTS_TOPIC!r} from {feed.endpoint} within "
+        f"{timeout} s: is the vision node running and subscribed to {pub}?"
+    )
 
 
-def run(events_endpoint: str, pub: str, results: str, n: int, sleep=(0.13, 0.23),
-        timeout: float = 10.0, cameras=("left", "right"), seed: int | None = None,
-        ready_timeout: float = 10.0, out=print) -> list[Outcome]:
+def run(
+    events_endpoint: str,
+    pub: str,
+    results: str,
+    n: int,
+    sleep=(0.13, 0.23),
+    timeout: float = 10.0,
+    cameras=("left", "right"),
+    seed: int | None = None,
+    ready_timeout: float = 10.0,
+    out=print,
+) -> list[Outcome]:
     """Publish ``n`` requests at random moments; return what became of each."""
     rng = random.Random(seed)
     ctx = zmq.Context()
@@ -129,10 +140,12 @@ def run(events_endpoint: str, pub: str, results: str, n: int, sleep=(0.13, 0.23)
                     for rid, o in list(pending.items()):
                         if now - o.t_published > timeout * 1e9:
                             del pending[rid]
-                            out(f"result  {outcomes.index(o) + 1:2d}/{n}  request {rid}: "
-                                f"no result within {timeout} s")
-                    wake = min([o.t_published + int(timeout * 1e9) for o in pending.values()]
-                               + ([next_at] if len(outcomes) < n else []), default=now)
+                            out(f"result  {outcomes.index(o) + 1:2d}/{n}  request {rid}: no result within {timeout} s")
+                    wake = min(
+                        [o.t_published + int(timeout * 1e9) for o in pending.values()]
+                        + ([next_at] if len(outcomes) < n else []),
+                        default=now,
+                    )
                     got = feed.receive(wake)
                     if got is None:
                         continue
@@ -155,9 +168,11 @@ def describe(i: int, n: int, o: Outcome) -> str:
     if "error" in r:
         return f"{head}  ERROR {r['error']}"
     frames = " ".join(f"{c}={f}" for c, f in r["frames"].items())
-    parts = (f"pair after {(r['t_received'] - o.t_published) / 1e6:.1f}, "
-             f"vision {(r['t_done'] - r['t_received']) / 1e6:.1f}, "
-             f"back {(o.t_arrived - r['t_done']) / 1e6:.1f} ms")
+    parts = (
+        f"pair after {(r['t_received'] - o.t_published) / 1e6:.1f}, "
+        f"vision {(r['t_done'] - r['t_received']) / 1e6:.1f}, "
+        f"back {(o.t_arrived - r['t_done']) / 1e6:.1f} ms"
+    )
     return f"{head}  disparity {r['disparity_px']:7.3f} px  frames {frames}  ({parts})"
 
 
@@ -165,35 +180,54 @@ def summary(outcomes: list[Outcome]) -> list[str]:
     answered = [o for o in outcomes if o.ok]
     failed = [o for o in outcomes if o.result is not None and not o.ok]
     lost = [o for o in outcomes if o.result is None]
-    lines = [f"requests: {len(outcomes)} published, {len(answered)} answered, "
-             f"{len(failed)} errors, {len(lost)} without a result"]
+    lines = [
+        f"requests: {len(outcomes)} published, {len(answered)} answered, "
+        f"{len(failed)} errors, {len(lost)} without a result"
+    ]
     if answered:
         lat = np.array([o.latency_ms for o in answered])
-        lines.append(f"latency: n {len(lat)}, median {np.median(lat):.1f} ms, "
-                     f"p90 {np.percentile(lat, 90):.1f} ms, max {lat.max():.1f} ms")
+        lines.append(
+            f"latency: n {len(lat)}, median {np.median(lat):.1f} ms, "
+            f"p90 {np.percentile(lat, 90):.1f} ms, max {lat.max():.1f} ms"
+        )
         disp = np.array([o.result["disparity_px"] for o in answered])
         lines.append(f"disparity: mean {disp.mean():.3f} px, min {disp.min():.3f}, max {disp.max():.3f}")
     return lines
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    p = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
     p.add_argument("--events", default="tcp://127.0.0.1:5557", help="the service's events endpoint")
-    p.add_argument("--pub", default="tcp://127.0.0.1:5556",
-                   help="the service's publish endpoint (only for the start-up handshake)")
+    p.add_argument(
+        "--pub", default="tcp://127.0.0.1:5556", help="the service's publish endpoint (only for the start-up handshake)"
+    )
     p.add_argument("--results", default=DEFAULT_RESULTS, help="the vision node's results endpoint")
     p.add_argument("-n", type=int, default=20, help="number of requests (default 20)")
-    p.add_argument("--sleep", type=float, nargs=2, default=(0.13, 0.23), metavar=("A", "B"),
-                   help="seconds between requests, uniform in [A, B] (default 0.13 0.23)")
-    p.add_argument("--timeout", type=float, default=10.0,
-                   help="seconds to wait for each result (default 10)")
+    p.add_argument(
+        "--sleep",
+        type=float,
+        nargs=2,
+        default=(0.13, 0.23),
+        metavar=("A", "B"),
+        help="seconds between requests, uniform in [A, B] (default 0.13 0.23)",
+    )
+    p.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for each result (default 10)")
     p.add_argument("--cameras", default="left,right", help="the stereo pair's cameras")
     p.add_argument("--seed", type=int, help="seed of the random sleeps")
     args = p.parse_args(argv)
     try:
-        outcomes = run(args.events, args.pub, args.results, args.n, tuple(args.sleep), args.timeout,
-                       args.cameras.split(","), args.seed)
+        outcomes = run(
+            args.events,
+            args.pub,
+            args.results,
+            args.n,
+            tuple(args.sleep),
+            args.timeout,
+            args.cameras.split(","),
+            args.seed,
+        )
     except RequestTimeout as exc:
         print(f"robot: {exc}", file=sys.stderr)
         return 1

@@ -11,6 +11,7 @@ one line per result and a summary, stops everything, and exits 0 only if every
 request got a result, none was an error, and the measured disparity is within
 1 px of ``--shift``.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -76,8 +77,14 @@ def main(argv=None) -> int:
     p.add_argument("--height", type=int, default=1024, help="image height (default 1024)")
     p.add_argument("--fps", type=float, default=20.0, help="frames per second (default 20)")
     p.add_argument("--shift", type=int, default=24, help="shift_px of the right camera: the disparity (default 24)")
-    p.add_argument("--sleep", type=float, nargs=2, default=(0.13, 0.23), metavar=("A", "B"),
-                   help="seconds between requests, uniform in [A, B] (default 0.13 0.23)")
+    p.add_argument(
+        "--sleep",
+        type=float,
+        nargs=2,
+        default=(0.13, 0.23),
+        metavar=("A", "B"),
+        help="seconds between requests, uniform in [A, B] (default 0.13 0.23)",
+    )
     p.add_argument("--timeout", type=float, default=10.0, help="seconds to wait for each result (default 10)")
     p.add_argument("--seed", type=int, help="seed of the robot's random sleeps")
     p.add_argument("--name", default=f"robotcell{os.getpid()}", help="service name (names its shared memory)")
@@ -88,24 +95,48 @@ def main(argv=None) -> int:
     camera = f"synthetic:pattern=chessboard,fps={args.fps},width={args.width},height={args.height}"
     results = f"tcp://127.0.0.1:{free_tcp_port()}"
     service_log = None if args.verbose else tempfile.TemporaryFile()
-    svc = ServiceProcess(["--camera", f"left={camera}",
-                          "--camera", f"right={camera},shift_px={args.shift}"],
-                         name=args.name, stderr=service_log)
+    svc = ServiceProcess(
+        ["--camera", f"left={camera}", "--camera", f"right={camera},shift_px={args.shift}"],
+        name=args.name,
+        stderr=service_log,
+    )
     vision = None
     code = 1
     try:
         svc.start()
-        print(f"service {svc.name!r}: cameras left, right ({args.width}x{args.height} mono8, "
-              f"{args.fps:g} fps, right shifted by {args.shift} px); events {svc.events}, pub {svc.pub}",
-              flush=True)
+        print(
+            f"service {svc.name!r}: cameras left, right ({args.width}x{args.height} mono8, "
+            f"{args.fps:g} fps, right shifted by {args.shift} px); events {svc.events}, pub {svc.pub}",
+            flush=True,
+        )
         vision = subprocess.Popen(
-            [sys.executable, str(HERE / "vision.py"), "--pub", svc.pub, "--events", svc.events,
-             "--results", results, "--exit-with-parent", *(["-v"] if args.verbose else [])],
-            stdout=subprocess.PIPE, stdin=subprocess.DEVNULL)
+            [
+                sys.executable,
+                str(HERE / "vision.py"),
+                "--pub",
+                svc.pub,
+                "--events",
+                svc.events,
+                "--results",
+                results,
+                "--exit-with-parent",
+                *(["-v"] if args.verbose else []),
+            ],
+            stdout=subprocess.PIPE,
+            stdin=subprocess.DEVNULL,
+        )
         wait_for_line(vision, "ready", timeout=15)
         print(f"vision node ready: results on {results}", flush=True)
-        outcomes = robot.run(svc.events, svc.pub, results, args.n, tuple(args.sleep), args.timeout,
-                             seed=args.seed, out=lambda line: print(line, flush=True))
+        outcomes = robot.run(
+            svc.events,
+            svc.pub,
+            results,
+            args.n,
+            tuple(args.sleep),
+            args.timeout,
+            seed=args.seed,
+            out=lambda line: print(line, flush=True),
+        )
         for line in robot.summary(outcomes):
             print(line)
         answered = [o for o in outcomes if o.ok]
@@ -114,8 +145,9 @@ def main(argv=None) -> int:
         else:
             worst = max(abs(o.result["disparity_px"] - args.shift) for o in answered)
             verdict = "OK" if worst <= 1.0 else "FAIL"
-            print(f"{verdict}: every request got a result; disparity off shift_px={args.shift} "
-                  f"by at most {worst:.3f} px")
+            print(
+                f"{verdict}: every request got a result; disparity off shift_px={args.shift} by at most {worst:.3f} px"
+            )
             code = 0 if verdict == "OK" else 1
     except (RuntimeError, RequestTimeout) as exc:
         print(f"FAIL: {exc}")

@@ -20,6 +20,7 @@ stdout carries exactly one line, ``ready``, once the pair subscription is live
 (checked with ``fxis_shm.pubsub.handshake``); everything else goes to stderr.
 SIGTERM or SIGINT stops it with exit code 0.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -61,6 +62,7 @@ def log(*parts) -> None:
 
 # ---- the image processing ----
 
+
 def find_corners(image: np.ndarray) -> np.ndarray | None:
     """The board's inner corners as a (rows, cols, 2) array of (x, y), ordered
     top-left first whichever way round OpenCV found them; None if no board."""
@@ -69,8 +71,7 @@ def find_corners(image: np.ndarray) -> np.ndarray | None:
     found, corners = cv2.findChessboardCorners(gray, BOARD, flags=flags)
     if not found:
         return None
-    corners = cv2.cornerSubPix(gray, corners.reshape(-1, 1, 2).astype(np.float32), (5, 5),
-                               (-1, -1), _SUBPIX)
+    corners = cv2.cornerSubPix(gray, corners.reshape(-1, 1, 2).astype(np.float32), (5, 5), (-1, -1), _SUBPIX)
     grid = corners.reshape(BOARD[1], BOARD[0], 2)
     if grid[0, 0, 0] > grid[0, -1, 0]:  # found right to left
         grid = grid[:, ::-1]
@@ -95,8 +96,7 @@ def process(message: Message, left: str, right: str) -> dict | None:
         return None  # a late answer to one of our handshake probes
     t_received = time.monotonic_ns()
     header = message.header
-    result = {"request_id": header.get("id"), "t_request": header.get("t_request"),
-              "t_received": t_received}
+    result = {"request_id": header.get("id"), "t_request": header.get("t_request"), "t_received": t_received}
     if not message.ok:
         err = header.get("error") or {}
         result["error"] = f"service: {err.get('code', 'UNKNOWN')}: {err.get('message', '')}"
@@ -118,6 +118,7 @@ def process(message: Message, left: str, right: str) -> dict | None:
 
 # ---- the node ----
 
+
 def serve(args, out) -> None:
     ctx = zmq.Context()
     parent = os.getppid()
@@ -131,8 +132,7 @@ def serve(args, out) -> None:
                 pairs.topic(PROBE_TOPIC)
                 with EventPublisher(args.events, context=ctx) as probes:
                     handshake(probes, pairs, PROBE_TOPIC, timeout=args.ready_timeout)
-                log(f"subscribed to {PAIRS_TOPIC!r} on {args.pub}; "
-                    f"publishing {RESULTS_TOPIC!r} on {args.results}")
+                log(f"subscribed to {PAIRS_TOPIC!r} on {args.pub}; publishing {RESULTS_TOPIC!r} on {args.results}")
                 print("ready", file=out, flush=True)
                 while True:
                     if args.exit_with_parent and os.getppid() != parent:
@@ -152,9 +152,11 @@ def serve(args, out) -> None:
                     if "error" in result:
                         log(f"request {result['request_id']}: {result['error']}")
                     elif args.verbose and "disparity_px" in result:
-                        log(f"request {result['request_id']}: frames {result['frames']}, "
+                        log(
+                            f"request {result['request_id']}: frames {result['frames']}, "
                             f"disparity {result['disparity_px']:.3f} px in "
-                            f"{(result['t_done'] - result['t_received']) / 1e6:.1f} ms")
+                            f"{(result['t_done'] - result['t_received']) / 1e6:.1f} ms"
+                        )
         finally:
             results.close()
     finally:
@@ -162,20 +164,28 @@ def serve(args, out) -> None:
 
 
 def main(argv=None) -> int:
-    p = argparse.ArgumentParser(description=__doc__.split("\n\n")[0],
-                                formatter_class=argparse.RawDescriptionHelpFormatter)
-    p.add_argument("--pub", default="tcp://127.0.0.1:5556",
-                   help="the service's publish endpoint, where the pairs come from")
-    p.add_argument("--events", default="tcp://127.0.0.1:5557",
-                   help="the service's events endpoint (used only for the start-up handshake)")
-    p.add_argument("--results", default=DEFAULT_RESULTS,
-                   help=f"endpoint this node binds and publishes results on (default {DEFAULT_RESULTS})")
+    p = argparse.ArgumentParser(
+        description=__doc__.split("\n\n")[0], formatter_class=argparse.RawDescriptionHelpFormatter
+    )
+    p.add_argument(
+        "--pub", default="tcp://127.0.0.1:5556", help="the service's publish endpoint, where the pairs come from"
+    )
+    p.add_argument(
+        "--events",
+        default="tcp://127.0.0.1:5557",
+        help="the service's events endpoint (used only for the start-up handshake)",
+    )
+    p.add_argument(
+        "--results",
+        default=DEFAULT_RESULTS,
+        help=f"endpoint this node binds and publishes results on (default {DEFAULT_RESULTS})",
+    )
     p.add_argument("--left", default="left", help="name of the left camera")
     p.add_argument("--right", default="right", help="name of the right camera")
-    p.add_argument("--ready-timeout", type=float, default=10.0,
-                   help="seconds to wait for the service at start-up")
-    p.add_argument("--exit-with-parent", action="store_true",
-                   help="stop when the process that started this one goes away")
+    p.add_argument("--ready-timeout", type=float, default=10.0, help="seconds to wait for the service at start-up")
+    p.add_argument(
+        "--exit-with-parent", action="store_true", help="stop when the process that started this one goes away"
+    )
     p.add_argument("-v", "--verbose", action="store_true", help="log every result on stderr")
     args = p.parse_args(argv)
     signal.signal(signal.SIGTERM, _on_signal)

@@ -11,6 +11,7 @@ id and capture time in this clock, and the tuple's skew. JPEG with --encoding jp
 Exit status 0 when every tuple had every camera (and, for synthetic cameras, every frame's
 stamp read back as its id), 1 otherwise.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -50,16 +51,23 @@ def main(argv=None) -> int:
             for cam, frame in sorted(pair.items()):
                 stamp_ok = kinds[cam] != "synthetic" or read_stamp(frame.image) == frame.frame_id
                 problems += not stamp_ok
-                parts.append(f"{cam} #{frame.frame_id} at {(frame.t_capture - at) / 1e6:+.2f} ms"
-                             + ("" if stamp_ok else " (STAMP MISMATCH)"))
+                parts.append(
+                    f"{cam} #{frame.frame_id} at {(frame.t_capture - at) / 1e6:+.2f} ms"
+                    + ("" if stamp_ok else " (STAMP MISMATCH)")
+                )
             missing = set(kinds) - set(pair)
             problems += bool(missing)
-            print(f"request {i}: skew {pair.skew_ns / 1e6:.2f} ms; " + "; ".join(parts)
-                  + (f"; MISSING {', '.join(sorted(missing))}" if missing else ""))
+            print(
+                f"request {i}: skew {pair.skew_ns / 1e6:.2f} ms; "
+                + "; ".join(parts)
+                + (f"; MISSING {', '.join(sorted(missing))}" if missing else "")
+            )
             time.sleep(0.2)
         for endpoint, c in client.clocks.items():
-            print(f"clock of {endpoint}: {c.method}, offset {c.offset_ns / 1e9:+.6f} s, drift "
-                  f"{c.drift_ppm:+.2f} ppm, uncertainty {c.uncertainty_ns / 1e3:.1f} us")
+            print(
+                f"clock of {endpoint}: {c.method}, offset {c.offset_ns / 1e9:+.6f} s, drift "
+                f"{c.drift_ppm:+.2f} ppm, uncertainty {c.uncertainty_ns / 1e3:.1f} us"
+            )
     print("OK" if problems == 0 else f"FAIL: {problems} problem(s)")
     return 0 if problems == 0 else 1
 

@@ -9,6 +9,7 @@ It prints every command it runs: on real hosts you run the same ones (README.md)
 it made (namespaces, links, keys, services) is removed when it ends, also on Ctrl-C.
 Exit status: that of cell.py; 1 if the hosts or services could not be started.
 """
+
 from __future__ import annotations
 
 import argparse
@@ -55,26 +56,53 @@ def main(argv=None) -> int:
             os.makedirs(allowed)
             shutil.copy(os.path.join(keys, "vision.key"), allowed)  # copy it to every camera host
             print(f"[vision node] $ cp {keys}/vision.key {allowed}/", flush=True)
-            client_keys = ClientKeys.from_files(os.path.join(keys, "server.key"),
-                                                os.path.join(keys, "vision.key_secret"))
+            client_keys = ClientKeys.from_files(
+                os.path.join(keys, "server.key"), os.path.join(keys, "vision.key_secret")
+            )
             endpoints = []
             for label, offset, camera in (("A", 1000, "left"), ("B", 2000, "right")):
                 host = lab.host(clock_offset_s=offset, rate=args.rate)
                 endpoint, pub, events = host.endpoints(5555)
-                run_args = ["--camera", f"{camera}=synthetic:width={args.width},height={args.height}",
-                            "--curve-secret", os.path.join(keys, "server.key_secret"), "--curve-clients", allowed]
-                svc = ServiceProcess(run_args, name=f"cell{label}", endpoint=endpoint, pub=pub, events=events,
-                                     stderr=open(os.path.join(work, f"host{label}.log"), "wb"),
-                                     client_keys=client_keys, wrapper=host.wrapper())
+                run_args = [
+                    "--camera",
+                    f"{camera}=synthetic:width={args.width},height={args.height}",
+                    "--curve-secret",
+                    os.path.join(keys, "server.key_secret"),
+                    "--curve-clients",
+                    allowed,
+                ]
+                svc = ServiceProcess(
+                    run_args,
+                    name=f"cell{label}",
+                    endpoint=endpoint,
+                    pub=pub,
+                    events=events,
+                    stderr=open(os.path.join(work, f"host{label}.log"), "wb"),
+                    client_keys=client_keys,
+                    wrapper=host.wrapper(),
+                )
                 services.append(svc)
                 host.services.append(svc)  # the lab stops it before it removes the host
-                print(f"[camera host {label}: {host.address}, clock {offset} s ahead, {args.rate}] $ "
-                      + shlex.join(["fxis", "run", *svc.args]), flush=True)
+                print(
+                    f"[camera host {label}: {host.address}, clock {offset} s ahead, {args.rate}] $ "
+                    + shlex.join(["fxis", "run", *svc.args]),
+                    flush=True,
+                )
                 svc.start()
                 endpoints.append(endpoint)
-            cell = [sys.executable, str(HERE / "cell.py"), *endpoints, "--server-key", os.path.join(keys, "server.key"),
-                    "--client-key", os.path.join(keys, "vision.key_secret"), "-n", str(args.n),
-                    "--encoding", args.encoding]
+            cell = [
+                sys.executable,
+                str(HERE / "cell.py"),
+                *endpoints,
+                "--server-key",
+                os.path.join(keys, "server.key"),
+                "--client-key",
+                os.path.join(keys, "vision.key_secret"),
+                "-n",
+                str(args.n),
+                "--encoding",
+                args.encoding,
+            ]
             print(f"[vision node] $ {shlex.join(['python', 'examples/two_hosts/cell.py', *cell[2:]])}", flush=True)
             return subprocess.run(cell).returncode
     except (HostsUnavailable, FxisError, subprocess.CalledProcessError) as exc:

@@ -5,6 +5,7 @@ a second loopback address for a second emulator, and real ``fxis run`` services.
 Nothing is skipped: where Aravis' Python binding or the emulator is missing the tests
 fail saying what to install (`make test` installs both).
 """
+
 from __future__ import annotations
 
 import itertools
@@ -90,15 +91,18 @@ class Emulator:
     def start(self) -> Emulator:
         other = gvcp_serial(self.address)
         if other is not None:
-            raise RuntimeError(f"a GigE Vision device (serial {other!r}) already answers on "
-                               f"{self.address}:{GVCP_PORT}; a leftover emulator? stop it first")
+            raise RuntimeError(
+                f"a GigE Vision device (serial {other!r}) already answers on "
+                f"{self.address}:{GVCP_PORT}; a leftover emulator? stop it first"
+            )
         args = [EMULATOR, "-i", self.address, "-s", self.serial]
         if self.loss:
             args += ["-r", str(self.loss)]
         log = open(self.log_path, "ab") if self.log_path else subprocess.DEVNULL
         try:
-            self.proc = subprocess.Popen(args, stdout=log, stderr=log, stdin=subprocess.DEVNULL,
-                                         preexec_fn=die_with_parent)
+            self.proc = subprocess.Popen(
+                args, stdout=log, stderr=log, stdin=subprocess.DEVNULL, preexec_fn=die_with_parent
+            )
         finally:
             if self.log_path:
                 log.close()
@@ -122,15 +126,17 @@ class Emulator:
 @pytest.fixture(scope="session")
 def second_address():
     """127.0.0.2 on lo for a second emulator; added (root) if missing, removed afterwards."""
-    shown = subprocess.run(["ip", "-o", "-4", "addr", "show", "dev", "lo"], capture_output=True,
-                           text=True, check=True).stdout
+    shown = subprocess.run(
+        ["ip", "-o", "-4", "addr", "show", "dev", "lo"], capture_output=True, text=True, check=True
+    ).stdout
     added = f" {SECOND_ADDRESS}/" not in shown
     if added:
-        done = subprocess.run(["ip", "addr", "add", f"{SECOND_ADDRESS}/8", "dev", "lo"],
-                              capture_output=True, text=True)
+        done = subprocess.run(["ip", "addr", "add", f"{SECOND_ADDRESS}/8", "dev", "lo"], capture_output=True, text=True)
         if done.returncode != 0:
-            pytest.fail(f"a second emulator needs {SECOND_ADDRESS} on lo: `ip addr add "
-                        f"{SECOND_ADDRESS}/8 dev lo` failed (needs root): {done.stderr.strip()}")
+            pytest.fail(
+                f"a second emulator needs {SECOND_ADDRESS} on lo: `ip addr add "
+                f"{SECOND_ADDRESS}/8 dev lo` failed (needs root): {done.stderr.strip()}"
+            )
     yield SECOND_ADDRESS
     if added:
         subprocess.run(["ip", "addr", "del", f"{SECOND_ADDRESS}/8", "dev", "lo"], check=False)

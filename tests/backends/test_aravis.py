@@ -8,6 +8,7 @@ every Mono8 image the service returns must equal ``ramp(frame_id)``, which prove
 that it is complete (a buffer with missing packets holds parts of older frames) and that
 it is the frame its metadata names.
 """
+
 import json
 import os
 import sys
@@ -60,6 +61,7 @@ def stored_frames(svc, camera: str) -> list:
 
 # ---- pure parts: no emulator needed ----------------------------------------------------------
 
+
 def test_gige_vision_block_ids_unwrap_into_a_64_bit_counter():
     ids = FrameCounter(0xFFFF)
     assert [ids.next(raw) for raw in (65534, 65535, 1, 2)] == [(65534, 0), (65535, 0), (65536, 0), (65537, 0)]
@@ -72,13 +74,14 @@ def test_gige_vision_block_ids_unwrap_into_a_64_bit_counter():
     assert [usb.next(raw) for raw in (7, 8, 10)] == [(7, 0), (8, 0), (10, 1)]
 
 
-@pytest.mark.parametrize("pattern, site", [("BayerRG8", (0, 0)), ("BayerGR8", (0, 1)),
-                                           ("BayerGB8", (1, 0)), ("BayerBG8", (1, 1))])
+@pytest.mark.parametrize(
+    "pattern, site", [("BayerRG8", (0, 0)), ("BayerGR8", (0, 1)), ("BayerGB8", (1, 0)), ("BayerBG8", (1, 1))]
+)
 def test_bayer_mosaics_become_bgr_with_the_right_colours(pattern, site):
     import cv2
 
     mosaic = np.zeros((8, 8), np.uint8)
-    mosaic[site[0]::2, site[1]::2] = 200  # only the red sites lit: a red scene
+    mosaic[site[0] :: 2, site[1] :: 2] = 200  # only the red sites lit: a red scene
     bgr = cv2.cvtColor(mosaic, getattr(cv2, PIXEL_FORMATS[pattern].to_bgr))
     assert bgr[2:6, 2:6].reshape(-1, 3).mean(axis=0).tolist() == [0, 0, 200]
 
@@ -91,15 +94,20 @@ def test_without_pygobject_the_error_names_the_extra(monkeypatch):
 
 # ---- against emulators -----------------------------------------------------------------------
 
+
 def test_a_free_running_camera_delivers_every_frame_complete_across_the_id_wrap(emulator, start_service):
     cam = emulator()
-    svc = start_service("--camera", f"a=aravis:device={cam.device_id},fps=50,{SMALL},pixel_format=Mono8",
-                        "--slots", "400")
+    svc = start_service(
+        "--camera", f"a=aravis:device={cam.device_id},fps=50,{SMALL},pixel_format=Mono8", "--slots", "400"
+    )
     wait_until(lambda: newest_id(svc, "a") > 65545, timeout=15, what="frame ids past the 16-bit wrap")
     # the measured rate is a running average: an emulator that once sends a frame late
     # (it does, now and then, by ~100 ms) pulls it down for a second
-    status = wait_until(lambda: (s := status_of(svc, "a"))["fps"] == pytest.approx(50, rel=0.1) and s,
-                        timeout=10, what="the measured frame rate to be the emulator's")
+    status = wait_until(
+        lambda: (s := status_of(svc, "a"))["fps"] == pytest.approx(50, rel=0.1) and s,
+        timeout=10,
+        what="the measured frame rate to be the emulator's",
+    )
     assert status["kind"] == "aravis" and status["alive"]
     assert status["shape"] == [48, 64] and status["dtype"] == "uint8"
     frames = stored_frames(svc, "a")
@@ -116,10 +124,16 @@ def test_a_free_running_camera_delivers_every_frame_complete_across_the_id_wrap(
 def test_two_emulated_cameras_answer_a_tuple(emulator, second_address, start_service):
     left, right = emulator("127.0.0.1"), emulator(second_address)
     svc = start_service(
-        "--camera", f"left=aravis:device={left.device_id},fps=20,{SMALL},pixel_format=Mono8",
-        "--camera", f"right=aravis:device={right.device_id},fps=20,{SMALL},pixel_format=BayerRG8")
-    wait_until(lambda: all(status_of(svc, c)["frames_stored"] >= 5 for c in ("left", "right")),
-               timeout=15, what="frames from both emulators")
+        "--camera",
+        f"left=aravis:device={left.device_id},fps=20,{SMALL},pixel_format=Mono8",
+        "--camera",
+        f"right=aravis:device={right.device_id},fps=20,{SMALL},pixel_format=BayerRG8",
+    )
+    wait_until(
+        lambda: all(status_of(svc, c)["frames_stored"] >= 5 for c in ("left", "right")),
+        timeout=15,
+        what="frames from both emulators",
+    )
     with svc.client() as client:
         frames = client.tuple()
     assert frames["left"].image.shape == (48, 64) and is_frame(frames["left"])
@@ -130,8 +144,12 @@ def test_two_emulated_cameras_answer_a_tuple(emulator, second_address, start_ser
 
 def test_a_tuple_request_software_triggers_both_cameras(emulator, second_address, start_service):
     a, b = emulator("127.0.0.1"), emulator(second_address)
-    svc = start_service("--camera", f"a=aravis:device={a.device_id},trigger=software,{SMALL},pixel_format=Mono8",
-                        "--camera", f"b=aravis:device={b.device_id},trigger=software,{SMALL},pixel_format=Mono8")
+    svc = start_service(
+        "--camera",
+        f"a=aravis:device={a.device_id},trigger=software,{SMALL},pixel_format=Mono8",
+        "--camera",
+        f"b=aravis:device={b.device_id},trigger=software,{SMALL},pixel_format=Mono8",
+    )
     assert status_of(svc, "a")["trigger"] == "software"
     previous = None
     with svc.client() as client:
@@ -149,10 +167,14 @@ def test_a_tuple_request_software_triggers_both_cameras(emulator, second_address
 
 def test_incomplete_frames_from_packet_loss_are_dropped_and_counted(emulator, start_service):
     cam = emulator(loss_per_thousand=50)  # 5 % of the packets: about 1 frame in 4 is incomplete
-    svc = start_service("--camera", f"a=aravis:device={cam.device_id},fps=50,{SMALL},pixel_format=Mono8",
-                        "--slots", "400")
-    wait_until(lambda: (s := status_of(svc, "a"))["frames_dropped"] >= 10 and s["frames_stored"] >= 40,
-               timeout=20, what="drops under packet loss")
+    svc = start_service(
+        "--camera", f"a=aravis:device={cam.device_id},fps=50,{SMALL},pixel_format=Mono8", "--slots", "400"
+    )
+    wait_until(
+        lambda: (s := status_of(svc, "a"))["frames_dropped"] >= 10 and s["frames_stored"] >= 40,
+        timeout=20,
+        what="drops under packet loss",
+    )
     frames = stored_frames(svc, "a")
     assert all(is_frame(f) for f in frames)  # not one incomplete frame reached the client
     ids = [f.frame_id for f in frames]
@@ -171,27 +193,45 @@ def test_a_camera_that_vanishes_is_reported_lost_and_resumes_with_a_new_generati
     wait_until(lambda: status_of(svc, "a")["frames_stored"] >= 3, timeout=15, what="first frames")
     generation = status_of(svc, "a")["generation"]
     cam.kill()
-    wait_until(lambda: "camera lost" in status_of(svc, "a").get("note", ""), timeout=15,
-               what="the status to report the camera lost")
+    wait_until(
+        lambda: "camera lost" in status_of(svc, "a").get("note", ""),
+        timeout=15,
+        what="the status to report the camera lost",
+    )
     with svc.client() as client:
         with pytest.raises((FrameTimeout, CameraDown)):
             client.image("a", wait="next", timeout=0.3)
     cam.start()  # the same camera comes back
-    status = wait_until(lambda: (s := status_of(svc, "a"))["generation"] > generation and s["note"] == "" and s,
-                        timeout=20, what="the camera to be reopened")
+    status = wait_until(
+        lambda: (s := status_of(svc, "a"))["generation"] > generation and s["note"] == "" and s,
+        timeout=20,
+        what="the camera to be reopened",
+    )
     assert status["alive"]
     with svc.client() as client:
         frame = client.image("a", wait="next")
     assert frame.generation > generation and is_frame(frame)
 
 
-@pytest.mark.parametrize("setting, allowed", [("width=4096", "1..2048"),
-                                              ("pixel_format=Mono12", "BayerRG8, Mono8, RGB8")])
+@pytest.mark.parametrize(
+    "setting, allowed", [("width=4096", "1..2048"), ("pixel_format=Mono12", "BayerRG8, Mono8, RGB8")]
+)
 def test_a_setting_the_camera_refuses_stops_start_up_naming_camera_and_key(emulator, setting, allowed):
     cam = emulator()
     ports = [f"tcp://127.0.0.1:{free_tcp_port()}" for _ in range(3)]
-    result = fxis("run", "--name", f"refuse{os.getpid()}", "--endpoint", ports[0], "--pub", ports[1],
-                  "--events", ports[2], "--camera", f"cam=aravis:device={cam.device_id},{setting}")
+    result = fxis(
+        "run",
+        "--name",
+        f"refuse{os.getpid()}",
+        "--endpoint",
+        ports[0],
+        "--pub",
+        ports[1],
+        "--events",
+        ports[2],
+        "--camera",
+        f"cam=aravis:device={cam.device_id},{setting}",
+    )
     assert result.returncode == 1
     lines = [line for line in result.stderr.splitlines() if "refuses" in line and "camera 'cam'" in line]
     assert lines, result.stderr
@@ -210,8 +250,9 @@ def test_fxis_cameras_lists_the_emulator(emulator):
 
 def test_device_timestamps_land_on_the_host_clock(emulator, start_service):
     cam = emulator()
-    svc = start_service("--camera", f"a=aravis:device={cam.device_id},fps=50,{SMALL},pixel_format=Mono16,"
-                        "timestamp=device")
+    svc = start_service(
+        "--camera", f"a=aravis:device={cam.device_id},fps=50,{SMALL},pixel_format=Mono16,timestamp=device"
+    )
     wait_until(lambda: status_of(svc, "a")["frames_stored"] >= 20, timeout=15, what="frames")
     with svc.client() as client:
         frames = client.sequence("consecutive", camera="a", count=10)

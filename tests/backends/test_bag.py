@@ -1,4 +1,5 @@
 """The ``bag`` camera: a recorded bag replayed by a real service, checked against the bag."""
+
 import os
 
 import pytest
@@ -22,20 +23,29 @@ def recorded(tmp_path_factory):
     finally:
         stop(svc)
     bag = read_bag(tmp / "bag")
-    stamps = {cam: {read_stamp(rosmsgs.image_array(m.msg)): m.stamp for m in bag.messages[f"/{cam}/image_raw"]}
-              for cam in ("left", "right")}
+    stamps = {
+        cam: {read_stamp(rosmsgs.image_array(m.msg)): m.stamp for m in bag.messages[f"/{cam}/image_raw"]}
+        for cam in ("left", "right")
+    }
     return str(tmp / "bag"), stamps
 
 
 def bag_cameras(path, extra=""):
-    return ["--camera", f"left=bag:path={path},topic=/left/image_raw{extra}",
-            "--camera", f"right=bag:path={path},topic=/right/image_raw{extra}"]
+    return [
+        "--camera",
+        f"left=bag:path={path},topic=/left/image_raw{extra}",
+        "--camera",
+        f"right=bag:path={path},topic=/right/image_raw{extra}",
+    ]
 
 
 def replayed(client, count: int, cameras=("left", "right")) -> None:
     """Waits until every camera has stored ``count`` frames."""
-    wait_until(lambda: all((client.status()["cameras"][c].get("frames_stored") or 0) >= count for c in cameras),
-               timeout=30, what=f"{count} frames replayed")
+    wait_until(
+        lambda: all((client.status()["cameras"][c].get("frames_stored") or 0) >= count for c in cameras),
+        timeout=30,
+        what=f"{count} frames replayed",
+    )
 
 
 def recorded_gap(stamps, a, b) -> int:
@@ -84,8 +94,9 @@ def test_a_bag_played_once_ends_after_its_last_frame_and_says_so(start_service, 
     path, stamps = recorded
     svc = start_service("--camera", f"v=bag:path={path},topic=/left/image_raw,loop=false,speed=4", "--slots", "64")
     with svc.client(timeout=5) as client:
-        status = wait_until(lambda: (s := client.status()["cameras"]["v"])["note"] and s,
-                            timeout=30, what="the end of the bag")
+        status = wait_until(
+            lambda: (s := client.status()["cameras"]["v"])["note"] and s, timeout=30, what="the end of the bag"
+        )
         assert "end of bag" in status["note"]
         assert status["frames_stored"] + status["frames_dropped"] == len(stamps["left"])
         first = client.sequence("consecutive", camera="v", count=status["frames_stored"])
@@ -119,8 +130,9 @@ def test_bad_options_name_the_key_and_what_the_bag_holds(recorded, tmp_path):
         BagCamera("v", options({"path": str(tmp_path / "none")}), 0)
     with pytest.raises(ValueError, match="holds no .mcap file"):
         BagCamera("v", options({"path": str(tmp_path)}), 0)
-    with pytest.raises(ValueError,
-                       match=r"no topic '/cam0/image_raw'.*image topics: /left/image_raw, /right/image_raw"):
+    with pytest.raises(
+        ValueError, match=r"no topic '/cam0/image_raw'.*image topics: /left/image_raw, /right/image_raw"
+    ):
         BagCamera("v", options({"path": path, "topic": "/cam0/image_raw"}), 0)
     with pytest.raises(ValueError, match="key 'topic' is required: .* has 2 image topics"):
         BagCamera("v", options({"path": path}), 0)
@@ -128,8 +140,19 @@ def test_bad_options_name_the_key_and_what_the_bag_holds(recorded, tmp_path):
 
 def test_a_bad_bag_camera_stops_start_up_with_the_reason(recorded):
     path, _ = recorded
-    result = fxis("run", "--name", f"bag{os.getpid()}", "--camera", f"v=bag:path={path},topic=/nope",
-                  "--endpoint", "tcp://127.0.0.1:1", "--pub", "tcp://127.0.0.1:2", "--events", "tcp://127.0.0.1:3")
+    result = fxis(
+        "run",
+        "--name",
+        f"bag{os.getpid()}",
+        "--camera",
+        f"v=bag:path={path},topic=/nope",
+        "--endpoint",
+        "tcp://127.0.0.1:1",
+        "--pub",
+        "tcp://127.0.0.1:2",
+        "--events",
+        "tcp://127.0.0.1:3",
+    )
     assert result.returncode == 1
     assert "camera 'v'" in result.stderr and "/left/image_raw" in result.stderr
     result = fxis("run", "--camera", "v=bag:path=x,speed=0")

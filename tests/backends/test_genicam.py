@@ -1,6 +1,7 @@
 """The ``genicam`` backend against a real GenTL producer: viky.cti, the simulated
 producer the genicam wheel ships (three devices, 400x400 RGBa8 at 20 fps, each
 drawing a bouncing square: red, green and blue)."""
+
 import json
 import os
 import time
@@ -58,8 +59,11 @@ def camera(**raw) -> GenicamCamera:
 
 def test_three_devices_of_one_producer_stream_together(start_service):
     svc = start_service("--camera", f"a={viky(0)}", "--camera", f"b={viky(1)}", "--camera", f"c={viky(2)}")
-    cams = wait_until(lambda: (s := statuses(svc)) and all(c["frames_stored"] >= 10 for c in s.values()) and s,
-                      timeout=20, what="frames from all three devices")
+    cams = wait_until(
+        lambda: (s := statuses(svc)) and all(c["frames_stored"] >= 10 for c in s.values()) and s,
+        timeout=20,
+        what="frames from all three devices",
+    )
     for status in cams.values():
         assert status["alive"] and status["shape"] == [400, 400, 3] and status["dtype"] == "uint8"
         assert 15 <= status["fps"] <= 25  # viky runs at 20 fps; stamps are host fetch times
@@ -76,16 +80,29 @@ def test_three_devices_of_one_producer_stream_together(start_service):
     assert all(later[c].frame_id > frames[c].frame_id for c in "abc")
 
 
-@pytest.mark.parametrize("keys, words", [
-    ({"width": 900}, ["key 'width'", "900", "100..800"]),
-    ({"pixel_format": "BayerRG8"}, ["key 'pixel_format'", "BayerRG8", "RGBa8, Mono8"]),
-    ({"trigger": "software"}, ["key 'trigger'", "TriggerSoftware", "trigger=free"]),
-    ({"timestamp": "device"}, ["key 'timestamp'", "timestamp=host"]),
-])
+@pytest.mark.parametrize(
+    "keys, words",
+    [
+        ({"width": 900}, ["key 'width'", "900", "100..800"]),
+        ({"pixel_format": "BayerRG8"}, ["key 'pixel_format'", "BayerRG8", "RGBa8, Mono8"]),
+        ({"trigger": "software"}, ["key 'trigger'", "TriggerSoftware", "trigger=free"]),
+        ({"timestamp": "device"}, ["key 'timestamp'", "timestamp=host"]),
+    ],
+)
 def test_a_configuration_the_device_refuses_stops_start_up(keys, words):
-    result = fxis("run", "--name", f"gen{os.getpid()}", "--camera", f"a={viky(0, **keys)}",
-                  "--endpoint", "tcp://127.0.0.1:1", "--pub", "tcp://127.0.0.1:2",
-                  "--events", "tcp://127.0.0.1:3")
+    result = fxis(
+        "run",
+        "--name",
+        f"gen{os.getpid()}",
+        "--camera",
+        f"a={viky(0, **keys)}",
+        "--endpoint",
+        "tcp://127.0.0.1:1",
+        "--pub",
+        "tcp://127.0.0.1:2",
+        "--events",
+        "tcp://127.0.0.1:3",
+    )
     assert result.returncode == 1
     assert "camera 'a'" in result.stderr, result.stderr
     assert all(w in result.stderr for w in words), result.stderr
@@ -169,8 +186,9 @@ def test_discover_without_producers_says_why(monkeypatch):
 def test_a_processing_hook_works_with_a_genicam_camera(start_service, monkeypatch):
     monkeypatch.setenv("PYTHONPATH", REPO + os.pathsep + os.environ.get("PYTHONPATH", ""))
     svc = start_service("--camera", f"a={viky(0)},process=tests.backends.test_genicam:half_grey")
-    status = wait_until(lambda: (s := statuses(svc)["a"])["frames_stored"] >= 3 and s,
-                        timeout=20, what="frames through the hook")
+    status = wait_until(
+        lambda: (s := statuses(svc)["a"])["frames_stored"] >= 3 and s, timeout=20, what="frames through the hook"
+    )
     assert status["shape"] == [200, 200] and status["hook_errors"] == 0
     with svc.client() as client:
         frame = client.image("a")
@@ -192,8 +210,7 @@ def test_bayer_patterns_demosaic_to_the_right_colours(pattern, code_pattern):
 
 def test_conversions_keep_depth_and_drop_row_padding():
     mono16 = np.arange(4 * 3, dtype=np.uint16)
-    assert to_image(mono16.view(np.uint8), "Mono16", 3, 4, raw=False).tolist() == \
-        mono16.reshape(4, 3).tolist()
+    assert to_image(mono16.view(np.uint8), "Mono16", 3, 4, raw=False).tolist() == mono16.reshape(4, 3).tolist()
     padded = np.arange(4 * 5, dtype=np.uint8)  # rows of 3 pixels + 2 bytes of padding
     assert to_image(padded, "Mono8", 3, 4, raw=False).tolist() == padded.reshape(4, 5)[:, :3].tolist()
     rgb = np.array([10, 20, 30] * 4, np.uint8)

@@ -1,5 +1,6 @@
 """The ``opencv`` backend against a real peer: a video file the test writes with
 cv2.VideoWriter, played through a real ``fxis run`` service."""
+
 import os
 import time
 
@@ -79,8 +80,9 @@ def test_the_test_video_is_what_the_tests_expect(video):
 
 def test_a_file_plays_in_order_at_its_rate_then_stops(start_service, video):
     svc = start_service("--camera", f"v=opencv:source={video}", "--slots", "64")
-    status = wait_until(lambda: (s := status_of(svc))["frames_stored"] >= FRAMES and s,
-                        timeout=15, what="the whole file to play")
+    status = wait_until(
+        lambda: (s := status_of(svc))["frames_stored"] >= FRAMES and s, timeout=15, what="the whole file to play"
+    )
     assert status["shape"] == [HEIGHT, WIDTH, 3] and status["alive"]
     assert status["fps"] == pytest.approx(FPS, rel=0.01)
     frames = newest(svc, FRAMES)
@@ -101,13 +103,20 @@ def test_a_file_plays_in_order_at_its_rate_then_stops(start_service, video):
     assert used < 0.3, f"the worker of a finished file uses {used:.0%} of a CPU"
 
 
-@pytest.mark.xfail(not hasattr(Camera, "note"), strict=True, run=False,
-                   reason="the camera worker does not yet publish Camera.note in the status note "
-                          "(workers/backends/base.py and workers/camera.py: see the helper's report)")
+@pytest.mark.xfail(
+    not hasattr(Camera, "note"),
+    strict=True,
+    run=False,
+    reason="the camera worker does not yet publish Camera.note in the status note "
+    "(workers/backends/base.py and workers/camera.py: see the helper's report)",
+)
 def test_the_end_of_a_file_shows_in_the_status_note(start_service, video):
     svc = start_service("--camera", f"v=opencv:source={video},rate=400")
-    status = wait_until(lambda: (s := status_of(svc))["frames_stored"] >= FRAMES and "end of file" in s["note"]
-                        and s, timeout=10, what="the end of the file in the status note")
+    status = wait_until(
+        lambda: (s := status_of(svc))["frames_stored"] >= FRAMES and "end of file" in s["note"] and s,
+        timeout=10,
+        what="the end of the file in the status note",
+    )
     assert "loop=false" in status["note"] and status["alive"]
 
 
@@ -127,8 +136,7 @@ def test_rate_max_delivers_faster_than_the_file_rate(start_service, video):
 def test_a_looping_file_goes_on_past_its_end(start_service, video):
     rate = 200.0  # 0.2 s per pass of the file
     svc = start_service("--camera", f"v=opencv:source={video},loop=true,rate={rate:g}")
-    wait_until(lambda: status_of(svc)["frames_stored"] >= 2 * FRAMES + 10, timeout=15,
-               what="two passes of the file")
+    wait_until(lambda: status_of(svc)["frames_stored"] >= 2 * FRAMES + 10, timeout=15, what="two passes of the file")
     frames = newest(svc, 16)  # a ring of 20 slots holds 19 that can always be read
     ids = [f.frame_id for f in frames]
     assert ids == list(range(ids[0], ids[0] + 16)) and ids[-1] >= 2 * FRAMES
@@ -169,8 +177,11 @@ def test_a_stream_that_ends_is_lost_and_reopened(video):
 
 def test_the_worker_reconnects_a_lost_stream(start_service, video):
     svc = start_service("--camera", f"v=opencv:source=file://{video}")
-    status = wait_until(lambda: (s := status_of(svc))["generation"] >= 1 and s["frames_stored"] > FRAMES // 2
-                        and s, timeout=20, what="the stream to be lost and reopened")
+    status = wait_until(
+        lambda: (s := status_of(svc))["generation"] >= 1 and s["frames_stored"] > FRAMES // 2 and s,
+        timeout=20,
+        what="the stream to be lost and reopened",
+    )
     assert status["alive"]
     with svc.client() as client:
         frame = client.latest(["v"])["v"]
@@ -178,8 +189,7 @@ def test_the_worker_reconnects_a_lost_stream(start_service, video):
 
 
 def test_mono8_frames_are_grey(video):
-    options = camera_options("v", "opencv",
-                            {"source": video, "rate": "max", "pixel_format": "mono8"})
+    options = camera_options("v", "opencv", {"source": video, "rate": "max", "pixel_format": "mono8"})
     camera = OpenCVCamera("v", options, time.monotonic_ns())
     camera.open()
     try:
@@ -209,19 +219,32 @@ def test_a_finished_file_returns_none_without_spinning(video):
 
 def test_a_missing_file_stops_start_up_naming_camera_and_source(tmp_path):
     missing = tmp_path / "no-such-video.avi"
-    result = fxis("run", "--name", f"ocv{os.getpid()}", "--camera", f"v=opencv:source={missing}",
-                  "--endpoint", "tcp://127.0.0.1:1", "--pub", "tcp://127.0.0.1:2",
-                  "--events", "tcp://127.0.0.1:3")
+    result = fxis(
+        "run",
+        "--name",
+        f"ocv{os.getpid()}",
+        "--camera",
+        f"v=opencv:source={missing}",
+        "--endpoint",
+        "tcp://127.0.0.1:1",
+        "--pub",
+        "tcp://127.0.0.1:2",
+        "--events",
+        "tcp://127.0.0.1:3",
+    )
     assert result.returncode == 1
     assert "camera 'v'" in result.stderr and "key 'source'" in result.stderr
     assert str(missing) in result.stderr
 
 
-@pytest.mark.parametrize("flag, words", [
-    ("v=opencv:rate=fast", ["camera 'v'", "'rate'", "max"]),
-    ("v=opencv:loop=maybe", ["camera 'v'", "'loop'"]),
-    ("v=opencv:pixel_format=rgb8", ["camera 'v'", "'pixel_format'", "mono8"]),
-])
+@pytest.mark.parametrize(
+    "flag, words",
+    [
+        ("v=opencv:rate=fast", ["camera 'v'", "'rate'", "max"]),
+        ("v=opencv:loop=maybe", ["camera 'v'", "'loop'"]),
+        ("v=opencv:pixel_format=rgb8", ["camera 'v'", "'pixel_format'", "mono8"]),
+    ],
+)
 def test_malformed_keys_are_config_errors(flag, words):
     result = fxis("run", "--camera", flag)
     assert result.returncode == 2
@@ -229,9 +252,11 @@ def test_malformed_keys_are_config_errors(flag, words):
 
 
 def test_file_keys_on_a_device_and_device_keys_on_a_file_are_refused(video):
-    for raw, key in (({"source": video, "width": "320"}, "'width'"),
-                     ({"source": "0", "loop": "true"}, "'loop'"),
-                     ({}, "'source'")):
+    for raw, key in (
+        ({"source": video, "width": "320"}, "'width'"),
+        ({"source": "0", "loop": "true"}, "'loop'"),
+        ({}, "'source'"),
+    ):
         with pytest.raises(ValueError, match=key):
             OpenCVCamera("v", camera_options("v", "opencv", raw), 0)
 

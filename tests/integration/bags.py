@@ -1,5 +1,6 @@
 """Recorded bags for the recording and replay tests: a small two-camera service, ``fxis
 record`` run against it, and the bag read back with the independent ``rosbags`` library."""
+
 from __future__ import annotations
 
 import os
@@ -15,8 +16,10 @@ from fxis_shm.launch import ServiceProcess
 from ..conftest import assert_nothing_left, fxis
 
 FPS = 20
-CAMERAS = ["left=synthetic:fps=20,width=160,height=120",
-           "right=synthetic:fps=20,width=160,height=120,pixel_format=bgr8"]
+CAMERAS = [
+    "left=synthetic:fps=20,width=160,height=120",
+    "right=synthetic:fps=20,width=160,height=120,pixel_format=bgr8",
+]
 
 
 @dataclass

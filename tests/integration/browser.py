@@ -5,6 +5,7 @@ Chromium listens for DevTools on a port it picks itself (``--remote-debugging-po
 and writes it into ``DevToolsActivePort`` of its private profile folder, so two tests
 never race for a port. Every wait has a deadline.
 """
+
 from __future__ import annotations
 
 import base64
@@ -41,19 +42,33 @@ class Browser:
         profile.mkdir(parents=True, exist_ok=True)
         self.log = open(folder / "chromium.log", "w")
         self.proc = subprocess.Popen(
-            [executable, "--headless", "--no-sandbox",  # --no-sandbox: tests may run as root
-             "--disable-gpu", "--no-first-run", "--no-default-browser-check",
-             "--disable-extensions", "--disable-background-networking", "--mute-audio",
-             f"--user-data-dir={profile}", "--remote-debugging-address=127.0.0.1",
-             "--remote-debugging-port=0", f"--window-size={WINDOW[0]},{WINDOW[1]}", "about:blank"],
-            stdin=subprocess.DEVNULL, stdout=self.log, stderr=subprocess.STDOUT,
-            start_new_session=True)
+            [
+                executable,
+                "--headless",
+                "--no-sandbox",  # --no-sandbox: tests may run as root
+                "--disable-gpu",
+                "--no-first-run",
+                "--no-default-browser-check",
+                "--disable-extensions",
+                "--disable-background-networking",
+                "--mute-audio",
+                f"--user-data-dir={profile}",
+                "--remote-debugging-address=127.0.0.1",
+                "--remote-debugging-port=0",
+                f"--window-size={WINDOW[0]},{WINDOW[1]}",
+                "about:blank",
+            ],
+            stdin=subprocess.DEVNULL,
+            stdout=self.log,
+            stderr=subprocess.STDOUT,
+            start_new_session=True,
+        )
         self._ids = itertools.count(1)
         self._socket = contextlib.ExitStack()
         try:
-            self._ws = self._socket.enter_context(connect(
-                self._page_socket(profile / "DevToolsActivePort"), open_timeout=START_TIMEOUT_S,
-                max_size=None))
+            self._ws = self._socket.enter_context(
+                connect(self._page_socket(profile / "DevToolsActivePort"), open_timeout=START_TIMEOUT_S, max_size=None)
+            )
         except BaseException:
             self.close()
             raise

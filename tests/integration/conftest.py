@@ -22,14 +22,18 @@ def module_service(args: list[str]):
 @pytest.fixture(scope="module")
 def two_cameras():
     """A shared service with two small synthetic cameras at 50 fps, for tests that only read."""
-    yield from module_service(["--camera", f"cam0=synthetic:fps=50,{SMALL}",
-                               "--camera", f"cam1=synthetic:fps=50,phase_ms=1,{SMALL}"])
+    yield from module_service(
+        ["--camera", f"cam0=synthetic:fps=50,{SMALL}", "--camera", f"cam1=synthetic:fps=50,phase_ms=1,{SMALL}"]
+    )
 
 
 def child_pids(svc, role: str) -> list[int]:
     """Pids of the service's children of one role ("camera" or "coordinator")."""
-    return [child.pid for child in procstat.children(svc.proc.pid)
-            if f"fxis_shm.workers.{role}" in procstat.cmdline(child.pid)]
+    return [
+        child.pid
+        for child in procstat.children(svc.proc.pid)
+        if f"fxis_shm.workers.{role}" in procstat.cmdline(child.pid)
+    ]
 
 
 @pytest.fixture

@@ -2,6 +2,7 @@
 
 (A caller on another host, with a clock of its own, is tested in emulated hosts.)
 """
+
 import time
 
 import numpy as np
@@ -21,13 +22,21 @@ def medium(request):
     """Two 320x240 cameras (large enough for the stamp to survive JPEG), one of them colour."""
     from .conftest import module_service
 
-    yield from module_service(["--camera", f"cam0=synthetic:fps=50,{MEDIUM}",
-                               "--camera", f"cam1=synthetic:fps=50,phase_ms=1,pixel_format=bgr8,{MEDIUM}"])
+    yield from module_service(
+        [
+            "--camera",
+            f"cam0=synthetic:fps=50,{MEDIUM}",
+            "--camera",
+            f"cam1=synthetic:fps=50,phase_ms=1,pixel_format=bgr8,{MEDIUM}",
+        ]
+    )
 
 
 def _ready(client):
-    wait_until(lambda: all(c.get("frames_stored", 0) > 5 for c in client.status()["cameras"].values()),
-               what="frames in every ring")
+    wait_until(
+        lambda: all(c.get("frames_stored", 0) > 5 for c in client.status()["cameras"].values()),
+        what="frames in every ring",
+    )
 
 
 def test_on_the_services_own_clock_nothing_is_estimated(medium):
@@ -68,8 +77,10 @@ def test_a_call_without_at_means_the_moment_of_the_call(medium):
 
 @pytest.mark.parametrize("encoding, quality", [("jpeg", 90), ("jpeg", 75), ("png", None)])
 def test_compressed_frames_keep_their_shape_and_stamp(medium, encoding, quality):
-    with Client(medium.endpoint, local="off") as raw, \
-            Client(medium.endpoint, local="off", encoding=encoding, quality=quality) as packed:
+    with (
+        Client(medium.endpoint, local="off") as raw,
+        Client(medium.endpoint, local="off", encoding=encoding, quality=quality) as packed,
+    ):
         _ready(raw)
         pair = packed.tuple(wait="none")
         same = {cam: raw.image(cam, at=frame.t_capture, wait="none") for cam, frame in pair.items()}
@@ -86,8 +97,10 @@ def test_compressed_frames_keep_their_shape_and_stamp(medium, encoding, quality)
 
 
 def test_a_frame_is_encoded_once_for_every_client_that_asks(medium):
-    with Client(medium.endpoint, local="off", encoding="jpeg") as a, \
-            Client(medium.endpoint, local="off", encoding="jpeg") as b:
+    with (
+        Client(medium.endpoint, local="off", encoding="jpeg") as a,
+        Client(medium.endpoint, local="off", encoding="jpeg") as b,
+    ):
         _ready(a)
         before = a.status()["encoded"]
         t_star = time.monotonic_ns() - 100 * MS  # in the past: every request picks the same frames
@@ -115,13 +128,16 @@ def test_a_compressed_stream(medium):
     assert read_stamp(frame.image) == frame.frame_id
 
 
-@pytest.mark.parametrize("kwargs, says", [
-    ({"encoding": "gif"}, "unknown encoding 'gif'"),
-    ({"encoding": "jpeg", "quality": 0}, "quality must be an integer from 1 to 100"),
-    ({"encoding": "jpeg", "quality": 101}, "quality must be an integer from 1 to 100"),
-    ({"clock": 5}, "clock must be"),
-    ({"clock": "sundial"}, "unknown clock 'sundial'"),
-])
+@pytest.mark.parametrize(
+    "kwargs, says",
+    [
+        ({"encoding": "gif"}, "unknown encoding 'gif'"),
+        ({"encoding": "jpeg", "quality": 0}, "quality must be an integer from 1 to 100"),
+        ({"encoding": "jpeg", "quality": 101}, "quality must be an integer from 1 to 100"),
+        ({"clock": 5}, "clock must be"),
+        ({"clock": "sundial"}, "unknown clock 'sundial'"),
+    ],
+)
 def test_bad_encodings_and_clocks_are_clear_errors(kwargs, says):
     with pytest.raises(InvalidArgument, match=says):
         Client("tcp://127.0.0.1:9", **kwargs)

@@ -1,4 +1,5 @@
 """A child process refuses a spec it cannot read, saying why (fxis_shm.childspec)."""
+
 from __future__ import annotations
 
 import json
@@ -16,8 +17,13 @@ def test_a_child_given_another_version_fails_through_the_handshake(role):
     spec = json.dumps({"role": role, "version": 999, "service": "x"})
     read_fd, write_fd = os.pipe()
     try:
-        child = subprocess.run([sys.executable, "-m", ROLES[role].MODULE, spec, str(write_fd)],
-                               pass_fds=(write_fd,), capture_output=True, text=True, timeout=60)
+        child = subprocess.run(
+            [sys.executable, "-m", ROLES[role].MODULE, spec, str(write_fd)],
+            pass_fds=(write_fd,),
+            capture_output=True,
+            text=True,
+            timeout=60,
+        )
         os.close(write_fd)
         write_fd = -1
         handshake = os.read(read_fd, 4096).decode()

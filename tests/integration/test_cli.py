@@ -1,4 +1,5 @@
 """The fxis commands against a real service."""
+
 import json
 
 import cv2
@@ -19,16 +20,23 @@ def test_status_prints_a_table(two_cameras):
     clock, header, *rows = result.stdout.splitlines()[1:]
     assert clock.startswith("clock monotonic: same clock, offset from this host's monotonic +0.000 ms")
     assert header.split()[:4] == ["camera", "kind", "alive", "shape"]
-    assert [r.split()[:4] for r in rows] == [["cam0", "synthetic", "yes", "48x64"],
-                                             ["cam1", "synthetic", "yes", "48x64"]]
+    assert [r.split()[:4] for r in rows] == [
+        ["cam0", "synthetic", "yes", "48x64"],
+        ["cam1", "synthetic", "yes", "48x64"],
+    ]
 
 
 def test_status_json(two_cameras):
     result = fxis("status", "--endpoint", two_cameras.endpoint, "--json")
     status = json.loads(result.stdout)
     assert status["service"] == two_cameras.name and status["clock"] == "monotonic"
-    assert status["clock_mapping"] == {"method": "same clock", "offset_ns": 0, "drift_ppm": 0.0,
-                                       "uncertainty_ns": 0, "samples": 0}
+    assert status["clock_mapping"] == {
+        "method": "same clock",
+        "offset_ns": 0,
+        "drift_ppm": 0.0,
+        "uncertainty_ns": 0,
+        "samples": 0,
+    }
 
 
 def test_status_without_a_service_fails_clearly():

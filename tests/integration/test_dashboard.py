@@ -1,4 +1,5 @@
 """The live dashboard (fxis run --http): a real service, its dashboard process, real HTTP."""
+
 from __future__ import annotations
 
 import io
@@ -19,8 +20,7 @@ from fxis_shm.launch import free_tcp_port
 from ..conftest import fxis
 from .conftest import SMALL, client_keys
 
-CAMERAS = ["--camera", "a=synthetic:fps=20,width=320,height=240",
-           "--camera", f"b=synthetic:fps=10,{SMALL}"]
+CAMERAS = ["--camera", "a=synthetic:fps=20,width=320,height=240", "--camera", f"b=synthetic:fps=10,{SMALL}"]
 
 
 def get(url: str, timeout: float = 10.0) -> tuple[int, dict, bytes]:
@@ -81,8 +81,7 @@ def test_pictures_are_the_newest_frames_scaled_down(dashboard, wait):
     status, _, body = get(base + "/cameras/b/latest.jpg")  # narrower than the default: as it is
     assert jpeg(body).shape == (48, 64)
     first = headers["X-Fxis-Frame"]
-    wait(lambda: get(base + "/cameras/a/latest.jpg?width=160")[1]["X-Fxis-Frame"] != first,
-         what="a newer frame")
+    wait(lambda: get(base + "/cameras/a/latest.jpg?width=160")[1]["X-Fxis-Frame"] != first, what="a newer frame")
 
 
 def test_each_frame_shown_is_encoded_once_however_often_it_is_asked_for(dashboard):
@@ -106,14 +105,17 @@ def test_the_mjpeg_stream_sends_distinct_frames_at_the_asked_rate(dashboard):
     assert image.shape == (60, 80)
 
 
-@pytest.mark.parametrize("path, code, words", [
-    ("/cameras/nope/latest.jpg", 404, "no camera 'nope'"),
-    ("/cameras/nope/stream.mjpg", 404, "known: a, b"),
-    ("/cameras/a/latest.jpg?width=abc", 400, "width must be a whole number"),
-    ("/cameras/a/latest.jpg?width=0", 400, "width must be from 1"),
-    ("/cameras/a/stream.mjpg?fps=-1", 400, "fps must be > 0"),
-    ("/cameras/a/stream.mjpg?fps=abc", 400, "fps must be a number"),
-])
+@pytest.mark.parametrize(
+    "path, code, words",
+    [
+        ("/cameras/nope/latest.jpg", 404, "no camera 'nope'"),
+        ("/cameras/nope/stream.mjpg", 404, "known: a, b"),
+        ("/cameras/a/latest.jpg?width=abc", 400, "width must be a whole number"),
+        ("/cameras/a/latest.jpg?width=0", 400, "width must be from 1"),
+        ("/cameras/a/stream.mjpg?fps=-1", 400, "fps must be > 0"),
+        ("/cameras/a/stream.mjpg?fps=abc", 400, "fps must be a number"),
+    ],
+)
 def test_bad_requests_get_a_readable_error_and_the_service_keeps_serving(dashboard, path, code, words):
     svc, base = dashboard
     status, _, body = get(base + path)
@@ -150,8 +152,11 @@ def test_a_silent_service_is_shown_as_gone_and_back(dashboard, wait):
     pid = json.loads(get(base + "/status.json")[2])["supervisor"]["processes"]["coordinator"]["pid"]
     os.kill(pid, signal.SIGSTOP)
     try:
-        shown = wait(lambda: (lambda v: not v["service_ok"] and v)(view(base)), timeout=15,
-                     what="the service shown as not answering")
+        shown = wait(
+            lambda: (lambda v: not v["service_ok"] and v)(view(base)),
+            timeout=15,
+            what="the service shown as not answering",
+        )
         assert "does not answer" in shown["error"]
         assert get(base + "/status.json")[0] == 503
     finally:
@@ -167,8 +172,11 @@ def test_a_killed_dashboard_is_restarted(start_service, wait):
     with svc.client() as client:
         pid = client.status()["supervisor"]["processes"]["dashboard"]["pid"]
         os.kill(pid, signal.SIGKILL)
-        wait(lambda: client.status()["supervisor"]["processes"]["dashboard"]["restarts"] == 1,
-             timeout=20, what="the dashboard restarted")
+        wait(
+            lambda: client.status()["supervisor"]["processes"]["dashboard"]["restarts"] == 1,
+            timeout=20,
+            what="the dashboard restarted",
+        )
     wait(lambda: service_ok(base), timeout=20, what="the restarted dashboard to answer")
 
 
@@ -180,9 +188,21 @@ def test_a_port_in_use_stops_start_up_naming_the_dashboard():
         busy.listen()
         port = busy.getsockname()[1]
         ports = [f"tcp://127.0.0.1:{free_tcp_port()}" for _ in range(3)]
-        result = fxis("run", "--name", f"dash{os.getpid()}", "--camera", f"a=synthetic:{SMALL}",
-                      "--endpoint", ports[0], "--pub", ports[1], "--events", ports[2],
-                      "--http", f"127.0.0.1:{port}")
+        result = fxis(
+            "run",
+            "--name",
+            f"dash{os.getpid()}",
+            "--camera",
+            f"a=synthetic:{SMALL}",
+            "--endpoint",
+            ports[0],
+            "--pub",
+            ports[1],
+            "--events",
+            ports[2],
+            "--http",
+            f"127.0.0.1:{port}",
+        )
     assert result.returncode == 1
     assert "dashboard" in result.stderr and "address" in result.stderr.lower(), result.stderr
 
@@ -218,9 +238,15 @@ def test_with_curve_the_dashboard_uses_the_services_own_pair(start_service, wait
     # the service's own public key among the allowed ones lets its dashboard in
     (allowed / "server.key").write_bytes((folder / "server.key").read_bytes())
     port = free_tcp_port()
-    start_service(*CAMERAS, "--curve-secret", str(folder / "server.key_secret"),
-                  "--curve-clients", str(allowed), client_keys=client_keys(folder, "alice"),
-                  http=f"127.0.0.1:{port}")
+    start_service(
+        *CAMERAS,
+        "--curve-secret",
+        str(folder / "server.key_secret"),
+        "--curve-clients",
+        str(allowed),
+        client_keys=client_keys(folder, "alice"),
+        http=f"127.0.0.1:{port}",
+    )
     base = f"http://127.0.0.1:{port}"
     wait(lambda: service_ok(base), timeout=30, what="the dashboard served through CurveZMQ")
     assert get(base + "/cameras/a/latest.jpg")[0] == 200

@@ -1,6 +1,7 @@
 """The dashboard in a real browser: headless Chromium loads the page of a real service,
 every camera's picture is drawn and moves, and a camera worker killed with kill -9 is
 shown DOWN. Screenshots are kept in the test's tmp_path (dashboard-*.png)."""
+
 from __future__ import annotations
 
 import os
@@ -40,8 +41,10 @@ def picture(browser: Browser, tile: dict) -> np.ndarray:
 def browser(tmp_path):
     executable = find_chromium()
     if executable is None:
-        pytest.fail("chromium is not installed: the dashboard's browser test needs Debian's "
-                    "chromium package (scripts/install-system-packages.sh installs it)")
+        pytest.fail(
+            "chromium is not installed: the dashboard's browser test needs Debian's "
+            "chromium package (scripts/install-system-packages.sh installs it)"
+        )
     with Browser(tmp_path / "chromium", executable) as b:
         yield b
 
@@ -68,20 +71,32 @@ def test_the_page_shows_every_camera_live_and_a_killed_one_down(browser, start_s
     for name, image in first.items():
         assert image.shape[:2] == SIZES[name][::-1] and image.std() > 5, f"{name}: a blank picture"
     for name, tile in shown.items():
-        wait(lambda tile=tile, name=name: not np.array_equal(picture(browser, tile), first[name]), timeout=20,
-             interval=0.2, what=f"camera {name}'s picture to change on the page")
+        wait(
+            lambda tile=tile, name=name: not np.array_equal(picture(browser, tile), first[name]),
+            timeout=20,
+            interval=0.2,
+            what=f"camera {name}'s picture to change on the page",
+        )
 
     # kill -9 of camera b's worker (--restart-limit 0: it stays down) shows on the page
     with svc.client() as client:
         pid = client.status()["supervisor"]["processes"]["camera:b"]["pid"]
     assert pid in child_pids(svc, "camera")
     os.kill(pid, signal.SIGKILL)
-    down = wait(lambda: (lambda t: t["b"]["state"] == "down" and t)(tiles(browser)), timeout=20,
-                interval=0.2, what="camera b shown DOWN on the page")
+    down = wait(
+        lambda: (lambda t: t["b"]["state"] == "down" and t)(tiles(browser)),
+        timeout=20,
+        interval=0.2,
+        what="camera b shown DOWN on the page",
+    )
     (tmp_path / "dashboard-b-down.png").write_bytes(browser.screenshot())
     assert down["b"]["badge"] == "DOWN" and down["b"]["why"], down["b"]
     assert down["a"]["state"] == "up" and down["a"]["badge"] == "live"  # the other goes on
     before = picture(browser, down["a"])
-    wait(lambda: not np.array_equal(picture(browser, down["a"]), before), timeout=20,
-         interval=0.2, what="camera a's picture to keep changing")
+    wait(
+        lambda: not np.array_equal(picture(browser, down["a"]), before),
+        timeout=20,
+        interval=0.2,
+        what="camera a's picture to keep changing",
+    )
     assert get(base + "/cameras/b/latest.jpg")[0] == 503

@@ -1,5 +1,6 @@
 """Fault injection with real processes: kill -9 of a camera worker and of the
 coordinator, partial tuples, per-client limits, and torn reads under stress."""
+
 import os
 import signal
 import time
@@ -41,8 +42,7 @@ def test_kill_9_of_a_camera_worker(start_service):
         assert frame.generation == 2 and read_stamp(frame.image) == frame.frame_id
         status = client.status()
         assert status["cameras"]["a"]["restarts"] == 1
-        assert any("camera:a" == e["process"] and "restarted" in e["what"]
-                   for e in status["supervisor"]["events"])
+        assert any("camera:a" == e["process"] and "restarted" in e["what"] for e in status["supervisor"]["events"])
 
 
 def test_kill_9_of_the_coordinator(start_service):
@@ -132,6 +132,8 @@ def test_torn_reads_never_reach_a_client(start_service, local):
     with svc.client() as client:
         status = client.status()["cameras"]["fast"]
     assert isinstance(status["torn_reads"], int) and status["frames_stored"] > 100  # wrapped many times
-    print(f"torn-read stress ({paths.pop()} path): {served[0]} frames served, "
-          f"{status['torn_reads'] + torn[0]} torn copies detected and refused, "
-          f"{status['frames_stored']} frames written")
+    print(
+        f"torn-read stress ({paths.pop()} path): {served[0]} frames served, "
+        f"{status['torn_reads'] + torn[0]} torn copies detected and refused, "
+        f"{status['frames_stored']} frames written"
+    )

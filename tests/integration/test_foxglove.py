@@ -1,6 +1,7 @@
 """The Foxglove live view (fxis run --foxglove): a real service, its Foxglove process, and
 a WebSocket client in the test speaking the Foxglove protocol, as the Foxglove app does.
 Messages are decoded by the schema the server advertises (protobuf), like the app."""
+
 from __future__ import annotations
 
 import base64
@@ -27,8 +28,7 @@ from .conftest import SMALL
 # foxglove-sdk 0.30 speaks "foxglove.sdk.v1"; earlier servers "foxglove.websocket.v1"
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 MESSAGE_DATA = 0x01  # opcode of a binary message: u32 subscription id, u64 log time (ns), payload
-CAMERAS = ["--camera", "a=synthetic:fps=20,width=320,height=240",
-           "--camera", f"b=synthetic:fps=10,{SMALL}"]
+CAMERAS = ["--camera", "a=synthetic:fps=20,width=320,height=240", "--camera", f"b=synthetic:fps=10,{SMALL}"]
 SIZES = {"a": (320, 240), "b": (64, 48)}
 TOPICS = {"/a/image", "/b/image", "/fxis/status"}
 
@@ -37,8 +37,9 @@ class FoxgloveClient:
     """The app's side of the protocol: advertised channels, subscriptions, decoded messages."""
 
     def __init__(self, url: str, **options):
-        self.ws = connect(url, subprotocols=SUBPROTOCOLS, open_timeout=10, close_timeout=2,
-                          max_size=None, **options).__enter__()
+        self.ws = connect(
+            url, subprotocols=SUBPROTOCOLS, open_timeout=10, close_timeout=2, max_size=None, **options
+        ).__enter__()
         self.channels: dict[str, dict] = {}  # topic -> advertised channel
         self.subscriptions: dict[int, dict] = {}  # subscription id -> channel
         self.texts: list[dict] = []  # JSON messages other than advertise
@@ -78,8 +79,9 @@ class FoxgloveClient:
     def subscribe(self, topics) -> None:
         ids = {len(self.subscriptions) + i: self.channels[t] for i, t in enumerate(sorted(topics))}
         self.subscriptions.update(ids)
-        self.ws.send(json.dumps({"op": "subscribe", "subscriptions": [
-            {"id": i, "channelId": c["id"]} for i, c in ids.items()]}))
+        self.ws.send(
+            json.dumps({"op": "subscribe", "subscriptions": [{"id": i, "channelId": c["id"]} for i, c in ids.items()]})
+        )
 
     def decode(self, channel: dict, payload: bytes):
         """A protobuf message by the channel's advertised schema (a FileDescriptorSet), or JSON."""
@@ -87,18 +89,19 @@ class FoxgloveClient:
             return json.loads(payload)
         assert channel["encoding"] == "protobuf" and channel["schemaEncoding"] == "protobuf"
         if channel["id"] not in self._decoders:
-            self._decoders[channel["id"]] = message_class(channel["schemaName"],
-                                                          base64.b64decode(channel["schema"]))
+            self._decoders[channel["id"]] = message_class(channel["schemaName"], base64.b64decode(channel["schema"]))
         return self._decoders[channel["id"]].FromString(payload)
 
 
 def foxglove_client(url: str, wait) -> FoxgloveClient:
     """A client once the server listens (it starts after the service answers)."""
+
     def attempt():
         try:
             return FoxgloveClient(url)
         except OSError:  # refused: not listening yet
             return None
+
     return wait(attempt, timeout=30, interval=0.1, what=f"the Foxglove server at {url}")
 
 
@@ -106,8 +109,15 @@ def foxglove_client(url: str, wait) -> FoxgloveClient:
 def served(start_service, wait):
     """A service with two cameras and its Foxglove server; yields (service, connected client)."""
     port = free_tcp_port()
-    svc = start_service(*CAMERAS, "--restart-limit", "0", "--slots", "100",  # 5 s of a's frames
-                        "--foxglove", f"127.0.0.1:{port}")
+    svc = start_service(
+        *CAMERAS,
+        "--restart-limit",
+        "0",
+        "--slots",
+        "100",  # 5 s of a's frames
+        "--foxglove",
+        f"127.0.0.1:{port}",
+    )
     client = foxglove_client(f"ws://127.0.0.1:{port}", wait)
     client.until(lambda _: TOPICS <= set(client.channels), what="every channel advertised")
     yield svc, client
@@ -167,18 +177,25 @@ def test_images_are_the_cameras_frames_stamped_with_their_capture_time(served):
 def test_the_viewer_sets_the_rate_and_a_bad_one_is_refused(served):
     svc, client = served
     client.ws.send(json.dumps({"op": "getParameters", "parameterNames": ["rate_hz"], "id": "get"}))
-    values = client.until(lambda m: isinstance(m, dict) and m.get("op") == "parameterValues" and m,
-                          what="the rate parameter")
+    values = client.until(
+        lambda m: isinstance(m, dict) and m.get("op") == "parameterValues" and m, what="the rate parameter"
+    )
     assert values["parameters"] == [{"name": "rate_hz", "type": "float64", "value": 10.0}]
-    client.ws.send(json.dumps({"op": "setParameters", "id": "bad", "parameters": [
-        {"name": "rate_hz", "type": "float64", "value": -1.0}]}))
-    refused = client.until(lambda m: isinstance(m, dict) and m.get("op") == "status" and m,
-                           what="a status message refusing the rate")
+    client.ws.send(
+        json.dumps(
+            {"op": "setParameters", "id": "bad", "parameters": [{"name": "rate_hz", "type": "float64", "value": -1.0}]}
+        )
+    )
+    refused = client.until(
+        lambda m: isinstance(m, dict) and m.get("op") == "status" and m, what="a status message refusing the rate"
+    )
     assert "rate_hz must be" in refused["message"]
-    client.ws.send(json.dumps({"op": "setParameters", "id": "set", "parameters": [
-        {"name": "rate_hz", "type": "float64", "value": 2.0}]}))
-    set_to = client.until(lambda m: isinstance(m, dict) and m.get("id") == "set" and m,
-                          what="the new rate confirmed")
+    client.ws.send(
+        json.dumps(
+            {"op": "setParameters", "id": "set", "parameters": [{"name": "rate_hz", "type": "float64", "value": 2.0}]}
+        )
+    )
+    set_to = client.until(lambda m: isinstance(m, dict) and m.get("id") == "set" and m, what="the new rate confirmed")
     assert set_to["parameters"][0]["value"] == 2.0
     client.subscribe(["/a/image"])  # a camera at 20 fps, sent at 2 pictures a second
     sent = [t for t, _ in images(client, {"/a/image": 5})["/a/image"]]
@@ -194,8 +211,11 @@ def test_a_killed_foxglove_process_is_restarted(start_service, wait):
         process = service.status()["supervisor"]["processes"]["foxglove"]
         assert process["state"] == "running"
         os.kill(process["pid"], signal.SIGKILL)
-        wait(lambda: service.status()["supervisor"]["processes"]["foxglove"]["restarts"] == 1,
-             timeout=20, what="the Foxglove process restarted")
+        wait(
+            lambda: service.status()["supervisor"]["processes"]["foxglove"]["restarts"] == 1,
+            timeout=20,
+            what="the Foxglove process restarted",
+        )
     client = foxglove_client(f"ws://127.0.0.1:{port}", wait)
     try:
         client.until(lambda _: TOPICS <= set(client.channels), what="every channel advertised again")
@@ -203,12 +223,15 @@ def test_a_killed_foxglove_process_is_restarted(start_service, wait):
         client.close()
 
 
-@pytest.mark.parametrize("args, words", [
-    (["--foxglove", "0.0.0.0:8765"], ["foxglove 0.0.0.0:8765", "insecure_bind"]),
-    (["--foxglove", "nowhere"], ["foxglove 'nowhere'", "HOST:PORT"]),
-    (["--foxglove", "127.0.0.1:8765", "--foxglove-rate", "0"], ["foxglove_rate must be", "> 0"]),
-    (["--foxglove", "127.0.0.1:8765", "--foxglove-rate", "abc"], ["foxglove_rate must be"]),
-])
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["--foxglove", "0.0.0.0:8765"], ["foxglove 0.0.0.0:8765", "insecure_bind"]),
+        (["--foxglove", "nowhere"], ["foxglove 'nowhere'", "HOST:PORT"]),
+        (["--foxglove", "127.0.0.1:8765", "--foxglove-rate", "0"], ["foxglove_rate must be", "> 0"]),
+        (["--foxglove", "127.0.0.1:8765", "--foxglove-rate", "abc"], ["foxglove_rate must be"]),
+    ],
+)
 def test_bad_foxglove_settings_are_refused_naming_them(args, words):
     result = fxis("run", "--http", "off", *args)
     assert result.returncode == 2, result.stderr
@@ -220,17 +243,25 @@ def test_without_the_sdk_the_message_names_the_extra(tmp_path):
     shadow.mkdir()
     (shadow / "__init__.py").write_text("raise ImportError(\"No module named 'foxglove'\")\n")
     env = {**os.environ, "PYTHONPATH": f"{tmp_path}{os.pathsep}{os.environ.get('PYTHONPATH', '')}"}
-    result = subprocess.run([sys.executable, "-m", "fxis_shm.cli", "run", "--http", "off",
-                             "--foxglove", "127.0.0.1:8765"], capture_output=True, text=True,
-                            timeout=60, env=env)
+    result = subprocess.run(
+        [sys.executable, "-m", "fxis_shm.cli", "run", "--http", "off", "--foxglove", "127.0.0.1:8765"],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env=env,
+    )
     assert result.returncode == 2, result.stderr
     assert "foxglove-sdk" in result.stderr and "fxis-shm[foxglove]" in result.stderr, result.stderr
 
 
 def test_a_viewer_that_stops_reading_holds_up_nobody(start_service, wait):
     port = free_tcp_port()
-    svc = start_service("--camera", "a=synthetic:fps=20,width=1280,height=960",  # 1.2 MB pictures
-                        "--foxglove", f"127.0.0.1:{port}")
+    svc = start_service(
+        "--camera",
+        "a=synthetic:fps=20,width=1280,height=960",  # 1.2 MB pictures
+        "--foxglove",
+        f"127.0.0.1:{port}",
+    )
     url = f"ws://127.0.0.1:{port}"
     reader = foxglove_client(url, wait)
     # a viewer that subscribes and never reads: a small receive buffer and a queue of one
@@ -262,8 +293,22 @@ def test_a_port_in_use_stops_start_up_naming_the_foxglove_server():
         busy.listen()
         port = busy.getsockname()[1]
         ports = [f"tcp://127.0.0.1:{free_tcp_port()}" for _ in range(3)]
-        result = fxis("run", "--name", f"fox{os.getpid()}", "--camera", f"a=synthetic:{SMALL}",
-                      "--endpoint", ports[0], "--pub", ports[1], "--events", ports[2],
-                      "--http", "off", "--foxglove", f"127.0.0.1:{port}")
+        result = fxis(
+            "run",
+            "--name",
+            f"fox{os.getpid()}",
+            "--camera",
+            f"a=synthetic:{SMALL}",
+            "--endpoint",
+            ports[0],
+            "--pub",
+            ports[1],
+            "--events",
+            ports[2],
+            "--http",
+            "off",
+            "--foxglove",
+            f"127.0.0.1:{port}",
+        )
     assert result.returncode == 1
     assert "foxglove" in result.stderr and "address" in result.stderr.lower(), result.stderr

@@ -1,5 +1,6 @@
 """100,000 random and mutated messages at a real coordinator; afterwards it is the
 same process, and it still answers well-formed requests correctly."""
+
 import json
 import random
 
@@ -15,8 +16,10 @@ from .conftest import SMALL, child_pids
 pytestmark = pytest.mark.integration
 BATCHES, PER_BATCH = 100, 1000
 TEMPLATES = [
-    encode_request("tuple", id=1)[0], encode_request("image", id=2, camera="a")[0],
-    encode_request("latest", id=3)[0], encode_request("status", id=4)[0],
+    encode_request("tuple", id=1)[0],
+    encode_request("image", id=2, camera="a")[0],
+    encode_request("latest", id=3)[0],
+    encode_request("status", id=4)[0],
     encode_request("sequence", id=5, kind="consecutive", camera="a", count=3)[0],
     encode_request("tuple", id=6, cameras=["a", "b"], sync="independent", wait="none")[0],
 ]
@@ -37,14 +40,13 @@ def mutate(rng: random.Random, template: bytes) -> list[bytes]:
         return [bytes(data[: rng.randrange(len(data))])]
     if kind == 3:  # a field replaced by a value of another type
         header = json.loads(template)
-        header[rng.choice(list(header) + ["camera", "cameras", "at", "count", "kind", "v"])] = \
-            rng.choice(JUNK_VALUES)
+        header[rng.choice(list(header) + ["camera", "cameras", "at", "count", "kind", "v"])] = rng.choice(JUNK_VALUES)
         return [json.dumps(header).encode()]
     if kind == 4:  # extra frames, empty frames
         return [bytes(data)] + [rng.randbytes(rng.randrange(0, 20)) for _ in range(rng.randrange(1, 4))]
     if kind == 5:  # spliced with another template
         other = rng.choice(TEMPLATES)
-        return [bytes(data[: rng.randrange(len(data))]) + other[rng.randrange(len(other)):]]
+        return [bytes(data[: rng.randrange(len(data))]) + other[rng.randrange(len(other)) :]]
     if kind == 6:  # deeply nested JSON
         depth = rng.randrange(1, 2000)
         return [b"[" * depth + b"]" * depth]
@@ -57,8 +59,10 @@ def service():
 
     from fxis_shm.launch import ServiceProcess
 
-    svc = ServiceProcess(["--camera", f"a=synthetic:fps=50,{SMALL}", "--camera", f"b=synthetic:fps=50,{SMALL}"],
-                         stderr=subprocess.DEVNULL).start()
+    svc = ServiceProcess(
+        ["--camera", f"a=synthetic:fps=50,{SMALL}", "--camera", f"b=synthetic:fps=50,{SMALL}"],
+        stderr=subprocess.DEVNULL,
+    ).start()
     yield svc
     svc.stop()
 
@@ -76,8 +80,9 @@ def test_a_fuzzed_coordinator_stays_up_and_correct(service):
             counts["replies"] += 1
             timeout_ms = 0
 
-    @settings(max_examples=BATCHES, deadline=None, derandomize=True, database=None,
-              suppress_health_check=list(HealthCheck))
+    @settings(
+        max_examples=BATCHES, deadline=None, derandomize=True, database=None, suppress_health_check=list(HealthCheck)
+    )
     @given(seed=st.integers(0, 2**32 - 1), templates=st.lists(st.sampled_from(TEMPLATES), min_size=1, max_size=4))
     def batch(seed, templates):
         rng = random.Random(seed)
@@ -102,5 +107,4 @@ def test_a_fuzzed_coordinator_stays_up_and_correct(service):
         assert all(read_stamp(f.image) == f.frame_id for f in frames.values())
         status = client.status()
     assert status["supervisor"]["processes"]["coordinator"]["restarts"] == 0
-    print(f"fuzz: {counts['sent']} messages sent, {counts['replies']} replies; coordinator pid "
-          f"{coordinator} unchanged")
+    print(f"fuzz: {counts['sent']} messages sent, {counts['replies']} replies; coordinator pid {coordinator} unchanged")

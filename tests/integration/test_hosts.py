@@ -4,6 +4,7 @@ that goes away and comes back, compressed frames (issue 11, items 1-8).
 
 Every test here needs root and namespaces; without them the ``emulated_hosts`` fixture fails
 saying so. None of them asserts a duration: bench/network.py measures."""
+
 import os
 import subprocess
 import sys
@@ -34,9 +35,11 @@ def _client(lab: Lab, endpoints, **options) -> Client:
 
 def _estimated(client: Client, endpoint: str):
     """The client's clock estimate for ``endpoint`` once it rests on exchanges."""
+
     def ready():
         estimate = client.clocks.get(endpoint)
         return estimate if estimate is not None and estimate.method == "estimated" else None
+
     return wait_until(ready, timeout=30, what=f"a clock estimate for {endpoint}")
 
 
@@ -48,12 +51,19 @@ def _true_caller_time(frame, host) -> int:
 
 # ---- the emulated host itself -----------------------------------------------------------------
 
+
 def test_an_emulated_host_has_its_own_clock_shm_address_and_link(emulated_hosts):
     host = emulated_hosts.host(clock_offset_s=1000, rate="100mbit")
     before = time.monotonic_ns()
-    inside = host.run(["python3", "-c", "import os, time; print(time.monotonic_ns()); "
-                                        "print(os.readlink('/proc/self/ns/time')); print(os.listdir('/dev/shm')); "
-                                        "open('/dev/shm/fxt-probe', 'w').close()"])
+    inside = host.run(
+        [
+            "python3",
+            "-c",
+            "import os, time; print(time.monotonic_ns()); "
+            "print(os.readlink('/proc/self/ns/time')); print(os.listdir('/dev/shm')); "
+            "open('/dev/shm/fxt-probe', 'w').close()",
+        ]
+    )
     after = time.monotonic_ns()
     assert inside.returncode == 0, inside.stderr
     clock, namespace, shm = inside.stdout.splitlines()
@@ -62,6 +72,7 @@ def test_an_emulated_host_has_its_own_clock_shm_address_and_link(emulated_hosts)
     assert shm == "[]"  # a fresh tmpfs, not ours
     assert not os.path.exists("/dev/shm/fxt-probe")  # and what it writes there stays there
     import ipaddress
+
     assert ipaddress.ip_address(host.address) in SUBNET and ipaddress.ip_address(host.gateway) in SUBNET
     shaper = subprocess.run(["tc", "qdisc", "show", "dev", host.link], capture_output=True, text=True).stdout
     assert "tbf" in shaper and "100Mbit" in shaper
@@ -93,8 +104,9 @@ def test_a_crashed_runs_leftovers_are_removed_first(tmp_path):
     if os.geteuid() != 0:
         pytest.fail("emulated hosts unavailable: this test needs root", pytrace=False)
     subprocess.run(["ip", "netns", "add", netns], check=True)
-    subprocess.run(["ip", "link", "add", link, "type", "veth", "peer", "name", f"{PREFIX}{gone.pid}n0",
-                    "netns", netns], check=True)
+    subprocess.run(
+        ["ip", "link", "add", link, "type", "veth", "peer", "name", f"{PREFIX}{gone.pid}n0", "netns", netns], check=True
+    )
     try:
         with Lab(log_dir=str(tmp_path)):
             assert netns not in namespaces() and link not in links()
@@ -106,6 +118,7 @@ def test_a_crashed_runs_leftovers_are_removed_first(tmp_path):
 
 
 # ---- the caller's clock across hosts ----------------------------------------------------------
+
 
 def test_at_is_in_the_callers_clock_on_a_host_1000_s_ahead(emulated_hosts):
     host = emulated_hosts.host(clock_offset_s=1000)
@@ -164,8 +177,9 @@ def test_a_host_whose_service_stops_and_comes_back(emulated_hosts):
     sa = a.service("--camera", f"left=synthetic:fps={FPS},{SMALL}")
     sb = b.service("--camera", f"right=synthetic:fps={FPS},{SMALL}")
     with Client([sa.endpoint, sb.endpoint], timeout=3.0, keys=emulated_hosts.client_keys) as client:
-        wait_until(lambda: set(_tuple_or_none(client) or ()) == {"left", "right"}, timeout=60,
-                   what="a tuple of both hosts")
+        wait_until(
+            lambda: set(_tuple_or_none(client) or ()) == {"left", "right"}, timeout=60, what="a tuple of both hosts"
+        )
         sb.stop()
         with pytest.raises(CameraDown) as down:
             client.tuple()
@@ -185,6 +199,7 @@ def _tuple_or_none(client):
 
 
 # ---- compressed frames over the link --------------------------------------------------------
+
 
 @pytest.mark.parametrize("pixel_format", ["mono8", "bgr8"])
 @pytest.mark.parametrize("encoding", ["jpeg", "png"])
@@ -213,16 +228,22 @@ def test_compressed_frames_over_the_link_keep_shape_and_stamp(emulated_hosts, en
 
 # ---- the example ------------------------------------------------------------------------------
 
+
 def test_the_two_hosts_example_runs(emulated_hosts):
     """examples/two_hosts/run.py makes its own lab; the fixture only checks that hosts can be made."""
     from pathlib import Path
 
     run = Path(__file__).resolve().parents[2] / "examples" / "two_hosts" / "run.py"
-    done = subprocess.run([sys.executable, str(run), "-n", "3", "--width", "320", "--height", "240",
-                           "--encoding", "jpeg"], capture_output=True, text=True, timeout=100)
+    done = subprocess.run(
+        [sys.executable, str(run), "-n", "3", "--width", "320", "--height", "240", "--encoding", "jpeg"],
+        capture_output=True,
+        text=True,
+        timeout=100,
+    )
     report = f"stdout:\n{done.stdout}\nstderr:\n{done.stderr}"
     assert done.returncode == 0, report
     assert done.stdout.rstrip().endswith("OK"), report
     assert "--insecure-bind" not in done.stdout and "--curve-secret" in done.stdout
     from ..hosts import _owner_alive, ours
+
     assert [n for n in ours(namespaces() + links()) if not _owner_alive(n)] == []  # run.py removed its hosts

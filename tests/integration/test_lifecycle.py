@@ -1,4 +1,5 @@
 """Start, stop, crash and clean-up of whole services (real processes and /dev/shm)."""
+
 import os
 import signal
 import subprocess
@@ -30,8 +31,7 @@ def test_sigint_stops_like_ctrl_c(start_service):
 
 
 def test_killed_camera_worker_fails_fast(start_service, wait):
-    svc = start_service("--restart-limit", "0", "--camera", f"a=synthetic:{SMALL}",
-                        "--camera", f"b=synthetic:{SMALL}")
+    svc = start_service("--restart-limit", "0", "--camera", f"a=synthetic:{SMALL}", "--camera", f"b=synthetic:{SMALL}")
     with svc.client(timeout=5.0) as client:
         victim = client.status()["cameras"]["a"]["writer_pid"]
         os.kill(victim, signal.SIGKILL)
@@ -51,16 +51,27 @@ def test_restarted_camera_worker_has_a_new_generation(start_service, wait):
     with svc.client(timeout=5.0) as client:
         first = client.status()["cameras"]["a"]
         os.kill(first["writer_pid"], signal.SIGKILL)
-        wait(lambda: client.status()["cameras"]["a"].get("generation") == 2 and
-             client.status()["cameras"]["a"]["alive"], what="the worker to come back")
+        wait(
+            lambda: client.status()["cameras"]["a"].get("generation") == 2 and client.status()["cameras"]["a"]["alive"],
+            what="the worker to come back",
+        )
         frame = client.image("a")
         assert frame.generation == 2
 
 
 def test_second_run_of_the_same_name_is_refused(start_service):
     svc = start_service("--camera", f"a=synthetic:{SMALL}")
-    result = fxis("run", "--name", svc.name, "--camera", f"a=synthetic:{SMALL}",
-                  "--endpoint", "tcp://127.0.0.1:0", "--pub", "tcp://127.0.0.1:1")
+    result = fxis(
+        "run",
+        "--name",
+        svc.name,
+        "--camera",
+        f"a=synthetic:{SMALL}",
+        "--endpoint",
+        "tcp://127.0.0.1:0",
+        "--pub",
+        "tcp://127.0.0.1:1",
+    )
     assert result.returncode == 1
     assert "already running" in result.stderr
     with svc.client() as client:  # the first one is unharmed
@@ -83,21 +94,29 @@ def test_kill_9_of_the_supervisor_then_run_again(start_service, wait, tmp_path):
     first.proc.kill()
     first.proc.wait()
     # the children notice their parent died (PR_SET_PDEATHSIG) and exit
-    wait(lambda: not any(os.path.exists(f"/proc/{pid}/cmdline") and
-                         open(f"/proc/{pid}/cmdline", "rb").read() for pid in children),
-         what="orphaned children to exit")
+    wait(
+        lambda: (
+            not any(
+                os.path.exists(f"/proc/{pid}/cmdline") and open(f"/proc/{pid}/cmdline", "rb").read() for pid in children
+            )
+        ),
+        what="orphaned children to exit",
+    )
     second = start_service("--camera", f"a=synthetic:{SMALL}", name=first.name)
     with second.client() as client:
         assert client.image("a").generation >= 1
 
 
-@pytest.mark.parametrize("flag,named", [
-    ("a=synthetic:fps=0", "fps"),
-    ("a=synthetic:pixel_format=yuv", "pixel_format"),
-    ("a=warp", "warp"),
-    ("a=synthetic:colour=red", "colour"),
-    ("bad name=synthetic", "camera name"),
-])
+@pytest.mark.parametrize(
+    "flag,named",
+    [
+        ("a=synthetic:fps=0", "fps"),
+        ("a=synthetic:pixel_format=yuv", "pixel_format"),
+        ("a=warp", "warp"),
+        ("a=synthetic:colour=red", "colour"),
+        ("bad name=synthetic", "camera name"),
+    ],
+)
 def test_bad_settings_exit_2_naming_the_setting(flag, named):
     result = fxis("run", "--camera", flag)
     assert result.returncode == 2
@@ -113,9 +132,11 @@ def test_bad_config_file_exits_2(tmp_path):
 
 def test_config_file_is_used(start_service, tmp_path):
     config = tmp_path / "cell.toml"
-    config.write_text('slots = 5\n[cameras.left]\nkind = "synthetic"\nfps = 40\nwidth = 64\n'
-                      'height = 48\n[cameras.right]\nkind = "synthetic"\npixel_format = "bgr8"\n'
-                      'width = 64\nheight = 48\n')
+    config.write_text(
+        'slots = 5\n[cameras.left]\nkind = "synthetic"\nfps = 40\nwidth = 64\n'
+        'height = 48\n[cameras.right]\nkind = "synthetic"\npixel_format = "bgr8"\n'
+        "width = 64\nheight = 48\n"
+    )
     svc = start_service("--config", str(config))
     with svc.client() as client:
         status = client.status()["cameras"]

@@ -3,6 +3,7 @@
 Torn copies on this path are covered by tests/integration/test_faults.py
 (test_torn_reads_never_reach_a_client[require]).
 """
+
 import json
 import subprocess
 import sys
@@ -18,8 +19,7 @@ from .conftest import SMALL
 
 
 def test_a_local_client_copies_the_frames_the_service_would_send(two_cameras):
-    with Client(two_cameras.endpoint, local="auto") as local, \
-            Client(two_cameras.endpoint, local="off") as remote:
+    with Client(two_cameras.endpoint, local="auto") as local, Client(two_cameras.endpoint, local="off") as remote:
         wait_until(lambda: local.status()["cameras"]["cam1"].get("frames_stored", 0) > 3)
         by_ring = local.tuple()
         t_star = by_ring.t_request
@@ -120,10 +120,24 @@ _PRIVATE_SHM_CLIENT = textwrap.dedent("""
 def test_a_client_that_cannot_read_the_rings_falls_back_to_the_network(two_cameras, impostor):
     shell = 'mount -t tmpfs -o size=16m tmpfs /dev/shm && exec "$0" "$@"'
     done = subprocess.run(
-        ["unshare", "--mount", "--propagation", "private", "sh", "-c", shell, sys.executable, "-c",
-         _PRIVATE_SHM_CLIENT, two_cameras.endpoint, two_cameras.name,
-         "impostor" if impostor else "-"],
-        capture_output=True, text=True, timeout=60,
+        [
+            "unshare",
+            "--mount",
+            "--propagation",
+            "private",
+            "sh",
+            "-c",
+            shell,
+            sys.executable,
+            "-c",
+            _PRIVATE_SHM_CLIENT,
+            two_cameras.endpoint,
+            two_cameras.name,
+            "impostor" if impostor else "-",
+        ],
+        capture_output=True,
+        text=True,
+        timeout=60,
     )
     assert done.returncode == 0, done.stderr  # as root with util-linux (make test installs it)
     out = json.loads(done.stdout)

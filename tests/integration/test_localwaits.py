@@ -1,4 +1,5 @@
 """Same-host reads that wait, fail and follow restarts without the coordinator (issue 12)."""
+
 import os
 import random
 import signal
@@ -15,10 +16,8 @@ from .conftest import SMALL
 
 def test_local_and_network_answers_agree_frame_for_frame(two_cameras):
     rng = random.Random(12)
-    with Client(two_cameras.endpoint, local="require") as local, \
-            Client(two_cameras.endpoint, local="off") as remote:
-        wait_until(lambda: local.status()["cameras"]["cam1"].get("frames_stored", 0) > 30,
-                   what="600 ms of frames")
+    with Client(two_cameras.endpoint, local="require") as local, Client(two_cameras.endpoint, local="off") as remote:
+        wait_until(lambda: local.status()["cameras"]["cam1"].get("frames_stored", 0) > 30, what="600 ms of frames")
         for _ in range(25):
             t_star = time.monotonic_ns() - rng.randrange(20_000_000, 300_000_000)  # the ring holds 400 ms
             by_ring, by_wire = local.tuple(at=t_star), remote.tuple(at=t_star)
@@ -111,8 +110,16 @@ def test_a_local_client_learns_a_service_restarted_with_more_cameras(start_servi
     with Client(first.endpoint, local="require", timeout=2.0) as client:
         assert client.image("a").path == "local"
         first.stop()
-        again = start_service("--camera", f"a=synthetic:fps=50,{SMALL}", "--camera", f"b=synthetic:fps=50,{SMALL}",
-                              name=first.name, endpoint=first.endpoint, pub=first.pub, events=first.events)
+        again = start_service(
+            "--camera",
+            f"a=synthetic:fps=50,{SMALL}",
+            "--camera",
+            f"b=synthetic:fps=50,{SMALL}",
+            name=first.name,
+            endpoint=first.endpoint,
+            pub=first.pub,
+            events=first.events,
+        )
         wait_until(lambda: again.client().status()["cameras"]["b"].get("frames_stored"), what="camera b")
         frame = client.image("b")  # a camera the client had not seen: it learns the rings again
     again.stop()  # before the fixture checks that the first one, of the same name, left nothing

@@ -1,4 +1,5 @@
 """Malformed requests each get an error reply, and the service keeps serving."""
+
 import json
 
 import pytest
@@ -41,8 +42,7 @@ def raw(two_cameras):
     sock.close()
 
 
-@pytest.mark.parametrize("frames,code", [(f, c) for _, f, c in BAD_REQUESTS],
-                         ids=[name for name, _, _ in BAD_REQUESTS])
+@pytest.mark.parametrize("frames,code", [(f, c) for _, f, c in BAD_REQUESTS], ids=[name for name, _, _ in BAD_REQUESTS])
 def test_bad_request_gets_an_error_reply(raw, two_cameras, frames, code):
     raw.send_multipart([b""] + frames)
     reply = raw.recv_multipart()

@@ -1,5 +1,6 @@
 """One client over several services: their cameras as one set (issue 11, item 6).
 Here the services share a host; tests/integration/test_hosts.py runs them on emulated hosts."""
+
 import os
 import signal
 
@@ -16,8 +17,9 @@ from .conftest import SMALL, child_pids
 @pytest.fixture
 def two_services(start_service):
     a = start_service("--camera", f"left=synthetic:fps=50,{SMALL}")
-    b = start_service("--camera", f"right=synthetic:fps=50,phase_ms=7,{SMALL}",
-                      "--camera", f"top=synthetic:fps=25,phase_ms=3,{SMALL}")
+    b = start_service(
+        "--camera", f"right=synthetic:fps=50,phase_ms=7,{SMALL}", "--camera", f"top=synthetic:fps=25,phase_ms=3,{SMALL}"
+    )
     return a, b
 
 
@@ -34,6 +36,7 @@ def _least_skew_near(times: dict[str, list[int]], t_star: int, radius: int) -> i
             return
         for t in near[cams[0]]:
             walk(cams[1:], chosen + [t])
+
     walk(list(near), [])
     return best
 
@@ -43,8 +46,12 @@ def test_a_tuple_across_services_is_the_least_skewed_one(two_services):
     with Client([a.endpoint, b.endpoint]) as client:
         assert isinstance(client, MultiClient)
         assert set(client.cameras) == {"left", "right", "top"}
-        wait_until(lambda: all(len(client.clients[i].frame_times()["cameras"][c]["frames"]) > 10
-                               for i, c in ((0, "left"), (1, "top"))), what="frames in every ring")
+        wait_until(
+            lambda: all(
+                len(client.clients[i].frame_times()["cameras"][c]["frames"]) > 10 for i, c in ((0, "left"), (1, "top"))
+            ),
+            what="frames in every ring",
+        )
         for back_ms in (30, 55, 80, 105, 130):
             t_star = client.clock() - back_ms * 1_000_000
             tup = client.tuple(at=t_star)

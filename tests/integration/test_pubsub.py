@@ -1,4 +1,5 @@
 """Streams and request events over publish/subscribe, against a real service."""
+
 import json
 import subprocess
 
@@ -18,9 +19,10 @@ pytestmark = pytest.mark.integration
 
 @pytest.fixture(scope="module")
 def svc():
-    svc = ServiceProcess(["--camera", f"a=synthetic:fps=50,{SMALL}",
-                          "--camera", f"b=synthetic:fps=50,phase_ms=1,{SMALL}"],
-                         stderr=subprocess.DEVNULL).start()
+    svc = ServiceProcess(
+        ["--camera", f"a=synthetic:fps=50,{SMALL}", "--camera", f"b=synthetic:fps=50,phase_ms=1,{SMALL}"],
+        stderr=subprocess.DEVNULL,
+    ).start()
     yield svc
     svc.stop()
 
@@ -69,8 +71,7 @@ def test_frame_stream_carries_every_stored_frame_and_decimation_keeps_the_rate(s
 
 @pytest.mark.parametrize("kind,rate", [("frames", 10), ("tuples", 7), ("tuples", 12.5)])
 def test_a_decimated_stream_keeps_the_rate_asked_for_over_seconds(start_service, kind, rate):
-    svc = start_service("--camera", f"a=synthetic:fps=25,{SMALL}",
-                        "--camera", f"b=synthetic:fps=25,phase_ms=2,{SMALL}")
+    svc = start_service("--camera", f"a=synthetic:fps=25,{SMALL}", "--camera", f"b=synthetic:fps=25,phase_ms=2,{SMALL}")
     with Subscriber(svc.pub) as sub:
         sub.frames("a", rate_hz=rate) if kind == "frames" else sub.tuples(rate_hz=rate)
         first = sub.receive(timeout=5)
@@ -103,8 +104,9 @@ def test_tuple_stream_is_synchronized(svc):
 
 def test_a_stalled_subscriber_blocks_no_one(start_service):
     # frames large enough that the kernel's socket buffers cannot hide the stall
-    svc = start_service("--camera", "a=synthetic:fps=50,width=640,height=480",
-                        "--camera", "b=synthetic:fps=50,width=640,height=480")
+    svc = start_service(
+        "--camera", "a=synthetic:fps=50,width=640,height=480", "--camera", "b=synthetic:fps=50,width=640,height=480"
+    )
     with Subscriber(svc.pub, queue=2) as stalled, Subscriber(svc.pub) as live:
         stalled.tuples()
         live.tuples()
@@ -119,8 +121,12 @@ def test_a_stalled_subscriber_blocks_no_one(start_service):
 
 
 def test_event_answers_reach_every_subscriber(svc):
-    with EventPublisher(svc.events) as events, Subscriber(svc.pub) as first, \
-            Subscriber(svc.pub) as second, Subscriber(svc.pub) as third:
+    with (
+        EventPublisher(svc.events) as events,
+        Subscriber(svc.pub) as first,
+        Subscriber(svc.pub) as second,
+        Subscriber(svc.pub) as third,
+    ):
         for sub in (first, second, third):
             sub.topic("cell/pairs")
             handshake(events, sub, "cell/pairs")
@@ -167,8 +173,10 @@ def test_malformed_events_are_answered_or_dropped(svc):
             raw.send_multipart([EVENT_TOPIC, b"\xff not json"])
             raw.send_multipart([EVENT_TOPIC, json.dumps({"v": 1, "op": "tuple"}).encode()])
             raw.send_multipart([EVENT_TOPIC, b"a", b"b", b"c"])
-            wait_until(lambda: client.status()["events_dropped"] >= dropped_before + 3,
-                       what="the malformed events to be counted")
+            wait_until(
+                lambda: client.status()["events_dropped"] >= dropped_before + 3,
+                what="the malformed events to be counted",
+            )
             assert client.tuple()["a"].frame_id > 0  # still serving
     raw.close()
 

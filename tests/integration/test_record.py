@@ -1,4 +1,5 @@
 """``fxis record`` against a real service; the bag read back with rosbags (an independent reader)."""
+
 import os
 import signal
 import subprocess
@@ -101,8 +102,12 @@ def test_jpeg_images_are_compressed_images_of_the_frames_they_name(cell, tmp_pat
 
 def test_ctrl_c_ends_the_recording_with_a_valid_bag(cell, tmp_path):
     out = tmp_path / "c"
-    proc = subprocess.Popen([sys.executable, "-m", "fxis_shm.cli", "record", "--endpoint", cell.endpoint,
-                             "--out", str(out)], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    proc = subprocess.Popen(
+        [sys.executable, "-m", "fxis_shm.cli", "record", "--endpoint", cell.endpoint, "--out", str(out)],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
+    )
     try:
         mcap = out / "c_0.mcap"
         wait_until(lambda: mcap.exists() and mcap.stat().st_size > 200_000, timeout=30, what="frames recorded")
@@ -118,15 +123,18 @@ def test_ctrl_c_ends_the_recording_with_a_valid_bag(cell, tmp_path):
     assert f"{len(bag.messages['/left/image_raw'])}" in stdout
 
 
-@pytest.mark.parametrize("args, words", [
-    (["--seconds", "-1"], ["--seconds", "> 0"]),
-    (["--frames", "0"], ["--frames"]),
-    (["--quality", "50"], ["--quality", "jpeg"]),
-    (["--encoding", "jpeg", "--quality", "101"], ["--quality", "1 to 100"]),
-    (["--cameras", "left,centre"], ["--cameras", "centre", "left, right"]),
-    (["--seconds", "1", "--frames", "3"], ["not allowed with"]),
-    (["--encoding", "png"], ["--encoding", "invalid choice"]),
-])
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["--seconds", "-1"], ["--seconds", "> 0"]),
+        (["--frames", "0"], ["--frames"]),
+        (["--quality", "50"], ["--quality", "jpeg"]),
+        (["--encoding", "jpeg", "--quality", "101"], ["--quality", "1 to 100"]),
+        (["--cameras", "left,centre"], ["--cameras", "centre", "left, right"]),
+        (["--seconds", "1", "--frames", "3"], ["not allowed with"]),
+        (["--encoding", "png"], ["--encoding", "invalid choice"]),
+    ],
+)
 def test_bad_input_exits_2_naming_the_setting(cell, tmp_path, args, words):
     result = fxis("record", "--endpoint", cell.endpoint, "--out", str(tmp_path / "x"), *args)
     assert result.returncode == 2

@@ -1,5 +1,6 @@
 """Requests against a real service: frames are the frames their metadata names,
 many clients are served at once, and a waiting request delays no one."""
+
 import os
 import signal
 

@@ -1,5 +1,6 @@
 """The shared-memory ring with real segments: order, overwrite detection,
 generations, permissions, and a concurrent writer process."""
+
 import multiprocessing
 import os
 import stat

@@ -1,4 +1,5 @@
 """CurveZMQ: only clients with allowed keys are served; exposed endpoints need keys."""
+
 import subprocess
 import sys
 import time
@@ -17,9 +18,15 @@ pytestmark = pytest.mark.integration
 
 def test_only_allowed_clients_are_served(start_service, keys):
     folder, allowed = keys
-    svc = start_service("--camera", f"a=synthetic:fps=50,{SMALL}",
-                        "--curve-secret", str(folder / "server.key_secret"),
-                        "--curve-clients", str(allowed), client_keys=client_keys(folder, "alice"))
+    svc = start_service(
+        "--camera",
+        f"a=synthetic:fps=50,{SMALL}",
+        "--curve-secret",
+        str(folder / "server.key_secret"),
+        "--curve-clients",
+        str(allowed),
+        client_keys=client_keys(folder, "alice"),
+    )
     alice = Client(svc.endpoint, timeout=15.0, keys=client_keys(folder, "alice"))  # handshakes under load
     mallory = Client(svc.endpoint, timeout=0.5, keys=client_keys(folder, "mallory"))
     stranger = Client(svc.endpoint, timeout=0.5)
@@ -49,11 +56,29 @@ def test_an_exposed_endpoint_needs_keys():
 def test_insecure_bind_warns(tmp_path):
     port = free_tcp_port()
     proc = subprocess.Popen(
-        [sys.executable, "-m", "fxis_shm.cli", "run", "--name", f"insecure{port}", "--insecure-bind",
-         "--camera", f"a=synthetic:{SMALL}", "--endpoint", f"tcp://0.0.0.0:{port}",
-         "--pub", f"tcp://127.0.0.1:{free_tcp_port()}", "--events", f"tcp://127.0.0.1:{free_tcp_port()}",
-         "--http", "off"],
-        stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
+        [
+            sys.executable,
+            "-m",
+            "fxis_shm.cli",
+            "run",
+            "--name",
+            f"insecure{port}",
+            "--insecure-bind",
+            "--camera",
+            f"a=synthetic:{SMALL}",
+            "--endpoint",
+            f"tcp://0.0.0.0:{port}",
+            "--pub",
+            f"tcp://127.0.0.1:{free_tcp_port()}",
+            "--events",
+            f"tcp://127.0.0.1:{free_tcp_port()}",
+            "--http",
+            "off",
+        ],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.DEVNULL,
+        text=True,
+    )
     try:
         banner = []
         deadline = time.monotonic() + 30

@@ -1,4 +1,5 @@
 """Sequence requests at every edge, against a real service."""
+
 import os
 import subprocess
 
@@ -18,12 +19,22 @@ SLOTS = 20
 
 @pytest.fixture(scope="module")
 def full_rings():
-    svc = ServiceProcess(["--camera", f"a=synthetic:fps=50,{SMALL}",
-                          "--camera", f"b=synthetic:fps=50,phase_ms=1,{SMALL}",
-                          "--slots", str(SLOTS)], stderr=subprocess.DEVNULL).start()
+    svc = ServiceProcess(
+        [
+            "--camera",
+            f"a=synthetic:fps=50,{SMALL}",
+            "--camera",
+            f"b=synthetic:fps=50,phase_ms=1,{SMALL}",
+            "--slots",
+            str(SLOTS),
+        ],
+        stderr=subprocess.DEVNULL,
+    ).start()
     with svc.client() as client:
-        wait_until(lambda: all(c["frames_stored"] > 2 * SLOTS for c in client.status()["cameras"].values()),
-                   what="the rings to wrap around")
+        wait_until(
+            lambda: all(c["frames_stored"] > 2 * SLOTS for c in client.status()["cameras"].values()),
+            what="the rings to wrap around",
+        )
     yield svc
     svc.stop()
 
@@ -91,11 +102,14 @@ def test_future_frames_are_waited_for(full_rings):
     assert len(tuples) in (2, 3) and all(t.skew_ns <= 1_000_000 for t in tuples)
 
 
-@pytest.mark.parametrize("kwargs,message", [
-    (dict(kind="consecutive", camera="a", count=SLOTS), "at most 19 consecutive frames"),
-    (dict(kind="interval", camera="a", count=10, interval_ms=-200), "older than the oldest frame"),
-    (dict(kind="range", camera="a", start=0, end=10), "older than the oldest frame"),
-])
+@pytest.mark.parametrize(
+    "kwargs,message",
+    [
+        (dict(kind="consecutive", camera="a", count=SLOTS), "at most 19 consecutive frames"),
+        (dict(kind="interval", camera="a", count=10, interval_ms=-200), "older than the oldest frame"),
+        (dict(kind="range", camera="a", start=0, end=10), "older than the oldest frame"),
+    ],
+)
 def test_too_much_history_says_what_is_held(full_rings, kwargs, message):
     with full_rings.client() as client:
         with pytest.raises(ServiceError, match=message) as err:
@@ -104,8 +118,14 @@ def test_too_much_history_says_what_is_held(full_rings, kwargs, message):
 
 
 def test_too_many_frames_is_refused(start_service):
-    svc = start_service("--camera", f"a=synthetic:{SMALL}", "--camera", f"b=synthetic:{SMALL}",
-                        "--config", _config_with(max_sequence_frames=10))
+    svc = start_service(
+        "--camera",
+        f"a=synthetic:{SMALL}",
+        "--camera",
+        f"b=synthetic:{SMALL}",
+        "--config",
+        _config_with(max_sequence_frames=10),
+    )
     with svc.client() as client:
         with pytest.raises(ServiceError, match="limit is 10") as err:
             client.sequence("consecutive", count=6)  # 6 tuples of 2 frames
@@ -113,8 +133,9 @@ def test_too_many_frames_is_refused(start_service):
 
 
 def test_partly_filled_and_empty_rings(start_service):
-    svc = start_service("--camera", f"slow=synthetic:fps=0.2,{SMALL}", "--camera", f"a=synthetic:fps=5,{SMALL}",
-                        "--slots", "30")
+    svc = start_service(
+        "--camera", f"slow=synthetic:fps=0.2,{SMALL}", "--camera", f"a=synthetic:fps=5,{SMALL}", "--slots", "30"
+    )
     with svc.client() as client:
         with pytest.raises(ServiceError, match="frame") as err:
             client.sequence("consecutive", camera="a", count=25)

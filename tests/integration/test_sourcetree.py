@@ -1,6 +1,7 @@
 """Everything runs from a source checkout, without fxis-shm installed
 (``PYTHONPATH=<checkout>``): the top-level workers/ folder is then found as
 fxis_shm.workers by fxis_shm/_sourcetree.py, in the CLI and in every child."""
+
 from __future__ import annotations
 
 import json
@@ -27,8 +28,13 @@ def bare_python(tmp_path_factory) -> str:
     venv = tmp_path_factory.mktemp("bare") / "venv"
     subprocess.run([sys.executable, "-m", "venv", "--without-pip", str(venv)], check=True, timeout=120)
     python = str(venv / "bin" / "python")
-    bare_site = subprocess.run([python, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
-                               capture_output=True, text=True, check=True, timeout=30).stdout.strip()
+    bare_site = subprocess.run(
+        [python, "-c", "import sysconfig; print(sysconfig.get_paths()['purelib'])"],
+        capture_output=True,
+        text=True,
+        check=True,
+        timeout=30,
+    ).stdout.strip()
     Path(bare_site, "fxis-test-deps.pth").write_text("\n".join(site.getsitepackages()) + "\n")
     return python
 
@@ -39,10 +45,13 @@ def checkout_env() -> dict[str, str]:
 
 
 def test_the_workers_package_is_the_checkouts_folder(bare_python, checkout_env, tmp_path):
-    code = ("import sys, fxis_shm.workers.camera as c; "
-            "print(c.__file__); print(any('editable' in type(f).__module__ for f in sys.meta_path))")
-    result = subprocess.run([bare_python, "-c", code], cwd=tmp_path, env=checkout_env,
-                            capture_output=True, text=True, timeout=60)
+    code = (
+        "import sys, fxis_shm.workers.camera as c; "
+        "print(c.__file__); print(any('editable' in type(f).__module__ for f in sys.meta_path))"
+    )
+    result = subprocess.run(
+        [bare_python, "-c", code], cwd=tmp_path, env=checkout_env, capture_output=True, text=True, timeout=60
+    )
     assert result.returncode == 0, result.stderr
     path, editable_finder = result.stdout.split()
     assert Path(path) == CHECKOUT / "workers" / "camera.py"
@@ -50,8 +59,14 @@ def test_the_workers_package_is_the_checkouts_folder(bare_python, checkout_env, 
 
 
 def test_fxis_cameras_runs_from_the_checkout(bare_python, checkout_env, tmp_path):
-    result = subprocess.run([bare_python, "-m", "fxis_shm.cli", "cameras", "--json"], cwd=tmp_path,
-                            env=checkout_env, capture_output=True, text=True, timeout=120)
+    result = subprocess.run(
+        [bare_python, "-m", "fxis_shm.cli", "cameras", "--json"],
+        cwd=tmp_path,
+        env=checkout_env,
+        capture_output=True,
+        text=True,
+        timeout=120,
+    )
     assert result.returncode == 0, result.stderr
     listing = json.loads(result.stdout)
     assert isinstance(listing["cameras"], list) and isinstance(listing["unavailable"], dict)
@@ -59,8 +74,9 @@ def test_fxis_cameras_runs_from_the_checkout(bare_python, checkout_env, tmp_path
 
 def test_a_service_runs_from_the_checkout(bare_python, checkout_env, tmp_path):
     with open(tmp_path / "service.log", "w") as log:
-        svc = ServiceProcess(["--camera", "a=synthetic:width=64,height=48,fps=50"], stderr=log,
-                             python=bare_python, env=checkout_env)
+        svc = ServiceProcess(
+            ["--camera", "a=synthetic:width=64,height=48,fps=50"], stderr=log, python=bare_python, env=checkout_env
+        )
         try:
             with svc.start().client(timeout=5.0) as client:
                 assert client.tuple().keys() == {"a"}  # the camera worker stored frames

@@ -1,4 +1,5 @@
 """The synchronization layer on a real service: no spikes, no needless waits."""
+
 import pytest
 
 from fxis_shm import ServiceError, SkewExceeded, read_stamp
@@ -18,12 +19,14 @@ def paper_cameras():
 
     from fxis_shm.launch import ServiceProcess
 
-    svc = ServiceProcess(["--camera", f"cam0=synthetic:{SMALL}",
-                          "--camera", f"cam1=synthetic:phase_ms=1,{SMALL}"],
-                         stderr=open(os.devnull, "w")).start()
+    svc = ServiceProcess(
+        ["--camera", f"cam0=synthetic:{SMALL}", "--camera", f"cam1=synthetic:phase_ms=1,{SMALL}"],
+        stderr=open(os.devnull, "w"),
+    ).start()
     with svc.client() as client:  # full rings (20 slots) that have wrapped around
-        wait_until(lambda: all(c["frames_stored"] > 25 for c in client.status()["cameras"].values()),
-                   what="the rings to fill")
+        wait_until(
+            lambda: all(c["frames_stored"] > 25 for c in client.status()["cameras"].values()), what="the rings to fill"
+        )
     yield svc
     svc.stop()
 

@@ -1,4 +1,5 @@
 """Software-triggered cameras: a request triggers every camera of its tuple at once."""
+
 import pytest
 
 from fxis_shm import read_stamp
@@ -9,8 +10,9 @@ pytestmark = pytest.mark.integration
 
 
 def test_a_tuple_request_triggers_every_camera_and_returns_those_frames(start_service):
-    svc = start_service("--camera", f"a=synthetic:trigger=software,{SMALL}",
-                        "--camera", f"b=synthetic:trigger=software,{SMALL}")
+    svc = start_service(
+        "--camera", f"a=synthetic:trigger=software,{SMALL}", "--camera", f"b=synthetic:trigger=software,{SMALL}"
+    )
     with svc.client() as client:
         assert client.status()["cameras"]["a"]["trigger"] == "software"
         previous = None
@@ -29,8 +31,9 @@ def test_a_tuple_request_triggers_every_camera_and_returns_those_frames(start_se
 
 
 def test_a_free_running_camera_joins_a_triggered_one(start_service):
-    svc = start_service("--camera", f"trig=synthetic:trigger=software,{SMALL}",
-                        "--camera", f"free=synthetic:fps=50,{SMALL}")
+    svc = start_service(
+        "--camera", f"trig=synthetic:trigger=software,{SMALL}", "--camera", f"free=synthetic:fps=50,{SMALL}"
+    )
     with svc.client() as client:
         frames = client.tuple()
     assert frames["trig"].t_capture >= frames.t_request

@@ -1,5 +1,6 @@
 """bench/network.py's verdict pieces (pure): paired differences between configurations, the
 rounds a busy machine spoilt, and the flattening of targets for --strict."""
+
 import pathlib
 import sys
 
@@ -13,14 +14,21 @@ def network():
     sys.path.insert(0, str(BENCH))
     try:
         import network
+
         yield network
     finally:
         sys.path.remove(str(BENCH))
 
 
 def _record(k, eps_ms, tau_ms, miss_ms=0.0, error=None):
-    return {"k": k, "error": error, "eps_b_ms": 1.0, "eps_ms": {"cam0": eps_ms}, "tau_w_ms": {"cam0": tau_ms},
-            "phase_miss_ms": miss_ms}
+    return {
+        "k": k,
+        "error": error,
+        "eps_b_ms": 1.0,
+        "eps_ms": {"cam0": eps_ms},
+        "tau_w_ms": {"cam0": tau_ms},
+        "phase_miss_ms": miss_ms,
+    }
 
 
 class _Exp:
@@ -41,14 +49,25 @@ def test_configurations_are_compared_round_by_round(network):
 def test_a_round_whose_call_missed_its_phase_or_failed_is_left_out(network):
     result = {
         "one host": {"ours": {"records": [_record(0, 1.0, 0.0), _record(1, 1.0, 0.0), _record(2, 1.0, 0.0)]}},
-        "remote": {"ours": {"records": [_record(0, 1.5, 0.0), _record(1, 30.0, 0.0, miss_ms=17.0),
-                                        _record(2, 0.0, 0.0, error="RequestTimeout")]}},
+        "remote": {
+            "ours": {
+                "records": [
+                    _record(0, 1.5, 0.0),
+                    _record(1, 30.0, 0.0, miss_ms=17.0),
+                    _record(2, 0.0, 0.0, error="RequestTimeout"),
+                ]
+            }
+        },
     }
     diff, se = network.paired_difference(result, "remote", "ours", "|eps_1|", _Exp)
     assert diff == pytest.approx(0.5) and se is None  # one round left: no spread to tell
 
 
 def test_every_target_counts_for_strict(network):
-    targets = {"table2": [{"passed": True}, {"passed": True}], "tuples": False,
-               "size": [{"passed": True}], "clock": {"passed": None}}
+    targets = {
+        "table2": [{"passed": True}, {"passed": True}],
+        "tuples": False,
+        "size": [{"passed": True}],
+        "clock": {"passed": None},
+    }
     assert network.verdicts(targets) == [True, True, False, True, None]

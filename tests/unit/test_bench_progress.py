@@ -1,4 +1,5 @@
 """The benches' progress: a bar on a terminal, two plain lines per stage elsewhere."""
+
 import importlib.util
 import pathlib
 import sys

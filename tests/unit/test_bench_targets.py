@@ -1,4 +1,5 @@
 """The benches' verdicts: local wake-up times and compare.py's target ratios (pure functions)."""
+
 import pathlib
 import sys
 
@@ -14,6 +15,7 @@ def bench_modules():
         import compare_report
         import latency_wake
         import scaling
+
         yield {"compare_report": compare_report, "latency_wake": latency_wake, "scaling": scaling}
     finally:
         sys.path.remove(str(BENCH))
@@ -28,8 +30,10 @@ def test_a_request_waited_only_if_a_frame_it_returns_was_stored_after_it_was_mad
 
 def test_wake_targets_judge_median_and_p99_of_copied_and_zero_copy_apart(bench_modules):
     wake = bench_modules["latency_wake"]
-    summary = {"all, copied": {"wake_ms": {"median": 0.4, "p99": 2.5}},
-               "all, zero-copy": {"wake_ms": {"median": None, "p99": None}}}
+    summary = {
+        "all, copied": {"wake_ms": {"median": 0.4, "p99": 2.5}},
+        "all, zero-copy": {"wake_ms": {"median": None, "p99": None}},
+    }
     verdicts = {t["target"]: (t["passed"], t["ratio"]) for t in wake.targets(summary)}
     assert verdicts["local wake-up median, copied"] == (True, pytest.approx(0.8))
     assert verdicts["local wake-up p99, copied"] == (False, pytest.approx(1.25))
@@ -43,8 +47,15 @@ def result(median_ms):
 def test_compare_targets_are_ratios_of_medians_against_their_limits(bench_modules):
     report = bench_modules["compare_report"]
     fx, rv = sys.modules["compare_fxis"], sys.modules["compare_rivals"]
-    res = {fx.LOCAL: result(1.2), rv.COPY: result(1.0), fx.LOCAL_VIEW: result(0.05), fx.TIME: result(0.2),
-           fx.TCP: result(3.0), rv.IMZ_1: result(1.0), rv.IMZ: result(2.0)}
+    res = {
+        fx.LOCAL: result(1.2),
+        rv.COPY: result(1.0),
+        fx.LOCAL_VIEW: result(0.05),
+        fx.TIME: result(0.2),
+        fx.TCP: result(3.0),
+        rv.IMZ_1: result(1.0),
+        rv.IMZ: result(2.0),
+    }
     got = {(t["contender"], t["reference"]): t for t in report.targets({report.TARGET_SCENARIO: res})}
     assert got[fx.LOCAL, rv.COPY]["pass"] is True and got[fx.LOCAL, rv.COPY]["ratio"] == pytest.approx(1.2)
     assert got[fx.LOCAL_VIEW, fx.TIME]["pass"] is True  # 0.25 <= 0.3

@@ -1,4 +1,5 @@
 """The typed, versioned specs the supervisor gives its children (fxis_shm.childspec)."""
+
 from __future__ import annotations
 
 import json
@@ -8,11 +9,23 @@ import pytest
 from fxis_shm.childspec import ROLES, CameraWorkerSpec, CoordinatorSpec, DashboardSpec, FoxgloveSpec
 from fxis_shm.errors import SpecError
 
-CAMERA = CameraWorkerSpec(service="svc", camera="left", kind="synthetic", options={"fps": 20.0},
-                          slots=4, time_origin_ns=123, log_level="DEBUG")
-COORDINATOR = CoordinatorSpec(service="svc", endpoint="tcp://127.0.0.1:1", pub="tcp://127.0.0.1:2",
-                              events="tcp://127.0.0.1:3", cameras={"left": "synthetic"},
-                              settings={"timeout_ms": 50.0})
+CAMERA = CameraWorkerSpec(
+    service="svc",
+    camera="left",
+    kind="synthetic",
+    options={"fps": 20.0},
+    slots=4,
+    time_origin_ns=123,
+    log_level="DEBUG",
+)
+COORDINATOR = CoordinatorSpec(
+    service="svc",
+    endpoint="tcp://127.0.0.1:1",
+    pub="tcp://127.0.0.1:2",
+    events="tcp://127.0.0.1:3",
+    cameras={"left": "synthetic"},
+    settings={"timeout_ms": 50.0},
+)
 
 
 @pytest.mark.parametrize("spec", [CAMERA, COORDINATOR])
@@ -77,5 +90,9 @@ def test_coordinator_fields_are_checked_by_type(changes, words):
 
 
 def test_roles_name_their_spec_classes():
-    assert ROLES == {"camera": CameraWorkerSpec, "coordinator": CoordinatorSpec, "dashboard": DashboardSpec,
-                     "foxglove": FoxgloveSpec}
+    assert ROLES == {
+        "camera": CameraWorkerSpec,
+        "coordinator": CoordinatorSpec,
+        "dashboard": DashboardSpec,
+        "foxglove": FoxgloveSpec,
+    }

@@ -1,4 +1,5 @@
 """The clock estimator against synthetic exchanges whose true offset and drift are known."""
+
 import random
 
 import pytest
@@ -12,15 +13,26 @@ US = 1_000
 def exchange(t: int, offset: int, drift_ppm: float, there_us: float, back_us: float, serve_us: float = 30) -> Exchange:
     """An exchange starting at caller time ``t`` against a service clock of ``offset`` + drift,
     with one-way delays ``there_us`` and ``back_us``."""
+
     def service(tc):
         return tc + offset + round(drift_ppm * 1e-6 * tc)
+
     received = t + int(there_us * US)
     replied = received + int(serve_us * US)
     return Exchange(t, service(received), service(replied), replied + int(back_us * US))
 
 
-def feed(est: ClockEstimator, rng: random.Random, seconds: int, offset: int, drift_ppm: float = 0.0,
-         start: int = 10 * S, per_burst: int = 8, queueing_us: float = 2000, outlier_rate: float = 0.3):
+def feed(
+    est: ClockEstimator,
+    rng: random.Random,
+    seconds: int,
+    offset: int,
+    drift_ppm: float = 0.0,
+    start: int = 10 * S,
+    per_burst: int = 8,
+    queueing_us: float = 2000,
+    outlier_rate: float = 0.3,
+):
     """One burst a second; each exchange has a base delay of 60 us each way plus, often, queueing
     on one side only (asymmetric): the kind of delays a loaded link adds."""
     for k in range(seconds):

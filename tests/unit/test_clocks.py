@@ -1,4 +1,5 @@
 """Camera timestamps onto CLOCK_MONOTONIC (fxis_shm.clocks)."""
+
 import random
 
 import pytest

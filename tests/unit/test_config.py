@@ -1,4 +1,5 @@
 """Service configuration and typed camera options (fxis_shm.config, fxis_shm.options)."""
+
 from __future__ import annotations
 
 import pytest
@@ -8,10 +9,19 @@ from fxis_shm.errors import ConfigError
 from fxis_shm.options import Option, boolean, choice, number, parse_options, split_key_values, text
 
 SYNTHETIC_DEFAULTS = {
-    "fps": 20.0, "width": 1360, "height": 1024, "pixel_format": "mono8",
-    "phase_ms": 0.0, "jitter_ms": 0.0, "drop": 0.0, "seed": 0,
-    "pattern": "stripes", "shift_px": 0, "trigger": "free",
-    "process": None, "process_workers": 1,  # generic to every kind (camerakinds.PROCESS_OPTIONS)
+    "fps": 20.0,
+    "width": 1360,
+    "height": 1024,
+    "pixel_format": "mono8",
+    "phase_ms": 0.0,
+    "jitter_ms": 0.0,
+    "drop": 0.0,
+    "seed": 0,
+    "pattern": "stripes",
+    "shift_px": 0,
+    "trigger": "free",
+    "process": None,
+    "process_workers": 1,  # generic to every kind (camerakinds.PROCESS_OPTIONS)
 }
 
 
@@ -27,10 +37,10 @@ def config_error(file_values=None, flags=None) -> str:
 
 # ---- defaults ----
 
+
 def test_defaults_are_two_synthetic_cameras_and_local_endpoints():
     config = build_config()
-    assert [(c.name, c.kind) for c in config.cameras] == [("cam0", "synthetic"),
-                                                         ("cam1", "synthetic")]
+    assert [(c.name, c.kind) for c in config.cameras] == [("cam0", "synthetic"), ("cam1", "synthetic")]
     assert cameras_of(config) == {"cam0": SYNTHETIC_DEFAULTS, "cam1": SYNTHETIC_DEFAULTS}
     assert config.slots == 20
     assert config.endpoint == "tcp://127.0.0.1:5555"
@@ -48,8 +58,7 @@ def test_option_defaults_have_their_declared_types():
 
 @pytest.mark.parametrize(
     "flags",
-    [None, {}, {"name": None, "endpoint": None, "pub": None, "slots": None, "cameras": []},
-     {"cameras": ()}],
+    [None, {}, {"name": None, "endpoint": None, "pub": None, "slots": None, "cameras": []}, {"cameras": ()}],
 )
 def test_flags_that_were_not_given_change_nothing(flags):
     assert build_config({}, flags) == build_config()
@@ -57,20 +66,26 @@ def test_flags_that_were_not_given_change_nothing(flags):
 
 # ---- --camera flags ----
 
+
 @pytest.mark.parametrize(
     "flag, name, options",
     [
         ("left=synthetic", "left", {}),
         ("left=synthetic:", "left", {}),
         ("left=synthetic:fps=30", "left", {"fps": 30.0}),
-        ("cam-2=synthetic:fps=7.5,width=640,height=480,pixel_format=bgr8",
-         "cam-2", {"fps": 7.5, "width": 640, "height": 480, "pixel_format": "bgr8"}),
-        ("r_1=synthetic:phase_ms=-12.5,jitter_ms=0.25,drop=0.1,seed=42",
-         "r_1", {"phase_ms": -12.5, "jitter_ms": 0.25, "drop": 0.1, "seed": 42}),
+        (
+            "cam-2=synthetic:fps=7.5,width=640,height=480,pixel_format=bgr8",
+            "cam-2",
+            {"fps": 7.5, "width": 640, "height": 480, "pixel_format": "bgr8"},
+        ),
+        (
+            "r_1=synthetic:phase_ms=-12.5,jitter_ms=0.25,drop=0.1,seed=42",
+            "r_1",
+            {"phase_ms": -12.5, "jitter_ms": 0.25, "drop": 0.1, "seed": 42},
+        ),
         (" left = synthetic : fps = 30 , width = 64 ,", "left", {"fps": 30.0, "width": 64}),
         ("left=synthetic:fps=1e2", "left", {"fps": 100.0}),
-        ("right=synthetic:pattern=chessboard,shift_px=-24", "right",
-         {"pattern": "chessboard", "shift_px": -24}),
+        ("right=synthetic:pattern=chessboard,shift_px=-24", "right", {"pattern": "chessboard", "shift_px": -24}),
     ],
 )
 def test_a_camera_flag_gives_typed_options(flag, name, options):
@@ -111,11 +126,15 @@ FILE_VALUES = {
 
 def test_file_values_are_typed_and_checked():
     config = build_config(FILE_VALUES)
-    assert (config.name, config.endpoint, config.pub) == ("lab", "ipc:///tmp/fxis-lab.sock",
-                                                         "tcp://0.0.0.0:7001")
+    assert (config.name, config.endpoint, config.pub) == ("lab", "ipc:///tmp/fxis-lab.sock", "tcp://0.0.0.0:7001")
     assert (config.slots, config.restart_limit, config.log_level) == (64, 0, "DEBUG")
-    assert config.settings == {"sync": "independent", "wait": "next", "timeout_ms": 250.0,
-                               "max_skew_ms": 2.5, "max_pending": 16}
+    assert config.settings == {
+        "sync": "independent",
+        "wait": "next",
+        "timeout_ms": 250.0,
+        "max_skew_ms": 2.5,
+        "max_pending": 16,
+    }
     assert type(config.settings["timeout_ms"]) is float
     assert cameras_of(config) == {
         "left": {**SYNTHETIC_DEFAULTS, "fps": 30.0, "width": 640, "height": 480},
@@ -154,12 +173,16 @@ def test_a_real_toml_file_loads(tmp_path):
 
 
 def test_flags_override_the_file():
-    config = build_config(FILE_VALUES, {
-        "name": "override", "slots": 8, "endpoint": "tcp://127.0.0.1:9000",
-        "cameras": ["left=synthetic:fps=5", "extra=synthetic"],
-    })
-    assert (config.name, config.slots, config.endpoint) == ("override", 8,
-                                                            "tcp://127.0.0.1:9000")
+    config = build_config(
+        FILE_VALUES,
+        {
+            "name": "override",
+            "slots": 8,
+            "endpoint": "tcp://127.0.0.1:9000",
+            "cameras": ["left=synthetic:fps=5", "extra=synthetic"],
+        },
+    )
+    assert (config.name, config.slots, config.endpoint) == ("override", 8, "tcp://127.0.0.1:9000")
     assert config.pub == FILE_VALUES["pub"]  # not overridden
     options = cameras_of(config)
     assert list(options) == ["left", "right", "extra"]
@@ -169,6 +192,7 @@ def test_flags_override_the_file():
 
 
 # ---- bad settings: each ConfigError names what is wrong ----
+
 
 @pytest.mark.parametrize(
     "flag, named",
@@ -300,6 +324,7 @@ def test_an_unreadable_config_file_names_the_file(tmp_path, name):
 
 # ---- options.py building blocks ----
 
+
 @pytest.mark.parametrize(
     "text_, expected",
     [
@@ -332,8 +357,7 @@ SCHEMA = {
 
 
 def test_parse_options_fills_defaults_and_types_values():
-    parsed = parse_options("cam", "kind", SCHEMA, {"rate": "2.5", "count": "10", "flag": "yes",
-                                                   "label": 7})
+    parsed = parse_options("cam", "kind", SCHEMA, {"rate": "2.5", "count": "10", "flag": "yes", "label": 7})
     assert parsed == {"rate": 2.5, "count": 10, "mode": "a", "flag": True, "label": "7"}
 
 
@@ -348,8 +372,19 @@ def test_parse_options_lists_unknown_and_known_keys():
 
 @pytest.mark.parametrize(
     "raw",
-    [{"rate": 0}, {"rate": "x"}, {"count": 11}, {"count": -1}, {"count": 2.5}, {"count": True},
-     {"mode": "c"}, {"flag": "maybe"}, {"flag": 2}, {"label": None}, {"label": 1.5}],
+    [
+        {"rate": 0},
+        {"rate": "x"},
+        {"count": 11},
+        {"count": -1},
+        {"count": 2.5},
+        {"count": True},
+        {"mode": "c"},
+        {"flag": "maybe"},
+        {"flag": 2},
+        {"label": None},
+        {"label": 1.5},
+    ],
 )
 def test_parse_options_names_the_key_of_a_bad_value(raw):
     (key,) = raw
@@ -359,8 +394,20 @@ def test_parse_options_names_the_key_of_a_bad_value(raw):
 
 @pytest.mark.parametrize(
     "value, expected",
-    [(True, True), (False, False), ("1", True), ("TRUE", True), (" on ", True), ("yes", True),
-     ("0", False), ("False", False), ("off", False), ("no", False), (1, True), (0, False)],
+    [
+        (True, True),
+        (False, False),
+        ("1", True),
+        ("TRUE", True),
+        (" on ", True),
+        ("yes", True),
+        ("0", False),
+        ("False", False),
+        ("off", False),
+        ("no", False),
+        (1, True),
+        (0, False),
+    ],
 )
 def test_boolean_accepts_the_usual_spellings(value, expected):
     assert boolean(value) is expected

@@ -31,8 +31,10 @@ def test_jpeg_keeps_shape_and_dtype_and_stays_close(shape):
     assert len(data) < image.nbytes
 
 
-@pytest.mark.parametrize("name,quality,says", [("webp", 90, "unknown encoding"), ("jpeg", 0, "quality"),
-                                                ("jpeg", 101, "quality"), ("jpeg", 9.5, "quality")])
+@pytest.mark.parametrize(
+    "name,quality,says",
+    [("webp", 90, "unknown encoding"), ("jpeg", 0, "quality"), ("jpeg", 101, "quality"), ("jpeg", 9.5, "quality")],
+)
 def test_bad_encoding_or_quality_says_what_is_wrong(name, quality, says):
     with pytest.raises(ProtocolError, match=says):
         encoding.encode(_image((8, 8)), name, quality)

@@ -5,6 +5,7 @@ and whether its worker is alive. Each test submits requests and feeds frames and
 clock values, and checks what the engine decides: reply now with which frames, wait
 until when, or fail with which error.
 """
+
 from __future__ import annotations
 
 import numpy as np
@@ -57,8 +58,12 @@ class TableCamera:
 
     def state(self, snap: Snapshot) -> CameraState:
         n = len(snap.timeline)
-        return CameraState(newest=snap.newest, period_ns=self.period_ns, delay_ns=DELAY,
-                           newest_stored=snap.frame_meta(n - 1).t_stored if n else None)
+        return CameraState(
+            newest=snap.newest,
+            period_ns=self.period_ns,
+            delay_ns=DELAY,
+            newest_stored=snap.frame_meta(n - 1).t_stored if n else None,
+        )
 
 
 def request(op: str, **fields) -> dict:
@@ -80,6 +85,7 @@ def picked_times(reply: Reply) -> dict[str, int]:
 
 
 # ---- answering at once, and waiting ----
+
 
 @pytest.mark.parametrize(
     "t_star, answered_now, expected",
@@ -145,8 +151,9 @@ def test_next_waits_for_a_frame_stored_after_arrival():
 def test_none_never_waits():
     cam = TableCamera().add_periodic(0, 20)
     engine = engine_with(cam=cam)
-    reply = only(engine.submit(request("image", camera="cam", at=25 * PERIOD, wait="none"),
-                               19 * PERIOD + DELAY, 1), Reply)
+    reply = only(
+        engine.submit(request("image", camera="cam", at=25 * PERIOD, wait="none"), 19 * PERIOD + DELAY, 1), Reply
+    )
     assert picked_times(reply) == {"cam": 19 * PERIOD}
 
 
@@ -160,6 +167,7 @@ def test_frames_of_other_cameras_do_not_wake_a_request():
 
 
 # ---- the wake-up time, deadlines and give-ups ----
+
 
 def test_a_waiting_request_wakes_for_liveness_and_times_out_at_its_deadline():
     cam = TableCamera().add_periodic(0, 20)
@@ -207,6 +215,7 @@ def test_a_request_older_than_the_ring_is_refused_with_what_it_holds():
 
 # ---- cameras that are down, unknown, empty ----
 
+
 def test_a_dead_camera_fails_waiting_requests_at_the_next_look():
     cam = TableCamera().add_periodic(0, 20)
     engine = engine_with(cam=cam)
@@ -252,6 +261,7 @@ def test_a_camera_with_no_frame_yet_is_waited_for():
 
 # ---- restarts and overwritten copies ----
 
+
 def test_a_restarted_camera_is_followed():
     cam = TableCamera().add_periodic(0, 20)
     engine = engine_with(cam=cam)
@@ -260,7 +270,7 @@ def test_a_restarted_camera_is_followed():
     cam.generation = 2  # the worker came back: its frames carry a new generation
     cam.add(19 * PERIOD + 41 * MS)
     reply = only(engine.on_frames({"cam"}, 19 * PERIOD + 41 * MS + DELAY), Reply)
-    (cam_name, index), = reply.plan.picks
+    ((cam_name, index),) = reply.plan.picks
     assert reply.snapshots[cam_name].frame_meta(index).generation == 2
 
 
@@ -278,6 +288,7 @@ def test_an_overwritten_copy_is_planned_again_then_given_up():
 
 
 # ---- triggers, limits, sequences ----
+
 
 def test_a_triggered_camera_answers_with_the_frame_after_the_trigger():
     trig, free = TableCamera(triggered=True).add(5 * MS), TableCamera().add_periodic(0, 20)
@@ -304,8 +315,14 @@ def test_a_consecutive_sequence_after_t_star_waits_for_every_frame():
     a, b = TableCamera().add_periodic(0, 20), TableCamera().add_periodic(0, 20, phase=1 * MS)
     engine = engine_with(a=a, b=b)
     t_star = 19 * PERIOD + 10 * MS
-    assert engine.submit(request("sequence", kind="consecutive", count=3, direction="after", at=t_star),
-                         19 * PERIOD + DELAY + 1 * MS, 1) == []
+    assert (
+        engine.submit(
+            request("sequence", kind="consecutive", count=3, direction="after", at=t_star),
+            19 * PERIOD + DELAY + 1 * MS,
+            1,
+        )
+        == []
+    )
     actions = []
     for k in range(20, 24):
         a.add_periodic(k, 1)
@@ -316,13 +333,16 @@ def test_a_consecutive_sequence_after_t_star_waits_for_every_frame():
     reply = only(actions, Reply)
     assert reply.plan.body["targets"] == [20 * PERIOD, 21 * PERIOD, 22 * PERIOD]
     assert [[reply.snapshots[c].timeline.at(i) for c, i in g] for g in reply.plan.groups] == [
-        [k * PERIOD, k * PERIOD + 1 * MS] for k in (20, 21, 22)]
+        [k * PERIOD, k * PERIOD + 1 * MS] for k in (20, 21, 22)
+    ]
 
 
 def test_a_sequence_larger_than_the_limit_is_refused():
     engine = RequestEngine({"cam": TableCamera().add_periodic(0, 20)}, {"max_sequence_frames": 4})
-    failure = only(engine.submit(request("sequence", kind="interval", camera="cam", count=5,
-                                         interval_ms=-10), 20 * PERIOD, 1), Failure)
+    failure = only(
+        engine.submit(request("sequence", kind="interval", camera="cam", count=5, interval_ms=-10), 20 * PERIOD, 1),
+        Failure,
+    )
     assert failure.code == "TOO_LARGE"
 
 

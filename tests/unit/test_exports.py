@@ -1,4 +1,5 @@
 """The public API is exactly what README.md documents, all importable from ``fxis_shm``."""
+
 import pathlib
 import re
 
@@ -33,8 +34,7 @@ def test_module_paths_keep_working():
 
 
 def test_no_public_name_outside_all():
-    public = {n for n, v in vars(fxis_shm).items()
-              if not n.startswith("_") and not isinstance(v, type(fxis_shm))}
+    public = {n for n, v in vars(fxis_shm).items() if not n.startswith("_") and not isinstance(v, type(fxis_shm))}
     assert public == set(fxis_shm.__all__)
 
 

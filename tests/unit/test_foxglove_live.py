@@ -1,4 +1,5 @@
 """What the Foxglove live view computes without I/O (fxis_shm.foxglove_live) and its settings."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -11,13 +12,16 @@ from fxis_shm.foxglove_live import RATE_PARAMETER, RateParameter, raw_image, raw
 from ..foxglove_decode import message_class
 
 
-@pytest.mark.parametrize("shape, dtype, encoding", [
-    ((4, 6), np.uint8, "mono8"),
-    ((4, 6, 1), np.uint8, "mono8"),
-    ((4, 6, 3), np.uint8, "bgr8"),
-    ((4, 6, 4), np.uint8, "bgra8"),
-    ((4, 6), np.uint16, "mono16"),
-])
+@pytest.mark.parametrize(
+    "shape, dtype, encoding",
+    [
+        ((4, 6), np.uint8, "mono8"),
+        ((4, 6, 1), np.uint8, "mono8"),
+        ((4, 6, 3), np.uint8, "bgr8"),
+        ((4, 6, 4), np.uint8, "bgra8"),
+        ((4, 6), np.uint16, "mono16"),
+    ],
+)
 def test_frames_go_as_they_are_where_foxglove_has_the_encoding(shape, dtype, encoding):
     image = np.arange(np.prod(shape), dtype=dtype).reshape(shape)
     pixels, got = raw_pixels(image)
@@ -38,8 +42,13 @@ def test_a_raw_image_carries_the_capture_time_and_the_camera():
     schema = message.get_schema()
     decoded = message_class(schema.name, schema.data).FromString(message.encode())  # as sent
     assert (decoded.timestamp.seconds, decoded.timestamp.nanos) == (12, 345)
-    assert (decoded.frame_id, decoded.width, decoded.height, decoded.encoding, decoded.step) == \
-        ("cam0", 5, 3, "bgr8", 15)
+    assert (decoded.frame_id, decoded.width, decoded.height, decoded.encoding, decoded.step) == (
+        "cam0",
+        5,
+        3,
+        "bgr8",
+        15,
+    )
     assert decoded.data == image.tobytes()
 
 

@@ -1,5 +1,6 @@
 """The library knows camera kinds and child roles by name; only the workers
 import the library, never the other way round."""
+
 from __future__ import annotations
 
 import ast

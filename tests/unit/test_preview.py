@@ -1,4 +1,5 @@
 """What the dashboard computes without I/O (fxis_shm.preview) and its config (http)."""
+
 from __future__ import annotations
 
 import numpy as np
@@ -20,8 +21,10 @@ from fxis_shm.preview import (
 )
 
 
-@pytest.mark.parametrize("text, words", [("abc", "whole number"), ("0", "from 1"), ("-3", "from 1"),
-                                         ("99999", "4096"), ("1.5", "whole number")])
+@pytest.mark.parametrize(
+    "text, words",
+    [("abc", "whole number"), ("0", "from 1"), ("-3", "from 1"), ("99999", "4096"), ("1.5", "whole number")],
+)
 def test_a_bad_width_is_refused_naming_it(text, words):
     with pytest.raises(InvalidArgument, match="width") as info:
         parse_width(text)
@@ -45,12 +48,15 @@ def test_previews_are_scaled_down_never_up_keeping_the_aspect_ratio():
     assert scaled(image, 5000) is image
 
 
-@pytest.mark.parametrize("image, shape", [
-    (np.full((8, 10), 0x1234, np.uint16), (8, 10)),
-    (np.zeros((8, 10, 4), np.uint8), (8, 10, 3)),
-    (np.zeros((8, 10, 1), np.uint8), (8, 10)),
-    (np.linspace(0, 1, 80, dtype=np.float32).reshape(8, 10), (8, 10)),
-])
+@pytest.mark.parametrize(
+    "image, shape",
+    [
+        (np.full((8, 10), 0x1234, np.uint16), (8, 10)),
+        (np.zeros((8, 10, 4), np.uint8), (8, 10, 3)),
+        (np.zeros((8, 10, 1), np.uint8), (8, 10)),
+        (np.linspace(0, 1, 80, dtype=np.float32).reshape(8, 10), (8, 10)),
+    ],
+)
 def test_every_stored_format_becomes_something_jpeg_takes(image, shape):
     shown = displayable(image)
     assert shown.dtype == np.uint8 and shown.shape == shape
@@ -115,6 +121,7 @@ def test_the_skew_history_keeps_the_newest():
 
 
 # ---- the http setting ----
+
 
 def test_the_dashboard_is_on_loopback_by_default_and_can_be_turned_off():
     assert build_config().http == "127.0.0.1:8080"

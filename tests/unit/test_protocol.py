@@ -1,4 +1,5 @@
 """The wire codec (fxis_shm.protocol): round trips and every kind of malformed message."""
+
 from __future__ import annotations
 
 import json
@@ -45,10 +46,29 @@ def rejected(frames, code=Code.BAD_REQUEST) -> str:
 
 ENCODED = {"encoding": "raw", "quality": None}
 REQUEST_DEFAULTS = {
-    "image": {"id": None, "camera": ..., "at": None, "t_call": None, "wait": None, "timeout_ms": None,
-              "local": None, **ENCODED},
-    "tuple": {"id": None, "cameras": None, "sync": None, "max_skew_ms": None, "partial": None,
-              "at": None, "t_call": None, "wait": None, "timeout_ms": None, "local": None, **ENCODED},
+    "image": {
+        "id": None,
+        "camera": ...,
+        "at": None,
+        "t_call": None,
+        "wait": None,
+        "timeout_ms": None,
+        "local": None,
+        **ENCODED,
+    },
+    "tuple": {
+        "id": None,
+        "cameras": None,
+        "sync": None,
+        "max_skew_ms": None,
+        "partial": None,
+        "at": None,
+        "t_call": None,
+        "wait": None,
+        "timeout_ms": None,
+        "local": None,
+        **ENCODED,
+    },
     "latest": {"id": None, "cameras": None, "local": None, **ENCODED},
     "status": {"id": None},
     "time": {"id": None},
@@ -59,12 +79,10 @@ REQUEST_DEFAULTS = {
     "op, fields",
     [
         ("image", {"camera": "cam0"}),
-        ("image", {"camera": "cam0", "id": 7, "at": 123_456_789_012, "wait": "next",
-                   "timeout_ms": 250.5}),
+        ("image", {"camera": "cam0", "id": 7, "at": 123_456_789_012, "wait": "next", "timeout_ms": 250.5}),
         ("image", {"camera": "left", "at": -5, "wait": "none", "timeout_ms": 1}),
         ("tuple", {}),
-        ("tuple", {"cameras": ["a", "b"], "sync": "independent", "max_skew_ms": 2,
-                   "wait": "auto", "id": "req-1"}),
+        ("tuple", {"cameras": ["a", "b"], "sync": "independent", "max_skew_ms": 2, "wait": "auto", "id": "req-1"}),
         ("tuple", {"cameras": ["a"], "sync": "joint", "max_skew_ms": 0.5, "at": 0}),
         ("latest", {}),
         ("latest", {"cameras": ["cam1"]}),
@@ -104,6 +122,7 @@ def test_a_request_frame_may_be_any_bytes_like_object(as_type):
 
 
 # ---- requests: malformed messages ----
+
 
 @pytest.mark.parametrize("frames", [[], request(op="time") * 2, [b'{"v": 1}', b""]])
 def test_a_request_is_exactly_one_frame(frames):
@@ -247,6 +266,7 @@ def test_the_size_limit_applies_before_parsing():
 
 # ---- replies ----
 
+
 def image(shape, dtype) -> np.ndarray:
     return (np.arange(int(np.prod(shape)), dtype=np.uint64) % 251).astype(dtype).reshape(shape)
 
@@ -255,8 +275,15 @@ def reply_of(images, request_id=5, order=None, **body) -> list:
     """A success reply carrying ``images``; buffer k holds images[order[k]]."""
     order = list(range(len(images))) if order is None else order
     metas = [
-        frame_meta(f"cam{k}", frame_id=100 + k, t_capture=10**12 + k, t_stored=10**12 + 7,
-                   generation=2, image=img, buffer=order.index(k))
+        frame_meta(
+            f"cam{k}",
+            frame_id=100 + k,
+            t_capture=10**12 + k,
+            t_stored=10**12 + 7,
+            generation=2,
+            image=img,
+            buffer=order.index(k),
+        )
         for k, img in enumerate(images)
     ]
     return encode_reply(request_id, {"frames": metas, **body}, [images[k] for k in order])
@@ -267,8 +294,14 @@ def over_the_wire(frames) -> list[bytes]:
     return [bytes(memoryview(f)) for f in frames]
 
 
-SHAPES = [((4, 20), "uint8"), ((4, 20, 3), "uint8"), ((3, 17), "uint16"), ((2, 5), "float32"),
-          ((1, 1), "uint8"), ((0, 8), "uint16")]
+SHAPES = [
+    ((4, 20), "uint8"),
+    ((4, 20, 3), "uint8"),
+    ((3, 17), "uint16"),
+    ((2, 5), "float32"),
+    ((1, 1), "uint8"),
+    ((0, 8), "uint16"),
+]
 
 
 @pytest.mark.parametrize("shape, dtype", SHAPES)
@@ -283,8 +316,15 @@ def test_a_reply_round_trips_images_of_every_layout(shape, dtype, transport):
     assert header["clock"] == CLOCK
     assert header["id"] == 5
     assert header["frames"][0] == {
-        "camera": "cam0", "frame_id": 100, "t_capture": 10**12, "t_available": 10**12, "t_stored": 10**12 + 7,
-        "generation": 2, "shape": list(shape), "dtype": dtype, "buffer": 0,
+        "camera": "cam0",
+        "frame_id": 100,
+        "t_capture": 10**12,
+        "t_available": 10**12,
+        "t_stored": 10**12 + 7,
+        "generation": 2,
+        "shape": list(shape),
+        "dtype": dtype,
+        "buffer": 0,
     }
 
 
@@ -304,8 +344,7 @@ def test_decoded_images_are_views_of_the_received_buffers():
 
 
 def test_frame_meta_converts_numpy_integers_for_json():
-    meta = frame_meta("c", np.int64(3), np.int64(4), np.uint64(5), np.int32(1),
-                      image((2, 2), "uint8"), 0)
+    meta = frame_meta("c", np.int64(3), np.int64(4), np.uint64(5), np.int32(1), image((2, 2), "uint8"), 0)
     assert json.loads(json.dumps(meta))["frame_id"] == 3
     assert all(type(meta[k]) is int for k in ("frame_id", "t_capture", "t_stored", "generation"))
 
@@ -325,6 +364,7 @@ def test_an_error_reply_round_trips():
 
 
 # ---- replies: malformed ----
+
 
 def reply_with_meta(meta, buffers) -> list:
     return raw({"v": VERSION, "ok": True, "frames": [meta]}) + list(buffers)
@@ -398,6 +438,7 @@ def test_deeply_nested_json_is_a_bad_request():
 
 # ---- the local fast path ----
 
+
 @pytest.mark.parametrize("bad", ["", "x" * 65, 7, ["id"], True])
 def test_a_bad_local_boot_id_is_refused(bad):
     with pytest.raises(ProtocolError, match="'local'.*boot id"):
@@ -410,12 +451,33 @@ def test_request_events_cannot_ask_for_ring_references():
 
 
 def test_a_local_reply_names_where_each_frame_is_and_carries_no_buffers():
-    ref = frame_ref("cam0", np.int64(7), 10**12, 10**12 + 5, 1, (1024, 1360), "uint8", None,
-                    ring="/fxis.svc.cam0.ring", instance=np.uint64(2**63 + 1), slot=3, seq=np.uint64(88))
+    ref = frame_ref(
+        "cam0",
+        np.int64(7),
+        10**12,
+        10**12 + 5,
+        1,
+        (1024, 1360),
+        "uint8",
+        None,
+        ring="/fxis.svc.cam0.ring",
+        instance=np.uint64(2**63 + 1),
+        slot=3,
+        seq=np.uint64(88),
+    )
     header, images = decode_reply(over_the_wire(encode_reply(4, {"frames": [ref], "delivery": "local"})))
     assert images == []
     assert header["frames"][0] == {
-        "camera": "cam0", "frame_id": 7, "t_capture": 10**12, "t_available": 10**12,
-        "t_stored": 10**12 + 5, "generation": 1, "shape": [1024, 1360], "dtype": "uint8",
-        "ring": "/fxis.svc.cam0.ring", "instance": 2**63 + 1, "slot": 3, "seq": 88,
+        "camera": "cam0",
+        "frame_id": 7,
+        "t_capture": 10**12,
+        "t_available": 10**12,
+        "t_stored": 10**12 + 5,
+        "generation": 1,
+        "shape": [1024, 1360],
+        "dtype": "uint8",
+        "ring": "/fxis.svc.cam0.ring",
+        "instance": 2**63 + 1,
+        "slot": 3,
+        "seq": 88,
     }

@@ -1,4 +1,5 @@
 """The recorder's pure decisions (which frames to take, what was missed) and its bag metadata."""
+
 import sys
 
 import pytest

@@ -7,12 +7,24 @@ MS = 1_000_000
 
 
 def described(name, offset, first_capture, period=20 * MS, count=10, alive=True):
-    rows = [[i, first_capture + i * period, first_capture + i * period + 2 * MS,
-             first_capture + i * period + MS, 1] for i in range(count)]
+    rows = [
+        [i, first_capture + i * period, first_capture + i * period + 2 * MS, first_capture + i * period + MS, 1]
+        for i in range(count)
+    ]
     cam = RemoteCamera(name, f"tcp://host-{name}:5555")
-    cam.describe({"alive": alive, "reason": None if alive else "its worker is not running",
-                  "period_ns": period, "delay_ns": 0, "slots": 16, "triggered": False, "frames": rows},
-                 COLUMNS, offset)
+    cam.describe(
+        {
+            "alive": alive,
+            "reason": None if alive else "its worker is not running",
+            "period_ns": period,
+            "delay_ns": 0,
+            "slots": 16,
+            "triggered": False,
+            "frames": rows,
+        },
+        COLUMNS,
+        offset,
+    )
     return cam
 
 

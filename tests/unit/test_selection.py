@@ -1,4 +1,5 @@
 """Choosing one frame per camera for a tuple (fxis_shm.selection)."""
+
 from __future__ import annotations
 
 import itertools
@@ -26,6 +27,7 @@ def assert_consistent(sel, timelines):
 
 
 # ---- the paper's spike (its Fig. 7) ----
+
 
 def spike_rig(n_slots=20, start=0):
     """Two free-running 20 fps cameras, b 0.9 ms after a, 20 frames each (0 .. 950 ms)."""
@@ -65,6 +67,7 @@ def test_joint_skew_on_the_spike_rig_is_the_phase_offset_for_every_t_star(t_star
 
 # ---- wrap-around ----
 
+
 @pytest.mark.parametrize("start", range(0, 20, 3))
 @pytest.mark.parametrize("t_star", [512 * MS, 1234 * MS, 1480 * MS])
 def test_wrapped_rings_give_the_same_choice_as_unwrapped_ones(start, t_star):
@@ -81,6 +84,7 @@ def test_wrapped_rings_give_the_same_choice_as_unwrapped_ones(start, t_star):
 
 
 # ---- different frame rates, phase offsets, dropped frames ----
+
 
 def test_cameras_at_20_and_60_fps():
     rig = {
@@ -101,8 +105,7 @@ def test_cameras_at_20_and_60_fps():
 def phase_rig():
     """Three 20 fps cameras with phases 0, 10 and 30 ms: no tuple has less than 30 ms of skew."""
     return {
-        name: ring(periodic(PERIOD_20FPS, 20, phase_ns=phase * MS))
-        for name, phase in (("a", 0), ("b", 10), ("c", 30))
+        name: ring(periodic(PERIOD_20FPS, 20, phase_ns=phase * MS)) for name, phase in (("a", 0), ("b", 10), ("c", 30))
     }
 
 
@@ -162,6 +165,7 @@ def test_synchronized_cameras_exactly_halfway_get_the_newest_frames_as_independe
 
 # ---- the tolerance rule ----
 
+
 @pytest.mark.parametrize(
     "tolerance_ns, expected",
     [
@@ -179,6 +183,7 @@ def test_tolerance_trades_a_little_skew_for_closeness_to_t_star(tolerance_ns, ex
 
 # ---- select() ----
 
+
 def test_select_dispatches_on_the_sync_mode():
     rig = spike_rig()
     assert select(INDEPENDENT, rig, SPIKE_T_STAR, PERIOD_20FPS).skew_ns == PERIOD_20FPS - 900_000
@@ -188,6 +193,7 @@ def test_select_dispatches_on_the_sync_mode():
 
 
 # ---- properties, against brute force over every combination of candidate frames ----
+
 
 def candidates(times, t_star, radius):
     """Indices of a camera's candidate frames: within radius of t*, plus its nearest frame."""
@@ -256,17 +262,21 @@ def test_joint_skew_never_exceeds_independent_skew(scene):
 
 
 @settings(max_examples=200, derandomize=True, deadline=None)
-@given(times=sorted_times, n_cams=st.integers(2, 3), t_star=st.integers(-20, 220),
-       radius=st.integers(0, 120), tolerance=st.sampled_from([0, 5, 20]))
-def test_cameras_with_identical_timestamps_get_the_independent_choice(
-    times, n_cams, t_star, radius, tolerance
-):
+@given(
+    times=sorted_times,
+    n_cams=st.integers(2, 3),
+    t_star=st.integers(-20, 220),
+    radius=st.integers(0, 120),
+    tolerance=st.sampled_from([0, 5, 20]),
+)
+def test_cameras_with_identical_timestamps_get_the_independent_choice(times, n_cams, t_star, radius, tolerance):
     rig = {f"c{k}": ring(times) for k in range(n_cams)}
     joint = select_joint(rig, t_star, radius, tolerance)
     assert joint.index == select_independent(rig, t_star).index
 
 
 # ---- the guarantees of docs/design.md, for free-running cameras of one period ----
+
 
 def least_skew_allowed(phases, period):
     """S*: the shortest arc covering every phase on a circle of circumference ``period``."""
@@ -276,13 +286,15 @@ def least_skew_allowed(phases, period):
 
 
 @settings(max_examples=200, derandomize=True, deadline=None)
-@given(phases=st.lists(st.integers(0, 999), min_size=2, max_size=4),
-       t_star=st.integers(10_000, 30_000), tolerance=st.sampled_from([0, 1, 10, 100]),
-       start=st.integers(0, 39))
+@given(
+    phases=st.lists(st.integers(0, 999), min_size=2, max_size=4),
+    t_star=st.integers(10_000, 30_000),
+    tolerance=st.sampled_from([0, 1, 10, 100]),
+    start=st.integers(0, 39),
+)
 def test_joint_selection_keeps_the_bounds_of_the_design(phases, t_star, tolerance, start):
     period = 1000
-    rig = {f"c{k}": ring(periodic(period, 40, phase_ns=phase), 40, start)
-           for k, phase in enumerate(phases)}
+    rig = {f"c{k}": ring(periodic(period, 40, phase_ns=phase), 40, start) for k, phase in enumerate(phases)}
     least = least_skew_allowed(phases, period)
     sel = select_joint(rig, t_star, radius_ns=period, tolerance_ns=tolerance)
     assert sel.skew_ns <= least + tolerance

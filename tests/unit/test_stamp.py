@@ -1,4 +1,5 @@
 """The frame-id stamp in the first and last pixel rows (fxis_shm.stamp)."""
+
 from __future__ import annotations
 
 import numpy as np

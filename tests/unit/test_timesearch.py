@@ -1,4 +1,5 @@
 """Nearest-time search over a circular timestamp vector (fxis_shm.timesearch)."""
+
 from __future__ import annotations
 
 import bisect

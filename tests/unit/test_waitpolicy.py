@@ -1,4 +1,5 @@
 """When a request waits for frames not stored yet (fxis_shm.waitpolicy)."""
+
 from __future__ import annotations
 
 import pytest
@@ -36,6 +37,7 @@ def waits(mode, t_star, now, **cameras):
 
 
 # ---- auto ----
+
 
 @pytest.mark.parametrize(
     "t_star, waiting",
@@ -86,7 +88,9 @@ def test_auto_does_not_wait_when_the_frame_period_is_unknown():
 def test_auto_waits_only_for_the_cameras_that_are_behind():
     t_star = NEWEST + PERIOD
     result = waits(
-        AUTO, t_star, NEWEST,
+        AUTO,
+        t_star,
+        NEWEST,
         current=camera(newest=t_star),  # already holds a frame at t*
         behind=camera(),
         empty=camera(newest=None),
@@ -97,6 +101,7 @@ def test_auto_waits_only_for_the_cameras_that_are_behind():
 
 
 # ---- next and none ----
+
 
 @pytest.mark.parametrize(
     "stored, waiting",
@@ -114,6 +119,7 @@ def test_none_never_waits(cam):
 
 
 # ---- auto, deciding with the request's own selection ----
+
 
 def flat(times):
     return Timeline(list(times), 0, len(times))
@@ -134,14 +140,16 @@ def test_predictions_extend_the_timeline_and_skip_overdue_frames():
     assert late == [NEWEST + 2 * PERIOD]  # the first predicted frame is overdue: dropped
 
 
-@pytest.mark.parametrize("offset, waiting", [(0, False), (PERIOD // 2 - 1, False), (PERIOD // 2, True),
-                                             (PERIOD - 1, True)])
+@pytest.mark.parametrize(
+    "offset, waiting", [(0, False), (PERIOD // 2 - 1, False), (PERIOD // 2, True), (PERIOD - 1, True)]
+)
 def test_one_camera_waits_as_the_per_camera_rule_says(offset, waiting):
     tl = flat(grid(0))
     cam = camera(newest=NEWEST)
     t_star = NEWEST + offset
-    got = waiting_for_selection(t_star, NEWEST, {"c": tl}, {"c": cam},
-                                lambda tls: select_independent(tls, t_star), PERIOD)
+    got = waiting_for_selection(
+        t_star, NEWEST, {"c": tl}, {"c": cam}, lambda tls: select_independent(tls, t_star), PERIOD
+    )
     assert ("c" in got) == waiting == bool(waits(AUTO, t_star, NEWEST, c=cam))
 
 
@@ -187,8 +195,14 @@ def test_no_wait_for_a_tuple_that_only_looks_less_skewed():
 
 def test_an_empty_camera_waits_until_the_deadline():
     states = {"a": camera(newest=None), "b": camera()}
-    got = waiting_for_selection(NEWEST, NEWEST, {"a": flat([]), "b": flat(grid(0))}, states,
-                                lambda tls: select_joint(tls, NEWEST, PERIOD), PERIOD)
+    got = waiting_for_selection(
+        NEWEST,
+        NEWEST,
+        {"a": flat([]), "b": flat(grid(0))},
+        states,
+        lambda tls: select_joint(tls, NEWEST, PERIOD),
+        PERIOD,
+    )
     assert got == {"a": None}
 
 

@@ -1,4 +1,5 @@
 """Building Timelines for the tests: logical sequences stored in a circular vector."""
+
 from __future__ import annotations
 
 from fxis_shm.timesearch import Timeline

@@ -1,6 +1,7 @@
 """Camera backends: the classes fxis_shm.camerakinds names, one module per kind.
 A module loads only when its kind is used, so an optional SDK binding that is
 not installed only matters to its own cameras."""
+
 from __future__ import annotations
 
 import importlib

@@ -28,6 +28,7 @@ feature for other cameras); a failed probe, a probe showing that this host lost
 control of the camera (it restarted), or Aravis' ``control-lost`` signal raise
 CameraLost; the worker then closes and reopens the camera with backoff.
 """
+
 from __future__ import annotations
 
 import ipaddress
@@ -48,9 +49,11 @@ from .pixelformats import PIXEL_FORMATS as GENICAM_FORMATS
 
 log = logging.getLogger("camera")
 
-EXTRA_HINT = ("the aravis backend needs PyGObject and Aravis' introspection data: "
-              "pip install 'fxis-shm[aravis]' and, on Debian/Ubuntu, apt-get install gir1.2-aravis-0.8 "
-              "(scripts/install-system-packages.sh)")
+EXTRA_HINT = (
+    "the aravis backend needs PyGObject and Aravis' introspection data: "
+    "pip install 'fxis-shm[aravis]' and, on Debian/Ubuntu, apt-get install gir1.2-aravis-0.8 "
+    "(scripts/install-system-packages.sh)"
+)
 
 
 def load_aravis():
@@ -170,18 +173,26 @@ class AravisCamera(Camera):
                 offered = list(cam.dup_available_pixel_formats_as_strings())
                 if o["pixel_format"] not in offered:
                     usable = [f for f in offered if f in PIXEL_FORMATS]
-                    raise self._refuse("pixel_format", o["pixel_format"], f"it offers {', '.join(offered)}" + (
-                        f" (fxis stores {', '.join(usable) or 'none of them'})" if usable != offered else ""))
+                    raise self._refuse(
+                        "pixel_format",
+                        o["pixel_format"],
+                        f"it offers {', '.join(offered)}"
+                        + (f" (fxis stores {', '.join(usable) or 'none of them'})" if usable != offered else ""),
+                    )
                 cam.set_pixel_format_from_string(o["pixel_format"])
             self._configure_region()
             self._configure_numbers()
         except GLib.Error as exc:
-            raise RuntimeError(f"camera {self.name!r} ({self.device_id}): configuration failed: "
-                               f"{exc.message}") from None
+            raise RuntimeError(
+                f"camera {self.name!r} ({self.device_id}): configuration failed: {exc.message}"
+            ) from None
         fmt = cam.get_pixel_format_as_string()
         if fmt not in PIXEL_FORMATS:
-            raise self._refuse("pixel_format", f"{fmt} (its current format)",
-                               f"fxis stores {', '.join(PIXEL_FORMATS)}; choose one with pixel_format=")
+            raise self._refuse(
+                "pixel_format",
+                f"{fmt} (its current format)",
+                f"fxis stores {', '.join(PIXEL_FORMATS)}; choose one with pixel_format=",
+            )
         self._format = fmt
         self._pixel = PIXEL_FORMATS[fmt]
         self._pfnc = cam.get_pixel_format()
@@ -194,21 +205,30 @@ class AravisCamera(Camera):
         if self.options["trigger"] == "free" and cam.is_frame_rate_available():
             rate = cam.get_frame_rate()
             self._period_ns = round(1e9 / rate) if rate > 0 else 0
-        log.info("camera %s: %s %s %dx%d %s, %s, timestamp=%s", self.name, self.device_id,
-                 cam.get_model_name(), w, h, fmt,
-                 f"{1e9 / self._period_ns:.3g} fps" if self._period_ns else "trigger=software"
-                 if self.supports_trigger else "frame rate unknown", o["timestamp"])
+        log.info(
+            "camera %s: %s %s %dx%d %s, %s, timestamp=%s",
+            self.name,
+            self.device_id,
+            cam.get_model_name(),
+            w,
+            h,
+            fmt,
+            f"{1e9 / self._period_ns:.3g} fps"
+            if self._period_ns
+            else "trigger=software"
+            if self.supports_trigger
+            else "frame rate unknown",
+            o["timestamp"],
+        )
 
     def _configure_trigger(self) -> None:
         cam = self._cam
         if self.options["trigger"] == "software":
             if not cam.is_software_trigger_supported():
-                raise self._refuse("trigger", "software", "the camera has no TriggerSoftware command; "
-                                   "use trigger=free")
+                raise self._refuse("trigger", "software", "the camera has no TriggerSoftware command; use trigger=free")
             sources = list(cam.dup_available_trigger_sources() or [])
             if "Software" not in sources:
-                raise self._refuse("trigger", "software",
-                                   f"its TriggerSource offers {', '.join(sources) or 'nothing'}")
+                raise self._refuse("trigger", "software", f"its TriggerSource offers {', '.join(sources) or 'nothing'}")
             cam.set_trigger("Software")  # TriggerSelector=FrameStart, TriggerMode=On, TriggerSource=Software
         elif cam.is_feature_available("TriggerMode"):
             cam.clear_triggers()  # TriggerMode=Off: free-running
@@ -229,8 +249,9 @@ class AravisCamera(Camera):
         elif x or y:
             raise self._refuse("offset_x" if x else "offset_y", x or y, "the camera has no region offset")
         for key, value, bounds, step, offset, okey in (
-                ("width", w, cam.get_width_bounds(), cam.get_width_increment(), x, "offset_x"),
-                ("height", h, cam.get_height_bounds(), cam.get_height_increment(), y, "offset_y")):
+            ("width", w, cam.get_width_bounds(), cam.get_width_increment(), x, "offset_x"),
+            ("height", h, cam.get_height_bounds(), cam.get_height_increment(), y, "offset_y"),
+        ):
             lo, hi = bounds
             if not lo <= value <= hi:
                 raise self._refuse(key, value, f"it allows {lo}..{hi}" + (f" in steps of {step}" if step > 1 else ""))
@@ -241,16 +262,19 @@ class AravisCamera(Camera):
         cam.set_integer("Width", w)
         cam.set_integer("Height", h)
         if x or y:
-            for key, value, bounds in (("offset_x", x, cam.get_x_offset_bounds()),
-                                       ("offset_y", y, cam.get_y_offset_bounds())):
+            for key, value, bounds in (
+                ("offset_x", x, cam.get_x_offset_bounds()),
+                ("offset_y", y, cam.get_y_offset_bounds()),
+            ):
                 if not bounds[0] <= value <= bounds[1]:
                     raise self._refuse(key, value, f"it allows {bounds[0]}..{bounds[1]}")
             cam.set_integer("OffsetX", x)
             cam.set_integer("OffsetY", y)
         got = tuple(cam.get_region())
         if got != (x, y, w, h):
-            raise self._refuse("width/height/offset_x/offset_y", f"{w}x{h}+{x}+{y}",
-                               f"it set {got[2]}x{got[3]}+{got[0]}+{got[1]}")
+            raise self._refuse(
+                "width/height/offset_x/offset_y", f"{w}x{h}+{x}+{y}", f"it set {got[2]}x{got[3]}+{got[0]}+{got[1]}"
+            )
 
     def _configure_numbers(self) -> None:
         cam, o = self._cam, self.options
@@ -325,8 +349,11 @@ class AravisCamera(Camera):
             # camera's timestamp tick frequency (USB3 Vision timestamps are ns already).
             self._clock = DeviceClockFit(tick_ns=1.0)
             if self._gv and not self._device.get_timestamp_tick_frequency():
-                log.warning("camera %s reports no timestamp tick frequency: Aravis stamps its frames "
-                            "with the host's clock, so timestamp=device is the arrival time", self.name)
+                log.warning(
+                    "camera %s reports no timestamp tick frequency: Aravis stamps its frames "
+                    "with the host's clock, so timestamp=device is the arrival time",
+                    self.name,
+                )
         self._probe: threading.Thread | None = None
         self._probe_started = 0.0
         self._warned_device_ts = False
@@ -378,8 +405,10 @@ class AravisCamera(Camera):
                 self.frames_dropped += 1
                 self._failed_since_good += 1
             return None
-        if buffer.get_payload_type() not in (Aravis.BufferPayloadType.IMAGE,
-                                             Aravis.BufferPayloadType.EXTENDED_CHUNK_DATA):
+        if buffer.get_payload_type() not in (
+            Aravis.BufferPayloadType.IMAGE,
+            Aravis.BufferPayloadType.EXTENDED_CHUNK_DATA,
+        ):
             self.frames_dropped += 1
             self._failed_since_good += 1
             return None
@@ -406,8 +435,16 @@ class AravisCamera(Camera):
     def _image_of(self, buffer) -> np.ndarray | None:
         w, h = buffer.get_image_width(), buffer.get_image_height()
         if (w, h) != (self._width, self._height) or buffer.get_image_pixel_format() != self._pfnc:
-            log.warning("camera %s sent a %dx%d frame of format 0x%08x; expected %dx%d %s", self.name,
-                        w, h, buffer.get_image_pixel_format(), self._width, self._height, self._format)
+            log.warning(
+                "camera %s sent a %dx%d frame of format 0x%08x; expected %dx%d %s",
+                self.name,
+                w,
+                h,
+                buffer.get_image_pixel_format(),
+                self._width,
+                self._height,
+                self._format,
+            )
             return None
         data = buffer.get_image_data()  # bytes: PyGObject copied them out of the buffer
         row = self._row_bytes
@@ -441,8 +478,9 @@ class AravisCamera(Camera):
             return
         self._probe_started = now
         idle = now - self._last_frame
-        self._probe = threading.Thread(target=self._run_probe, args=(idle,), daemon=True,
-                                       name=f"aravis-probe-{self.name}")
+        self._probe = threading.Thread(
+            target=self._run_probe, args=(idle,), daemon=True, name=f"aravis-probe-{self.name}"
+        )
         self._probe.start()
 
     def _run_probe(self, idle: float) -> None:
@@ -453,8 +491,9 @@ class AravisCamera(Camera):
             if self._gv:
                 ccp = device.read_register(GV_CCP_REGISTER)
                 if not ccp & GV_CCP_CONTROL_BITS:
-                    self._probe_error = (f"no frame for {idle:.1f} s and the camera has no controlling "
-                                         "host any more (it restarted)")
+                    self._probe_error = (
+                        f"no frame for {idle:.1f} s and the camera has no controlling host any more (it restarted)"
+                    )
             else:
                 cam.get_integer("Width")
         except GLib.Error as exc:
@@ -495,9 +534,14 @@ class AravisCamera(Camera):
         found = []
         for i in range(Aravis.get_n_devices()):
             device_id = Aravis.get_device_id(i)
-            entry = {"id": device_id, "model": Aravis.get_device_model(i),
-                     "vendor": Aravis.get_device_vendor(i), "serial": Aravis.get_device_serial_nbr(i),
-                     "protocol": Aravis.get_device_protocol(i), "address": Aravis.get_device_address(i)}
+            entry = {
+                "id": device_id,
+                "model": Aravis.get_device_model(i),
+                "vendor": Aravis.get_device_vendor(i),
+                "serial": Aravis.get_device_serial_nbr(i),
+                "protocol": Aravis.get_device_protocol(i),
+                "address": Aravis.get_device_address(i),
+            }
             try:
                 cam = Aravis.Camera.new(device_id)
                 _, _, w, h = cam.get_region()

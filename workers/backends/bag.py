@@ -20,6 +20,7 @@ header.stamp (plus ``pass * loop``, so that stamps keep increasing), for code th
 matches frames with other recorded data: it must then ask for frames by those times
 (``at=``, ``wait="none"``), as the service sees them as long past.
 """
+
 from __future__ import annotations
 
 import time
@@ -49,8 +50,9 @@ class BagCamera(Camera):
         super().__init__(name, options, time_origin_ns)
         path = self.options["path"]
         if path is None or not str(path).strip():
-            raise ValueError(f"camera {name!r}: key 'path' is required: a bag folder recorded "
-                             f"with fxis record (or its .mcap file)")
+            raise ValueError(
+                f"camera {name!r}: key 'path' is required: a bag folder recorded with fxis record (or its .mcap file)"
+            )
         try:
             self._bag = BagReader(str(path).strip())
         except ConfigError as exc:
@@ -73,20 +75,25 @@ class BagCamera(Camera):
 
     def _choose_topic(self, topic) -> str:
         images = sorted(t for t, kind in self._bag.topics.items() if kind in _IMAGE_TYPES)
-        listing = (f"its image topics: {', '.join(images) or 'none'}; all topics: "
-                   + ", ".join(f"{t} ({kind})" for t, kind in sorted(self._bag.topics.items())))
+        listing = f"its image topics: {', '.join(images) or 'none'}; all topics: " + ", ".join(
+            f"{t} ({kind})" for t, kind in sorted(self._bag.topics.items())
+        )
         if topic is None or not str(topic).strip():
             if len(images) != 1:
-                raise ValueError(f"camera {self.name!r}: key 'topic' is required: the bag "
-                                 f"{self._bag.path!r} has {len(images)} image topics; {listing}")
+                raise ValueError(
+                    f"camera {self.name!r}: key 'topic' is required: the bag "
+                    f"{self._bag.path!r} has {len(images)} image topics; {listing}"
+                )
             return images[0]
         topic = str(topic).strip()
         if topic not in self._bag.topics:
-            raise ValueError(f"camera {self.name!r}: key 'topic': no topic {topic!r} in the bag "
-                             f"{self._bag.path!r}; {listing}")
+            raise ValueError(
+                f"camera {self.name!r}: key 'topic': no topic {topic!r} in the bag {self._bag.path!r}; {listing}"
+            )
         if topic not in images:
-            raise ValueError(f"camera {self.name!r}: key 'topic': {topic!r} holds "
-                             f"{self._bag.topics[topic]}, not images; {listing}")
+            raise ValueError(
+                f"camera {self.name!r}: key 'topic': {topic!r} holds {self._bag.topics[topic]}, not images; {listing}"
+            )
         if not self._bag.counts.get(topic):
             raise ValueError(f"camera {self.name!r}: key 'topic': {topic!r} has no messages")
         return topic

@@ -1,4 +1,5 @@
 """The camera plug-in base: a backend implements open, grab and close."""
+
 from __future__ import annotations
 
 from abc import ABC, abstractmethod

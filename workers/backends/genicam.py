@@ -23,6 +23,7 @@ fetched; ``device`` maps the buffer's device timestamp onto CLOCK_MONOTONIC with
 ``DeviceClockFit`` (capture time on the camera's clock, so transfer jitter
 drops out; the device must timestamp its buffers, which start-up checks).
 """
+
 from __future__ import annotations
 
 import glob
@@ -44,6 +45,7 @@ _INSTALL_HINT = "the genicam backend needs harvesters and genicam: pip install '
 _PROBE_AFTER_S = 1.0  # without frames this long, check that the device still answers
 _FIRST_FRAME_S = 5.0  # how long start-up waits for a frame when it must look at one
 _EVENT_WAIT_MS = 5
+
 
 def _sdk():
     """harvesters.core, genicam.genapi and genicam.gentl, or ImportError saying what to install."""
@@ -123,14 +125,16 @@ class GenicamCamera(Camera):
             files = producers_in(cti)
             if not files:
                 what = "folder holds no .cti file" if os.path.isdir(cti) else "file does not exist"
-                raise self._refuse("cti", f"{cti!r}: the {what}; give a GenTL producer (.cti) "
-                                          f"or a folder holding one")
+                raise self._refuse("cti", f"{cti!r}: the {what}; give a GenTL producer (.cti) or a folder holding one")
             return files
         files = producers_from_env()
         if not files:
-            raise self._refuse("cti", f"no producer given and ${GENTL_PATH_VAR} "
-                                      f"({os.environ.get(GENTL_PATH_VAR, 'not set')!r}) names no folder "
-                                      f"holding a .cti file; set cti=/path/to/producer.cti")
+            raise self._refuse(
+                "cti",
+                f"no producer given and ${GENTL_PATH_VAR} "
+                f"({os.environ.get(GENTL_PATH_VAR, 'not set')!r}) names no folder "
+                f"holding a .cti file; set cti=/path/to/producer.cti",
+            )
         return files
 
     def _pick_device(self, infos: list, files: list[str]) -> int:
@@ -145,10 +149,11 @@ class GenicamCamera(Camera):
                 return i
         if want.isdigit() and int(want) < len(infos):
             return int(want)
-        listing = "; ".join(f"{i}: {_prop(info, 'serial_number') or '-'} ({_prop(info, 'id_')}, "
-                            f"{_prop(info, 'model')})" for i, info in enumerate(infos))
-        raise self._refuse("device", f"no device {want!r}; the producer(s) offer (index: serial "
-                                     f"(id, model)) {listing}")
+        listing = "; ".join(
+            f"{i}: {_prop(info, 'serial_number') or '-'} ({_prop(info, 'id_')}, {_prop(info, 'model')})"
+            for i, info in enumerate(infos)
+        )
+        raise self._refuse("device", f"no device {want!r}; the producer(s) offer (index: serial (id, model)) {listing}")
 
     def _node(self, *names):
         """The first of ``names`` the device implements and makes available now, or None."""
@@ -166,8 +171,11 @@ class GenicamCamera(Camera):
     def _set_enum(self, key: str | None, node, value: str, quiet: bool = False) -> str:
         """Set an enumeration by its symbolic name (case-insensitive); returns the name set."""
         _, genapi, _ = _sdk()
-        offered = [e.symbolic for e in node.entries
-                   if e.node.get_access_mode() not in (genapi.EAccessMode.NI, genapi.EAccessMode.NA)]
+        offered = [
+            e.symbolic
+            for e in node.entries
+            if e.node.get_access_mode() not in (genapi.EAccessMode.NI, genapi.EAccessMode.NA)
+        ]
         match = next((s for s in offered if s.lower() == value.lower()), None)
         if match is not None and _readable(node.node, genapi) and node.value == match:
             return match  # already so, whether or not it could change now
@@ -175,8 +183,9 @@ class GenicamCamera(Camera):
             if quiet:
                 return ""
             if match is None:
-                raise self._refuse(key, f"the device does not offer {value!r}; it offers "
-                                        f"{', '.join(offered) or 'nothing'}")
+                raise self._refuse(
+                    key, f"the device does not offer {value!r}; it offers {', '.join(offered) or 'nothing'}"
+                )
             raise self._refuse(key, f"the device does not let {node.node.name} change now")
         try:
             node.value = match
@@ -224,15 +233,24 @@ class GenicamCamera(Camera):
                 raise self._refuse("pixel_format", "the device has no PixelFormat feature")
             self._set_enum("pixel_format", node, o["pixel_format"])
         if node is None or not _readable(node.node, genapi):
-            raise ValueError(f"camera {self.name!r}: the device does not say its PixelFormat; "
-                             f"fxis cannot tell how to read its images")
+            raise ValueError(
+                f"camera {self.name!r}: the device does not say its PixelFormat; "
+                f"fxis cannot tell how to read its images"
+            )
         self._pixel_format = node.value
         if self._pixel_format not in PIXEL_FORMATS:
-            offered = [e.symbolic for e in node.entries if e.symbolic in PIXEL_FORMATS and
-                       e.node.get_access_mode() not in (genapi.EAccessMode.NI, genapi.EAccessMode.NA)]
-            raise self._refuse("pixel_format", f"fxis cannot convert {self._pixel_format!r} to NumPy; "
-                                               f"set one the device offers that it can: "
-                                               f"{', '.join(offered) or 'none'}")
+            offered = [
+                e.symbolic
+                for e in node.entries
+                if e.symbolic in PIXEL_FORMATS
+                and e.node.get_access_mode() not in (genapi.EAccessMode.NI, genapi.EAccessMode.NA)
+            ]
+            raise self._refuse(
+                "pixel_format",
+                f"fxis cannot convert {self._pixel_format!r} to NumPy; "
+                f"set one the device offers that it can: "
+                f"{', '.join(offered) or 'none'}",
+            )
         for size, offset, axis in (("width", "offset_x", "OffsetX"), ("height", "offset_y", "OffsetY")):
             if o[size] is None and o[offset] is None:
                 continue
@@ -241,8 +259,9 @@ class GenicamCamera(Camera):
                 try:
                     node.value = node.min  # room for the largest size first
                 except Exception as exc:  # GenApi exceptions: the device refused
-                    raise self._refuse(offset, f"the device refused to move {axis} to {node.min}: "
-                                               f"{_short(exc)}") from None
+                    raise self._refuse(
+                        offset, f"the device refused to move {axis} to {node.min}: {_short(exc)}"
+                    ) from None
             if o[size] is not None:
                 self._set_number(size, (size.capitalize(),), o[size], integer=True)
             if o[offset] is not None:
@@ -263,8 +282,9 @@ class GenicamCamera(Camera):
         self._configure_trigger()
         width, height = self._node("Width"), self._node("Height")
         if width is None or height is None:
-            raise ValueError(f"camera {self.name!r}: the device has no Width/Height features; "
-                             f"fxis cannot tell its image size")
+            raise ValueError(
+                f"camera {self.name!r}: the device has no Width/Height features; fxis cannot tell its image size"
+            )
         self._layout = image_layout(self._pixel_format, width.value, height.value, o["raw"])
         self._period_ns = self._read_period()
 
@@ -274,9 +294,12 @@ class GenicamCamera(Camera):
         selector = self._node("TriggerSelector")
         if software:
             if self._node("TriggerSoftware") is None or mode is None or self._node("TriggerSource") is None:
-                raise self._refuse("trigger", "software triggering needs the device's TriggerMode, "
-                                              "TriggerSource and TriggerSoftware features, which it "
-                                              "lacks; it allows trigger=free only")
+                raise self._refuse(
+                    "trigger",
+                    "software triggering needs the device's TriggerMode, "
+                    "TriggerSource and TriggerSoftware features, which it "
+                    "lacks; it allows trigger=free only",
+                )
             if selector is not None:
                 for name in ("FrameStart", "AcquisitionStart"):
                     if self._set_enum(None, selector, name, quiet=True):
@@ -292,8 +315,9 @@ class GenicamCamera(Camera):
         if self.supports_trigger:
             return 0
         _, genapi, _ = _sdk()
-        node = self._node("ResultingFrameRate", "AcquisitionResultingFrameRate",
-                          "AcquisitionFrameRate", "AcquisitionFrameRateAbs")
+        node = self._node(
+            "ResultingFrameRate", "AcquisitionResultingFrameRate", "AcquisitionFrameRate", "AcquisitionFrameRateAbs"
+        )
         try:
             fps = float(node.value) if node is not None and _readable(node.node, genapi) else 0.0
         except Exception:  # some devices compute it only while acquiring
@@ -321,9 +345,11 @@ class GenicamCamera(Camera):
             try:
                 self._ia = self._harvester.create(index)
             except gentl.GenericException as exc:
-                raise RuntimeError(f"camera {self.name!r}: cannot open device "
-                                   f"{_prop(infos[index], 'id_')!r}: {_short(exc)} "
-                                   f"(is another program using it?)") from None
+                raise RuntimeError(
+                    f"camera {self.name!r}: cannot open device "
+                    f"{_prop(infos[index], 'id_')!r}: {_short(exc)} "
+                    f"(is another program using it?)"
+                ) from None
             try:
                 self._ia.num_buffers = max(8, self._ia.min_num_buffers)
             except Exception:
@@ -343,9 +369,15 @@ class GenicamCamera(Camera):
         except BaseException:
             self.close()
             raise
-        log.info("camera %s: %s device %s, %s %s, %s", self.name, ", ".join(files),
-                 _prop(infos[index], "id_"), self._pixel_format, self._layout,
-                 f"{1e9 / self._period_ns:.2f} fps" if self._period_ns else "fps unknown")
+        log.info(
+            "camera %s: %s device %s, %s %s, %s",
+            self.name,
+            ", ".join(files),
+            _prop(infos[index], "id_"),
+            self._pixel_format,
+            self._layout,
+            f"{1e9 / self._period_ns:.2f} fps" if self._period_ns else "fps unknown",
+        )
 
     def _check_device_timestamps(self) -> None:
         """Start-up looks at one buffer: device timestamps need the device to set them."""
@@ -354,8 +386,10 @@ class GenicamCamera(Camera):
             self.trigger()
         buffer = self._ia.try_fetch(timeout=_FIRST_FRAME_S)
         if buffer is None:
-            raise RuntimeError(f"camera {self.name!r}: no frame within {_FIRST_FRAME_S:.0f} s to check "
-                               f"its timestamps (timestamp=device)")
+            raise RuntimeError(
+                f"camera {self.name!r}: no frame within {_FIRST_FRAME_S:.0f} s to check "
+                f"its timestamps (timestamp=device)"
+            )
         with buffer:
             try:
                 _ = buffer.module.timestamp_ns  # raises if the buffers carry no ns timestamp
@@ -364,8 +398,10 @@ class GenicamCamera(Camera):
                 try:
                     _ = buffer.module.timestamp
                 except gentl.GenericException as exc:
-                    raise self._refuse("timestamp", f"the device does not timestamp its buffers "
-                                                    f"({_short(exc)}); it allows timestamp=host only") from None
+                    raise self._refuse(
+                        "timestamp",
+                        f"the device does not timestamp its buffers ({_short(exc)}); it allows timestamp=host only",
+                    ) from None
                 self._device_ns = False
         tick_ns = 1.0
         if not self._device_ns:
@@ -376,11 +412,15 @@ class GenicamCamera(Camera):
                 node = self._node("GevTimestampTickFrequency")
                 frequency = node.value if node is not None else 0
             if not frequency:
-                raise self._refuse("timestamp", "the device's timestamp tick frequency is unknown; "
-                                                "it allows timestamp=host only")
+                raise self._refuse(
+                    "timestamp", "the device's timestamp tick frequency is unknown; it allows timestamp=host only"
+                )
             tick_ns = 1e9 / frequency
-        self._fit = PtpClock(timebase.service_and_tai, tick_ns) if self.options["timestamp"] == "ptp" \
+        self._fit = (
+            PtpClock(timebase.service_and_tai, tick_ns)
+            if self.options["timestamp"] == "ptp"
             else DeviceClockFit(tick_ns=tick_ns)
+        )
 
     def grab(self, timeout: float) -> Capture | None:
         _, genapi, gentl = _sdk()
@@ -401,13 +441,14 @@ class GenicamCamera(Camera):
                 fmt = component.data_format
                 width, height = component.width, component.height
                 if fmt != self._pixel_format or (height, width) != (self._layout.height, self._layout.width):
-                    raise ValueError(f"a {fmt} {width}x{height} buffer, but the ring holds "
-                                     f"{self._pixel_format} {self._layout.width}x{self._layout.height}")
+                    raise ValueError(
+                        f"a {fmt} {width}x{height} buffer, but the ring holds "
+                        f"{self._pixel_format} {self._layout.width}x{self._layout.height}"
+                    )
                 image = to_image(component.data, fmt, width, height, self.options["raw"])
                 device_id = _frame_id(buffer, gentl)
                 t_capture = self._device_time(buffer, t_host, gentl) if self._fit is not None else t_host
-            except (gentl.GenericException, genapi.GenericException, ValueError, IndexError,
-                    AttributeError) as exc:
+            except (gentl.GenericException, genapi.GenericException, ValueError, IndexError, AttributeError) as exc:
                 self.frames_dropped += 1
                 log.warning("camera %s: frame dropped: %s", self.name, _short(exc))
                 return None
@@ -470,9 +511,11 @@ class GenicamCamera(Camera):
         core, _, _ = _sdk()
         files = producers_from_env()
         if not files:
-            raise LookupError(f"no GenTL producer: ${GENTL_PATH_VAR} "
-                              f"({os.environ.get(GENTL_PATH_VAR, 'not set')!r}) names no folder "
-                              f"holding a .cti file")
+            raise LookupError(
+                f"no GenTL producer: ${GENTL_PATH_VAR} "
+                f"({os.environ.get(GENTL_PATH_VAR, 'not set')!r}) names no folder "
+                f"holding a .cti file"
+            )
         found = []
         for cti in files:
             harvester = _harvester(core)
@@ -480,13 +523,15 @@ class GenicamCamera(Camera):
                 harvester.add_file(cti)
                 harvester.update()
                 for i, info in enumerate(harvester.device_info_list):
-                    found.append({
-                        "id": _prop(info, "serial_number") or _prop(info, "id_"),
-                        "model": " ".join(filter(None, (_prop(info, "vendor"), _prop(info, "model")))),
-                        "format": _current_format(core, harvester, i),
-                        "device_id": _prop(info, "id_"),
-                        "cti": cti,
-                    })
+                    found.append(
+                        {
+                            "id": _prop(info, "serial_number") or _prop(info, "id_"),
+                            "model": " ".join(filter(None, (_prop(info, "vendor"), _prop(info, "model")))),
+                            "format": _current_format(core, harvester, i),
+                            "device_id": _prop(info, "id_"),
+                            "cti": cti,
+                        }
+                    )
             finally:
                 harvester.reset()
         return found
@@ -524,8 +569,9 @@ def _current_format(core, harvester, index: int) -> str:
     '?' if the device is in use."""
     for privilege in ("read_only", "exclusive"):
         try:
-            ia = harvester.create(index, config=core.ParameterSet(
-                {core.ParameterKey.DEVICE_OWNERSHIP_PRIVILEGE: privilege}))
+            ia = harvester.create(
+                index, config=core.ParameterSet({core.ParameterKey.DEVICE_OWNERSHIP_PRIVILEGE: privilege})
+            )
         except Exception:
             continue
         try:

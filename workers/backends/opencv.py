@@ -19,6 +19,7 @@
 
 Frames come as BGR (``pixel_format=bgr8``) or converted to grey (``mono8``).
 """
+
 from __future__ import annotations
 
 import fcntl
@@ -64,8 +65,7 @@ class OpenCVCamera(Camera):
         self.note = ""
         source = self.options["source"]
         if source is None or not str(source).strip():
-            raise ValueError(f"camera {name!r}: key 'source' is required: a device index (0), "
-                             f"a video file or a URL")
+            raise ValueError(f"camera {name!r}: key 'source' is required: a device index (0), a video file or a URL")
         self._source = str(source).strip()
         self._kind = source_kind(self._source)
         if self._kind != "device":
@@ -76,8 +76,10 @@ class OpenCVCamera(Camera):
         if self._kind != "file":
             for key, default in (("rate", "file"), ("loop", False)):
                 if self.options[key] != default:
-                    raise ValueError(f"camera {name!r}: key {key!r} applies to video files only, "
-                                     f"not to the {self._kind} {self._source!r}")
+                    raise ValueError(
+                        f"camera {name!r}: key {key!r} applies to video files only, "
+                        f"not to the {self._kind} {self._source!r}"
+                    )
         self._cap: cv2.VideoCapture | None = None
         self._reader: _LiveReader | None = None
         self._layout: FrameLayout | None = None
@@ -103,8 +105,9 @@ class OpenCVCamera(Camera):
     def _open_file(self) -> None:
         path = self._source
         if not os.path.isfile(path):
-            raise self._refuse("source", f"no file {path!r} (source takes a device index, "
-                                         f"an existing video file or a URL)")
+            raise self._refuse(
+                "source", f"no file {path!r} (source takes a device index, an existing video file or a URL)"
+            )
         cap = cv2.VideoCapture(path)
         if not cap.isOpened():
             cap.release()
@@ -118,8 +121,9 @@ class OpenCVCamera(Camera):
             fps = cap.get(cv2.CAP_PROP_FPS)
             if not (math.isfinite(fps) and fps > 0):
                 cap.release()
-                raise self._refuse("rate", f"{path!r} does not say its frame rate; "
-                                           f"set rate=<frames per second> or rate=max")
+                raise self._refuse(
+                    "rate", f"{path!r} does not say its frame rate; set rate=<frames per second> or rate=max"
+                )
             self._period_ns = round(1e9 / fps)
         elif wanted == "max":
             self._period_ns = 0
@@ -134,8 +138,10 @@ class OpenCVCamera(Camera):
     def _open_live(self) -> None:
         source = int(self._source) if self._kind == "device" else self._source
         params = []
-        for prop, value in (("CAP_PROP_OPEN_TIMEOUT_MSEC", _OPEN_TIMEOUT_MS),
-                            ("CAP_PROP_READ_TIMEOUT_MSEC", _OPEN_TIMEOUT_MS)):
+        for prop, value in (
+            ("CAP_PROP_OPEN_TIMEOUT_MSEC", _OPEN_TIMEOUT_MS),
+            ("CAP_PROP_READ_TIMEOUT_MSEC", _OPEN_TIMEOUT_MS),
+        ):
             if self._kind == "url" and hasattr(cv2, prop):
                 params += [getattr(cv2, prop), value]
         cap = cv2.VideoCapture(source, cv2.CAP_ANY, params) if params else cv2.VideoCapture(source)
@@ -158,8 +164,7 @@ class OpenCVCamera(Camera):
     def _apply_device_settings(self, cap) -> None:
         """Ask for width, height and fps; refuse if the device delivers something else."""
         o = self.options
-        props = {"width": cv2.CAP_PROP_FRAME_WIDTH, "height": cv2.CAP_PROP_FRAME_HEIGHT,
-                 "fps": cv2.CAP_PROP_FPS}
+        props = {"width": cv2.CAP_PROP_FRAME_WIDTH, "height": cv2.CAP_PROP_FRAME_HEIGHT, "fps": cv2.CAP_PROP_FPS}
         for key in ("width", "height", "fps"):
             if o[key] is not None:
                 cap.set(props[key], o[key])
@@ -169,8 +174,11 @@ class OpenCVCamera(Camera):
             got = cap.get(props[key])
             if not math.isclose(got, o[key], rel_tol=0.01, abs_tol=0.5):
                 w, h = cap.get(cv2.CAP_PROP_FRAME_WIDTH), cap.get(cv2.CAP_PROP_FRAME_HEIGHT)
-                raise self._refuse(key, f"the device does not accept {o[key]:g}; it gives {got:g} "
-                                        f"(now {w:g}x{h:g} at {cap.get(cv2.CAP_PROP_FPS):g} fps)")
+                raise self._refuse(
+                    key,
+                    f"the device does not accept {o[key]:g}; it gives {got:g} "
+                    f"(now {w:g}x{h:g} at {cap.get(cv2.CAP_PROP_FPS):g} fps)",
+                )
 
     def grab(self, timeout: float) -> Capture | None:
         if self._reader is not None:
@@ -213,16 +221,19 @@ class OpenCVCamera(Camera):
             self._played = 0
         if not ok or frame is None:
             self._ended = True
-            self.note = (f"end of file {os.path.basename(self._source)!r} after {self._played} frames "
-                         f"(loop=false): no more frames")
+            self.note = (
+                f"end of file {os.path.basename(self._source)!r} after {self._played} frames "
+                f"(loop=false): no more frames"
+            )
             log.info("camera %s: %s", self.name, self.note)
             return None
         self._played += 1
         image = self._convert(frame)
         if FrameLayout.of(image) != self._layout:
             self.frames_dropped += 1
-            log.warning("camera %s: a %s frame in a file of %s frames; dropped", self.name,
-                        FrameLayout.of(image), self._layout)
+            log.warning(
+                "camera %s: a %s frame in a file of %s frames; dropped", self.name, FrameLayout.of(image), self._layout
+            )
             return None
         return image
 
@@ -247,11 +258,17 @@ class OpenCVCamera(Camera):
         """BGR or grey as configured, whatever the source delivers."""
         mono = self.options["pixel_format"] == "mono8"
         if frame.dtype != np.uint8:
-            frame = cv2.convertScaleAbs(frame, alpha=255.0 / np.iinfo(frame.dtype).max) \
-                if frame.dtype.kind == "u" else frame.astype(np.uint8)
+            frame = (
+                cv2.convertScaleAbs(frame, alpha=255.0 / np.iinfo(frame.dtype).max)
+                if frame.dtype.kind == "u"
+                else frame.astype(np.uint8)
+            )
         if frame.ndim == 2 or frame.shape[2] == 1:
-            return np.ascontiguousarray(frame.reshape(frame.shape[:2])) if mono \
+            return (
+                np.ascontiguousarray(frame.reshape(frame.shape[:2]))
+                if mono
                 else cv2.cvtColor(frame, cv2.COLOR_GRAY2BGR)
+            )
         if frame.shape[2] == 4:
             return cv2.cvtColor(frame, cv2.COLOR_BGRA2GRAY if mono else cv2.COLOR_BGRA2BGR)
         return cv2.cvtColor(frame, cv2.COLOR_BGR2GRAY) if mono else frame
@@ -260,8 +277,7 @@ class OpenCVCamera(Camera):
         reader, cap = self._reader, self._cap
         self._reader = self._cap = None
         if reader is not None and not reader.stop():
-            log.warning("camera %s: its reader is still blocked in OpenCV; leaving the capture open",
-                        self.name)
+            log.warning("camera %s: its reader is still blocked in OpenCV; leaving the capture open", self.name)
             return
         if cap is not None:
             cap.release()
@@ -272,7 +288,7 @@ class OpenCVCamera(Camera):
         files and URLs are not discoverable."""
         found = []
         for path in sorted(glob.glob("/dev/video*"), key=lambda p: (len(p), p)):
-            index = path[len("/dev/video"):]
+            index = path[len("/dev/video") :]
             if not index.isdigit():
                 continue
             info = _v4l2_info(path)

@@ -6,6 +6,7 @@ OpenCV names its Bayer codes after the second row's pattern, one row and column
 down from GenICam's: BayerRG (an RGGB mosaic) is OpenCV's BayerBG.
 tests/backends/test_aravis.py and test_genicam.py check this on a known mosaic.
 """
+
 from __future__ import annotations
 
 from dataclasses import dataclass
@@ -24,8 +25,12 @@ class PixelFormat:
     to_bgr: str | None = None  # cv2 colour conversion to BGR (unless raw=true)
 
 
-_BAYER_CV2 = {"RG": "COLOR_BayerBG2BGR", "BG": "COLOR_BayerRG2BGR",
-              "GR": "COLOR_BayerGB2BGR", "GB": "COLOR_BayerGR2BGR"}
+_BAYER_CV2 = {
+    "RG": "COLOR_BayerBG2BGR",
+    "BG": "COLOR_BayerRG2BGR",
+    "GR": "COLOR_BayerGB2BGR",
+    "GB": "COLOR_BayerGR2BGR",
+}
 PIXEL_FORMATS: dict[str, PixelFormat] = {
     "Mono8": PixelFormat("uint8", 1),
     **{f"Mono{bits}": PixelFormat("uint16", 1) for bits in (10, 12, 14, 16)},  # unpacked, in 16 bits
@@ -34,8 +39,7 @@ PIXEL_FORMATS: dict[str, PixelFormat] = {
     "RGBa8": PixelFormat("uint8", 4, "COLOR_RGBA2BGR"),
     "BGRa8": PixelFormat("uint8", 4, "COLOR_BGRA2BGR"),
     **{f"Bayer{p}8": PixelFormat("uint8", 1, code) for p, code in _BAYER_CV2.items()},
-    **{f"Bayer{p}{bits}": PixelFormat("uint16", 1, code) for p, code in _BAYER_CV2.items()
-       for bits in (10, 12, 16)},
+    **{f"Bayer{p}{bits}": PixelFormat("uint16", 1, code) for p, code in _BAYER_CV2.items() for bits in (10, 12, 16)},
 }
 
 

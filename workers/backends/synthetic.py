@@ -20,6 +20,7 @@ same fps and phase capture frames with the same k and see the same sway, so
 ``left`` with shift_px=0 and ``right`` with shift_px=d form a stereo pair
 whose disparity (x in left minus x in right) is exactly d pixels.
 """
+
 from __future__ import annotations
 
 import queue
@@ -54,8 +55,10 @@ class SyntheticCamera(Camera):
         o = self.options
         self._period = Fraction(10**9) / Fraction(o["fps"]).limit_denominator(10**6)
         if o["jitter_ms"] * 1e6 >= self._period / 2:
-            raise ValueError(f"jitter_ms={o['jitter_ms']} must be below half the frame period "
-                             f"({float(self._period) / 2e6:.3f} ms), or frames would reorder")
+            raise ValueError(
+                f"jitter_ms={o['jitter_ms']} must be below half the frame period "
+                f"({float(self._period) / 2e6:.3f} ms), or frames would reorder"
+            )
         self._phase_ns = round(o["phase_ms"] * 1e6)
         self._jitter_ns = round(o["jitter_ms"] * 1e6)
         self._rng = random.Random(o["seed"] or None)
@@ -68,12 +71,15 @@ class SyntheticCamera(Camera):
         w, h, shift = self.options["width"], self.options["height"], self.options["shift_px"]
         square = board_square_px(w, h)
         if square < _MIN_SQUARE_PX:
-            raise ValueError(f"pattern=chessboard needs at least {16 * _MIN_SQUARE_PX}x"
-                             f"{12 * _MIN_SQUARE_PX} pixels, got {w}x{h}")
+            raise ValueError(
+                f"pattern=chessboard needs at least {16 * _MIN_SQUARE_PX}x{12 * _MIN_SQUARE_PX} pixels, got {w}x{h}"
+            )
         room = (w - (BOARD_CORNERS[0] + 1) * square) // 2 - square  # keeps a square of margin
         if abs(shift) + square // 4 > room:
-            raise ValueError(f"shift_px={shift} moves the chessboard out of a {w}x{h} image; "
-                             f"|shift_px| must be at most {room - square // 4}")
+            raise ValueError(
+                f"shift_px={shift} moves the chessboard out of a {w}x{h} image; "
+                f"|shift_px| must be at most {room - square // 4}"
+            )
 
     @property
     def layout(self) -> FrameLayout:
@@ -110,8 +116,7 @@ class SyntheticCamera(Camera):
         y0 = (height - rows * square) // 2
         for r in range(rows):
             for c in range(r % 2, cols, 2):  # the top-left square is black
-                canvas[y0 + r * square : y0 + (r + 1) * square,
-                       x0 + c * square : x0 + (c + 1) * square] = 0
+                canvas[y0 + r * square : y0 + (r + 1) * square, x0 + c * square : x0 + (c + 1) * square] = 0
         return canvas
 
     def _window(self, k: int) -> int:
