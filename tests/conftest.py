@@ -84,3 +84,25 @@ def emulated_hosts(tmp_path):
     assert lab.leftovers() == [], "emulated hosts left namespaces or links behind"
     for svc in (svc for host in lab.hosts for svc in host.services):
         assert not os.path.exists(lock_path(svc.name)), f"service {svc.name!r} left its lock file"
+
+
+def fxis_run_alone(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
+    """``fxis run`` expected to stop during start-up: a name and endpoints of its own, so it
+    can neither meet a running service nor another test's ports."""
+    from fxis_shm.launch import free_tcp_port
+
+    endpoints = [f"tcp://127.0.0.1:{free_tcp_port()}" for _ in range(3)]
+    name = f"alone{os.getpid()}x{time.monotonic_ns() % 10**6}"
+    return fxis(
+        "run",
+        "--name",
+        name,
+        "--endpoint",
+        endpoints[0],
+        "--pub",
+        endpoints[1],
+        "--events",
+        endpoints[2],
+        *args,
+        timeout=timeout,
+    )

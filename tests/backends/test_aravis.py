@@ -10,17 +10,15 @@ it is the frame its metadata names.
 """
 
 import json
-import os
 import sys
 
 import numpy as np
 import pytest
 
 from fxis_shm.errors import CameraDown, FrameTimeout, FxisError
-from fxis_shm.launch import free_tcp_port
 from fxis_shm.workers.backends.aravis import PIXEL_FORMATS, FrameCounter, load_aravis
 
-from ..conftest import wait_until
+from ..conftest import fxis_run_alone, wait_until
 from .conftest import fxis
 
 pytestmark = pytest.mark.integration
@@ -218,20 +216,7 @@ def test_a_camera_that_vanishes_is_reported_lost_and_resumes_with_a_new_generati
 )
 def test_a_setting_the_camera_refuses_stops_start_up_naming_camera_and_key(emulator, setting, allowed):
     cam = emulator()
-    ports = [f"tcp://127.0.0.1:{free_tcp_port()}" for _ in range(3)]
-    result = fxis(
-        "run",
-        "--name",
-        f"refuse{os.getpid()}",
-        "--endpoint",
-        ports[0],
-        "--pub",
-        ports[1],
-        "--events",
-        ports[2],
-        "--camera",
-        f"cam=aravis:device={cam.device_id},{setting}",
-    )
+    result = fxis_run_alone("--camera", f"cam=aravis:device={cam.device_id},{setting}")
     assert result.returncode == 1
     lines = [line for line in result.stderr.splitlines() if "refuses" in line and "camera 'cam'" in line]
     assert lines, result.stderr

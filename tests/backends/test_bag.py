@@ -1,13 +1,11 @@
 """The ``bag`` camera: a recorded bag replayed by a real service, checked against the bag."""
 
-import os
-
 import pytest
 
 from fxis_shm import read_stamp, rosmsgs
 from fxis_shm.workers.backends.bag import BagCamera
 
-from ..conftest import fxis, wait_until
+from ..conftest import fxis, fxis_run_alone, wait_until
 from ..integration.bags import read_bag, record, start_cameras, stop
 
 pytestmark = pytest.mark.integration
@@ -140,19 +138,7 @@ def test_bad_options_name_the_key_and_what_the_bag_holds(recorded, tmp_path):
 
 def test_a_bad_bag_camera_stops_start_up_with_the_reason(recorded):
     path, _ = recorded
-    result = fxis(
-        "run",
-        "--name",
-        f"bag{os.getpid()}",
-        "--camera",
-        f"v=bag:path={path},topic=/nope",
-        "--endpoint",
-        "tcp://127.0.0.1:1",
-        "--pub",
-        "tcp://127.0.0.1:2",
-        "--events",
-        "tcp://127.0.0.1:3",
-    )
+    result = fxis_run_alone("--camera", f"v=bag:path={path},topic=/nope")
     assert result.returncode == 1
     assert "camera 'v'" in result.stderr and "/left/image_raw" in result.stderr
     result = fxis("run", "--camera", "v=bag:path=x,speed=0")

@@ -18,7 +18,7 @@ except ImportError as exc:
 from fxis_shm.camerakinds import GENTL_PATH_VAR, camera_options  # noqa: E402
 from fxis_shm.workers.backends.genicam import GenicamCamera, image_layout, producers_from_env, to_image  # noqa: E402
 
-from ..conftest import wait_until  # noqa: E402
+from ..conftest import fxis_run_alone, wait_until  # noqa: E402
 from .conftest import fxis  # noqa: E402
 
 pytestmark = pytest.mark.integration
@@ -90,19 +90,7 @@ def test_three_devices_of_one_producer_stream_together(start_service):
     ],
 )
 def test_a_configuration_the_device_refuses_stops_start_up(keys, words):
-    result = fxis(
-        "run",
-        "--name",
-        f"gen{os.getpid()}",
-        "--camera",
-        f"a={viky(0, **keys)}",
-        "--endpoint",
-        "tcp://127.0.0.1:1",
-        "--pub",
-        "tcp://127.0.0.1:2",
-        "--events",
-        "tcp://127.0.0.1:3",
-    )
+    result = fxis_run_alone("--camera", f"a={viky(0, **keys)}")
     assert result.returncode == 1
     assert "camera 'a'" in result.stderr, result.stderr
     assert all(w in result.stderr for w in words), result.stderr

@@ -1,7 +1,6 @@
 """The ``opencv`` backend against a real peer: a video file the test writes with
 cv2.VideoWriter, played through a real ``fxis run`` service."""
 
-import os
 import time
 
 import cv2
@@ -13,7 +12,7 @@ from fxis_shm.camerakinds import camera_options
 from fxis_shm.workers.backends.base import Camera, CameraLost
 from fxis_shm.workers.backends.opencv import OpenCVCamera
 
-from ..conftest import wait_until
+from ..conftest import fxis_run_alone, wait_until
 from .conftest import fxis
 
 pytestmark = pytest.mark.integration
@@ -219,19 +218,7 @@ def test_a_finished_file_returns_none_without_spinning(video):
 
 def test_a_missing_file_stops_start_up_naming_camera_and_source(tmp_path):
     missing = tmp_path / "no-such-video.avi"
-    result = fxis(
-        "run",
-        "--name",
-        f"ocv{os.getpid()}",
-        "--camera",
-        f"v=opencv:source={missing}",
-        "--endpoint",
-        "tcp://127.0.0.1:1",
-        "--pub",
-        "tcp://127.0.0.1:2",
-        "--events",
-        "tcp://127.0.0.1:3",
-    )
+    result = fxis_run_alone("--camera", f"v=opencv:source={missing}")
     assert result.returncode == 1
     assert "camera 'v'" in result.stderr and "key 'source'" in result.stderr
     assert str(missing) in result.stderr

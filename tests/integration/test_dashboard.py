@@ -17,7 +17,7 @@ import pytest
 from fxis_shm import read_stamp
 from fxis_shm.launch import free_tcp_port
 
-from ..conftest import fxis
+from ..conftest import fxis, fxis_run_alone
 from .conftest import SMALL, client_keys
 
 CAMERAS = ["--camera", "a=synthetic:fps=20,width=320,height=240", "--camera", f"b=synthetic:fps=10,{SMALL}"]
@@ -187,22 +187,7 @@ def test_a_port_in_use_stops_start_up_naming_the_dashboard():
         busy.bind(("127.0.0.1", 0))
         busy.listen()
         port = busy.getsockname()[1]
-        ports = [f"tcp://127.0.0.1:{free_tcp_port()}" for _ in range(3)]
-        result = fxis(
-            "run",
-            "--name",
-            f"dash{os.getpid()}",
-            "--camera",
-            f"a=synthetic:{SMALL}",
-            "--endpoint",
-            ports[0],
-            "--pub",
-            ports[1],
-            "--events",
-            ports[2],
-            "--http",
-            f"127.0.0.1:{port}",
-        )
+        result = fxis_run_alone("--camera", f"a=synthetic:{SMALL}", "--http", f"127.0.0.1:{port}")
     assert result.returncode == 1
     assert "dashboard" in result.stderr and "address" in result.stderr.lower(), result.stderr
 

@@ -21,7 +21,7 @@ from websockets.sync.client import connect
 from fxis_shm import read_stamp
 from fxis_shm.launch import free_tcp_port
 
-from ..conftest import fxis
+from ..conftest import fxis, fxis_run_alone
 from ..foxglove_decode import message_class
 from .conftest import SMALL
 
@@ -292,23 +292,6 @@ def test_a_port_in_use_stops_start_up_naming_the_foxglove_server():
         busy.bind(("127.0.0.1", 0))
         busy.listen()
         port = busy.getsockname()[1]
-        ports = [f"tcp://127.0.0.1:{free_tcp_port()}" for _ in range(3)]
-        result = fxis(
-            "run",
-            "--name",
-            f"fox{os.getpid()}",
-            "--camera",
-            f"a=synthetic:{SMALL}",
-            "--endpoint",
-            ports[0],
-            "--pub",
-            ports[1],
-            "--events",
-            ports[2],
-            "--http",
-            "off",
-            "--foxglove",
-            f"127.0.0.1:{port}",
-        )
+        result = fxis_run_alone("--camera", f"a=synthetic:{SMALL}", "--http", "off", "--foxglove", f"127.0.0.1:{port}")
     assert result.returncode == 1
     assert "foxglove" in result.stderr and "address" in result.stderr.lower(), result.stderr

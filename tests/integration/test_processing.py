@@ -6,6 +6,7 @@ import pytest
 
 from fxis_shm import read_stamp
 
+from ..conftest import fxis_run_alone
 from .conftest import SMALL
 
 pytestmark = pytest.mark.integration
@@ -64,21 +65,8 @@ def test_a_slow_hook_spread_over_processes_keeps_order_and_rate(start_service, w
 
 
 def test_an_unloadable_hook_stops_start_up_naming_camera_and_key(tmp_path):
-    from .test_lifecycle import fxis
 
-    result = fxis(
-        "run",
-        "--name",
-        f"hook{os.getpid()}",
-        "--camera",
-        f"a=synthetic:{SMALL},process=no.such:hook",
-        "--endpoint",
-        "tcp://127.0.0.1:1",
-        "--pub",
-        "tcp://127.0.0.1:2",
-        "--events",
-        "tcp://127.0.0.1:3",
-    )
+    result = fxis_run_alone("--camera", f"a=synthetic:{SMALL},process=no.such:hook")
     assert result.returncode == 1
     assert "camera 'a'" in result.stderr and "process=no.such:hook" in result.stderr
 
