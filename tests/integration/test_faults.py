@@ -105,11 +105,12 @@ def test_torn_reads_never_reach_a_client(start_service, local):
     copies the frames (local="off") or the clients copy them from the rings themselves."""
     svc = start_service("--slots", "2", "--camera", "fast=synthetic:fps=500,width=512,height=256")
     errors, served, torn, paths = [], [0], [0], set()
+    wanted, give_up = 1200, time.monotonic() + 90  # frames to serve; a loaded machine takes longer
 
     def reader():
         try:
             with Client(svc.endpoint, timeout=5.0, local=local) as client:
-                for _ in range(150):
+                while served[0] < wanted and time.monotonic() < give_up:
                     try:
                         frames = (client.image("fast"), client.latest()["fast"])
                     except Overwritten:  # overwritten 3 times before we copied: a clean refusal
@@ -127,7 +128,7 @@ def test_torn_reads_never_reach_a_client(start_service, local):
 
     run_in_threads(reader, 8, timeout=120)
     assert not errors, errors[:3]
-    assert served[0] > 1000
+    assert served[0] >= wanted, f"only {served[0]} frames served in 90 s"
     assert paths == {"network" if local == "off" else "local"}
     with svc.client() as client:
         status = client.status()["cameras"]["fast"]
