@@ -1,6 +1,7 @@
 """bench/network.py's verdict pieces (pure): paired differences between configurations, the
 rounds a busy machine spoilt, and the flattening of targets for --strict."""
 
+import importlib
 import pathlib
 import sys
 
@@ -9,15 +10,22 @@ import pytest
 BENCH = pathlib.Path(__file__).resolve().parents[2] / "bench"
 
 
-@pytest.fixture(scope="module")
-def network():
+def _bench_module(name):
     sys.path.insert(0, str(BENCH))
     try:
-        import network
-
-        yield network
+        return importlib.import_module(name)
     finally:
         sys.path.remove(str(BENCH))
+
+
+@pytest.fixture(scope="module")
+def network():
+    return _bench_module("network")
+
+
+@pytest.fixture(scope="module")
+def table2():
+    return _bench_module("_network_table2")
 
 
 def _record(k, eps_ms, tau_ms, miss_ms=0.0, error=None):
@@ -35,18 +43,18 @@ class _Exp:
     names = ["cam0"]
 
 
-def test_configurations_are_compared_round_by_round(network):
+def test_configurations_are_compared_round_by_round(table2):
     result = {
         "one host": {"ours": {"records": [_record(0, -10.0, 5.0), _record(1, 20.0, 0.0), _record(2, 3.0, 1.0)]}},
         "remote": {"ours": {"records": [_record(0, -10.2, 5.2), _record(1, 20.2, 0.2), _record(2, 3.2, 1.2)]}},
     }
-    diff, se = network.paired_difference(result, "remote", "ours", "|eps_1|", _Exp)
+    diff, se = table2.paired_difference(result, "remote", "ours", "|eps_1|", _Exp)
     assert diff == pytest.approx(0.2) and se == pytest.approx(0.0, abs=1e-9)  # the rounds' spread cancels
-    diff, _ = network.paired_difference(result, "remote", "ours", "tau_w1", _Exp)
+    diff, _ = table2.paired_difference(result, "remote", "ours", "tau_w1", _Exp)
     assert diff == pytest.approx(0.2)
 
 
-def test_a_round_whose_call_missed_its_phase_or_failed_is_left_out(network):
+def test_a_round_whose_call_missed_its_phase_or_failed_is_left_out(table2):
     result = {
         "one host": {"ours": {"records": [_record(0, 1.0, 0.0), _record(1, 1.0, 0.0), _record(2, 1.0, 0.0)]}},
         "remote": {
@@ -59,7 +67,7 @@ def test_a_round_whose_call_missed_its_phase_or_failed_is_left_out(network):
             }
         },
     }
-    diff, se = network.paired_difference(result, "remote", "ours", "|eps_1|", _Exp)
+    diff, se = table2.paired_difference(result, "remote", "ours", "|eps_1|", _Exp)
     assert diff == pytest.approx(0.5) and se is None  # one round left: no spread to tell
 
 
