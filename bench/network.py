@@ -1,6 +1,6 @@
 """The networked case (issue 11): a client on another host, with a clock of its own, over a
-rate-limited link; a tuple of cameras on two hosts; raw against JPEG frames.
-This file is the driver; each part is a module bench/_network_*.py.
+rate-limited link; a tuple of cameras on two hosts; raw against JPEG frames; how late t* would
+be without the call moment. This file is the driver; each part is a module bench/_network_*.py.
 
 The other hosts are emulated (tests/hosts.py): network namespaces on veth links shaped with
 tc's token bucket (no added delay: this kernel has no netem), each with its own
@@ -30,6 +30,12 @@ This process is the client, on the root namespace's clock. Parts (--parts):
           over 1 Gbit and 100 Mbit, --size-requests each. Bytes: what the link carried from
           host A (the shaper's counter: TCP, CurveZMQ and headers included) per request.
           Targets: JPEG/raw mean round trip <= 0.6x on 1 Gbit, <= 0.25x on 100 Mbit.
+  travel  how late t* would be if it were the request's arrival instead of the call moment
+          (issue 11; bench/_network_travel.py): arrival - call per link (1 Gbit, 100 Mbit), load
+          (idle; busy: another client pulling raw tuples back to back) and encoding,
+          --travel-requests calls tuple(wait="none") each after a sleep U[0, 2 x
+          --travel-sleep-ms]. Target: t_request equals the call moment within the clock
+          estimate's uncertainty, every call.
   clock   (always) every client's clock estimate against the true offset, sampled every
           --clock-every s from the first remote client on, while the other parts run; after
           them the client keeps asking host A for tuples at the paper's pace until --minutes
@@ -57,6 +63,7 @@ if __package__:
     from ._network_clock import ClockWatch, print_clock
     from ._network_size import sizes
     from ._network_table2 import compare_table_ii, table_ii
+    from ._network_travel import travel
     from ._network_tuples import two_host_tuples
 else:  # run as a script, or loaded from its path
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -65,12 +72,13 @@ else:  # run as a script, or loaded from its path
     from _network_clock import ClockWatch, print_clock
     from _network_size import sizes
     from _network_table2 import compare_table_ii, table_ii
+    from _network_travel import travel
     from _network_tuples import two_host_tuples
 sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.abspath(__file__))))  # for tests.hosts
 from fxis_shm import Client  # noqa: E402
 from tests.hosts import HostsUnavailable, Lab  # noqa: E402
 
-PARTS = ("table2", "tuples", "size")
+PARTS = ("table2", "tuples", "size", "travel")
 
 
 def parse_parts(text: str) -> list[str]:
@@ -119,6 +127,13 @@ def parser() -> argparse.ArgumentParser:
         type=common.nonnegative_float,
         default=40.0,
         help="mean sleep before each two-host tuple, ms",
+    )
+    tr = p.add_argument_group("travel")
+    tr.add_argument(
+        "--travel-requests", type=common.positive_int, default=100, help="calls per link, load and encoding"
+    )
+    tr.add_argument(
+        "--travel-sleep-ms", type=common.nonnegative_float, default=50.0, help="mean sleep before each call, ms"
     )
     p.add_argument("--size-requests", type=common.positive_int, default=20, help="requests per size configuration")
     cams = p.add_argument_group("cameras")
@@ -235,6 +250,10 @@ def main(argv: list[str] | None = None) -> int:
             if "size" in args.parts:
                 result["size"] = sizes(args, a, remote, names)
                 result["targets"]["size"] = result["size"]["targets"]
+            if "travel" in args.parts:
+                result["travel"] = travel(args, a, svc_a.endpoint, lab.client_keys, remote, names, rng)
+                result["targets"]["travel"] = result["travel"]["targets"]
+                failed += sum(r["failed"] for r in result["travel"]["configs"].values())
             failed += keep_asking(args, remote["raw"], names, watch, rng)
             watch.stop()
             result["clock"] = watch.report()

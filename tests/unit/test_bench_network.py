@@ -1,5 +1,6 @@
 """bench/network.py's verdict pieces (pure): paired differences between configurations, the
-rounds a busy machine spoilt, and the flattening of targets for --strict."""
+rounds a busy machine spoilt, the travel part's check against the clock uncertainty, and the
+flattening of targets for --strict."""
 
 import importlib
 import pathlib
@@ -26,6 +27,11 @@ def network():
 @pytest.fixture(scope="module")
 def table2():
     return _bench_module("_network_table2")
+
+
+@pytest.fixture(scope="module")
+def travel():
+    return _bench_module("_network_travel")
 
 
 def _record(k, eps_ms, tau_ms, miss_ms=0.0, error=None):
@@ -79,3 +85,23 @@ def test_every_target_counts_for_strict(network):
         "clock": {"passed": None},
     }
     assert network.verdicts(targets) == [True, True, False, True, None]
+
+
+def _call(t_request_us, true_us, uncertainty_us=50.0, error=None):
+    return {
+        "error": error,
+        "late_ms": 3.0,
+        "rtt_ms": 5.0,
+        "t_request_us": t_request_us,
+        "true_us": true_us,
+        "uncertainty_us": uncertainty_us,
+    }
+
+
+def test_t_request_must_be_the_call_moment_within_the_uncertainty(travel):
+    assert travel.judged([_call(10.0, -40.0), _call(-2.0, 5.0)])["passed"] is True
+    late = travel.judged([_call(10.0, 5.0), _call(3000.0, 3000.0)])  # t* = the arrival: t_call ignored
+    assert late["passed"] is False and late["outside_uncertainty"] == 1
+    mapped_wrong = travel.judged([_call(1.0, 80.0)])  # the mapping off by more than it claims
+    assert mapped_wrong["passed"] is False
+    assert travel.judged([_call(0, 0, error="RequestTimeout")])["passed"] is None  # nothing measured
