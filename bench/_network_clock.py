@@ -29,7 +29,8 @@ class ClockWatch:
         self._thread = threading.Thread(target=self._loop, name="clock-watch", daemon=True)
 
     def watch(self, label: str, client: Client, endpoint: str, true_offset_ns: int) -> None:
-        client.clock_estimate()  # the first estimate here: later reads in the thread only read it
+        if endpoint not in client.clocks:  # the first estimates here: the thread then only reads them
+            raise ValueError(f"{label}: the client does not ask {endpoint}")
         self._watched.append((label, client, endpoint, true_offset_ns))
         if self.started is None:
             self.started = time.monotonic()

@@ -29,6 +29,7 @@ PHASE_TOLERANCE_MS = 1.0  # a round counts in the comparison if every call came 
 def camera_anchor(client: Client, exp) -> int:
     """The phase of the first camera's frame times in the caller's clock, ns mod the period:
     the mean of (t_capture - frames since the first x period) over consecutive frames."""
+    common.wait_until_streaming(client, min_frames=ANCHOR_FRAMES + 1)  # a service just started holds fewer
     frames = client.sequence("consecutive", camera=exp.names[0], count=ANCHOR_FRAMES)
     first = frames[0].frame_id
     return round(statistics.mean(f.t_capture - (f.frame_id - first) * exp.period_ns for f in frames)) % exp.period_ns
