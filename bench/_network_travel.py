@@ -5,10 +5,11 @@ A call without ``at`` sends ``t_call``, its moment mapped into the service's clo
 service takes t* = t_call; the reply's ``t_request`` is t* in the caller's clock and
 ``timing["received"]`` the request's arrival (service clock). Per link rate (host A's link
 shaped as the size part does), load and encoding, --travel-requests calls ``tuple(wait="none")``
-after sleeps U[0, 2 x --travel-sleep-ms]; each gives
+after sleeps U[0, 2 x --travel-sleep-ms]. The call moment is the client's own reading of its
+clock as the call begins (its clock is wrapped to record it: our own stamp just before the
+call would add whatever a busy machine keeps us waiting in between). Each call gives
   late    arrival - call: what t* would be off by without t_call;
-  t_req   t_request - call: 0 when the service used t_call (give or take the mapping's
-          rounding and the few microseconds between our stamp and the client's own);
+  t_req   t_request - call: 0 when the service used t_call (the mapping's rounding aside);
   true    t* - call on the true clocks (the host's exact offset): the mapping's error too.
 Load "busy": another client process on this host pulls raw tuples back to back from the same
 service over the same link; a request then travels beside the other's replies and waits for a
@@ -95,20 +96,36 @@ class BusyLink:
         return {"tuples": tuples, "per_s": tuples / span if span > 0 else None, "failed": self.failed.value}
 
 
+@contextlib.contextmanager
+def call_moment(client: Client):
+    """The client's clock readings while in the block (a request reads it once, as it begins)."""
+    clock, moments = client.clock, []
+
+    def reading() -> int:
+        moments.append(clock())
+        return moments[-1]
+
+    client.clock = reading
+    try:
+        yield moments
+    finally:
+        client.clock = clock
+
+
 def calls(args, client: Client, cams: list[str], offset_ns: int, rng: random.Random, label: str) -> list[dict]:
     """--travel-requests calls, each after its random sleep: the call moment, the arrival and t*."""
     records = []
     with common.progress(args.travel_requests, f"travel {label}") as bar:
         for i in range(args.travel_requests):
             common.sleep_ms(rng.uniform(0, 2 * args.travel_sleep_ms))
-            called = client.clock()
             rec = {"i": i, "error": None}
             try:
-                reply = client.tuple(cams, wait="none")
+                with call_moment(client) as moments:
+                    reply = client.tuple(cams, wait="none")
             except common.REQUEST_ERRORS as exc:
                 rec["error"] = common.describe_error(exc)
             else:
-                estimate = client.clock_estimate()
+                called, estimate = moments[0], client.clock_estimate()
                 rec.update(
                     late_ms=common.ms(estimate.to_caller(reply.timing["received"]) - called),
                     t_request_us=(reply.t_request - called) / 1e3,
