@@ -1,6 +1,8 @@
 """bench/network.py's verdict pieces (pure): paired differences between configurations, the
-rounds a busy machine spoilt, and the flattening of targets for --strict."""
+rounds a busy machine spoilt, the travel part's check against the clock uncertainty, and the
+flattening of targets for --strict."""
 
+import importlib
 import pathlib
 import sys
 
@@ -9,15 +11,27 @@ import pytest
 BENCH = pathlib.Path(__file__).resolve().parents[2] / "bench"
 
 
-@pytest.fixture(scope="module")
-def network():
+def _bench_module(name):
     sys.path.insert(0, str(BENCH))
     try:
-        import network
-
-        yield network
+        return importlib.import_module(name)
     finally:
         sys.path.remove(str(BENCH))
+
+
+@pytest.fixture(scope="module")
+def network():
+    return _bench_module("network")
+
+
+@pytest.fixture(scope="module")
+def table2():
+    return _bench_module("_network_table2")
+
+
+@pytest.fixture(scope="module")
+def travel():
+    return _bench_module("_network_travel")
 
 
 def _record(k, eps_ms, tau_ms, miss_ms=0.0, error=None):
@@ -35,18 +49,18 @@ class _Exp:
     names = ["cam0"]
 
 
-def test_configurations_are_compared_round_by_round(network):
+def test_configurations_are_compared_round_by_round(table2):
     result = {
         "one host": {"ours": {"records": [_record(0, -10.0, 5.0), _record(1, 20.0, 0.0), _record(2, 3.0, 1.0)]}},
         "remote": {"ours": {"records": [_record(0, -10.2, 5.2), _record(1, 20.2, 0.2), _record(2, 3.2, 1.2)]}},
     }
-    diff, se = network.paired_difference(result, "remote", "ours", "|eps_1|", _Exp)
+    diff, se = table2.paired_difference(result, "remote", "ours", "|eps_1|", _Exp)
     assert diff == pytest.approx(0.2) and se == pytest.approx(0.0, abs=1e-9)  # the rounds' spread cancels
-    diff, _ = network.paired_difference(result, "remote", "ours", "tau_w1", _Exp)
+    diff, _ = table2.paired_difference(result, "remote", "ours", "tau_w1", _Exp)
     assert diff == pytest.approx(0.2)
 
 
-def test_a_round_whose_call_missed_its_phase_or_failed_is_left_out(network):
+def test_a_round_whose_call_missed_its_phase_or_failed_is_left_out(table2):
     result = {
         "one host": {"ours": {"records": [_record(0, 1.0, 0.0), _record(1, 1.0, 0.0), _record(2, 1.0, 0.0)]}},
         "remote": {
@@ -59,7 +73,7 @@ def test_a_round_whose_call_missed_its_phase_or_failed_is_left_out(network):
             }
         },
     }
-    diff, se = network.paired_difference(result, "remote", "ours", "|eps_1|", _Exp)
+    diff, se = table2.paired_difference(result, "remote", "ours", "|eps_1|", _Exp)
     assert diff == pytest.approx(0.5) and se is None  # one round left: no spread to tell
 
 
@@ -71,3 +85,23 @@ def test_every_target_counts_for_strict(network):
         "clock": {"passed": None},
     }
     assert network.verdicts(targets) == [True, True, False, True, None]
+
+
+def _call(t_request_us, true_us, uncertainty_us=50.0, error=None):
+    return {
+        "error": error,
+        "late_ms": 3.0,
+        "rtt_ms": 5.0,
+        "t_request_us": t_request_us,
+        "true_us": true_us,
+        "uncertainty_us": uncertainty_us,
+    }
+
+
+def test_t_request_must_be_the_call_moment_within_the_uncertainty(travel):
+    assert travel.judged([_call(10.0, -40.0), _call(-2.0, 5.0)])["passed"] is True
+    late = travel.judged([_call(10.0, 5.0), _call(3000.0, 3000.0)])  # t* = the arrival: t_call ignored
+    assert late["passed"] is False and late["outside_uncertainty"] == 1
+    mapped_wrong = travel.judged([_call(1.0, 80.0)])  # the mapping off by more than it claims
+    assert mapped_wrong["passed"] is False
+    assert travel.judged([_call(0, 0, error="RequestTimeout")])["passed"] is None  # nothing measured
