@@ -34,11 +34,11 @@ from dataclasses import dataclass
 
 if __package__:
     from . import _common as common
-    from .scaling import cpu_percent, cpu_sample, service_processes
+    from ._cpu import cpu_percent, cpu_sample, service_processes
 else:  # run as a script, or loaded from its path
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     import _common as common
-    from scaling import cpu_percent, cpu_sample, service_processes
+    from _cpu import cpu_percent, cpu_sample, service_processes
 
 IDLE = "idle"
 OBSERVER = "observer"  # the CPU row of the observer process itself

@@ -22,67 +22,17 @@ import time
 
 if __package__:
     from . import _common as common, _scaling as shared
+    from ._cpu import BENCH, HOST, IDLE, cpu_percent, cpu_sample, service_processes
 else:  # run as a script, or loaded from its path
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     import _common as common
     import _scaling as shared
+    from _cpu import BENCH, HOST, IDLE, cpu_percent, cpu_sample, service_processes
 
-from fxis_shm import procstat
 
 FPS_EDGE_FRAMES = 2  # frames a step's window may miss at its edges
 MIN_SERVED_SHARE = 0.9  # of --request-hz, for an fps step to pass
 BUSY_HOST_PERCENT = 20.0  # CPU (% of a core) of other processes above which an fps step is flagged
-BENCH, HOST, IDLE = "bench (client)", "host busy", "host idle"  # CPU rows besides the service's
-
-
-# ---- CPU shares from /proc -------------------------------------------------------------------
-
-
-def service_processes(status: dict, supervisor_pid: int) -> dict[str, int]:
-    """name -> pid of every process of the service: the supervisor, what it reports, the rest."""
-    procs = {"supervisor": supervisor_pid}
-    for name, proc in status["supervisor"]["processes"].items():
-        if proc.get("pid"):
-            procs[name] = proc["pid"]
-    known = set(procs.values())
-    for pid in procstat.descendants(supervisor_pid):
-        if pid not in known:
-            procs[f"other {pid}"] = pid
-    return procs
-
-
-def cpu_ticks(pid: int) -> int | None:
-    """utime + stime of ``pid`` (every thread), in clock ticks; None if it is gone."""
-    stat = procstat.read(pid)
-    return None if stat is None else stat.cpu_ticks
-
-
-def host_idle_ticks() -> int:
-    """Clock ticks all CPUs of the host spent idle (idle + iowait). Busy time is taken as the
-    rest: /proc/stat's user and system are sampled on timer ticks and miss periodic work that
-    falls between them (4 cameras at 125 fps showed half their CPU), while idle is measured."""
-    with open("/proc/stat") as f:
-        idle, iowait = (int(v) for v in f.readline().split()[4:6])
-    return idle + iowait
-
-
-def cpu_sample(procs: dict[str, int]) -> dict:
-    """CPU ticks so far of every named process, of the bench itself, and the host's idle ticks."""
-    sample = {name: cpu_ticks(pid) for name, pid in procs.items()}
-    sample[BENCH] = cpu_ticks(os.getpid())
-    sample[IDLE] = host_idle_ticks()
-    return sample
-
-
-def cpu_percent(before: dict, after: dict, seconds: float) -> dict:
-    """Percent of one core per process over ``seconds`` (None if it died meanwhile)."""
-    tick = os.sysconf("SC_CLK_TCK")
-    return {
-        name: (after[name] - before[name]) / tick / seconds * 100
-        if before.get(name) is not None and after.get(name) is not None
-        else None
-        for name in before
-    }
 
 
 # ---- one step ------------------------------------------------------------------------------
