@@ -95,6 +95,8 @@ class Client(SocketOwner):
         if cls is Client and isinstance(endpoint, (list, tuple)):
             from .multiclient import MultiClient  # imports this module
 
+            if args:  # they would be dropped silently: timeout, keys, ... are keywords there
+                raise InvalidArgument("Client([endpoint, ...]) takes its options by keyword (timeout=..., keys=...)")
             return MultiClient(endpoint, **kwargs)
         return super().__new__(cls)
 

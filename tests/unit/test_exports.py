@@ -44,6 +44,8 @@ def test_bad_arguments_to_the_public_api_raise_fxis_errors(tmp_path):
 
     from fxis_shm.stamp import write_stamp
 
+    with pytest.raises(fxis_shm.InvalidArgument, match="takes its options by keyword"):
+        fxis_shm.Client(["tcp://127.0.0.1:9", "tcp://127.0.0.1:10"], 2.0)
     with pytest.raises(fxis_shm.FxisError, match="local must be one of"):
         fxis_shm.Client("tcp://127.0.0.1:9", local="sometimes")
     with pytest.raises(fxis_shm.ConfigError, match="cannot read the key file"):
