@@ -17,6 +17,7 @@ import argparse
 import os
 import statistics
 import sys
+import threading
 import time
 
 if __package__:
@@ -47,24 +48,33 @@ def parser() -> argparse.ArgumentParser:
 
 
 def measure(pub: str, topics: list[str], seconds: float, timeout: float) -> dict[str, list[int]]:
-    """Capture times of every message of each topic, over ``seconds`` from its first message."""
+    """Capture times of every message of each topic, over ``seconds`` from its first message.
+    Each stream has a subscriber (a connection) of its own, as separate viewers would: the
+    service's bounded queue is per connection, and one connection reading every stream at
+    once would lose messages of some when others come in bursts."""
     times: dict[str, list[int]] = {t: [] for t in topics}
-    with Subscriber(pub, timeout=timeout, queue=10_000) as sub:
-        for topic in topics:
+    end = time.monotonic() + seconds + 3.0  # every stream has started by then
+
+    def count(topic: str) -> None:
+        with Subscriber(pub, timeout=timeout, queue=10_000) as sub:
             sub.topic(topic)
-        end = time.monotonic() + seconds + 3.0  # every stream has started by then
-        bar = common.progress(int(seconds + 3), "streams")
-        shown = 0
-        while time.monotonic() < end:
-            try:
-                message = sub.receive(timeout=0.5)
-            except RequestTimeout:
-                continue
-            times[message.topic].append(max(f.t_capture for f in message.frames))
-            if int(time.monotonic() - end + seconds + 3) > shown:
-                shown += 1
-                bar.update()
-        bar.close()
+            while time.monotonic() < end:
+                try:
+                    message = sub.receive(timeout=0.5)
+                except RequestTimeout:
+                    continue
+                times[topic].append(max(f.t_capture for f in message.frames))
+
+    threads = [threading.Thread(target=count, args=(topic,), daemon=True) for topic in topics]
+    for thread in threads:
+        thread.start()
+    bar = common.progress(int(seconds + 3), "streams")
+    while time.monotonic() < end:
+        time.sleep(1.0)
+        bar.update()
+    bar.close()
+    for thread in threads:
+        thread.join(timeout + 1.0)
     return {t: [x for x in ts if ts and x - ts[0] < seconds * 1e9] for t, ts in times.items()}
 
 

@@ -7,9 +7,13 @@ the one asked for: at 10 Hz from a 25 fps camera the frames sent alternate betwe
 would send every 2nd frame (12.5 per second). A rate at or above the camera's sends
 every frame.
 
-Frames are taken one at a time, as they arrive: frame t is the nearest one to every
-schedule time from the middle between it and the frame before, up to half a period
-after it (where the next frame becomes nearer). Pure: frame times in, decisions out.
+Frames are taken one at a time, as they arrive: frame t is sent when the next schedule
+time lies before half a period after it (where the next frame would become nearer), and
+answers that one schedule time. Tuples complete irregularly (their reference time moves
+with whichever camera is behind), so a frame may come a little late for its schedule time:
+the schedule times it passed are then kept for the frames after it, and only those more
+than an interval behind are given up (after a stall, no burst). Pure: frame times in,
+decisions out.
 """
 
 from __future__ import annotations
@@ -41,9 +45,11 @@ class Decimator:
         if self._time(self._next) >= covers_until:
             return False
         interval = 1e9 / self.rate_hz
-        self._next = max(self._next + 1, math.ceil((covers_until - self._start) / interval))
-        while self._time(self._next) < covers_until:  # ceil of a float can land one short
-            self._next += 1
+        # This frame answers the next schedule time, and the schedule goes on from the first
+        # time after the frame: a frame that came late for its time (tuples complete
+        # irregularly) leaves the next time to the next frame, and after a stall the times
+        # missed are given up rather than sent in a burst.
+        self._next = max(self._next + 1, math.floor((t - self._start) / interval) + 1)
         return True
 
 

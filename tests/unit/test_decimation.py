@@ -72,3 +72,23 @@ def test_no_rate_sends_everything_and_bad_rates_are_refused():
 def test_every_frame_says_when_the_camera_is_slower_than_asked():
     assert every_frame(30, int(1e9 / 25)) and every_frame(25, 40_000_000)
     assert not every_frame(10, 40_000_000)
+
+
+def test_irregular_frames_keep_the_rate():
+    """Tuples complete irregularly: 15 a second on average, 20 to 93 ms apart. 12.5 Hz asked is 12.5 Hz got."""
+    steps = [40_000_000, 93_333_333, 20_000_000, 113_333_333]  # mean 66.7 ms
+    times, t = [], 0
+    for k in range(600):
+        times.append(t)
+        t += steps[k % len(steps)]
+    chosen = sent(12.5, times, 66_666_667)
+    seconds = (times[-1] - times[0]) / 1e9
+    assert abs(len(chosen) - 12.5 * seconds) <= 1
+
+
+def test_a_stall_is_not_followed_by_a_burst():
+    period = 66_666_667
+    times = [k * period for k in range(300) if not 75 <= k < 150]  # 5 s without frames
+    resumed = [t for t in sent(10, times, period) if t >= 150 * period]
+    seconds = (times[-1] - 150 * period) / 1e9
+    assert abs(len(resumed) - 10 * seconds) <= 1  # 10 Hz again at once: the 5 s missed are not caught up
