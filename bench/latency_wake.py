@@ -2,14 +2,14 @@
 
 The local client (Client(local="require")) answers from the rings itself: when a request must
 wait for a frame, it sleeps until just before the frame is due, then watches the ring's write
-counter. Measured here, per request that had to wait: from the moment the last frame it
-returns that was stored after the request was made was stored (the frame's t_stored, the
-service's CLOCK_MONOTONIC, which is this process's on one host) to the moment the call
-returned (time.monotonic_ns() right after it). If the client went on waiting for a frame it
-did not choose, that time counts too: the number can only overstate the wake-up. A request
-whose returned frames were all stored before it was made (wait="next" may still choose the
-frame before t* once the next one is in) did not wait for them and is left out; the table
-says how many waited.
+counter. Measured here, per request that had to wait: from the moment the frame it waited
+for was stored (t_stored, the service's CLOCK_MONOTONIC, which is this process's on one host)
+to the moment the call returned (time.monotonic_ns() right after it). For "next" that is the
+last camera's first frame stored after the request was made (read from the rings' frame
+times after the call: the paper's policy then chooses the frame nearest to t*, which may be
+the one before); for "future", the last returned frame stored after the request. A request
+that found every frame it needed already stored did not wait and is left out; the table says
+how many waited.
 
 Requests, --wake-requests of each kind, interleaved, each after a random sleep U[0, tau_ia]
 so that they fall at every phase of the frame period:
@@ -57,6 +57,8 @@ def measure(client, kind: str, copy_name: str, names: list[str], period_ns: int,
     t_return = time.monotonic_ns()
     stored = {cam: reply[cam].t_stored for cam in names}
     reply.release()
+    if kind == "next":  # what it waited for: each camera's first frame after the request
+        stored = first_stored_after(client.frame_times(names), names, t_send)
     rec.update(
         t_send=t_send,
         t_return=t_return,
@@ -65,6 +67,15 @@ def measure(client, kind: str, copy_name: str, names: list[str], period_ns: int,
         **wake_of(t_send, t_return, stored.values()),
     )
     return rec
+
+
+def first_stored_after(listing: dict, names: list[str], t_send: int) -> dict:
+    """Each camera's first storage time after ``t_send``, from a ``frames`` reply."""
+    column = listing["columns"].index("t_stored")
+    return {
+        cam: min((row[column] for row in listing["cameras"][cam]["frames"] if row[column] > t_send), default=t_send)
+        for cam in names
+    }
 
 
 def wake_of(t_send: int, t_return: int, t_stored) -> dict:
