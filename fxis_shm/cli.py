@@ -317,7 +317,9 @@ def parser() -> argparse.ArgumentParser:
     client_args(grab)
     grab.add_argument("--out", required=True, metavar="DIR", help="folder to write into")
     grab.add_argument("--cameras", help="comma-separated cameras (default all)")
-    grab.add_argument("--at", type=int, help="t* in ns of the service's CLOCK_MONOTONIC (default now)")
+    grab.add_argument(
+        "--at", type=int, help="t* in ns of this host's CLOCK_MONOTONIC, mapped to the service's clock (default now)"
+    )
     grab.set_defaults(func=_grab)
 
     record = sub.add_parser(
@@ -326,7 +328,8 @@ def parser() -> argparse.ArgumentParser:
         description="Record every frame of the cameras (or one synchronized tuple per step with "
         "--tuples) into a rosbag2 folder with MCAP storage: /NAME/image_raw "
         "(sensor_msgs/msg/Image) or /NAME/image_raw/compressed (JPEG), stamps in the "
-        "service's CLOCK_MONOTONIC. Ctrl-C ends the recording with a valid bag. "
+        "service's clock (CLOCK_MONOTONIC unless fxis run --clock says otherwise). "
+        "Ctrl-C ends the recording with a valid bag. "
         "Replay it with a camera of kind bag (docs/recording.md).",
     )
     client_args(record)

@@ -17,7 +17,7 @@ import threading
 import time
 from dataclasses import dataclass
 
-from . import encoding as codec, rosmsgs
+from . import encoding as codec, rosmsgs, timebase
 from .bagfile import BagWriter
 from .client import Client
 from .errors import CameraDown, ConfigError, Overwritten, ServiceError
@@ -54,8 +54,9 @@ class Recorder:
         self._dropped_at_start = {c: status["cameras"][c].get("frames_dropped") or 0 for c in self.cameras}
         listing = client.frame_times(self.cameras)
         self.t_start = self._polled_at = listing["now"]
-        # The stamps are the service's CLOCK_MONOTONIC; MCAP log times are wall-clock (what
-        # Foxglove and `ros2 bag info` show as dates): the stamp plus this offset.
+        # The stamps are in the service's clock; MCAP log times are wall-clock (what Foxglove
+        # and `ros2 bag info` show as dates): the stamp plus this offset.
+        self.service_clock = timebase.WIRE_NAMES[status.get("clock") or timebase.DEFAULT]
         self.to_realtime = time.time_ns() - self.client.time()
         periods = {c: listing["cameras"][c].get("period_ns") or 0 for c in self.cameras}
         self.periods = periods
@@ -72,7 +73,7 @@ class Recorder:
 
     def _custom_data(self) -> dict:
         return {
-            "clock": rosmsgs.CLOCK,
+            "clock": self.service_clock,
             "stamps": "header.stamp: capture time"
             if not self.s.tuples
             else "header.stamp: the tuple's step time (the same in every image of a tuple)",

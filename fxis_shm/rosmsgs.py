@@ -13,7 +13,6 @@ from .errors import InvalidArgument
 
 IMAGE, COMPRESSED, TUPLE = "sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage", "fxis_msgs/msg/FrameTuple"
 TUPLES_TOPIC = "/fxis/tuples"
-CLOCK = "CLOCK_MONOTONIC"
 
 _SEP = "=" * 80 + "\n"
 _HEADER_DEPS = (
