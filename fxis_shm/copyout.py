@@ -86,14 +86,40 @@ class CopyOut:
             if (cam, i) in position:
                 continue
             position[(cam, i)] = len(frames)
-            frames.append(
-                self._reference(cam, snaps[cam], i)
-                if how == REFS
-                else self._copied(cam, snaps[cam], i, len(images), images, how == VIEWS)
-            )
-            if encoding != RAW and how == COPY:
-                frames[-1], images[-1] = self.encode(frames[-1], images[-1], encoding, quality)
+            if how == REFS:
+                frames.append(self._reference(cam, snaps[cam], i))
+            elif encoding != RAW and how == COPY:
+                frames.append(self._encoded(cam, snaps[cam], i, len(images), images, encoding, quality))
+            else:
+                frames.append(self._copied(cam, snaps[cam], i, len(images), images, how == VIEWS))
         return frames, images, position
+
+    def _encoded(
+        self, cam: str, snap: Snapshot, i: int, buffer: int, images: list, encoding: str, quality: int | None
+    ) -> dict:
+        """A frame in ``encoding``: copied out of the ring (and checked whole) only if no reply or
+        stream has encoded it so yet."""
+        meta = snap.frame_meta(i)
+
+        def pixels():
+            copied: list = []
+            self._copied(cam, snap, i, buffer, copied, False)
+            return copied[0]
+
+        data = self.encoded.get((cam, meta.generation, meta.frame_id), pixels, encoding, quality)
+        images.append(data)
+        layout = self.cameras[cam].reader.layout
+        described = protocol.described(
+            cam,
+            meta.frame_id,
+            meta.t_capture,
+            meta.t_stored,
+            meta.generation,
+            layout.shape,
+            layout.dtype,
+            meta.t_available,
+        )
+        return protocol.encoded_meta({**described, "buffer": buffer}, encoding, len(data))
 
     def _copied(self, cam: str, snap: Snapshot, i: int, buffer: int, images: list, view: bool) -> dict:
         handle = self.cameras[cam]
@@ -114,7 +140,9 @@ class CopyOut:
 
     def encode(self, meta: dict, image, encoding: str, quality: int | None) -> tuple[dict, bytes]:
         """A copied frame (checked whole) in ``encoding``, encoded once for every reply and stream."""
-        data = self.encoded.get((meta["camera"], meta["generation"], meta["frame_id"]), image, encoding, quality)
+        data = self.encoded.get(
+            (meta["camera"], meta["generation"], meta["frame_id"]), lambda: image, encoding, quality
+        )
         return protocol.encoded_meta(meta, encoding, len(data)), data
 
     def _reference(self, cam: str, snap: Snapshot, i: int) -> dict:

@@ -7,6 +7,7 @@ has usually moved on too."""
 from __future__ import annotations
 
 from collections import OrderedDict
+from collections.abc import Callable
 
 import numpy as np
 
@@ -19,8 +20,11 @@ class EncodeCache:
         self._entries: OrderedDict[tuple[object, ...], bytes] = OrderedDict()
         self.encoded = self.reused = 0
 
-    def get(self, frame: tuple[str, int, int], image: np.ndarray, encoding: str, quality: int | None) -> bytes:
-        """``image`` (the frame ``frame`` = (camera, generation, frame_id), checked whole) in ``encoding``."""
+    def get(
+        self, frame: tuple[str, int, int], pixels: Callable[[], np.ndarray], encoding: str, quality: int | None
+    ) -> bytes:
+        """The frame ``frame`` = (camera, generation, frame_id) in ``encoding``; ``pixels()`` gives
+        its image (checked whole), and is called only when the frame is not encoded yet."""
         quality = codec.DEFAULT_JPEG_QUALITY if quality is None else quality
         key = (*frame, encoding, quality if encoding == codec.JPEG else None)
         data = self._entries.get(key)
@@ -28,7 +32,7 @@ class EncodeCache:
             self._entries.move_to_end(key)
             self.reused += 1
             return data
-        data = codec.encode(image, encoding, quality)
+        data = codec.encode(pixels(), encoding, quality)
         self._entries[key] = data
         self.encoded += 1
         if len(self._entries) > self.size:

@@ -352,7 +352,7 @@ def parse_stream_topic(topic: str) -> StreamTopic | None:
 # ---- replies ----
 
 
-def _described(camera, frame_id, t_capture, t_stored, generation, shape, dtype: str, t_available) -> dict:
+def described(camera, frame_id, t_capture, t_stored, generation, shape, dtype: str, t_available) -> dict:
     return {
         "camera": camera,
         "frame_id": int(frame_id),
@@ -377,7 +377,7 @@ def frame_meta(
 ) -> dict:
     """A frame whose pixels travel in buffer frame number ``buffer`` of the reply."""
     return {
-        **_described(camera, frame_id, t_capture, t_stored, generation, image.shape, image.dtype.name, t_available),
+        **described(camera, frame_id, t_capture, t_stored, generation, image.shape, image.dtype.name, t_available),
         "buffer": buffer,
     }
 
@@ -400,7 +400,7 @@ def frame_ref(
     """A frame of a local reply: the client copies it out of ``slot`` of the ring
     segment ``ring`` (whose header carries ``instance``) while the slot shows ``seq``."""
     return {
-        **_described(camera, frame_id, t_capture, t_stored, generation, shape, dtype, t_available),
+        **described(camera, frame_id, t_capture, t_stored, generation, shape, dtype, t_available),
         "ring": ring,
         "instance": int(instance),
         "slot": int(slot),
