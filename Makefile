@@ -10,7 +10,7 @@ BIN    := $(VENV)/bin
 
 setup: $(VENV)/.installed
 
-$(VENV)/.installed: pyproject.toml setup.py fxis_shm/_ordered.c scripts/install-system-packages.sh
+$(VENV)/.installed: pyproject.toml setup.py fxis_shm/shm/_ordered.c scripts/install-system-packages.sh
 	bash scripts/install-system-packages.sh
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip

@@ -23,7 +23,7 @@ import numpy as np
 
 from fxis_shm import Client, read_stamp
 from fxis_shm.errors import FxisError, RequestTimeout
-from fxis_shm.launch import ServiceProcess
+from fxis_shm.service.launch import ServiceProcess
 
 DEFAULT_OUT = os.path.join(os.path.dirname(os.path.abspath(__file__)), "results")
 NS_PER_MS = 1_000_000

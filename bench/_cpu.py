@@ -5,7 +5,7 @@ from __future__ import annotations
 
 import os
 
-from fxis_shm import procstat
+from fxis_shm.shm import procstat
 
 BENCH, HOST, IDLE = "bench (client)", "host busy", "host idle"  # CPU rows besides the service's
 

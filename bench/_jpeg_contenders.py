@@ -1,5 +1,5 @@
 """The JPEG libraries bench/jpeg_codecs.py measures, each behind one small interface: OpenCV's
-(what fxis_shm.encoding uses), simplejpeg, PyTurboJPEG (accurate and fast DCT) and the project's
+(what fxis_shm.wire.encoding uses), simplejpeg, PyTurboJPEG (accurate and fast DCT) and the project's
 own codec module. Each is asked for OpenCV's JPEG (4:2:0 chroma for bgr8, accurate DCT) where it
 can make it, so that time is the only difference. Not a public module."""
 
@@ -103,11 +103,11 @@ def turbojpeg(accurate: bool = True) -> Contender:
 
 
 def fxis() -> Contender:
-    from fxis_shm import encoding
+    from fxis_shm.wire import encoding
 
     return Contender(
         "fxis",
-        "fxis_shm.encoding.encode / decode",
+        "fxis_shm.wire.encoding.encode / decode",
         "HxW",
         lambda image, q: encoding.encode(image, encoding.JPEG, q),
         lambda data, like: encoding.decode(data, encoding.JPEG, like.shape, like.dtype.name),

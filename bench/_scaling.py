@@ -21,7 +21,7 @@ else:  # run as a script, or loaded from its path
     import _common as common
 
 from fxis_shm import Client
-from fxis_shm.launch import ServiceProcess
+from fxis_shm.service.launch import ServiceProcess
 
 PATHS = ("network", "local")
 LOCAL_OPTION = {"network": "off", "local": "require"}  # Client(local=...) per transport

@@ -27,7 +27,7 @@ else:  # run as a script, or loaded from its path
     from _interleave import Contender, time_contenders
 
 from fxis_shm import Client
-from fxis_shm.launch import ServiceProcess, free_tcp_port
+from fxis_shm.service.launch import ServiceProcess, free_tcp_port
 
 SCENARIOS = {"2x1360x1024": (2, 1360, 1024), "4x1360x1024": (4, 1360, 1024), "2x2048x2048": (2, 2048, 2048)}
 FPS = 20.0

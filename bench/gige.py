@@ -111,7 +111,7 @@ def loopback_address(address: str):
 @contextlib.contextmanager
 def emulators(loss: int, log_dir: str):
     """Two emulators, serials GV01 and GV02; killed on exit."""
-    from fxis_shm.tether import die_with_parent
+    from fxis_shm.service.tether import die_with_parent
     from fxis_shm.workers.backends.aravis import load_aravis
 
     load_aravis()  # fails here, naming the extra, if PyGObject or Aravis is missing
@@ -187,7 +187,7 @@ def collect(client, readers: dict, cursors: dict, frames: dict, end: int, errors
 
 
 def measure(args, device_ids, label: str, process: str | None, out: str) -> dict:
-    from fxis_shm.ring import RingReader
+    from fxis_shm.shm.ring import RingReader
 
     run_args = camera_flags(args, device_ids, process)
     log_path = os.path.join(out, f"gige.{label.replace(' ', '_')}.service.log")

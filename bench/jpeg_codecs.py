@@ -7,7 +7,7 @@ Contenders (one that is not installed is skipped with a note):
               PyTurboJPEG 2.x wants libjpeg-turbo >= 3.0, Debian 12 and 13 ship 2.1, so PyTurboJPEG<2)
   turbojpeg-fastdct  the same with TurboJPEG's default DCT, the fast one below quality 96 (what
               simplejpeg always does: it shows what the fast DCT buys, in time and in PSNR)
-  fxis        fxis_shm.encoding.encode / decode: what the service does (OpenCV, with its checks)
+  fxis        fxis_shm.wire.encoding.encode / decode: what the service does (OpenCV, with its checks)
 
 All are asked for OpenCV's JPEG: baseline, standard Huffman tables, 4:2:0 chroma for bgr8, the
 accurate integer DCT, fancy upsampling on decode; where a library can make it, time is all that

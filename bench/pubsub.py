@@ -33,7 +33,7 @@ else:  # run as a script, or loaded from its path
     import _common as common
 
 from fxis_shm import FxisError, RequestTimeout
-from fxis_shm.pubsub import EventPublisher, Subscriber, handshake
+from fxis_shm.client.pubsub import EventPublisher, Subscriber, handshake
 
 REPLY_TOPIC = "bench/pairs"
 LIVE_SUBSCRIBERS = 3

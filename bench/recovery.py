@@ -24,7 +24,7 @@ else:
     import _common as common
 
 from fxis_shm import FxisError
-from fxis_shm.launch import ServiceProcess
+from fxis_shm.service.launch import ServiceProcess
 
 
 def coordinator_pid(svc: ServiceProcess) -> int:

@@ -1,7 +1,7 @@
 """What the ring's ordered accesses cost: per stored frame (writer) and per read (reader).
 
 Runs the same measurement twice in fresh processes, once with the fences of the
-fxis_shm._ordered helper (what the service uses) and once with plain accesses
+fxis_shm.shm._ordered helper (what the service uses) and once with plain accesses
 (FXIS_PLAIN_ORDERING=1: correct on x86-64 only), on a real shared-memory ring of
 --slots slots of --width x --height mono8 frames:
 
@@ -46,9 +46,9 @@ def measure(args) -> dict:
     """Microseconds per operation in this process's ordering mode."""
     import numpy as np
 
-    from fxis_shm import ordering
-    from fxis_shm.naming import remove_leftovers
-    from fxis_shm.ring import FrameLayout, RingReader, RingWriter
+    from fxis_shm.shm import ordering
+    from fxis_shm.shm.naming import remove_leftovers
+    from fxis_shm.shm.ring import FrameLayout, RingReader, RingWriter
 
     service = f"ro{os.getpid()}"
     layout = FrameLayout(args.height, args.width)

@@ -23,9 +23,10 @@ else:
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     import _common as common
 
-from fxis_shm import FxisError, RequestTimeout, procstat
-from fxis_shm.launch import ServiceProcess
-from fxis_shm.pubsub import Subscriber
+from fxis_shm import FxisError, RequestTimeout
+from fxis_shm.client.pubsub import Subscriber
+from fxis_shm.service.launch import ServiceProcess
+from fxis_shm.shm import procstat
 
 
 def service_processes(root: int) -> dict[int, str]:

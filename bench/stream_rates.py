@@ -27,7 +27,7 @@ else:  # run as a script, or loaded from its path
     import _common as common
 
 from fxis_shm import RequestTimeout
-from fxis_shm.pubsub import Subscriber
+from fxis_shm.client.pubsub import Subscriber
 
 
 def parser() -> argparse.ArgumentParser:

@@ -33,8 +33,8 @@ else:  # run as a script, or loaded from its path
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     import _common as common
 
-from fxis_shm import procstat
-from fxis_shm.launch import free_tcp_port
+from fxis_shm.service.launch import free_tcp_port
+from fxis_shm.shm import procstat
 
 BENCH = "bench (the viewers)"
 FOXGLOVE_SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]  # foxglove-sdk >= 0.30, older

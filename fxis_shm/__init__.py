@@ -2,10 +2,13 @@
 time-synchronized images over ZeroMQ. The public API is what ``__all__`` names
 (README.md, "The public API")."""
 
-from . import _sourcetree
-from .client import Client, Frame, FrameTuple
-from .clockmap import ClockEstimate
-from .errors import (
+from fxis_shm import _sourcetree
+from fxis_shm.client.client import Client
+from fxis_shm.client.frames import Frame, FrameTuple
+from fxis_shm.client.multiclient import MultiClient
+from fxis_shm.client.pubsub import EventPublisher, Message, Subscriber, handshake
+from fxis_shm.core.clockmap import ClockEstimate
+from fxis_shm.errors import (
     CameraDown,
     ConfigError,
     FrameTimeout,
@@ -20,10 +23,8 @@ from .errors import (
     SkewExceeded,
     UnknownCamera,
 )
-from .multiclient import MultiClient
-from .pubsub import EventPublisher, Message, Subscriber, handshake
-from .security import ClientKeys
-from .stamp import read_stamp
+from fxis_shm.formats.stamp import read_stamp
+from fxis_shm.wire.security import ClientKeys
 
 __all__ = [
     "Client",

@@ -10,17 +10,18 @@ import subprocess
 import sys
 import textwrap
 
-from . import defaults, naming
-from .camerakinds import KINDS, PROCESS_OPTIONS
-from .client import Client
-from .config import DEFAULT_FOXGLOVE_RATE_HZ, MAX_FOXGLOVE_RATE_HZ, build_config, load_toml
-from .errors import ConfigError, FxisError
+from fxis_shm.client.client import Client
+from fxis_shm.errors import ConfigError, FxisError
+from fxis_shm.service.camerakinds import KINDS, PROCESS_OPTIONS
+from fxis_shm.service.config import DEFAULT_FOXGLOVE_RATE_HZ, MAX_FOXGLOVE_RATE_HZ, build_config, load_toml
+from fxis_shm.shm import naming
+from fxis_shm.wire import defaults
 
 EXIT_USAGE = 2
 
 
 def _run(args) -> int:
-    from .supervisor import StartError, Supervisor
+    from fxis_shm.service.supervisor import StartError, Supervisor
 
     try:
         file_values = load_toml(args.config) if args.config else {}
@@ -103,7 +104,7 @@ def _status(args) -> int:
 
 
 def _grab(args) -> int:
-    from .tuplefiles import tuple_files
+    from fxis_shm.formats.tuplefiles import tuple_files
 
     cameras = args.cameras.split(",") if args.cameras else None
     with Client(args.endpoint, timeout=args.timeout) as client:
@@ -123,8 +124,8 @@ def _grab(args) -> int:
 
 
 def _record(args) -> int:
-    from . import encoding
-    from .recorder import Recorder, RecordSettings, summary_table
+    from fxis_shm.record.recorder import Recorder, RecordSettings, summary_table
+    from fxis_shm.wire import encoding
 
     def usage(message: str) -> int:
         print(f"fxis record: {message}", file=sys.stderr)
@@ -162,7 +163,7 @@ def _record(args) -> int:
 
 
 def _keys(args) -> int:
-    from .security import create_keys
+    from fxis_shm.wire.security import create_keys
 
     public, secret = create_keys(args.out, args.name)
     print(f"wrote {public} (public: give it to the other side) and {secret} (secret: keep it)")
@@ -170,7 +171,7 @@ def _keys(args) -> int:
 
 
 def _cameras(args) -> int:
-    from .camerakinds import DISCOVERY_MODULE
+    from fxis_shm.service.camerakinds import DISCOVERY_MODULE
 
     try:
         child = subprocess.run(
@@ -211,7 +212,7 @@ def _cameras(args) -> int:
 
 
 def _clean(args) -> int:
-    from .supervisor import service_running
+    from fxis_shm.service.supervisor import service_running
 
     if service_running(args.name):
         print(f"fxis clean: service {args.name!r} is running; stop it first", file=sys.stderr)

@@ -44,7 +44,7 @@ class InvalidArgument(FxisError, ValueError):
 
 
 class ServiceNotStarted(FxisError, RuntimeError):
-    """A service launched from Python (fxis_shm.launch) did not come up; the message says why."""
+    """A service launched from Python (fxis_shm.service.launch) did not come up; the message says why."""
 
 
 class ProtocolError(FxisError):

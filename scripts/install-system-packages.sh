@@ -8,7 +8,7 @@
 #   emulated hosts (ip netns, veth links, tc's token bucket: tests/hosts.py);
 #   util-linux for unshare (a client in its own mount namespace, test_localpath; the
 #   emulated hosts' time and mount namespaces);
-#   gcc, which builds the ring's memory-ordering helper (fxis_shm/_ordered.c);
+#   gcc, which builds the ring's memory-ordering helper (fxis_shm/shm/_ordered.c);
 # - libturbojpeg0, the TurboJPEG library PyTurboJPEG loads (bench/jpeg_codecs.py measures it);
 # - chromium, the headless browser the dashboard's browser test drives
 #   (tests/integration/test_dashboard_browser.py).

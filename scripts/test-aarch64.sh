@@ -1,6 +1,6 @@
 #!/usr/bin/env bash
 # Runs the ring's memory-ordering tests on an emulated aarch64 (ARM64) CPU, where the
-# seqlock needs the fences of fxis_shm/_ordered.c (docs/design.md, "Memory ordering").
+# seqlock needs the fences of fxis_shm/shm/_ordered.c (docs/design.md, "Memory ordering").
 # Not part of `make test`: it takes a few minutes and needs root (apt, mounts, chroot).
 #
 # How: Debian's qemu-user-static runs aarch64 binaries through binfmt_misc; mmdebstrap
@@ -91,10 +91,10 @@ git -C "$SRC" ls-files -co --exclude-standard -z | (cd "$SRC" && tar --null -T -
 in_root sh -c 'cd /src && pip install --quiet -e ".[test]"'
 
 step "the helper and the ordering mode on the emulated CPU"
-in_root sh -c 'objdump -d /src/fxis_shm/_ordered.*.so | grep -E "<(load_acquire|store_release|fence_acquire|fence_release)>:|ldar|stlr|dmb"'
+in_root sh -c 'objdump -d /src/fxis_shm/shm/_ordered.*.so | grep -E "<(load_acquire|store_release|fence_acquire|fence_release)>:|ldar|stlr|dmb"'
 in_root python -c '
 import platform, subprocess, sys
-from fxis_shm import ordering
+from fxis_shm.shm import ordering
 plain = subprocess.run([sys.executable, "-c", "from fxis_shm import ordering; print(ordering.MODE)"],
                        env={"FXIS_PLAIN_ORDERING": "1"}, capture_output=True, text=True, check=True).stdout.strip()
 print(f"machine={platform.machine()} python={platform.python_version()} MODE={ordering.MODE} "

@@ -6,9 +6,9 @@ import time
 
 import pytest
 
-from fxis_shm import naming
-from fxis_shm.launch import ServiceProcess
-from fxis_shm.supervisor import lock_path
+from fxis_shm.service.launch import ServiceProcess
+from fxis_shm.service.supervisor import lock_path
+from fxis_shm.shm import naming
 
 
 def wait_until(predicate, timeout: float = 10.0, interval: float = 0.02, what: str = "condition"):
@@ -89,7 +89,7 @@ def emulated_hosts(tmp_path):
 def fxis_run_alone(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
     """``fxis run`` expected to stop during start-up: a name and endpoints of its own, so it
     can neither meet a running service nor another test's ports."""
-    from fxis_shm.launch import free_tcp_port
+    from fxis_shm.service.launch import free_tcp_port
 
     endpoints = [f"tcp://127.0.0.1:{free_tcp_port()}" for _ in range(3)]
     name = f"alone{os.getpid()}x{time.monotonic_ns() % 10**6}"

@@ -5,7 +5,7 @@ import time
 import cv2
 import numpy as np
 
-from fxis_shm.stamp import read_stamp, write_stamp
+from fxis_shm.formats.stamp import read_stamp, write_stamp
 
 
 def half_size(image):

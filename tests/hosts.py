@@ -48,8 +48,8 @@ import tempfile
 import time
 from collections.abc import Sequence
 
-from fxis_shm.launch import ServiceProcess
-from fxis_shm.security import ClientKeys, create_keys
+from fxis_shm.service.launch import ServiceProcess
+from fxis_shm.wire.security import ClientKeys, create_keys
 
 PREFIX = "fxt"
 SUBNET = ipaddress.ip_network("198.51.100.0/24")  # TEST-NET-2 (RFC 5737): never routed anywhere

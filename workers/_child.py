@@ -1,5 +1,5 @@
 """What every child process of the supervisor shares: its typed spec from argv
-(fxis_shm.childspec), logging, the readiness handshake, and stopping on SIGTERM
+(fxis_shm.service.childspec), logging, the readiness handshake, and stopping on SIGTERM
 or when the supervisor dies."""
 
 from __future__ import annotations
@@ -12,10 +12,10 @@ import threading
 from collections.abc import Callable
 from typing import TypeVar
 
-from fxis_shm import timebase
-from fxis_shm.childspec import ChildSpec
+from fxis_shm.core import timebase
 from fxis_shm.errors import SpecError
-from fxis_shm.tether import die_with_parent
+from fxis_shm.service.childspec import ChildSpec
+from fxis_shm.service.tether import die_with_parent
 
 S = TypeVar("S", bound=ChildSpec)
 

@@ -10,9 +10,10 @@ import time
 
 import posix_ipc
 
-from fxis_shm import naming, timebase
-from fxis_shm.childspec import CameraWorkerSpec
-from fxis_shm.ring import FLAG_TRIGGERED, FrameLayout, RingWriter
+from fxis_shm.core import timebase
+from fxis_shm.service.childspec import CameraWorkerSpec
+from fxis_shm.shm import naming
+from fxis_shm.shm.ring import FLAG_TRIGGERED, FrameLayout, RingWriter
 
 from . import processing
 from ._child import Ready, child_main

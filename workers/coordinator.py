@@ -4,8 +4,8 @@ from __future__ import annotations
 
 import threading
 
-from fxis_shm.childspec import CoordinatorSpec
-from fxis_shm.coordinator import Coordinator
+from fxis_shm.service.childspec import CoordinatorSpec
+from fxis_shm.service.coordinator import Coordinator
 
 from ._child import Ready, child_main
 

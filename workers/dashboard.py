@@ -1,4 +1,4 @@
-"""The dashboard process: the live web page of the service (fxis_shm.dashboard), a client
+"""The dashboard process: the live web page of the service (fxis_shm.viewers.dashboard), a client
 of the coordinator and of the rings like any other, supervised and restarted like the
 camera workers and the coordinator."""
 
@@ -7,15 +7,15 @@ from __future__ import annotations
 import asyncio
 import threading
 
-from fxis_shm.childspec import DashboardSpec
-from fxis_shm.config import http_address
+from fxis_shm.service.childspec import DashboardSpec
+from fxis_shm.service.config import http_address
 
 from ._child import Ready, child_main
 
 
 def run(spec: DashboardSpec, ready: Ready, stop: threading.Event) -> None:
-    from fxis_shm.dashboard import serve
-    from fxis_shm.livefeed import feed_for
+    from fxis_shm.viewers.dashboard import serve
+    from fxis_shm.viewers.livefeed import feed_for
 
     host, port = http_address(spec.http)
     feed = feed_for(spec)

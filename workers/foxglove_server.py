@@ -1,4 +1,4 @@
-"""The Foxglove process: the cameras served to the Foxglove app (fxis_shm.foxglove_live), a
+"""The Foxglove process: the cameras served to the Foxglove app (fxis_shm.viewers.foxglove_live), a
 client of the coordinator and of the rings like any other, supervised and restarted like
 the camera workers and the coordinator."""
 
@@ -6,15 +6,15 @@ from __future__ import annotations
 
 import threading
 
-from fxis_shm.childspec import FoxgloveSpec
-from fxis_shm.config import http_address
+from fxis_shm.service.childspec import FoxgloveSpec
+from fxis_shm.service.config import http_address
 
 from ._child import Ready, child_main
 
 
 def run(spec: FoxgloveSpec, ready: Ready, stop: threading.Event) -> None:
-    from fxis_shm.foxglove_live import serve
-    from fxis_shm.livefeed import feed_for
+    from fxis_shm.viewers.foxglove_live import serve
+    from fxis_shm.viewers.livefeed import feed_for
 
     host, port = http_address(spec.foxglove, "foxglove")
     feed = feed_for(spec)

@@ -13,7 +13,7 @@ end, a summary.
                     --results tcp://127.0.0.1:5558 -n 20
 
 Before the first request it checks both legs it depends on, each with a
-deadline: its events reach the service (``fxis_shm.pubsub.handshake`` on a
+deadline: its events reach the service (``fxis_shm.client.pubsub.handshake`` on a
 topic of its own, hence ``--pub``), and a ``time`` event on ``cell/pairs``
 comes back through the vision node as a ping on ``cell/results``.
 Times are ns of CLOCK_MONOTONIC: the robot runs on the service's host.

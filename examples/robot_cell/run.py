@@ -27,7 +27,7 @@ from pathlib import Path
 import robot
 
 from fxis_shm import RequestTimeout
-from fxis_shm.launch import ServiceProcess, free_tcp_port
+from fxis_shm.service.launch import ServiceProcess, free_tcp_port
 
 HERE = Path(__file__).resolve().parent
 

@@ -17,7 +17,7 @@ true}``: the robot uses it to check the whole chain before it starts.
                      --results tcp://127.0.0.1:5558
 
 stdout carries exactly one line, ``ready``, once the pair subscription is live
-(checked with ``fxis_shm.pubsub.handshake``); everything else goes to stderr.
+(checked with ``fxis_shm.client.pubsub.handshake``); everything else goes to stderr.
 SIGTERM or SIGINT stops it with exit code 0.
 """
 

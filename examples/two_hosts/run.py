@@ -25,8 +25,8 @@ HERE = Path(__file__).resolve().parent
 sys.path.insert(0, str(HERE.parents[1]))  # the repository: tests.hosts
 
 from fxis_shm.errors import FxisError  # noqa: E402
-from fxis_shm.launch import ServiceProcess  # noqa: E402
-from fxis_shm.security import ClientKeys  # noqa: E402
+from fxis_shm.service.launch import ServiceProcess  # noqa: E402
+from fxis_shm.wire.security import ClientKeys  # noqa: E402
 from tests.hosts import HostsUnavailable, Lab  # noqa: E402
 
 FXIS = [sys.executable, "-m", "fxis_shm.cli"]

@@ -18,7 +18,7 @@ import time
 
 import pytest
 
-from fxis_shm.tether import die_with_parent
+from fxis_shm.service.tether import die_with_parent
 
 from ..conftest import fxis, start_service  # noqa: F401  (shared with the integration tests)
 

@@ -2,7 +2,8 @@
 
 import pytest
 
-from fxis_shm import read_stamp, rosmsgs
+from fxis_shm import read_stamp
+from fxis_shm.formats import rosmsgs
 from fxis_shm.workers.backends.bag import BagCamera
 
 from ..conftest import fxis, fxis_run_alone, wait_until
@@ -117,7 +118,7 @@ def test_a_jpeg_bag_replays_decoded(start_service, recorded, tmp_path):
 
 
 def options(raw):
-    return raw  # the camera checks and completes them itself (fxis_shm.camerakinds)
+    return raw  # the camera checks and completes them itself (fxis_shm.service.camerakinds)
 
 
 def test_bad_options_name_the_key_and_what_the_bag_holds(recorded, tmp_path):

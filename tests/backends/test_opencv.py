@@ -7,8 +7,8 @@ import cv2
 import numpy as np
 import pytest
 
-from fxis_shm import procstat
-from fxis_shm.camerakinds import camera_options
+from fxis_shm.service.camerakinds import camera_options
+from fxis_shm.shm import procstat
 from fxis_shm.workers.backends.base import Camera, CameraLost
 from fxis_shm.workers.backends.opencv import OpenCVCamera
 

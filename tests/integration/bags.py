@@ -10,8 +10,8 @@ from pathlib import Path
 from rosbags.highlevel import AnyReader
 from ruamel.yaml import YAML
 
-from fxis_shm import rosmsgs
-from fxis_shm.launch import ServiceProcess
+from fxis_shm.formats import rosmsgs
+from fxis_shm.service.launch import ServiceProcess
 
 from ..conftest import assert_nothing_left, fxis
 

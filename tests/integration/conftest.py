@@ -2,8 +2,8 @@ import os
 
 import pytest
 
-from fxis_shm import procstat
-from fxis_shm.launch import ServiceProcess
+from fxis_shm.service.launch import ServiceProcess
+from fxis_shm.shm import procstat
 
 from ..conftest import assert_nothing_left, start_service  # noqa: F401  (shared fixtures)
 

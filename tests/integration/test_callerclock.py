@@ -9,7 +9,7 @@ import numpy as np
 import pytest
 
 from fxis_shm import Client, InvalidArgument, Subscriber, read_stamp
-from fxis_shm.clockmap import ESTIMATED, SAME_CLOCK
+from fxis_shm.core.clockmap import ESTIMATED, SAME_CLOCK
 
 from ..conftest import wait_until
 

@@ -1,4 +1,4 @@
-"""A child process refuses a spec it cannot read, saying why (fxis_shm.childspec)."""
+"""A child process refuses a spec it cannot read, saying why (fxis_shm.service.childspec)."""
 
 from __future__ import annotations
 
@@ -9,7 +9,7 @@ import sys
 
 import pytest
 
-from fxis_shm.childspec import ROLES
+from fxis_shm.service.childspec import ROLES
 
 
 @pytest.mark.parametrize("role", sorted(ROLES))

@@ -6,8 +6,9 @@ import cv2
 import posix_ipc
 import pytest
 
-from fxis_shm import naming, read_stamp
-from fxis_shm.camerakinds import KINDS
+from fxis_shm import read_stamp
+from fxis_shm.service.camerakinds import KINDS
+from fxis_shm.shm import naming
 
 from .test_lifecycle import fxis
 

@@ -15,7 +15,7 @@ import numpy as np
 import pytest
 
 from fxis_shm import read_stamp
-from fxis_shm.launch import free_tcp_port
+from fxis_shm.service.launch import free_tcp_port
 
 from ..conftest import fxis, fxis_run_alone
 from .conftest import SMALL, client_keys

@@ -9,7 +9,7 @@ import pytest
 import zmq
 
 from fxis_shm import CameraDown, Client, Overwritten, RequestTimeout, ServiceError, read_stamp
-from fxis_shm.protocol import encode_request
+from fxis_shm.wire.protocol import encode_request
 
 from ..conftest import run_in_threads, wait_until
 from .conftest import SMALL, child_pids

@@ -19,7 +19,7 @@ import pytest
 from websockets.sync.client import connect
 
 from fxis_shm import read_stamp
-from fxis_shm.launch import free_tcp_port
+from fxis_shm.service.launch import free_tcp_port
 
 from ..conftest import fxis, fxis_run_alone
 from ..foxglove_decode import message_class

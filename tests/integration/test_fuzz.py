@@ -9,7 +9,7 @@ import zmq
 from hypothesis import HealthCheck, given, settings, strategies as st
 
 from fxis_shm import read_stamp
-from fxis_shm.protocol import encode_request
+from fxis_shm.wire.protocol import encode_request
 
 from .conftest import SMALL, child_pids
 
@@ -57,7 +57,7 @@ def mutate(rng: random.Random, template: bytes) -> list[bytes]:
 def service():
     import subprocess
 
-    from fxis_shm.launch import ServiceProcess
+    from fxis_shm.service.launch import ServiceProcess
 
     svc = ServiceProcess(
         ["--camera", f"a=synthetic:fps=50,{SMALL}", "--camera", f"b=synthetic:fps=50,{SMALL}"],

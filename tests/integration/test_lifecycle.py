@@ -7,8 +7,9 @@ import subprocess
 import posix_ipc
 import pytest
 
-from fxis_shm import CameraDown, naming
-from fxis_shm.launch import ServiceProcess
+from fxis_shm import CameraDown
+from fxis_shm.service.launch import ServiceProcess
+from fxis_shm.shm import naming
 
 from ..conftest import assert_nothing_left, fxis
 from .conftest import SMALL, child_pids

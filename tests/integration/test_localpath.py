@@ -94,7 +94,7 @@ _PRIVATE_SHM_CLIENT = textwrap.dedent("""
     import json, sys
     import numpy as np
     from fxis_shm import Client, LocalPathUnavailable, read_stamp
-    from fxis_shm.ring import FrameLayout, RingWriter
+    from fxis_shm.shm.ring import FrameLayout, RingWriter
     endpoint, service, impostor = sys.argv[1], sys.argv[2], sys.argv[3] == "impostor"
     if impostor:  # a ring of the same name, written by someone else
         writer = RingWriter(service, "cam0", FrameLayout(48, 64), 4)
@@ -149,7 +149,7 @@ def test_a_client_that_cannot_read_the_rings_falls_back_to_the_network(two_camer
 
 
 def test_the_service_says_how_its_rings_are_ordered(two_cameras):
-    from fxis_shm import ordering
+    from fxis_shm.shm import ordering
 
     with Client(two_cameras.endpoint) as client:
         assert client.status()["ring_ordering"] == ordering.MODE == "fenced"  # the install built the helper

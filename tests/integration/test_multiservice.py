@@ -7,8 +7,8 @@ import signal
 import pytest
 
 from fxis_shm import CameraDown, Client, UnknownCamera, read_stamp
+from fxis_shm.client.multiclient import MultiClient
 from fxis_shm.errors import ConfigError
-from fxis_shm.multiclient import MultiClient
 
 from ..conftest import wait_until
 from .conftest import SMALL, child_pids

@@ -7,9 +7,9 @@ import pytest
 import zmq
 
 from fxis_shm import RequestTimeout, read_stamp
-from fxis_shm.launch import ServiceProcess
-from fxis_shm.protocol import EVENT_TOPIC
-from fxis_shm.pubsub import EventPublisher, Subscriber, handshake
+from fxis_shm.client.pubsub import EventPublisher, Subscriber, handshake
+from fxis_shm.service.launch import ServiceProcess
+from fxis_shm.wire.protocol import EVENT_TOPIC
 
 from ..conftest import wait_until
 from .conftest import SMALL

@@ -9,7 +9,8 @@ import cv2
 import numpy as np
 import pytest
 
-from fxis_shm import read_stamp, rosmsgs
+from fxis_shm import read_stamp
+from fxis_shm.formats import rosmsgs
 
 from ..conftest import fxis, wait_until
 from .bags import FPS, read_bag, record, start_cameras, stop
@@ -85,7 +86,7 @@ def test_tuples_share_a_step_stamp_and_regroup_from_the_side_topic(cell, tmp_pat
 
 
 def test_jpeg_images_are_compressed_images_of_the_frames_they_name(cell, tmp_path):
-    """JPEG changes the stamp's bytes; its 8x8 blocks survive (fxis_shm.stamp), so each
+    """JPEG changes the stamp's bytes; its 8x8 blocks survive (fxis_shm.formats.stamp), so each
     decoded image still reads as the frame /fxis/tuples names."""
     record(cell, tmp_path / "j", "--tuples", "--frames", "5", "--encoding", "jpeg", "--quality", "90")
     bag = read_bag(tmp_path / "j")

@@ -8,7 +8,7 @@ import pytest
 import zmq
 
 from fxis_shm import Client, RequestTimeout, read_stamp
-from fxis_shm.protocol import encode_request
+from fxis_shm.wire.protocol import encode_request
 
 from ..conftest import run_in_threads
 from .conftest import child_pids

@@ -8,10 +8,11 @@ import stat
 import numpy as np
 import pytest
 
-from fxis_shm import naming, read_stamp
+from fxis_shm import read_stamp
 from fxis_shm.errors import RingError
-from fxis_shm.ring import FrameLayout, Overwritten, RingReader, RingWriter
-from fxis_shm.stamp import write_stamp
+from fxis_shm.formats.stamp import write_stamp
+from fxis_shm.shm import naming
+from fxis_shm.shm.ring import FrameLayout, Overwritten, RingReader, RingWriter
 
 LAYOUT = FrameLayout(8, 32)
 

@@ -7,8 +7,8 @@ import time
 import pytest
 
 from fxis_shm import Client, RequestTimeout
-from fxis_shm.launch import free_tcp_port
-from fxis_shm.pubsub import Subscriber
+from fxis_shm.client.pubsub import Subscriber
+from fxis_shm.service.launch import free_tcp_port
 
 from .conftest import SMALL, client_keys
 from .test_lifecycle import fxis

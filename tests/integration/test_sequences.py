@@ -6,7 +6,7 @@ import subprocess
 import pytest
 
 from fxis_shm import FrameTimeout, ServiceError, read_stamp
-from fxis_shm.launch import ServiceProcess
+from fxis_shm.service.launch import ServiceProcess
 
 from ..conftest import wait_until
 from .conftest import SMALL

@@ -13,7 +13,7 @@ from pathlib import Path
 
 import pytest
 
-from fxis_shm.launch import ServiceProcess
+from fxis_shm.service.launch import ServiceProcess
 
 from ..conftest import assert_nothing_left
 

@@ -17,7 +17,7 @@ PHASE = 1_000_000  # cam1 1 ms behind cam0, like the paper's cameras
 def paper_cameras():
     import os
 
-    from fxis_shm.launch import ServiceProcess
+    from fxis_shm.service.launch import ServiceProcess
 
     svc = ServiceProcess(
         ["--camera", f"cam0=synthetic:{SMALL}", "--camera", f"cam1=synthetic:phase_ms=1,{SMALL}"],

@@ -1,6 +1,6 @@
 import numpy as np
 
-from fxis_shm.bufferpool import BufferPool, release
+from fxis_shm.shm.bufferpool import BufferPool, release
 
 
 def test_a_dropped_buffer_is_handed_out_again():

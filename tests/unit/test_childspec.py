@@ -1,4 +1,4 @@
-"""The typed, versioned specs the supervisor gives its children (fxis_shm.childspec)."""
+"""The typed, versioned specs the supervisor gives its children (fxis_shm.service.childspec)."""
 
 from __future__ import annotations
 
@@ -6,8 +6,8 @@ import json
 
 import pytest
 
-from fxis_shm.childspec import ROLES, CameraWorkerSpec, CoordinatorSpec, DashboardSpec, FoxgloveSpec
 from fxis_shm.errors import SpecError
+from fxis_shm.service.childspec import ROLES, CameraWorkerSpec, CoordinatorSpec, DashboardSpec, FoxgloveSpec
 
 CAMERA = CameraWorkerSpec(
     service="svc",

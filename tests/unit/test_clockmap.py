@@ -4,7 +4,7 @@ import random
 
 import pytest
 
-from fxis_shm.clockmap import ESTIMATED, ClockEstimate, ClockEstimator, Exchange
+from fxis_shm.core.clockmap import ESTIMATED, ClockEstimate, ClockEstimator, Exchange
 
 S = 1_000_000_000
 US = 1_000

@@ -1,10 +1,10 @@
-"""Camera timestamps onto CLOCK_MONOTONIC (fxis_shm.clocks)."""
+"""Camera timestamps onto CLOCK_MONOTONIC (fxis_shm.core.clocks)."""
 
 import random
 
 import pytest
 
-from fxis_shm.clocks import DeviceClockFit, wall_to_monotonic
+from fxis_shm.core.clocks import DeviceClockFit, wall_to_monotonic
 
 MS = 1_000_000
 
@@ -44,7 +44,7 @@ def test_device_fit_needs_a_frame():
 
 
 def test_a_ptp_camera_s_time_is_moved_into_the_service_clock_as_it_is():
-    from fxis_shm.clocks import PtpClock
+    from fxis_shm.core.clocks import PtpClock
 
     tai_minus_service = 37 * 10**9 + 123  # e.g. a service on CLOCK_REALTIME
     clock = PtpClock(lambda: (1_000_000, 1_000_000 + tai_minus_service))

@@ -1,12 +1,12 @@
-"""Service configuration and typed camera options (fxis_shm.config, fxis_shm.options)."""
+"""Service configuration and typed camera options (fxis_shm.service.config, fxis_shm.service.options)."""
 
 from __future__ import annotations
 
 import pytest
 
-from fxis_shm.config import build_config, load_toml, parse_camera_flag
 from fxis_shm.errors import ConfigError
-from fxis_shm.options import Option, boolean, choice, number, parse_options, split_key_values, text
+from fxis_shm.service.config import build_config, load_toml, parse_camera_flag
+from fxis_shm.service.options import Option, boolean, choice, number, parse_options, split_key_values, text
 
 SYNTHETIC_DEFAULTS = {
     "fps": 20.0,

@@ -2,7 +2,7 @@ import random
 
 import pytest
 
-from fxis_shm.decimation import Decimator, every_frame
+from fxis_shm.core.decimation import Decimator, every_frame
 
 RATES = [1, 7, 10, 12.5, 30]
 CAMERA_FPS = [15, 20, 25, 30, 100]

@@ -1,8 +1,8 @@
 import numpy as np
 import pytest
 
-from fxis_shm import encoding
 from fxis_shm.errors import ProtocolError
+from fxis_shm.wire import encoding
 
 
 def _image(shape, dtype="uint8"):

@@ -1,4 +1,4 @@
-"""The request engine (fxis_shm.engine): requests in, actions out, over camera tables.
+"""The request engine (fxis_shm.core.engine): requests in, actions out, over camera tables.
 
 The cameras here are tables (TableCamera): the frames a ring would hold, its period
 and whether its worker is alive. Each test submits requests and feeds frames and
@@ -11,11 +11,11 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fxis_shm.engine import COPY_ATTEMPTS, LIVENESS_CHECK_NS, Failure, Reply, RequestEngine, Trigger
-from fxis_shm.protocol import decode_request, encode_request
-from fxis_shm.ring import SLOT, Snapshot
-from fxis_shm.timesearch import Timeline
-from fxis_shm.waitpolicy import CameraState
+from fxis_shm.core.engine import COPY_ATTEMPTS, LIVENESS_CHECK_NS, Failure, Reply, RequestEngine, Trigger
+from fxis_shm.core.snapshot import SLOT, Snapshot
+from fxis_shm.core.timesearch import Timeline
+from fxis_shm.core.waitpolicy import CameraState
+from fxis_shm.wire.protocol import decode_request, encode_request
 
 from .timeline_helpers import MS
 
@@ -349,9 +349,16 @@ def test_a_sequence_larger_than_the_limit_is_refused():
 def test_the_coordinator_and_same_host_clients_decide_with_this_one_engine():
     """One implementation of selection and waiting: both callers hand requests to the engine
     and hold no selection or wait-policy function of their own."""
-    from fxis_shm import coordinator, engine, localreads
+    from fxis_shm.client import localreads
+    from fxis_shm.core import engine
+    from fxis_shm.service import coordinator
 
-    deciding = ("fxis_shm.selection", "fxis_shm.waitpolicy", "fxis_shm.decisions", "fxis_shm.timesearch")
+    deciding = (
+        "fxis_shm.core.selection",
+        "fxis_shm.core.waitpolicy",
+        "fxis_shm.core.decisions",
+        "fxis_shm.core.timesearch",
+    )
     for caller in (coordinator, localreads):
         assert caller.RequestEngine is engine.RequestEngine
         own = [name for name, value in vars(caller).items() if getattr(value, "__module__", None) in deciding]

@@ -27,8 +27,8 @@ def test_every_exported_name_imports_and_every_error_is_an_fxis_error():
 
 
 def test_module_paths_keep_working():
-    from fxis_shm.client import Client
-    from fxis_shm.pubsub import Subscriber
+    from fxis_shm.client.client import Client
+    from fxis_shm.client.pubsub import Subscriber
 
     assert Client is fxis_shm.Client and Subscriber is fxis_shm.Subscriber
 
@@ -42,7 +42,7 @@ def test_bad_arguments_to_the_public_api_raise_fxis_errors(tmp_path):
     import numpy as np
     import pytest
 
-    from fxis_shm.stamp import write_stamp
+    from fxis_shm.formats.stamp import write_stamp
 
     with pytest.raises(fxis_shm.InvalidArgument, match="takes its options by keyword"):
         fxis_shm.Client(["tcp://127.0.0.1:9", "tcp://127.0.0.1:10"], 2.0)

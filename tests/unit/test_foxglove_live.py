@@ -1,13 +1,13 @@
-"""What the Foxglove live view computes without I/O (fxis_shm.foxglove_live) and its settings."""
+"""What the Foxglove live view computes without I/O (fxis_shm.viewers.foxglove_live) and its settings."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from fxis_shm.config import build_config, check_foxglove_rate
 from fxis_shm.errors import ConfigError
-from fxis_shm.foxglove_live import RATE_PARAMETER, RateParameter, raw_image, raw_pixels
+from fxis_shm.service.config import build_config, check_foxglove_rate
+from fxis_shm.viewers.foxglove_live import RATE_PARAMETER, RateParameter, raw_image, raw_pixels
 
 from ..foxglove_decode import message_class
 

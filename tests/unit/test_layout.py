@@ -1,5 +1,6 @@
-"""The library knows camera kinds and child roles by name; only the workers
-import the library, never the other way round."""
+"""The layout's rules that import-linter does not check (pyproject.toml, [tool.importlinter], run by
+`make lint`, holds the layers): modules small enough to read, each layer saying what it holds, and
+the camera kinds and child roles the library names by string existing."""
 
 from __future__ import annotations
 
@@ -11,28 +12,28 @@ import pathlib
 import pytest
 
 import fxis_shm
-from fxis_shm.camerakinds import DISCOVERY_MODULE, KINDS, PROCESS_OPTIONS
-from fxis_shm.childspec import ROLES
+from fxis_shm.service.camerakinds import DISCOVERY_MODULE, KINDS, PROCESS_OPTIONS
+from fxis_shm.service.childspec import ROLES
 
 LIBRARY = pathlib.Path(fxis_shm.__file__).parent
 
 
-def imported_modules(path: pathlib.Path) -> set[str]:
-    """Every module a file imports, relative imports made absolute."""
-    names = set()
-    for node in ast.walk(ast.parse(path.read_text(), str(path))):
-        if isinstance(node, ast.Import):
-            names.update(alias.name for alias in node.names)
-        elif isinstance(node, ast.ImportFrom):
-            base = "fxis_shm." * (node.level > 0) + (node.module or "")
-            names.update({base} | {f"{base.rstrip('.')}.{alias.name}" for alias in node.names})
-    return names
+SOURCES = [LIBRARY, LIBRARY.parent / "workers"]
+LINE_LIMIT = 500  # a module a newcomer can read in one sitting (issue 19)
 
 
-@pytest.mark.parametrize("path", sorted(LIBRARY.glob("*.py")), ids=lambda p: p.name)
-def test_no_library_module_imports_the_workers(path):
-    workers = sorted(m for m in imported_modules(path) if m.startswith("fxis_shm.workers"))
-    assert workers == [], f"{path.name} imports {workers}: start a worker by name instead"
+@pytest.mark.parametrize(
+    "path", sorted(p for root in SOURCES for p in root.rglob("*.py")), ids=lambda p: str(p.relative_to(LIBRARY.parent))
+)
+def test_no_module_is_over_the_line_limit(path):
+    lines = len(path.read_text().splitlines())
+    assert lines <= LINE_LIMIT, f"{path.name} has {lines} lines: split it along its seams"
+
+
+@pytest.mark.parametrize("package", sorted(p.parent for p in LIBRARY.glob("*/__init__.py")), ids=lambda p: p.name)
+def test_each_layer_says_what_it_holds_and_what_it_may_import(package):
+    doc = ast.get_docstring(ast.parse((package / "__init__.py").read_text())) or ""
+    assert "import" in doc and len(doc.splitlines()) <= 3, f"{package.name}/__init__.py: two lines, holds and imports"
 
 
 @pytest.mark.parametrize("kind", sorted(KINDS))

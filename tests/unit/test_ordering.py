@@ -5,7 +5,7 @@ import sys
 
 import pytest
 
-from fxis_shm import ordering
+from fxis_shm.shm import ordering
 
 
 @pytest.mark.parametrize(
@@ -39,7 +39,7 @@ def test_words_round_trip_through_a_shared_mapping():
 
 @pytest.mark.skipif(ordering.MODE != "fenced", reason="the helper is not built here")
 def test_the_helper_refuses_unaligned_or_outside_words():
-    from fxis_shm import _ordered
+    from fxis_shm.shm import _ordered
 
     mm = mmap.mmap(-1, 64)
     try:

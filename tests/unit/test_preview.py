@@ -1,14 +1,13 @@
-"""What the dashboard computes without I/O (fxis_shm.preview) and its config (http)."""
+"""What the dashboard computes without I/O (fxis_shm.viewers.preview) and its config (http)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from fxis_shm import encoding
-from fxis_shm.config import build_config
 from fxis_shm.errors import ConfigError, InvalidArgument
-from fxis_shm.preview import (
+from fxis_shm.service.config import build_config
+from fxis_shm.viewers.preview import (
     EncodedCache,
     RateMeter,
     SkewHistory,
@@ -19,6 +18,7 @@ from fxis_shm.preview import (
     preview_jpeg,
     scaled,
 )
+from fxis_shm.wire import encoding
 
 
 @pytest.mark.parametrize(

@@ -2,7 +2,7 @@ import os
 import subprocess
 import sys
 
-from fxis_shm import procstat
+from fxis_shm.shm import procstat
 
 
 def test_this_process_reads_as_running_with_its_parent():

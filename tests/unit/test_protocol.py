@@ -1,4 +1,4 @@
-"""The wire codec (fxis_shm.protocol): round trips and every kind of malformed message."""
+"""The wire codec (fxis_shm.wire.protocol): round trips and every kind of malformed message."""
 
 from __future__ import annotations
 
@@ -8,7 +8,7 @@ import numpy as np
 import pytest
 
 from fxis_shm.errors import Code, ProtocolError
-from fxis_shm.protocol import (
+from fxis_shm.wire.protocol import (
     CLOCK,
     MAX_HEADER_BYTES,
     VERSION,

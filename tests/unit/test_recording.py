@@ -4,9 +4,9 @@ import sys
 
 import pytest
 
-from fxis_shm import bagfile
 from fxis_shm.errors import ConfigError
-from fxis_shm.recording import Follower, Steps
+from fxis_shm.formats import bagfile
+from fxis_shm.record.recording import Follower, Steps
 
 P = 50_000_000  # a 20 fps camera
 

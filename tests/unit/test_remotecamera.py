@@ -1,6 +1,6 @@
-from fxis_shm.engine import Reply, RequestEngine
-from fxis_shm.protocol import request_of
-from fxis_shm.remotecamera import RemoteCamera
+from fxis_shm.core.engine import Reply, RequestEngine
+from fxis_shm.core.remotecamera import RemoteCamera
+from fxis_shm.wire.protocol import request_of
 
 COLUMNS = ["frame_id", "t_capture", "t_stored", "t_available", "generation"]
 MS = 1_000_000

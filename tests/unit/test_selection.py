@@ -1,4 +1,4 @@
-"""Choosing one frame per camera for a tuple (fxis_shm.selection)."""
+"""Choosing one frame per camera for a tuple (fxis_shm.core.selection)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import itertools
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from fxis_shm.selection import INDEPENDENT, JOINT, select, select_independent, select_joint
+from fxis_shm.core.selection import INDEPENDENT, JOINT, select, select_independent, select_joint
 
 from .timeline_helpers import MS, periodic, ring
 

@@ -1,11 +1,11 @@
-"""The frame-id stamp in the first and last pixel rows (fxis_shm.stamp)."""
+"""The frame-id stamp in the first and last pixel rows (fxis_shm.formats.stamp)."""
 
 from __future__ import annotations
 
 import numpy as np
 import pytest
 
-from fxis_shm.stamp import STAMP_BYTES, read_stamp, write_stamp
+from fxis_shm.formats.stamp import STAMP_BYTES, read_stamp, write_stamp
 
 LAYOUTS = [
     pytest.param((48, 64), np.uint8, id="mono8"),
@@ -100,7 +100,7 @@ def test_an_image_too_small_for_a_stamp_is_refused(shape, dtype):
 @pytest.mark.parametrize("shape", [(240, 320), (1024, 1360), (1024, 1360, 3)])
 @pytest.mark.parametrize("quality", [75, 90])
 def test_the_block_stamp_survives_jpeg(shape, quality):
-    from fxis_shm import encoding as codec
+    from fxis_shm.wire import encoding as codec
 
     image = np.random.default_rng(1).integers(0, 256, shape, dtype=np.uint8)
     write_stamp(image, 0x1_2345_6789)

@@ -1,4 +1,4 @@
-"""Nearest-time search over a circular timestamp vector (fxis_shm.timesearch)."""
+"""Nearest-time search over a circular timestamp vector (fxis_shm.core.timesearch)."""
 
 from __future__ import annotations
 
@@ -7,7 +7,7 @@ import bisect
 import pytest
 from hypothesis import given, settings, strategies as st
 
-from fxis_shm.timesearch import Timeline
+from fxis_shm.core.timesearch import Timeline
 
 from .timeline_helpers import brute_nearest, ring
 

@@ -1,12 +1,12 @@
-"""When a request waits for frames not stored yet (fxis_shm.waitpolicy)."""
+"""When a request waits for frames not stored yet (fxis_shm.core.waitpolicy)."""
 
 from __future__ import annotations
 
 import pytest
 
-from fxis_shm.selection import select_independent, select_joint
-from fxis_shm.timesearch import Timeline
-from fxis_shm.waitpolicy import (
+from fxis_shm.core.selection import select_independent, select_joint
+from fxis_shm.core.timesearch import Timeline
+from fxis_shm.core.waitpolicy import (
     AUTO,
     NEXT,
     NONE,

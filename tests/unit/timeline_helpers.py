@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from fxis_shm.timesearch import Timeline
+from fxis_shm.core.timesearch import Timeline
 
 MS = 1_000_000  # ns
 POISON = -(10**15)  # fills unused slots: a search that reads one goes wrong visibly

@@ -1,4 +1,4 @@
-"""Camera backends: the classes fxis_shm.camerakinds names, one module per kind.
+"""Camera backends: the classes fxis_shm.service.camerakinds names, one module per kind.
 A module loads only when its kind is used, so an optional SDK binding that is
 not installed only matters to its own cameras."""
 
@@ -6,7 +6,7 @@ from __future__ import annotations
 
 import importlib
 
-from fxis_shm.camerakinds import KINDS, camera_kind
+from fxis_shm.service.camerakinds import KINDS, camera_kind
 
 
 def discover_all() -> tuple[list[dict], dict[str, str]]:

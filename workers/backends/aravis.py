@@ -20,7 +20,7 @@ Time (docs/cameras.md): ``timestamp=host`` (default) is the moment Aravis saw
 the frame arrive, a wall-clock time mapped onto CLOCK_MONOTONIC with both
 clocks read right after the buffer is popped; ``timestamp=device`` is the
 camera's own timestamp mapped onto CLOCK_MONOTONIC by a fitted drift and offset
-(``fxis_shm.clocks.DeviceClockFit``).
+(``fxis_shm.core.clocks.DeviceClockFit``).
 
 Faults: no frame for a while makes ``grab`` probe the camera's control channel
 from a helper thread (reading the GigE Vision control-privilege register, or a
@@ -39,10 +39,10 @@ from typing import Any
 
 import numpy as np
 
-from fxis_shm import timebase
-from fxis_shm.camerakinds import ARAVIS_PIXEL_FORMATS
-from fxis_shm.clocks import DeviceClockFit, PtpClock, wall_to_monotonic
-from fxis_shm.ring import FrameLayout
+from fxis_shm.core import timebase
+from fxis_shm.core.clocks import DeviceClockFit, PtpClock, wall_to_monotonic
+from fxis_shm.service.camerakinds import ARAVIS_PIXEL_FORMATS
+from fxis_shm.shm.ring import FrameLayout
 
 from .base import Camera, CameraLost, Capture
 from .pixelformats import PIXEL_FORMATS as GENICAM_FORMATS

@@ -28,10 +28,12 @@ from contextlib import closing
 
 import numpy as np
 
-from fxis_shm import encoding as codec, rosmsgs, timebase
-from fxis_shm.bagfile import BagReader
+from fxis_shm.core import timebase
 from fxis_shm.errors import ConfigError, FxisError
-from fxis_shm.ring import FrameLayout
+from fxis_shm.formats import rosmsgs
+from fxis_shm.formats.bagfile import BagReader
+from fxis_shm.shm.ring import FrameLayout
+from fxis_shm.wire import encoding as codec
 
 from .base import Camera, Capture
 

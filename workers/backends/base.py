@@ -9,8 +9,8 @@ from typing import Any, ClassVar
 
 import numpy as np
 
-from fxis_shm.camerakinds import camera_options
-from fxis_shm.ring import FrameLayout
+from fxis_shm.service.camerakinds import camera_options
+from fxis_shm.shm.ring import FrameLayout
 
 
 class CameraLost(Exception):
@@ -31,7 +31,7 @@ class Capture:
 class Camera(ABC):
     """A source of frames, run inside its own camera worker process."""
 
-    kind: ClassVar[str]  # its entry in fxis_shm.camerakinds, which declares its options
+    kind: ClassVar[str]  # its entry in fxis_shm.service.camerakinds, which declares its options
     note: str = ""  # a short line the worker shows as the camera's status note ("" for none)
 
     def __init__(self, name: str, options: Mapping[str, Any], time_origin_ns: int):

@@ -31,10 +31,10 @@ import logging
 import os
 import time
 
-from fxis_shm import timebase
-from fxis_shm.camerakinds import GENTL_PATH_VAR
-from fxis_shm.clocks import DeviceClockFit, PtpClock
-from fxis_shm.ring import FrameLayout
+from fxis_shm.core import timebase
+from fxis_shm.core.clocks import DeviceClockFit, PtpClock
+from fxis_shm.service.camerakinds import GENTL_PATH_VAR
+from fxis_shm.shm.ring import FrameLayout
 
 from .base import Camera, CameraLost, Capture
 from .pixelformats import PIXEL_FORMATS, image_layout, to_image

@@ -36,8 +36,8 @@ import time
 import cv2
 import numpy as np
 
-from fxis_shm import timebase
-from fxis_shm.ring import FrameLayout
+from fxis_shm.core import timebase
+from fxis_shm.shm.ring import FrameLayout
 
 from .base import Camera, CameraLost, Capture
 

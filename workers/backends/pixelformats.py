@@ -13,7 +13,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fxis_shm.ring import FrameLayout
+from fxis_shm.shm.ring import FrameLayout
 
 
 @dataclass(frozen=True)

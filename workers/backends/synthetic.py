@@ -5,7 +5,7 @@ origin is shared by every synthetic camera of a service: two cameras with the
 same fps and phase capture together (like hardware-triggered cameras), and a
 phase offset is exactly the one configured. Deadlines are absolute, so the
 period never drifts. Each image is a pattern that moves with k, with k stamped
-into its first and last row (``fxis_shm.stamp.read_stamp`` reads it back).
+into its first and last row (``fxis_shm.formats.stamp.read_stamp`` reads it back).
 
 Two patterns, both drawn once by ``open`` so that a frame costs one copy:
 
@@ -30,9 +30,9 @@ from fractions import Fraction
 
 import numpy as np
 
-from fxis_shm import timebase
-from fxis_shm.ring import FrameLayout
-from fxis_shm.stamp import write_stamp
+from fxis_shm.core import timebase
+from fxis_shm.formats.stamp import write_stamp
+from fxis_shm.shm.ring import FrameLayout
 
 from .base import Camera, Capture
 

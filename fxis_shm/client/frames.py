@@ -1,0 +1,206 @@
+"""What a request returns: ``Frame`` (one image and what the service knows of it) and
+``FrameTuple`` (one frame per camera), built from a reply's header and images.
+
+Times in a Frame are in the caller's clock (``Client(clock=...)``; on the service's own
+host and clock, the service's CLOCK_MONOTONIC): ``in_caller_clock`` moves a reply's times
+there and keeps the service's own as ``service_t_*``.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable, Iterator, Mapping
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fxis_shm.core.clockmap import ClockEstimate
+from fxis_shm.errors import FxisError, ProtocolError
+from fxis_shm.shm.bufferpool import release as release_buffer
+
+LOCAL, NETWORK = "local", "network"
+_TIMES = ("t_capture", "t_stored", "t_available")
+
+
+@dataclass
+class Frame:
+    """One image and what the service knows of it. Times (``t_*``) are int ns of the caller's
+    clock; ``service_t_*`` are the same moments in the service's clock."""
+
+    image: np.ndarray
+    camera: str
+    frame_id: int
+    t_capture: int
+    t_stored: int
+    generation: int
+    timing: dict = field(default_factory=dict, repr=False)
+    t_available: int | None = None  # when the worker had the whole frame (before any processing hook)
+    path: str = NETWORK  # how the pixels came: "local" (copied from the ring here) or "network"
+    _still_valid: Callable[[], bool] | None = field(default=None, repr=False)
+    encoding: str = "raw"  # how the pixels travelled ("raw", "jpeg", "png")
+    service_t_capture: int = field(default=0, repr=False)
+    service_t_stored: int = field(default=0, repr=False)
+    service_t_available: int | None = field(default=None, repr=False)
+
+    def still_valid(self) -> bool:
+        """False once a zero-copy view's slot has been overwritten (then discard what you
+        computed from it). A copied image (the default) stays valid for ever."""
+        return self._still_valid is None or self._still_valid()
+
+    def release(self) -> None:
+        """Done with the image: its buffer goes back to the client's pool now (otherwise it
+        does when the last reference to the image goes). Using ``image`` afterwards raises
+        FxisError. ``with frame:`` releases on leaving the block."""
+        if not isinstance(self.image, ReleasedImage):
+            release_buffer(self.image)
+            self.image = ReleasedImage(f"the image of frame {self.frame_id} of {self.camera!r}")
+
+    def __enter__(self) -> Frame:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+
+class ReleasedImage:
+    """What ``Frame.image`` is after ``release()``: any use says so."""
+
+    __slots__ = ("what",)
+
+    def __init__(self, what: str):
+        self.what = what
+
+    def _fail(self, *args, **kwargs):
+        raise FxisError(f"{self.what} was released: its buffer may hold another frame now")
+
+    __getattr__ = __array__ = __getitem__ = __len__ = __iter__ = _fail
+
+    def __repr__(self) -> str:
+        return f"<{self.what}, released>"
+
+
+class FrameTuple(Mapping):
+    """One frame per camera, chosen together for the request time ``t_request``."""
+
+    def __init__(
+        self,
+        frames: dict[str, Frame],
+        t_request: int | None,
+        timing: dict,
+        missing: list[str] = (),
+        service_t_request: int | None = None,
+    ):
+        self._frames = frames
+        self.t_request = t_request  # t*, in the caller's clock
+        self.service_t_request = t_request if service_t_request is None else service_t_request
+        self.timing = timing
+        self.missing = list(missing)  # cameras left out of a partial tuple (they were down)
+
+    @property
+    def path(self) -> str:
+        """How the pixels came: "local" or "network" (the same for every frame of a reply)."""
+        return next(iter(self._frames.values())).path if self._frames else NETWORK
+
+    def still_valid(self) -> bool:
+        return all(f.still_valid() for f in self._frames.values())
+
+    def release(self) -> None:
+        """Release every frame (see ``Frame.release``); ``with tuple_:`` does it on leaving."""
+        for frame in self._frames.values():
+            frame.release()
+
+    def __enter__(self) -> FrameTuple:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.release()
+
+    def __getitem__(self, camera: str) -> Frame:
+        return self._frames[camera]
+
+    def __iter__(self) -> Iterator[str]:
+        return iter(self._frames)
+
+    def __len__(self) -> int:
+        return len(self._frames)
+
+    @property
+    def skew_ns(self) -> int:
+        """Max minus min capture time over the tuple."""
+        times = [f.t_capture for f in self._frames.values()]
+        return max(times) - min(times)
+
+    def __repr__(self) -> str:
+        ids = {c: f.frame_id for c, f in self._frames.items()}
+        return f"FrameTuple({ids}, skew_ns={self.skew_ns})"
+
+
+# ---- decoding replies and stream messages into Frames ----
+
+
+def frames_of(header: dict, images: list[np.ndarray], still_valid: Callable | None = None) -> list[Frame]:
+    timing, path = header.get("timing", {}), header.get("path", NETWORK)
+    try:
+        return [
+            Frame(
+                img,
+                m["camera"],
+                m["frame_id"],
+                m["t_capture"],
+                m["t_stored"],
+                m["generation"],
+                timing,
+                m.get("t_available"),
+                path,
+                still_valid,
+                m.get("encoding", "raw"),
+                m.get("service_t_capture", m["t_capture"]),
+                m.get("service_t_stored", m["t_stored"]),
+                m.get("service_t_available", m.get("t_available")),
+            )
+            for m, img in zip(header["frames"], images)
+        ]
+    except KeyError as exc:
+        raise ProtocolError(f"frame metadata lacks {exc}") from None
+
+
+def in_caller_clock(header: dict, clock: ClockEstimate) -> dict:
+    """The reply ``header`` with its frames' times, t* and sequence targets in the caller's
+    clock; the service's own values kept as ``service_*``. (``timing`` stays the service's.)"""
+    if clock.offset_ns == 0 and clock.drift_ppm == 0:
+        return header
+    for meta in header.get("frames", ()):
+        for key in _TIMES:
+            if meta.get(key) is not None:
+                meta["service_" + key] = meta[key]
+                meta[key] = clock.to_caller(meta[key])
+    if header.get("t_request") is not None:
+        header["service_t_request"] = header["t_request"]
+        header["t_request"] = clock.to_caller(header["t_request"])
+    if header.get("targets"):
+        header["targets"] = [clock.to_caller(t) for t in header["targets"]]
+    return header
+
+
+def tuple_of(header: dict, images: list[np.ndarray], still_valid: Callable | None = None) -> FrameTuple:
+    frames = frames_of(header, images, still_valid)
+    return FrameTuple(
+        {f.camera: f for f in frames},
+        header.get("t_request"),
+        header.get("timing", {}),
+        header.get("missing", ()),
+        header.get("service_t_request"),
+    )
+
+
+def sequence_of(
+    header: dict, images: list[np.ndarray], still_valid: Callable | None = None, single: bool = False
+) -> list:
+    frames = frames_of(header, images, still_valid)
+    groups = header.get("groups", [])
+    timing = header.get("timing", {})
+    if single:
+        return [frames[g[0]] for g in groups]
+    return [
+        FrameTuple({frames[i].camera: frames[i] for i in g}, t, timing)
+        for g, t in zip(groups, header.get("targets", [None] * len(groups)))
+    ]

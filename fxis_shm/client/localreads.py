@@ -1,0 +1,160 @@
+"""Same-host reads without a round trip: a client that answers frame requests itself.
+
+On the service's host (the same kernel and time namespace, so the same
+CLOCK_MONOTONIC; the rings readable; each ring the very segment the service
+reports) the client runs the service's own request engine (fxis_shm.core.engine) over
+read-only mappings of the rings: the same selection and wait policy, and no
+message to the coordinator. It copies the chosen frames under the seqlock, or
+hands out read-only views of the slots.
+
+Waiting for a frame that is not stored yet costs no CPU until just before it is
+due: the client sleeps until the camera's next frame is expected (its newest
+frame's storage time plus its period, both in the ring) less a margin, then
+watches the rings' write counters. Any number of readers can wait this way; a
+reader leaves nothing behind in the ring, and the writer never knows it exists.
+
+What only the coordinator can do (software triggers) still goes to it.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+from fxis_shm.core import timebase
+from fxis_shm.core.engine import Failure, Reply, RequestEngine
+from fxis_shm.errors import RequestTimeout, service_error
+from fxis_shm.shm.bufferpool import BufferPool
+from fxis_shm.shm.cameras import CameraHandle
+from fxis_shm.shm.copyout import COPY, VIEWS, CopyOut
+from fxis_shm.shm.localpath import LocalUnavailable, boot_id, time_namespace
+from fxis_shm.shm.ring import Overwritten
+from fxis_shm.wire import protocol
+
+WAKE_MARGIN_NS = 1_500_000  # stop sleeping this long before a frame is due
+POLL_S = 0.0001  # then look at the write counters this often
+
+
+def same_clock(status: dict, our_boot_id: str | None = None) -> str | None:
+    """Why this process cannot read the service's clock as its own (None: it can)."""
+    ours = boot_id() if our_boot_id is None else our_boot_id
+    if status.get("boot_id") is None or status.get("boot_id") != ours:
+        return "the service runs on another kernel"
+    if (status.get("clock") or timebase.DEFAULT) != "monotonic":
+        return None  # time namespaces set CLOCK_MONOTONIC (and BOOTTIME) apart, not REALTIME or TAI
+    namespace = time_namespace()
+    if namespace is None or status.get("time_namespace") != namespace:
+        return "the service runs in another time namespace (its CLOCK_MONOTONIC is not ours)"
+    return None
+
+
+class LocalReads:
+    """The service's rings as this client maps them, and the engine that answers from them."""
+
+    def __init__(self, status: dict, our_boot_id: str | None = None, max_pooled_bytes: int = 128 << 20):
+        reason = same_clock(status, our_boot_id)
+        if reason:
+            raise LocalUnavailable(reason)
+        self.cameras: dict[str, CameraHandle] = {}
+        try:
+            for name, info in status["cameras"].items():
+                self.cameras[name] = handle = CameraHandle(status["service"], name, info["kind"])
+                ring = handle.ring()
+                if ring is None:
+                    raise LocalUnavailable(handle.last_error)
+                if info.get("instance") is not None and ring.instance != info["instance"]:
+                    raise LocalUnavailable(
+                        f"{ring.name} here is not the service's ring (another IPC namespace, or the ring was replaced)"
+                    )
+        except BaseException:
+            self.close()
+            raise
+        self.now = timebase.reader(status.get("clock") or timebase.DEFAULT)  # the service's clock
+        self.wire_clock = timebase.WIRE_NAMES[status.get("clock") or timebase.DEFAULT]
+        self.engine = RequestEngine(self.cameras, status.get("settings"))
+        self.copyout = CopyOut(self.cameras, self.engine.settings, BufferPool(max_pooled_bytes))
+
+    def serves(self, op: str, fields: dict) -> bool:
+        """False for requests only the coordinator can answer: those that fire software triggers."""
+        if op not in ("image", "tuple") or fields.get("at") is not None:
+            return True
+        names = [fields["camera"]] if fields.get("camera") else fields.get("cameras") or list(self.cameras)
+        return not any(c in self.cameras and self.cameras[c].slots and self.cameras[c].triggered for c in names)
+
+    def answer(
+        self, op: str, fields: dict, deadline_ns: int, copy: bool = True
+    ) -> tuple[dict, list, Callable[[], bool] | None]:
+        """The reply header, images and (for views) a validity check, as the coordinator would
+        send them. Raises the service's errors, or RequestTimeout at ``deadline_ns``."""
+        # the frames stay raw: nothing travels, so compressing would only cost
+        raw = {k: v for k, v in fields.items() if k not in ("encoding", "quality")}
+        request = protocol.request_of(op, id=None, **raw)
+        # Write counts read before every look the engine takes: a frame stored after a look
+        # shows as a changed count, however soon after the look it came.
+        seen = {c: h.reader.field("write_count") for c, h in self.cameras.items() if h.reader is not None}
+        actions = self.engine.submit(request, self.now(), ticket=op)
+        while True:
+            reply = settled(actions)
+            if reply is not None:
+                try:
+                    body, images = self.copyout.reply(reply, COPY if copy else VIEWS)
+                except Overwritten:  # the ring came round during the copy: plan again
+                    actions = self.engine.retry(reply, self.now())
+                    continue
+                body["timing"]["sent"] = self.now()
+                header = {"ok": True, "clock": self.wire_clock, **body}
+                return header, images, None if copy else self._validity(reply)
+            now = self.now()
+            if now >= deadline_ns:
+                self.engine.cancel_all()
+                raise RequestTimeout(f"no answer to {op!r} from the rings within the client's timeout")
+            waiting = {c for p in self.engine.pending for c in p.cameras}
+            updated = self._wait_for_frames(waiting, min(deadline_ns, self.engine.next_wake() or now), seen)
+            actions = self.engine.on_frames(updated, self.now())
+
+    def _wait_for_frames(self, cameras: set[str], until_ns: int, seen: dict[str, int]) -> set[str]:
+        """The cameras whose write count moved on from ``seen`` before ``until_ns`` (empty: none
+        did); ``seen`` is updated to the counts found."""
+        readers = {c: self.cameras[c].reader for c in cameras if self.cameras[c].reader is not None}
+        counts = {c: seen.get(c, -1) for c in readers}
+        due = min((_next_due(r) for r in readers.values()), default=until_ns)  # before the look below
+        if all(r.field("write_count") == counts[c] for c, r in readers.items()):  # else: no nap
+            nap_ns = min(due - WAKE_MARGIN_NS, until_ns) - self.now()
+            if nap_ns > 0:
+                time.sleep(nap_ns / 1e9)
+        while True:
+            now_counts = {c: r.field("write_count") for c, r in readers.items()}
+            updated = {c for c, n in now_counts.items() if n != counts[c]}
+            if updated or self.now() >= until_ns:
+                seen.update(now_counts)
+                return updated
+            time.sleep(POLL_S)
+
+    def _validity(self, reply: Reply) -> Callable[[], bool]:
+        slots = [
+            (self.cameras[c].reader, reply.snapshots[c].slot(i), reply.snapshots[c].seq(i)) for c, i in reply.plan.picks
+        ]
+        return lambda: all(reader.slot_holds(slot, seq) for reader, slot, seq in slots)
+
+    def close(self) -> None:
+        for handle in self.cameras.values():
+            handle.close()
+
+
+def settled(actions: list) -> Reply | None:
+    """The reply the engine's actions settle on, None if they are waits; raises a failure."""
+    for action in actions:
+        if isinstance(action, Failure):
+            raise service_error(action.code, action.message)
+        if isinstance(action, Reply):
+            return action
+    return None
+
+
+def _next_due(reader) -> int:
+    """When the ring's next frame should be stored: its newest frame's storage time plus a period."""
+    count = reader.field("write_count")
+    if count == 0:
+        return 0
+    newest_stored = int(reader.table["t_stored"][(count - 1) % reader.slots])
+    return newest_stored + reader.field("period_ns")

@@ -1,0 +1,211 @@
+"""Publish/subscribe: receive streams and event answers, publish request events.
+
+with Subscriber("tcp://127.0.0.1:5556") as sub:
+    sub.tuples(rate_hz=5)               # synchronized tuples, 5 per second
+    for message in sub:                 # raises RequestTimeout after ``timeout``
+        print(message.seq, message.tuple.skew_ns)
+
+with EventPublisher("tcp://127.0.0.1:5557") as events, Subscriber() as answers:
+    answers.topic("robot1/pairs")
+    handshake(events, answers, "robot1/pairs")   # PUB/SUB connect asynchronously
+    events.request("tuple", "robot1/pairs", at=t_star)
+    pair = answers.receive().tuple
+"""
+
+from __future__ import annotations
+
+import collections
+import itertools
+import secrets
+import time
+from dataclasses import dataclass
+
+import numpy as np
+import zmq
+
+from fxis_shm.client.frames import FrameTuple, frames_of, sequence_of, tuple_of
+from fxis_shm.client.sockets import SocketOwner, checked_encoding, connected_socket
+from fxis_shm.errors import ProtocolError, RequestTimeout, service_error
+from fxis_shm.wire import defaults, protocol
+from fxis_shm.wire.encoding import JPEG, RAW
+from fxis_shm.wire.protocol import StreamTopic
+from fxis_shm.wire.security import ClientKeys
+
+DEFAULT_PUB = defaults.PUB
+DEFAULT_EVENTS = defaults.EVENTS
+
+
+@dataclass
+class Message:
+    """One published message: a stream item or the answer to a request event."""
+
+    topic: str
+    header: dict
+    images: list[np.ndarray]
+
+    @property
+    def seq(self) -> int | None:
+        """Per-stream message number; a gap means messages were lost."""
+        return self.header.get("seq")
+
+    @property
+    def rate(self) -> dict | None:
+        """In a decimated stream's first message: the rate asked, the camera's, and whether
+        every frame is sent (the camera is no faster than the rate asked)."""
+        return self.header.get("rate")
+
+    @property
+    def ok(self) -> bool:
+        return bool(self.header.get("ok"))
+
+    def raise_for_error(self) -> None:
+        if not self.ok:
+            err = self.header.get("error") or {}
+            raise service_error(err.get("code", "UNKNOWN"), err.get("message", ""))
+
+    @property
+    def frames(self):
+        self.raise_for_error()
+        return frames_of(self.header, self.images)
+
+    @property
+    def tuple(self) -> FrameTuple:
+        self.raise_for_error()
+        return tuple_of(self.header, self.images)
+
+    def sequence(self, single: bool = False) -> list:
+        self.raise_for_error()
+        return sequence_of(self.header, self.images, single=single)
+
+
+def _stream(kind: str, camera: str | None, rate_hz: float | None, encoding: str, quality: int | None) -> StreamTopic:
+    checked_encoding(encoding, quality)
+    return StreamTopic(kind, camera, rate_hz, encoding, quality if encoding == JPEG else None)
+
+
+class Subscriber(SocketOwner):
+    """A SUB socket with a bounded queue; iterate it or call ``receive``."""
+
+    def __init__(
+        self,
+        endpoint: str = DEFAULT_PUB,
+        timeout: float = 2.0,
+        queue: int = 16,
+        context: zmq.Context | None = None,
+        keys: ClientKeys | None = None,
+    ):
+        self.endpoint = endpoint
+        self.timeout = timeout
+        self._sock = (context or zmq.Context.instance()).socket(zmq.SUB)
+        self._sock.setsockopt(zmq.LINGER, 0)
+        self._sock.setsockopt(zmq.RCVHWM, queue)  # set before connecting, so it applies
+        if keys is not None:
+            keys.apply(self._sock)
+        self._sock.connect(endpoint)
+        self._topics: set[str] = set()
+        self._held: collections.deque[Message] = collections.deque()
+
+    def topic(self, topic: str) -> str:
+        """Subscribe to exactly ``topic`` (ZeroMQ matches prefixes; messages on
+        longer topics that merely start with it are skipped here)."""
+        self._sock.setsockopt(zmq.SUBSCRIBE, topic.encode())
+        self._topics.add(topic)
+        return topic
+
+    def frames(
+        self, camera: str, rate_hz: float | None = None, *, encoding: str = RAW, quality: int | None = None
+    ) -> str:
+        """Subscribe to every frame of ``camera`` (or ``rate_hz`` of them per second), its
+        pixels raw or compressed (``encoding="jpeg"`` with ``quality``, or ``"png"``)."""
+        return self.topic(str(_stream("frames", camera, rate_hz, encoding, quality)))
+
+    def tuples(self, rate_hz: float | None = None, *, encoding: str = RAW, quality: int | None = None) -> str:
+        """Subscribe to synchronized tuples of all cameras as they complete."""
+        return self.topic(str(_stream("tuples", None, rate_hz, encoding, quality)))
+
+    def unsubscribe(self, topic: str) -> None:
+        self._sock.setsockopt(zmq.UNSUBSCRIBE, topic.encode())
+        self._topics.discard(topic)
+
+    def receive(self, timeout: float | None = None, latest: bool = False) -> Message:
+        """The next message on a subscribed topic; with ``latest``, the newest one queued."""
+        if self._held and not latest:
+            return self._held.popleft()
+        timeout = self.timeout if timeout is None else timeout
+        deadline = time.monotonic() + timeout
+        found = None
+        while found is None or (latest and self._sock.poll(0, zmq.POLLIN)):
+            wait_ms = 0 if found is not None else max(0.0, deadline - time.monotonic()) * 1000
+            if not self._sock.poll(wait_ms, zmq.POLLIN):
+                if found is not None:
+                    break
+                raise RequestTimeout(f"no message from {self.endpoint} within {timeout:.3g} s")
+            frames = self._sock.recv_multipart(copy=False)
+            if frames and frames[0].bytes.decode(errors="replace") in self._topics:
+                found = frames
+        if len(found) < 2:
+            raise ProtocolError("a published message needs a topic and a header")
+        header, images = protocol.decode_reply([f.buffer for f in found[1:]])
+        return Message(found[0].bytes.decode(errors="replace"), header, images)
+
+    def hold(self, message: Message) -> None:
+        """Put back a message read too early: the next ``receive`` returns it first."""
+        self._held.append(message)
+
+    def __iter__(self):
+        while True:
+            yield self.receive()
+
+
+class EventPublisher(SocketOwner):
+    """Publishes request events; the service answers each on its ``reply_topic``."""
+
+    def __init__(
+        self, endpoint: str = DEFAULT_EVENTS, context: zmq.Context | None = None, keys: ClientKeys | None = None
+    ):
+        self.endpoint = endpoint
+        self._prefix = secrets.token_hex(4)  # ids stay unique across publishers sharing a topic
+        self._ids = (f"{self._prefix}-{n}" for n in itertools.count(1))
+        self._sock = connected_socket(context, zmq.PUB, endpoint, keys)
+
+    def request(self, op: str, reply_topic: str, **fields) -> str:
+        """Publish one request event (op image, tuple, latest, sequence or time); returns its
+        id ("<publisher>-<n>"), which the answer's ``header["id"]`` repeats."""
+        request_id = next(self._ids)
+        self._sock.send_multipart(protocol.encode_event(op, reply_topic, id=request_id, **fields))
+        return request_id
+
+
+def handshake(events: EventPublisher, answers: Subscriber, reply_topic: str, timeout: float = 5.0) -> None:
+    """Wait until events reach the service and its answers reach ``answers``
+    (subscribed to ``reply_topic``): PUB/SUB connections form asynchronously
+    and drop what is sent before."""
+    deadline = time.monotonic() + timeout
+    probes = set()
+    while time.monotonic() < deadline:
+        probes.add(events.request("time", reply_topic))
+        try:
+            while True:
+                message = answers.receive(timeout=0.1)
+                if message.topic == reply_topic and message.header.get("id") in probes:
+                    _drain_probe_answers(answers, probes)
+                    return
+        except RequestTimeout:
+            continue
+    raise RequestTimeout(
+        f"no answer on {reply_topic!r} within {timeout} s: is the service "
+        f"listening on {events.endpoint} and publishing to {answers.endpoint}?"
+    )
+
+
+def _drain_probe_answers(answers: Subscriber, probes: set, settle_s: float = 0.05) -> None:
+    """Consume answers to earlier probes that are already on their way; anything
+    else seen meanwhile is kept for the subscriber's next ``receive``."""
+    while True:
+        try:
+            message = answers.receive(timeout=settle_s)
+        except RequestTimeout:
+            return
+        if message.header.get("id") not in probes:
+            answers.hold(message)
+            return

@@ -1,0 +1,455 @@
+"""The Python client: synchronized tuples and single frames as NumPy arrays.
+
+It uses a DEALER socket and tags every request with an id, so a timed-out
+request leaves the client usable (a reply that arrives late is recognised by
+its id and discarded), and a restarted service is reconnected to by itself.
+
+Two paths bring the pixels (``Frame.path`` says which one did): on the
+service's own kernel, the service replies with where the chosen frames are and
+the client copies them out of the shared-memory rings itself ("local", see
+fxis_shm.shm.localpath); elsewhere, or when the rings cannot be opened here, the
+frames travel in the reply ("network"), raw or compressed (``encoding``).
+
+Every time the client takes or returns is in the caller's clock (``clock``): it
+keeps an estimate of each service's clock against it (fxis_shm.core.clockmap, kept fresh
+in the background by fxis_shm.client.clocktracker), exactly 0 where the service provably
+reads the same clock.
+"""
+
+from __future__ import annotations
+
+import itertools
+import time
+from collections.abc import Callable
+
+import numpy as np
+import zmq
+
+from fxis_shm.client.clocktracker import ClockTracker
+from fxis_shm.client.frames import LOCAL, NETWORK, Frame, FrameTuple, frames_of, in_caller_clock, sequence_of, tuple_of
+from fxis_shm.client.localreads import LocalReads
+from fxis_shm.client.requesttimes import fixed_mapping, last_needed, same_moment
+from fxis_shm.client.sockets import SocketOwner, checked_encoding, connected_socket, wire_timeout_ms
+from fxis_shm.core import timebase
+from fxis_shm.core.clockmap import ClockEstimate
+from fxis_shm.errors import (
+    CameraDown,
+    InvalidArgument,
+    LocalPathUnavailable,
+    Overwritten,
+    RequestTimeout,
+    UnknownCamera,
+    service_error,
+)
+from fxis_shm.shm.localpath import LocalRings, LocalUnavailable, boot_id
+from fxis_shm.wire import defaults, encoding as codec, protocol
+from fxis_shm.wire.security import ClientKeys
+
+DEFAULT_ENDPOINT = defaults.ENDPOINT
+LOCAL_MODES = ("auto", "off", "require")
+_LOCAL_ATTEMPTS = 3  # requests re-asked after a torn local copy before giving up
+_LOCAL_RETRY_S = 10.0  # after the rings could not be opened, the network path this long
+_PERIODS_VALID_S = 10.0  # the cameras' periods learnt from the status, for sequences that wait
+
+
+class SingleClient(SocketOwner):
+    """A client of one service (what ``Client(endpoint)`` makes): every call raises
+    RequestTimeout after ``timeout`` seconds."""
+
+    def __init__(
+        self,
+        endpoint: str = DEFAULT_ENDPOINT,
+        timeout: float = 2.0,
+        context: zmq.Context | None = None,
+        keys: ClientKeys | None = None,
+        local: str = "auto",
+        *,
+        clock: Callable[[], int] | str | None = None,
+        encoding: str = codec.RAW,
+        quality: int | None = None,
+    ):
+        """``keys``: for a service with CurveZMQ, its public key and this client's pair
+        (``ClientKeys.from_files("server.key", "me.key_secret")``).
+
+        ``local``: "auto" copies frames straight from the service's shared-memory rings
+        when the service runs on this kernel and its rings can be opened (same user, same
+        /dev/shm), else takes them from the reply; "off" always takes them from the
+        reply; "require" raises LocalPathUnavailable rather than use the network path.
+
+        ``clock``: the caller's clock, in which every time is given and returned:
+        "monotonic" (default, ``time.monotonic_ns``), "realtime" (``time.time_ns``), "tai",
+        or any function returning int ns. ``client.clocks`` shows its relation to the
+        service's clock.
+
+        ``encoding``: how frames travel over the network ("raw", "jpeg" with ``quality``
+        1-100, default 90, or "png"); each request may say otherwise. The local path is raw."""
+        if local not in LOCAL_MODES:
+            raise InvalidArgument(f"local must be one of {LOCAL_MODES}, got {local!r}")
+        if not (callable(clock) or clock is None or isinstance(clock, str)):
+            raise InvalidArgument(f"clock must be a clock's name or a function returning int ns, got {clock!r}")
+        self.endpoint = endpoint
+        self.timeout = timeout
+        self.local = local
+        self.encoding, self.quality = checked_encoding(encoding, quality)
+        self._clock_name = timebase.name_of(clock)
+        self.clock: Callable[[], int] = clock if callable(clock) else timebase.reader(self._clock_name or "")
+        self._ids = itertools.count(1)
+        self._context, self._keys = context, keys
+        self._sock = connected_socket(context, zmq.DEALER, endpoint, keys)
+        self._identity: dict | None = None  # the service's kernel, time namespace and clock, from its status
+        self._mapping: ClockEstimate | None = None  # fixed: the service reads our clock (or one shared)
+        self._tracker: ClockTracker | None = None  # else: estimated
+        self._periods: tuple[float, float] | None = None  # (longest frame period, when learnt)
+        self._boot_id = boot_id()
+        self._rings = LocalRings()
+        self._reads: LocalReads | None = None  # answers from the rings without the coordinator
+        self._reads_off: tuple[str, float] | None = None  # why not, since when
+        self._local_off: tuple[str, float] | None = None  # why the local path is not used, since when
+        self.paths = {LOCAL: 0, NETWORK: 0, "torn": 0}  # replies by path; local copies found torn
+
+    def close(self) -> None:
+        if self._tracker is not None:
+            self._tracker.close()
+        self._drop_reads()
+        self._rings.close()
+        super().close()
+
+    @property
+    def local_unavailable(self) -> str | None:
+        """Why the last request could not use the local path (None: it could, or was not asked to)."""
+        return self._local_off[0] if self._local_off else None
+
+    # ---- operations ----
+
+    def image(
+        self,
+        camera: str,
+        *,
+        at: int | None = None,
+        wait: str | None = None,
+        timeout: float | None = None,
+        copy: bool = True,
+        encoding: str | None = None,
+        quality: int | None = None,
+        timeout_ms: float | None = None,
+    ) -> Frame:
+        """The frame of ``camera`` nearest to ``at`` (ns of the caller's clock; default: the
+        moment of this call).
+
+        ``timeout``: seconds the service may wait for frames (default: its setting).
+        ``copy=False`` (local path only): the image is a read-only view of the ring slot,
+        with no copy at all; check ``frame.still_valid()`` after using it.
+        ``encoding``/``quality``: as the client's, for this request."""
+        return frames_of(
+            *self._request("image", timeout, timeout_ms, copy, encoding, quality, camera=camera, at=at, wait=wait)
+        )[0]
+
+    def tuple(
+        self,
+        cameras: list[str] | None = None,
+        *,
+        at: int | None = None,
+        sync: str | None = None,
+        wait: str | None = None,
+        max_skew_ms: float | None = None,
+        timeout: float | None = None,
+        partial: bool = False,
+        copy: bool = True,
+        encoding: str | None = None,
+        quality: int | None = None,
+        timeout_ms: float | None = None,
+    ) -> FrameTuple:
+        """One frame per camera (default: all), nearest to ``at`` (ns of the caller's clock;
+        default: the moment of this call) and to each other. With ``partial``, cameras
+        that are down are left out (``.missing`` names them) instead of failing the request
+        with CameraDown."""
+        return tuple_of(
+            *self._request(
+                "tuple",
+                timeout,
+                timeout_ms,
+                copy,
+                encoding,
+                quality,
+                cameras=cameras,
+                at=at,
+                sync=sync,
+                wait=wait,
+                max_skew_ms=max_skew_ms,
+                partial=partial or None,
+            )
+        )
+
+    def latest(
+        self,
+        cameras: list[str] | None = None,
+        *,
+        copy: bool = True,
+        encoding: str | None = None,
+        quality: int | None = None,
+    ) -> FrameTuple:
+        """The newest stored frame of each camera, without waiting."""
+        return tuple_of(*self._request("latest", None, None, copy, encoding, quality, cameras=cameras))
+
+    def sequence(
+        self,
+        kind: str,
+        *,
+        camera: str | None = None,
+        cameras: list[str] | None = None,
+        count: int | None = None,
+        direction: str = "before",
+        interval_ms: float | None = None,
+        start: int | None = None,
+        end: int | None = None,
+        at: int | None = None,
+        sync: str | None = None,
+        timeout: float | None = None,
+        copy: bool = True,
+        encoding: str | None = None,
+        quality: int | None = None,
+        timeout_ms: float | None = None,
+    ) -> list:
+        """Several frames of one ``camera`` (a list of Frame) or tuples of ``cameras``
+        (default all; a list of FrameTuple):
+
+        - ``kind="consecutive"``: ``count`` frames ``before``, ``after`` or ``around`` t*;
+        - ``kind="interval"``: the frames nearest to t* + i*interval_ms, i = 0..count-1;
+        - ``kind="range"``: every frame captured in [start, end] (ns of the caller's clock).
+        """
+        header, images, check = self._request(
+            "sequence",
+            timeout,
+            timeout_ms,
+            copy,
+            encoding,
+            quality,
+            camera=camera,
+            cameras=cameras,
+            kind=kind,
+            count=count,
+            direction=direction,
+            interval_ms=interval_ms,
+            start=start,
+            end=end,
+            at=at,
+            sync=sync,
+        )
+        return sequence_of(header, images, check, single=camera is not None)
+
+    @property
+    def clocks(self) -> dict[str, ClockEstimate]:
+        """The service's clock against the caller's: offset (service minus caller), drift,
+        uncertainty and how it is known ("same clock", "shared", "estimated")."""
+        return {self.endpoint: self.clock_estimate()}
+
+    def clock_estimate(self) -> ClockEstimate:
+        """The current mapping of the caller's clock onto the service's (see ``clocks``)."""
+        if self._mapping is None and self._tracker is None:
+            self._mapping = fixed_mapping(self._clock_name, self._service_identity())
+            if self._mapping is None:
+                self._tracker = ClockTracker(
+                    lambda: connected_socket(self._context, zmq.DEALER, self.endpoint, self._keys),
+                    self.clock,
+                    self.endpoint,
+                    self.timeout,
+                )
+        return self._mapping or self._tracker.estimate()  # type: ignore[union-attr]
+
+    def _longest_period_s(self) -> float:
+        """The slowest camera's frame period: from the rings when they are read here (no
+        request), else from the service's status, looked at again after a while."""
+        reads = self._local_reads()
+        if reads is not None:
+            periods = [h.period_ns for h in reads.cameras.values() if h.period_ns > 0]
+            return max(periods, default=1e9) / 1e9
+        if self._periods is None or time.monotonic() - self._periods[1] > _PERIODS_VALID_S:
+            cams = self.status()["cameras"].values()
+            self._periods = (max((1 / c["fps"] for c in cams if c.get("fps")), default=1.0), time.monotonic())
+        return self._periods[0]
+
+    def status(self) -> dict:
+        status = self._call("status", 0.0)[0]
+        self._identity = {k: status.get(k) for k in ("boot_id", "time_namespace", "clock")}
+        return status
+
+    def time(self) -> int:
+        """The service's clock now (int ns of the clock its status names; CLOCK_MONOTONIC by default)."""
+        return self._call("time", 0.0)[0]["now"]
+
+    def _service_identity(self) -> dict:
+        if self._identity is None:
+            self.status()
+        assert self._identity is not None
+        return self._identity
+
+    def _request(
+        self,
+        op: str,
+        timeout: float | None,
+        timeout_ms: float | None,
+        copy: bool,
+        encoding: str | None,
+        quality: int | None,
+        **fields,
+    ) -> tuple[dict, list, Callable | None]:
+        """A frame request with the caller's times moved into the service's clock, and the
+        reply's moved back. Without ``at``, t* is the moment of the call (the request's
+        travel time does not count)."""
+        called = self.clock()
+        waits_ms = wire_timeout_ms(timeout, timeout_ms)
+        mapping = self.clock_estimate()
+        last = last_needed(op, fields)  # in the caller's clock
+        extra = max(0.0, (waits_ms or 0) / 1000 - self.timeout / 2)
+        if last is not None:
+            extra += max(0.0, (last - called) / 1e9)
+        if op == "sequence" and fields["kind"] == "consecutive" and fields["direction"] != "before" and fields["count"]:
+            extra += fields["count"] * self._longest_period_s()
+        for key in ("at", "start", "end"):
+            if fields.get(key) is not None:
+                fields[key] = mapping.to_service(fields[key])
+        if op != "latest" and fields.get("at") is None:
+            fields["t_call"] = mapping.to_service(called)
+        if encoding is not None or quality is not None:
+            encoding, quality = checked_encoding(encoding or self.encoding, quality)
+        else:
+            encoding, quality = self.encoding, self.quality
+        if encoding != codec.RAW:
+            fields.update(encoding=encoding, quality=quality)
+        header, images, check = self._fetch(op, extra, copy, timeout_ms=waits_ms, **fields)
+        return in_caller_clock(header, mapping), images, check
+
+    def frame_times(self, cameras: list[str] | None = None) -> dict:
+        """Each camera's frames without pixels (the ``frames`` op): liveness, period and a row
+        per valid frame with the fields named in ``columns``, times in the service's clock."""
+        return self._call("frames", 0.0, cameras=cameras)[0]
+
+    # ---- the two paths ----
+
+    def _fetch(self, op: str, extra_wait: float, copy: bool, **fields) -> tuple[dict, list, Callable | None]:
+        """A request for frames, over the local path if it can be used: the reply header,
+        the images (the header's ``path`` set) and a validity check for zero-copy views.
+        Where the rings can be read with the service's own clock, the client answers
+        itself (fxis_shm.client.localreads); otherwise the coordinator chooses the frames."""
+        reads = self._local_reads()
+        if reads is not None and reads.serves(op, fields):
+            return self._read_locally(op, extra_wait, copy, fields)
+        if self._local_usable():
+            for _ in range(_LOCAL_ATTEMPTS):
+                header, images = self._call(op, extra_wait, local=self._boot_id, **fields)
+                if header.get("delivery") != protocol.LOCAL:  # the service is on another kernel
+                    self._give_up_local("the service runs on another kernel")
+                    return self._network_reply(header, images)
+                try:
+                    images = self._rings.images(header["frames"], copy)
+                except Overwritten:  # we were too slow: the ring came round; ask again
+                    self.paths["torn"] += 1
+                    continue
+                except LocalUnavailable as exc:  # the frames are there, just not here: same t*
+                    self._give_up_local(str(exc))
+                    fields = same_moment(op, fields, header)
+                    break
+                self.paths[LOCAL] += 1
+                self._local_off = None  # (again) usable
+                header["path"] = LOCAL
+                check = None if copy else (lambda metas=header["frames"]: all(map(self._rings.still_valid, metas)))
+                return header, images, check
+            else:
+                raise Overwritten(
+                    f"the frames of {op!r} were overwritten in the rings {_LOCAL_ATTEMPTS} "
+                    "times before this client could copy them (is it starved of CPU, "
+                    "or are the rings too short?)"
+                )
+        if self.local == "require":
+            raise LocalPathUnavailable(f"the local fast path cannot be used: {self.local_unavailable}")
+        return self._network_reply(*self._call(op, extra_wait, **fields))
+
+    def _read_locally(self, op: str, extra_wait: float, copy: bool, fields: dict) -> tuple[dict, list, Callable | None]:
+        deadline = self._reads.now() + int((self.timeout + extra_wait) * 1e9)
+        try:
+            header, images, check = self._reads.answer(op, fields, deadline, copy)
+        except (CameraDown, UnknownCamera):
+            # The service may have been restarted with new rings or other cameras: learn them again, once.
+            self._drop_reads()
+            if self._local_reads() is None:
+                raise
+            header, images, check = self._reads.answer(op, fields, deadline, copy)
+        self.paths[LOCAL] += 1
+        header["path"] = LOCAL
+        return header, images, check
+
+    def _local_reads(self) -> LocalReads | None:
+        """The client's own reads of the rings, learnt from the service's status once."""
+        if self.local == "off":
+            return None
+        if self._reads is not None:
+            return self._reads
+        if self._reads_off is not None and time.monotonic() - self._reads_off[1] < _LOCAL_RETRY_S:
+            return None
+        try:
+            self._reads = LocalReads(self.status(), self._boot_id)
+            self._reads_off = None
+        except LocalUnavailable as exc:
+            self._reads_off = (str(exc), time.monotonic())
+        return self._reads
+
+    def _drop_reads(self) -> None:
+        if self._reads is not None:
+            self._reads.close()
+            self._reads = None
+
+    def _network_reply(self, header: dict, images: list) -> tuple[dict, list, None]:
+        self.paths[NETWORK] += 1
+        header["path"] = NETWORK
+        return header, images, None
+
+    def _local_usable(self) -> bool:
+        if self.local == "off":
+            return False
+        if self._boot_id is None:
+            self._local_off = ("this kernel has no boot id to compare", time.monotonic())
+            return False
+        if self._local_off is not None and time.monotonic() - self._local_off[1] < _LOCAL_RETRY_S:
+            return False
+        return True
+
+    def _give_up_local(self, reason: str) -> None:
+        """Take the network path for a while: the rings cannot be read here now."""
+        self._local_off = (reason, time.monotonic())
+        if self.local == "require":
+            raise LocalPathUnavailable(f"the local fast path cannot be used: {reason}")
+
+    # ---- plumbing ----
+
+    def _call(self, op: str, extra_wait: float, **fields) -> tuple[dict, list[np.ndarray]]:
+        request_id = next(self._ids)
+        deadline = time.monotonic() + self.timeout + extra_wait
+        # A DEALER with no connected peer (service down, or our keys refused) would
+        # block in send: wait for it to become writable within our own deadline.
+        unsendable = RequestTimeout(
+            f"could not send {op!r} to {self.endpoint} within "
+            f"{self.timeout:.3g} s (is the service running, and are our keys accepted?)"
+        )
+        if not self._sock.poll(self.timeout * 1000, zmq.POLLOUT):
+            raise unsendable
+        try:
+            self._sock.send_multipart([b""] + protocol.encode_request(op, id=request_id, **fields), flags=zmq.NOBLOCK)
+        except zmq.Again:  # the peer went away between the poll and the send
+            raise unsendable from None
+        while True:
+            remaining = deadline - time.monotonic()
+            if remaining <= 0 or not self._sock.poll(remaining * 1000, zmq.POLLIN):
+                raise RequestTimeout(
+                    f"no reply to {op!r} from {self.endpoint} within {self.timeout + extra_wait:.3g} s "
+                    "(is the service running?)"
+                )
+            frames = self._sock.recv_multipart(copy=False)
+            if frames and len(frames[0].bytes) == 0:
+                frames = frames[1:]
+            header, images = protocol.decode_reply([f.buffer for f in frames])
+            if header.get("id") != request_id:
+                continue  # the late reply to an earlier request that timed out
+            if not header["ok"]:
+                err = header.get("error") or {}
+                raise service_error(err.get("code", "UNKNOWN"), err.get("message", ""))
+            return header, images

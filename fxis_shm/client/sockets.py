@@ -1,0 +1,59 @@
+"""What every socket of the client side shares: the frame encoding checked before a request
+leaves, a connected socket that never blocks on close, closing as a context manager, and a
+request's own timeout as the wire carries it."""
+
+from __future__ import annotations
+
+import warnings
+
+import zmq
+
+from fxis_shm.errors import InvalidArgument, ProtocolError
+from fxis_shm.wire import encoding as codec
+from fxis_shm.wire.security import ClientKeys
+
+
+def checked_encoding(encoding: str, quality: int | None) -> tuple[str, int | None]:
+    """``encoding`` and ``quality`` if a service can send frames so, else InvalidArgument."""
+    try:
+        codec.check(encoding, codec.DEFAULT_JPEG_QUALITY if quality is None else quality)
+    except ProtocolError as exc:
+        raise InvalidArgument(exc.message) from None
+    return encoding, quality
+
+
+def connected_socket(
+    context: zmq.Context | None, kind: int, endpoint: str, keys: ClientKeys | None = None
+) -> zmq.Socket:
+    """A client socket: LINGER 0 (closing never blocks), CURVE if keys are given."""
+    sock = (context or zmq.Context.instance()).socket(kind)
+    sock.setsockopt(zmq.LINGER, 0)
+    if keys is not None:
+        keys.apply(sock)
+    sock.connect(endpoint)
+    return sock
+
+
+class SocketOwner:
+    """Closes its one ZeroMQ socket (``self._sock``) on ``close`` and on leaving a ``with``."""
+
+    _sock: zmq.Socket
+
+    def close(self) -> None:
+        self._sock.close()
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+def wire_timeout_ms(timeout: float | None, timeout_ms: float | None) -> float | None:
+    """A request's own timeout for the wire (ms), from ``timeout`` in seconds as everywhere in
+    this API; ``timeout_ms``, the old name, still works but warns."""
+    if timeout_ms is not None:
+        warnings.warn("timeout_ms= is deprecated: give timeout= in seconds", DeprecationWarning, stacklevel=3)
+        if timeout is None:
+            return timeout_ms
+    return None if timeout is None else timeout * 1000

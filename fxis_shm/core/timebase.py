@@ -1,0 +1,74 @@
+"""Which clock times are in. A service stamps frames and reads "now" in one clock for
+all its processes (``fxis run --clock``): CLOCK_MONOTONIC by default (never steps;
+shared by every process of a host), or CLOCK_REALTIME / CLOCK_TAI where PTP (linuxptp's
+ptp4l + phc2sys) or chrony keeps the hosts of a cell in step, so that a caller on another
+host reading the same clock needs no estimate of the offset.
+
+A caller names its own clock the same way (``Client(clock="realtime")``) or passes a
+function returning int ns.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+from fxis_shm.errors import InvalidArgument
+
+_CLOCK_TAI = getattr(time, "CLOCK_TAI", 11)  # Linux's number, for Pythons that lack the name
+CLOCK_IDS = {"monotonic": time.CLOCK_MONOTONIC, "realtime": time.CLOCK_REALTIME, "tai": _CLOCK_TAI}
+WIRE_NAMES = {"monotonic": "CLOCK_MONOTONIC", "realtime": "CLOCK_REALTIME", "tai": "CLOCK_TAI"}
+DEFAULT = "monotonic"
+
+
+def check(name: str) -> str:
+    if name not in CLOCK_IDS:
+        raise InvalidArgument(f"unknown clock {name!r}: use one of {', '.join(CLOCK_IDS)}")
+    return name
+
+
+def reader(name: str) -> Callable[[], int]:
+    """A function reading clock ``name`` in int ns."""
+    if check(name) == "monotonic":
+        return time.monotonic_ns
+    if name == "realtime":
+        return time.time_ns
+    clock_id = CLOCK_IDS[name]
+    return lambda: time.clock_gettime_ns(clock_id)
+
+
+def name_of(clock: Callable[[], int] | str | None) -> str | None:
+    """The name of a caller's clock given as a name or as one of the readers above (None:
+    some other function, whose relation to any service clock must be estimated)."""
+    if clock is None:
+        return DEFAULT
+    if isinstance(clock, str):
+        return check(clock)
+    return {time.monotonic_ns: "monotonic", time.time_ns: "realtime"}.get(clock)
+
+
+# The clock of this process's service (set once at the start of each service process).
+_service_clock = DEFAULT
+now: Callable[[], int] = time.monotonic_ns
+
+
+def use(name: str) -> None:
+    """Make ``now`` read clock ``name``: the service's processes call it first thing."""
+    global _service_clock, now
+    _service_clock, now = check(name), reader(name)
+
+
+def service_clock() -> str:
+    return _service_clock
+
+
+def wire_name() -> str:
+    """The service's clock as replies name it ("CLOCK_MONOTONIC", ...)."""
+    return WIRE_NAMES[_service_clock]
+
+
+def service_and_tai() -> tuple[int, int]:
+    """This process's service clock and CLOCK_TAI, read together (for PTP camera timestamps)."""
+    first = now()
+    tai = time.clock_gettime_ns(CLOCK_IDS["tai"])
+    return (first + now()) // 2, tai

@@ -1,0 +1,99 @@
+"""What a recording takes next from the rings, and what it missed (``fxis record``).
+
+A recorder polls each camera's frame list (the ``frames`` op: ids and times, no pixels)
+and takes the frames it has not taken yet, as one sequence. Two kinds of gap in the
+frame ids are told apart, because only one of them is the recorder's fault:
+
+- the camera skipped ids (it dropped frames before the ring saw them): the gap lies
+  between two frames the ring holds, so the recorder could not have had them;
+- the ring came round before the recorder took them (it fell behind): the last frame
+  taken is no longer in the ring, and every id between it and the oldest held is missed.
+
+Pure: frame rows and times in, decisions out.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+from fxis_shm.core.decimation import Decimator
+
+# The columns of a ``frames`` row (fxis_shm.shm.cameras.FRAME_FIELDS).
+ID, T_CAPTURE, GENERATION = 0, 1, 4
+
+
+@dataclass
+class Follower:
+    """One camera's recording: the frames taken so far and those missed."""
+
+    t_start: int  # frames captured before this are not part of the recording
+    rate_hz: float | None = None  # None: every frame; else thinned on purpose to this rate
+    last_id: int | None = None
+    last_t: int | None = None
+    generation: int | None = None
+    missed: int = 0  # frames the ring held but the recorder did not take in time
+    taken: int = 0
+    decimator: Decimator = field(init=False)
+
+    def __post_init__(self):
+        self.decimator = Decimator(self.rate_hz)
+
+    def new_frames(self, rows: list[list[int]], period_ns: int) -> list[list[int]]:
+        """The rows (oldest first, as the ``frames`` op lists them) to take now. Counts
+        what fell out of the ring since the last call into ``missed``."""
+        fresh = [
+            r for r in rows if r[T_CAPTURE] >= self.t_start and (self.last_t is None or r[T_CAPTURE] > self.last_t)
+        ]
+        if not fresh:
+            return []
+        first = fresh[0]
+        if first[GENERATION] != self.generation:
+            self.last_id = None  # a restarted camera counts its ids afresh: no gap to measure
+        elif self.last_id is not None and rows[0][T_CAPTURE] > self.last_t:
+            # the last frame taken has left the ring: everything up to the oldest held is lost
+            self.missed += max(0, first[ID] - self.last_id - 1)
+        chosen = [r for r in fresh if self.decimator.offer(r[T_CAPTURE], period_ns)]
+        last = fresh[-1]
+        self.last_id, self.last_t, self.generation = last[ID], last[T_CAPTURE], last[GENERATION]
+        return chosen
+
+    def lost(self, count: int) -> None:
+        """Frames chosen but overwritten before their pixels could be copied."""
+        self.missed += count
+
+
+@dataclass
+class Steps:
+    """``--tuples``: one synchronized tuple at t0 + k/rate for k = 0, 1, ..."""
+
+    t0: int
+    rate_hz: float
+    next_k: int = 0
+    taken: int = 0
+    missed: int = 0  # steps whose frames had left the rings before the recorder asked
+
+    @property
+    def interval_ns(self) -> float:
+        return 1e9 / self.rate_hz
+
+    def time(self, k: int) -> int:
+        return self.t0 + round(k * self.interval_ns)  # from t0: no rounding drift
+
+    def due(self, now: int, oldest_held: int, limit: int) -> list[int]:
+        """The step times to ask for now (at most ``limit``): those not in the future.
+        Steps older than ``oldest_held`` (the newest of the cameras' oldest frames)
+        cannot be answered any more and are counted as missed."""
+        while self.time(self.next_k) < oldest_held and self.time(self.next_k) <= now:
+            self.next_k += 1
+            self.missed += 1
+        times = []
+        while len(times) < limit and self.time(self.next_k + len(times)) <= now:
+            times.append(self.time(self.next_k + len(times)))
+        return times
+
+    def advance(self, count: int, answered: bool = True) -> None:
+        self.next_k += count
+        if answered:
+            self.taken += count
+        else:
+            self.missed += count

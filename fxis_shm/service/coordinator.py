@@ -1,0 +1,338 @@
+"""The coordinator: the sockets and the poll loop around the request engine.
+
+One thread runs one poll loop over the ROUTER socket (requests from REQ and
+DEALER clients), the SUB socket (request events), the XPUB socket (streams
+and event answers) and the frame notifications of FrameWatch. A request goes
+receive -> engine (fxis_shm.core.engine: wait or answer, and with which frames) ->
+copy (fxis_shm.shm.copyout) -> reply. A request that must wait stays in the engine
+and is evaluated again when frames arrive or its wake-up time passes, so it
+never delays other clients.
+"""
+
+from __future__ import annotations
+
+import json
+import logging
+import threading
+from collections.abc import Callable
+
+import zmq
+from zmq.auth.thread import ThreadAuthenticator
+
+from fxis_shm.core import timebase
+from fxis_shm.core.engine import FRAME_OPS, Action, Failure, Reply, RequestEngine, Trigger
+from fxis_shm.errors import Code, ConfigError, ProtocolError
+from fxis_shm.service.childspec import CoordinatorSpec
+from fxis_shm.service.framewatch import FrameWatch
+from fxis_shm.service.streams import Streams
+from fxis_shm.shm import naming, ordering
+from fxis_shm.shm.cameras import FRAME_FIELDS, CameraHandle
+from fxis_shm.shm.copyout import CopyOut
+from fxis_shm.shm.localpath import boot_id, time_namespace
+from fxis_shm.shm.ring import Overwritten
+from fxis_shm.wire import protocol
+from fxis_shm.wire.security import load_pair, make_server
+
+log = logging.getLogger("coordinator")
+
+_PUB_QUEUE = 16  # messages queued per subscriber; beyond, that subscriber loses messages
+MAX_MESSAGE_BYTES = 1 << 20  # a peer sending more is disconnected by ZeroMQ
+
+
+class _Stopping:
+    """Gives the authenticator thread the close() the shutdown loop calls."""
+
+    def __init__(self, auth):
+        self.auth = auth
+
+    def close(self) -> None:
+        self.auth.stop()
+
+
+def split_envelope(frames: list) -> tuple[list, list]:
+    """ROUTER frames -> (routing envelope incl. the empty delimiter, body)."""
+    for i in range(1, len(frames)):
+        if len(frames[i]) == 0:
+            return frames[: i + 1], frames[i + 1 :]
+    return frames[:1], frames[1:]
+
+
+def send_parts(sock: zmq.Socket, parts: list) -> None:
+    """One multipart message, without blocking: image buffers handed to ZeroMQ
+    without a copy, small byte strings copied (cheaper than tracking them)."""
+    last = len(parts) - 1
+    for i, part in enumerate(parts):
+        flags = zmq.NOBLOCK | (zmq.SNDMORE if i < last else 0)
+        sock.send(part, flags, copy=isinstance(part, (bytes, zmq.Frame)))
+
+
+def _readable_field(frame: bytes, name: str, kinds: tuple):
+    """A field of a header we could not decode, if it is there and readable."""
+    try:
+        value = json.loads(bytes(frame)).get(name)
+        return value if isinstance(value, kinds) and not isinstance(value, bool) else None
+    except Exception:
+        return None
+
+
+class Coordinator:
+    def __init__(self, spec: CoordinatorSpec):
+        self.service = spec.service
+        self.endpoint = spec.endpoint
+        self.pub_endpoint = spec.pub
+        self.events_endpoint = spec.events
+        self.curve = None
+        if spec.curve_secret:
+            self.curve = (load_pair(spec.curve_secret), spec.curve_clients)
+        self.cameras = {name: CameraHandle(self.service, name, kind) for name, kind in spec.cameras.items()}
+        self.engine = RequestEngine(self.cameras, spec.settings)
+        self.settings = self.engine.settings
+        self.copyout = CopyOut(self.cameras, self.settings)
+        self.started_ns = timebase.now()
+        self.requests_served = 0
+        self.events_dropped = 0
+        self.boot_id = boot_id()
+        self.time_namespace = time_namespace()
+
+    # ---- the loop ----
+
+    def serve(self, stop: threading.Event, on_ready: Callable[[], None] = lambda: None) -> None:
+        ctx = zmq.Context()
+        closing = []
+        try:
+            if self.curve is not None:  # only clients whose public keys are in the folder
+                auth = ThreadAuthenticator(ctx, log=logging.getLogger("auth"))
+                auth.start()
+                auth.configure_curve(domain="*", location=self.curve[1])
+                closing.append(_Stopping(auth))
+            self.router = self._socket(ctx, zmq.ROUTER, self.endpoint, "request endpoint", closing)
+            self.router.setsockopt(zmq.ROUTER_MANDATORY, 1)  # report unsendable replies
+            self.pub = self._socket(ctx, zmq.XPUB, self.pub_endpoint, "publish endpoint", closing)
+            self.events = None
+            if self.events_endpoint:
+                self.events = self._socket(ctx, zmq.SUB, self.events_endpoint, "events endpoint", closing)
+                self.events.setsockopt(zmq.SUBSCRIBE, protocol.EVENT_TOPIC)
+            watch = FrameWatch(ctx, self.service, list(self.cameras))
+            closing.append(watch)
+            self.streams = Streams(self.copyout, self._publish)
+            poller = zmq.Poller()
+            for sock in (self.router, self.pub, self.events, watch.pull):
+                if sock is not None:
+                    poller.register(sock, zmq.POLLIN)
+            on_ready()
+            log.info(
+                "serving %s on %s, publishing on %s, events on %s",
+                sorted(self.cameras),
+                self.endpoint,
+                self.pub_endpoint,
+                self.events_endpoint or "-",
+            )
+            while not stop.is_set():
+                events = dict(poller.poll(self._poll_timeout_ms()))
+                updated = watch.drain() if watch.pull in events else set()
+                if self.pub in events:
+                    self._drain_subscriptions()
+                if self.router in events:
+                    self._drain(self.router, self._on_request)
+                if self.events is not None and self.events in events:
+                    self._drain(self.events, self._on_event)
+                if updated or self._due():
+                    self._carry_out(self.engine.on_frames(updated, timebase.now()))
+                if updated:
+                    self.streams.on_frames(updated, timebase.now())
+        finally:
+            for sock in reversed(closing):
+                sock.close()
+            for cam in self.cameras.values():
+                cam.close()
+            ctx.term()
+
+    def _socket(self, ctx, kind, endpoint: str, what: str, closing: list):
+        sock = ctx.socket(kind)
+        closing.append(sock)
+        sock.setsockopt(zmq.LINGER, 0)
+        if self.curve is not None:
+            make_server(sock, *self.curve[0])
+        sock.setsockopt(zmq.SNDHWM, _PUB_QUEUE if kind == zmq.XPUB else 100)
+        sock.setsockopt(zmq.MAXMSGSIZE, MAX_MESSAGE_BYTES)
+        try:
+            sock.bind(endpoint)
+        except zmq.ZMQError as exc:
+            raise ConfigError(f"cannot bind the {what} {endpoint}: {exc}") from None
+        return sock
+
+    def _poll_timeout_ms(self) -> int:
+        wake = self.engine.next_wake()
+        if wake is None:
+            return 200
+        return max(0, min(200, (wake - timebase.now()) // 1_000_000 + 1))
+
+    def _due(self) -> bool:
+        wake = self.engine.next_wake()
+        return wake is not None and wake <= timebase.now()
+
+    def _drain_subscriptions(self) -> None:
+        while True:
+            try:
+                message = self.pub.recv(zmq.NOBLOCK)
+            except zmq.Again:
+                return
+            if message and message[0] in (0, 1):
+                self.streams.subscription(message[1:].decode(errors="replace"), message[0] == 1)
+
+    @staticmethod
+    def _drain(sock, handle, budget: int = 256) -> None:
+        for _ in range(budget):
+            try:
+                frames = sock.recv_multipart(zmq.NOBLOCK)
+            except zmq.Again:
+                return
+            try:
+                handle(frames, timebase.now())
+            except Exception:  # no message may take the service down
+                log.exception("a message could not be handled; dropped")
+
+    # ---- requests and events ----
+
+    def _on_request(self, frames: list, t_received: int) -> None:
+        envelope, body = split_envelope(frames)
+        respond = lambda reply: self._send(envelope, reply)  # noqa: E731
+        try:
+            request = protocol.decode_request(body)
+        except ProtocolError as exc:
+            log.info("bad request: %s", exc.message)
+            rid = _readable_field(body[0], "id", (int, str)) if body else None
+            respond(protocol.encode_error(rid, exc.code, exc.message))
+            return
+        self._start(request, respond, t_received, client=bytes(envelope[0]))
+
+    def _on_event(self, frames: list, t_received: int) -> None:
+        try:
+            request = protocol.decode_event(frames)
+        except ProtocolError as exc:
+            topic = _readable_field(frames[-1], "reply_topic", (str,)) if frames else None
+            if topic and not topic.startswith(protocol.RESERVED_TOPICS):
+                self._publish(
+                    topic, protocol.encode_error(_readable_field(frames[-1], "id", (int, str)), exc.code, exc.message)
+                )
+            else:
+                self.events_dropped += 1
+            log.warning("dropped a malformed request event: %s", exc.message)
+            return
+        topic = request["reply_topic"]
+        self._start(request, lambda reply: self._publish(topic, reply), t_received)
+
+    def _start(
+        self, request: dict, respond: Callable[[list], None], t_received: int, client: bytes | None = None
+    ) -> None:
+        op = request["op"]
+        try:
+            if op not in FRAME_OPS:
+                self._reply(respond, request, getattr(self, f"_op_{op}")(request, t_received))
+                return
+            local = self.boot_id is not None and request.get("local") == self.boot_id
+            self._carry_out(self.engine.submit(request, t_received, respond, client=client, local=local))
+        except ProtocolError as exc:  # a request that cannot be answered as asked
+            respond(protocol.encode_error(request["id"], exc.code, exc.message))
+        except Exception as exc:  # a bug must not take the service down
+            log.exception("internal error on %s", op)
+            respond(protocol.encode_error(request["id"], Code.INTERNAL, repr(exc)))
+
+    def _carry_out(self, actions: list[Action]) -> None:
+        """Do what the engine decided: fire triggers, copy frames out and reply, or fail."""
+        for action in actions:
+            if isinstance(action, Trigger):
+                for cam in action.cameras:
+                    self.cameras[cam].fire_trigger()
+            elif isinstance(action, Failure):
+                action.pending.ticket(protocol.encode_error(action.pending.id, action.code, action.message))
+            else:
+                self._answer(action)
+
+    def _answer(self, reply: Reply) -> None:
+        try:
+            body, images = self.copyout.reply(reply)
+        except Overwritten:  # the ring came round during the copy: the engine plans again
+            self._carry_out(self.engine.retry(reply, timebase.now()))
+            return
+        self._reply(reply.pending.ticket, reply.pending.request, body, images)
+
+    def _op_status(self, request: dict, t_received: int) -> dict:
+        now = timebase.now()
+        return {
+            "op": "status",
+            "service": self.service,
+            "now": now,
+            "boot_id": self.boot_id,
+            "time_namespace": self.time_namespace,
+            "clock": timebase.service_clock(),
+            "encoded": self.copyout.encoded.status(),
+            "ring_ordering": ordering.MODE,
+            "uptime_s": round((now - self.started_ns) / 1e9, 3),
+            "endpoint": self.endpoint,
+            "pub": self.pub_endpoint,
+            "events": self.events_endpoint,
+            "pending": len(self.engine.pending),
+            "requests_served": self.requests_served,
+            "events_dropped": self.events_dropped,
+            "streams": self.streams.status(),
+            "supervisor": self._supervisor_state(),
+            "settings": self.settings,
+            "cameras": self._camera_status(now),
+        }
+
+    def _camera_status(self, now: int) -> dict:
+        processes = (self._supervisor_state() or {}).get("processes", {})
+        cameras = {name: cam.status(now) for name, cam in self.cameras.items()}
+        for name, info in cameras.items():
+            info["restarts"] = processes.get(f"camera:{name}", {}).get("restarts")
+        return cameras
+
+    def _supervisor_state(self) -> dict | None:
+        try:
+            with open(naming.supervisor_state_path(self.service)) as f:
+                return json.load(f)
+        except (OSError, ValueError):
+            return None
+
+    def _op_time(self, request: dict, t_received: int) -> dict:
+        """The clock now, and when the request was received: a caller estimating our clock
+        against its own takes both (an NTP-style exchange of four timestamps)."""
+        return {"op": "time", "received": t_received, "now": timebase.now(), "boot_id": self.boot_id}
+
+    def _op_frames(self, request: dict, t_received: int) -> dict:
+        """Every camera's frame times without pixels, for callers that choose frames
+        themselves (a client over several services)."""
+        names = request["cameras"] or list(self.cameras)
+        unknown = [n for n in names if n not in self.cameras]
+        if unknown:
+            raise ProtocolError(f"unknown camera(s) {unknown}; known: {sorted(self.cameras)}", Code.UNKNOWN_CAMERA)
+        now = timebase.now()
+        return {
+            "op": "frames",
+            "now": now,
+            "columns": list(FRAME_FIELDS),
+            "cameras": {n: self.cameras[n].timeline(now) for n in names},
+        }
+
+    # ---- replies ----
+
+    def _reply(self, respond, request: dict, body: dict, images: list = ()) -> None:
+        if "timing" in body:
+            body["timing"]["sent"] = timebase.now()
+        self.requests_served += 1
+        respond(protocol.encode_reply(request["id"], body, images))
+
+    def _send(self, envelope: list, frames: list) -> None:
+        try:
+            send_parts(self.router, envelope + frames)
+        except zmq.Again:
+            log.warning("dropped a reply: the client is not reading its replies")
+        except zmq.ZMQError as exc:  # EHOSTUNREACH: the client went away
+            log.info("could not send a reply: %s", exc)
+
+    def _publish(self, topic: str, frames: list) -> None:
+        try:  # a subscriber whose queue is full loses this message; nobody waits
+            send_parts(self.pub, [topic.encode(), *frames])
+        except zmq.ZMQError as exc:
+            log.debug("could not publish on %s: %s", topic, exc)

@@ -1,0 +1,116 @@
+"""Run a whole service (``fxis run``) as a child process, for tests, benchmarks
+and scripts: ready when it answers ``status``, stopped with SIGTERM on exit.
+
+    with ServiceProcess(["--camera", "a=synthetic"], name="demo") as svc:
+        with svc.client() as c:
+            c.tuple()
+"""
+
+from __future__ import annotations
+
+import os
+import signal
+import socket
+import subprocess
+import sys
+import time
+
+from fxis_shm.client.client import Client
+from fxis_shm.errors import RequestTimeout, ServiceNotStarted
+from fxis_shm.service.tether import die_with_parent
+
+
+def free_tcp_port() -> int:
+    with socket.socket() as s:
+        s.bind(("127.0.0.1", 0))
+        return s.getsockname()[1]
+
+
+class ServiceProcess:
+    def __init__(
+        self,
+        args: list[str] = (),
+        name: str | None = None,
+        endpoint: str | None = None,
+        pub: str | None = None,
+        events: str | None = None,
+        ready_timeout: float = 30.0,
+        stderr=None,
+        client_keys=None,
+        python: str = sys.executable,
+        env: dict[str, str] | None = None,
+        wrapper: list[str] = (),
+        http: str = "off",
+    ):
+        """``http``: the dashboard's HOST:PORT, or "off" (the default: tests and scripts
+        running at once must not all claim the same fixed port)."""
+        self.name = name or f"t{os.getpid()}x{time.monotonic_ns() % 10**6}"
+        self.endpoint = endpoint or f"tcp://127.0.0.1:{free_tcp_port()}"
+        self.pub = pub or f"tcp://127.0.0.1:{free_tcp_port()}"
+        self.events = events or f"tcp://127.0.0.1:{free_tcp_port()}"
+        self.args = [
+            "--name",
+            self.name,
+            "--endpoint",
+            self.endpoint,
+            "--pub",
+            self.pub,
+            "--events",
+            self.events,
+            "--http",
+            http,
+            *args,
+        ]
+        self.http = http
+        self.ready_timeout = ready_timeout
+        self.stderr = stderr
+        self.client_keys = client_keys  # for a service with CurveZMQ
+        self.python, self.env = python, env  # the interpreter and environment of `fxis run`
+        # a command that runs the service (e.g. in other namespaces: tests/hosts.py); it must
+        # exec it, not fork, so that SIGTERM reaches the service
+        self.wrapper = list(wrapper)
+        self.proc: subprocess.Popen | None = None
+
+    def start(self) -> ServiceProcess:
+        self.proc = subprocess.Popen(
+            [*self.wrapper, self.python, "-m", "fxis_shm.cli", "run", *self.args],
+            env=self.env,
+            stdout=subprocess.DEVNULL,
+            stderr=self.stderr,
+            stdin=subprocess.DEVNULL,
+            preexec_fn=die_with_parent,  # a killed launcher takes its service along
+        )
+        deadline = time.monotonic() + self.ready_timeout
+        with self.client(timeout=0.5) as client:
+            while True:
+                if self.proc.poll() is not None:
+                    raise ServiceNotStarted(f"fxis run exited with code {self.proc.returncode} during start-up")
+                try:
+                    client.status()
+                    return self
+                except RequestTimeout:
+                    if time.monotonic() > deadline:
+                        self.stop()
+                        raise ServiceNotStarted(f"service did not answer within {self.ready_timeout} s") from None
+
+    def client(self, timeout: float = 2.0) -> Client:
+        return Client(self.endpoint, timeout=timeout, keys=self.client_keys)
+
+    def stop(self, timeout: float = 10.0) -> int:
+        """SIGTERM, wait, then kill; returns the exit code."""
+        if self.proc is None:
+            return 0
+        if self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+            try:
+                self.proc.wait(timeout)
+            except subprocess.TimeoutExpired:
+                self.proc.kill()
+                self.proc.wait()
+        return self.proc.returncode
+
+    def __enter__(self) -> ServiceProcess:
+        return self.start()
+
+    def __exit__(self, *exc) -> None:
+        self.stop()

@@ -1,0 +1,339 @@
+"""The supervisor behind ``fxis run``: starts the camera workers and the
+coordinator, watches and restarts them, and cleans up everything on exit.
+
+Start-up: take the service's lock (refuse if another supervisor holds it),
+remove what a crashed earlier run left in /dev/shm, start every camera worker
+and wait for its readiness handshake, then the coordinator. Shutdown: ask
+(SIGTERM), wait, kill; then unlink every segment and semaphore of the service.
+"""
+
+from __future__ import annotations
+
+import fcntl
+import json
+import logging
+import os
+import signal
+import subprocess
+import sys
+import tempfile
+import threading
+import time
+
+from fxis_shm.core import timebase
+from fxis_shm.service.childspec import CameraWorkerSpec, ChildSpec, CoordinatorSpec, DashboardSpec, FoxgloveSpec
+from fxis_shm.service.config import ServiceConfig
+from fxis_shm.shm import naming
+
+log = logging.getLogger("supervisor")
+
+READY_TIMEOUT_S = 20.0
+STOP_GRACE_S = 3.0
+BACKOFF_FIRST_S, BACKOFF_MAX_S = 0.5, 10.0
+STABLE_AFTER_S = 30.0  # a child that ran this long has its backoff reset
+
+
+class StartError(Exception):
+    """A child could not start; the message says which and why."""
+
+
+def lock_path(service: str) -> str:
+    return os.path.join(os.environ.get("XDG_RUNTIME_DIR") or tempfile.gettempdir(), f"fxis-{service}.lock")
+
+
+class ServiceLock:
+    """An flock held for the supervisor's lifetime; the kernel drops it if the supervisor dies."""
+
+    def __init__(self, service: str):
+        self.path = lock_path(service)
+        self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o600)
+        try:
+            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            owner = os.pread(self._fd, 32, 0).decode(errors="replace").strip()
+            os.close(self._fd)
+            raise StartError(
+                f"service {service!r} is already running (supervisor pid {owner or '?'}); "
+                "stop it first, or pick another --name"
+            ) from None
+        os.ftruncate(self._fd, 0)
+        os.pwrite(self._fd, str(os.getpid()).encode(), 0)
+
+    def release(self) -> None:
+        try:
+            os.unlink(self.path)
+        except FileNotFoundError:
+            pass
+        os.close(self._fd)
+
+
+def service_running(service: str) -> bool:
+    try:
+        ServiceLock(service).release()
+    except StartError:
+        return True
+    return False
+
+
+class Child:
+    """One supervised process and its restart bookkeeping."""
+
+    def __init__(self, spec: ChildSpec, label: str, key: str):
+        self.spec, self.label, self.key = spec, label, key
+        self.state = "starting"
+        self.last_exit: int | None = None
+        self.proc: subprocess.Popen | None = None
+        self.restarts = 0
+        self.backoff = BACKOFF_FIRST_S
+        self.restart_at: float | None = None
+        self.started_at = 0.0
+        self._ready_fd: int | None = None
+
+    def start(self) -> None:
+        read_fd, write_fd = os.pipe()
+        try:
+            self.proc = subprocess.Popen(self.spec.command(write_fd), pass_fds=(write_fd,), stdin=subprocess.DEVNULL)
+        finally:
+            os.close(write_fd)
+        self._ready_fd = read_fd
+        self.started_at = time.monotonic()
+        self.restart_at = None
+
+    def wait_ready(self, timeout: float = READY_TIMEOUT_S) -> None:
+        """Block until the child's handshake; raise StartError if it failed or timed out."""
+        import select
+
+        fd, self._ready_fd = self._ready_fd, None
+        try:
+            ready, _, _ = select.select([fd], [], [], timeout)
+            line = os.read(fd, 4096).decode(errors="replace").strip() if ready else ""
+        finally:
+            os.close(fd)
+        if line == "ok":
+            return
+        if line.startswith("error "):
+            raise StartError(f"{self.label}: {line[len('error ') :]}")
+        if not ready:
+            raise StartError(f"{self.label} did not become ready within {timeout:.0f} s")
+        raise StartError(f"{self.label} exited during start-up (exit code {self.proc.wait(1)})")
+
+    def exited(self) -> int | None:
+        return None if self.proc is None else self.proc.poll()
+
+    def terminate(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.send_signal(signal.SIGTERM)
+
+    def kill(self) -> None:
+        if self.proc is not None and self.proc.poll() is None:
+            self.proc.kill()
+
+
+def viewer_children(config: ServiceConfig, common: dict) -> list[Child]:
+    """The processes that show the cameras, clients of the service like any other: the live
+    dashboard (fxis_shm.viewers.dashboard) and the Foxglove server (fxis_shm.viewers.foxglove_live), each
+    when its address is not off."""
+    viewer = {
+        **common,
+        "endpoint": config.endpoint,
+        "curve_secret": config.curve_secret,
+        "cameras": {c.name: {"kind": c.kind, "fps": c.options.get("fps")} for c in config.cameras},
+    }
+    children = []
+    if config.http_url:
+        children.append(Child(DashboardSpec(**viewer, http=config.http), "dashboard", key="dashboard"))
+    if config.foxglove_url:
+        children.append(
+            Child(
+                FoxgloveSpec(**viewer, foxglove=config.foxglove, rate_hz=config.foxglove_rate),
+                "foxglove",
+                key="foxglove",
+            )
+        )
+    return children
+
+
+class Supervisor:
+    def __init__(self, config: ServiceConfig, out=sys.stdout):
+        self.config = config
+        self.out = out
+        self.stop = threading.Event()
+        origin = timebase.reader(config.clock)()  # the synthetic cameras' shared time origin
+        common = {"service": config.name, "log_level": config.log_level, "clock": config.clock}
+        self.cameras = [
+            Child(
+                CameraWorkerSpec(
+                    **common, camera=c.name, kind=c.kind, options=c.options, slots=config.slots, time_origin_ns=origin
+                ),
+                f"camera {c.name!r}",
+                key=f"camera:{c.name}",
+            )
+            for c in config.cameras
+        ]
+        self.coordinator = Child(
+            CoordinatorSpec(
+                **common,
+                endpoint=config.endpoint,
+                pub=config.pub,
+                events=config.events,
+                cameras={c.name: c.kind for c in config.cameras},
+                settings=config.settings,
+                curve_secret=config.curve_secret,
+                curve_clients=config.curve_clients,
+            ),
+            "coordinator",
+            key="coordinator",
+        )
+        self.viewers = viewer_children(config, common)
+        self.events: list[dict] = []  # the latest exits and restarts, for status
+
+    @property
+    def children(self) -> list[Child]:
+        return [*self.cameras, self.coordinator, *self.viewers]
+
+    def run(self) -> int:
+        """Serve until SIGINT/SIGTERM; returns the process exit code."""
+        for sig in (signal.SIGINT, signal.SIGTERM):
+            signal.signal(sig, lambda *_: self.stop.set())
+        lock = ServiceLock(self.config.name)
+        try:
+            removed = naming.remove_leftovers(self.config.name)
+            if removed:
+                log.warning("removed %d leftovers of an earlier run: %s", len(removed), " ".join(removed))
+            try:
+                self._start_all()
+            except StartError as exc:
+                print(f"fxis: {exc}", file=sys.stderr)
+                return 1
+            for child in self.children:
+                child.state = "running"
+            self._write_state()
+            self._announce()
+            return self._watch()
+        finally:
+            self._stop_all()
+            naming.remove_leftovers(self.config.name)
+            lock.release()
+
+    def _start_all(self) -> None:
+        for child in self.cameras:
+            child.start()
+        for child in self.cameras:
+            child.wait_ready()
+        self.coordinator.start()
+        self.coordinator.wait_ready()
+        for viewer in self.viewers:  # a reader like any client: after the service it reads
+            viewer.start()
+            viewer.wait_ready()
+
+    def _announce(self) -> None:
+        c = self.config
+        lines = [f"fxis: service {c.name!r} is serving {len(c.cameras)} camera(s)"]
+        for cam in c.cameras:
+            opts = ", ".join(f"{k}={v}" for k, v in cam.options.items())
+            lines.append(f"  {cam.name:<10} {cam.kind:<10} {opts}")
+        lines.append(f"  requests on {c.endpoint}, publishing on {c.pub}, request events on {c.events}")
+        lines.append(f"  rings of {c.slots} slots in /dev/shm/fxis.{c.name}.*")
+        if c.http_url:
+            lines.append(f"  live dashboard on {c.http_url}/")
+        if c.foxglove_url:
+            lines.append(f"  Foxglove WebSocket server on {c.foxglove_url} ({c.foxglove_rate:g} pictures/s per camera)")
+        if c.curve_secret:
+            lines.append(f"  CurveZMQ: only the clients whose keys are in {c.curve_clients}")
+        if c.exposed_unencrypted:
+            lines.append(
+                f"  WARNING: {', '.join(c.exposed_unencrypted)} reachable from other hosts "
+                "WITHOUT authentication or encryption (--insecure-bind)"
+            )
+        lines.append("  Ctrl-C stops the service.")
+        print("\n".join(lines), file=self.out, flush=True)
+
+    def _watch(self) -> int:
+        while not self.stop.wait(0.1):
+            for child in self.children:
+                code = child.exited()
+                if code is not None and child.restart_at is None:
+                    if not self._schedule_restart(child, code):
+                        if child is self.coordinator:
+                            print("fxis: the coordinator keeps failing; stopping", file=sys.stderr)
+                            return 1
+                if child.restart_at is not None and time.monotonic() >= child.restart_at:
+                    self._restart(child)
+        return 0
+
+    def _schedule_restart(self, child: Child, code: int) -> bool:
+        if time.monotonic() - child.started_at > STABLE_AFTER_S:
+            child.backoff = BACKOFF_FIRST_S
+        child.last_exit = code
+        if child.restarts >= self.config.restart_limit:
+            log.error(
+                "%s exited with code %s; restart limit of %d reached, leaving it down",
+                child.label,
+                code,
+                self.config.restart_limit,
+            )
+            child.restart_at = float("inf")
+            child.state = "given up"
+            self._event(child, f"exited with code {code}; restart limit reached, left down")
+            return False
+        log.warning("%s exited with code %s; restarting in %.1f s", child.label, code, child.backoff)
+        child.restart_at = time.monotonic() + child.backoff
+        child.backoff = min(child.backoff * 2, BACKOFF_MAX_S)
+        child.state = "restarting"
+        self._event(child, f"exited with code {code}; restarting")
+        return True
+
+    def _restart(self, child: Child) -> None:
+        child.restarts += 1
+        child.start()
+        try:
+            child.wait_ready()
+            log.info("%s restarted (restart %d)", child.label, child.restarts)
+            child.state = "running"
+            self._event(child, f"restarted (restart {child.restarts})")
+        except StartError as exc:
+            log.error("restart failed: %s", exc)
+            child.kill()
+            self._event(child, f"restart failed: {exc}")
+
+    def _event(self, child: Child, what: str) -> None:
+        self.events = (self.events + [{"process": child.key, "t": time.monotonic_ns(), "what": what}])[-20:]
+        self._write_state()
+
+    def _write_state(self) -> None:
+        """The process table, for the coordinator's status (written whole, then renamed)."""
+        state = {
+            "pid": os.getpid(),
+            "processes": {
+                c.key: {
+                    "pid": c.proc.pid if c.proc else None,
+                    "state": c.state,
+                    "restarts": c.restarts,
+                    "last_exit": c.last_exit,
+                }
+                for c in self.children
+            },
+            "events": self.events,
+        }
+        path = naming.supervisor_state_path(self.config.name)
+        try:
+            with open(path + ".tmp", "w") as f:
+                json.dump(state, f)
+            os.chmod(path + ".tmp", 0o600)
+            os.replace(path + ".tmp", path)
+        except OSError as exc:
+            log.warning("could not write %s: %s", path, exc)
+
+    def _stop_all(self) -> None:
+        for child in self.children:
+            child.terminate()
+        deadline = time.monotonic() + STOP_GRACE_S
+        for child in self.children:
+            if child.proc is None:
+                continue
+            try:
+                child.proc.wait(max(0.0, deadline - time.monotonic()))
+            except subprocess.TimeoutExpired:
+                log.warning("%s did not stop within %.0f s; killing it", child.label, STOP_GRACE_S)
+                child.kill()
+                child.proc.wait()

@@ -1,0 +1,166 @@
+"""The coordinator's view of one camera: its ring (opened, and re-opened when
+the worker replaces it), whether its worker is alive, and its status."""
+
+from __future__ import annotations
+
+import numpy as np
+import posix_ipc
+
+from fxis_shm.core import timebase
+from fxis_shm.core.snapshot import Snapshot
+from fxis_shm.core.waitpolicy import CameraState
+from fxis_shm.errors import RingError
+from fxis_shm.shm import naming, procstat
+from fxis_shm.shm.ring import FLAG_TRIGGERED, RingReader
+
+# The columns of the ``frames`` op's rows, one row per frame.
+FRAME_FIELDS = ("frame_id", "t_capture", "t_stored", "t_available", "generation")
+# A worker heartbeats at least every 0.1 s; silence this long means it hangs.
+STALE_HEARTBEAT_NS = 2_000_000_000
+# How long a look at /proc that found the worker running stays good: requests
+# need not pay a file read each, and a death is still seen within this time.
+ALIVE_CHECK_NS = 20_000_000
+
+
+def process_alive(pid: int) -> bool:
+    """True if ``pid`` runs (a zombie, dead but not yet reaped, does not)."""
+    stat = procstat.read(pid) if pid > 0 else None
+    return stat is not None and stat.running
+
+
+class CameraHandle:
+    def __init__(self, service: str, name: str, kind: str):
+        self.service, self.name, self.kind = service, name, kind
+        self.reader: RingReader | None = None
+        self.torn_reads = 0
+        self.last_error = ""
+        self._trigger: posix_ipc.Semaphore | None = None
+        self._seen_alive = (0, 0, 0)  # (pid, when, write count) of the last look that found it running
+
+    def ring(self) -> RingReader | None:
+        """The ring, opened or re-opened if the worker created a new one; None if absent."""
+        if self.reader is not None and self.reader.retired:
+            self.reader.close()
+            self.reader = None
+        if self.reader is None:
+            try:
+                self.reader = RingReader(self.service, self.name, with_semaphore=False)
+            except RingError as exc:
+                self.last_error = str(exc)
+                return None
+        return self.reader
+
+    def down_reason(self, now: int) -> str | None:
+        """Why the camera cannot serve now, or None if its worker is alive."""
+        ring = self.ring()
+        if ring is None:
+            return f"camera {self.name!r} has no ring: {self.last_error}"
+        pid = ring.field("writer_pid")
+        if not self._alive(pid, ring.field("write_count")):
+            return f"camera {self.name!r} is down: its worker is not running"
+        if now - ring.field("heartbeat_ns") > STALE_HEARTBEAT_NS:
+            return f"camera {self.name!r} is down: its worker has not reported for over 2 s"
+        return None
+
+    def _alive(self, pid: int, write_count: int) -> bool:
+        checked = timebase.now()
+        seen_pid, seen_at, seen_count = self._seen_alive
+        if pid == seen_pid and (checked - seen_at < ALIVE_CHECK_NS or write_count != seen_count):
+            # a frame stored since the last look is as good a sign of life as /proc
+            self._seen_alive = (pid, checked if write_count != seen_count else seen_at, write_count)
+            return True
+        alive = process_alive(pid)
+        self._seen_alive = (pid, checked, write_count) if alive else (0, 0, 0)
+        return alive
+
+    @property
+    def triggered(self) -> bool:
+        """True if the camera captures on software triggers rather than free-running."""
+        return bool(self.reader.field("flags") & FLAG_TRIGGERED)
+
+    # ---- what the request engine reads (fxis_shm.core.engine.CameraSource) ----
+
+    def snapshot(self) -> Snapshot:
+        """The ring's frames now (call after ``down_reason`` found the ring there)."""
+        return self.reader.snapshot()
+
+    @property
+    def period_ns(self) -> int:
+        return self.reader.field("period_ns") if self.reader is not None else 0
+
+    @property
+    def slots(self) -> int | None:
+        ring = self.ring()
+        return ring.slots if ring is not None else None
+
+    def fire_trigger(self) -> None:
+        """Ask the camera's worker to trigger one capture now."""
+        if self._trigger is None:
+            self._trigger = posix_ipc.Semaphore(naming.trigger_name(self.service, self.name))
+        self._trigger.release()
+
+    def state(self, snapshot: Snapshot) -> CameraState:
+        ring = self.reader
+        n = len(snapshot.timeline)
+        return CameraState(
+            newest=snapshot.newest,
+            period_ns=ring.field("period_ns"),
+            delay_ns=max(0, ring.field("delay_ns")),
+            newest_stored=int(snapshot.meta["t_stored"][snapshot.slot(n - 1)]) if n else None,
+        )
+
+    def status(self, now: int) -> dict:
+        ring = self.ring()
+        down = self.down_reason(now)
+        info = {"kind": self.kind, "alive": down is None, "torn_reads": self.torn_reads}
+        if down:
+            info["reason"] = down
+        if ring is None:
+            return info
+        snap = ring.snapshot()
+        period = ring.field("period_ns")
+        newest_stored = int(snap.meta[snap.slot(len(snap.timeline) - 1)]["t_stored"]) if len(snap.timeline) else None
+        info.update(
+            shape=list(ring.layout.shape),
+            dtype=ring.layout.dtype,
+            fps=round(1e9 / period, 3) if period > 0 else None,
+            frames_stored=ring.field("write_count"),
+            frames_dropped=ring.field("frames_dropped"),
+            last_frame_age_ms=round((now - newest_stored) / 1e6, 3) if newest_stored else None,
+            ring_slots=ring.slots,
+            ring=ring.name,
+            instance=ring.instance,
+            generation=ring.field("generation"),
+            writer_pid=ring.field("writer_pid"),
+            delay_ms=round(ring.field("delay_ns") / 1e6, 3),
+            trigger="software" if self.triggered else "free",
+            hook_errors=ring.field("hook_errors"),
+            note=ring.header["status_text"].item().decode(errors="replace"),
+        )
+        return info
+
+    def timeline(self, now: int) -> dict:
+        """What a caller elsewhere needs to choose frames itself (the ``frames`` op): the
+        camera's liveness, timing and every valid frame's identity and times, oldest first."""
+        down = self.down_reason(now)
+        info: dict = {"alive": down is None, "reason": down, "frames": []}
+        if self.reader is None:
+            return info
+        snap = self.reader.snapshot()
+        picked = snap.meta[[snap.slot(i) for i in range(len(snap.timeline))]]
+        info.update(
+            period_ns=self.period_ns,
+            delay_ns=max(0, self.reader.field("delay_ns")),
+            slots=self.reader.slots,
+            triggered=self.triggered,
+            frames=np.stack([picked[k].astype(np.int64) for k in FRAME_FIELDS], axis=1).tolist(),
+        )
+        return info
+
+    def close(self) -> None:
+        if self._trigger is not None:
+            self._trigger.close()
+            self._trigger = None
+        if self.reader is not None:
+            self.reader.close()
+            self.reader = None

@@ -1,0 +1,168 @@
+"""The coordinator's access to the rings: snapshots of the cameras that are up, and
+copies of chosen frames out of them, into pooled buffers handed to ZeroMQ (or, for a
+client on this kernel, where each frame is, so that it copies the frame itself)."""
+
+from __future__ import annotations
+
+from fxis_shm.core import timebase
+from fxis_shm.core.decisions import Reject, check_not_empty
+from fxis_shm.core.engine import Reply
+from fxis_shm.core.selection import Selection, radius_for, select, tolerance_for
+from fxis_shm.core.snapshot import Snapshot
+from fxis_shm.core.timesearch import Timeline
+from fxis_shm.errors import Code
+from fxis_shm.shm.bufferpool import BufferPool
+from fxis_shm.shm.cameras import CameraHandle
+from fxis_shm.shm.ring import Overwritten
+from fxis_shm.wire import protocol
+from fxis_shm.wire.encodecache import EncodeCache
+from fxis_shm.wire.encoding import RAW
+
+COPY, REFS, VIEWS = "copy", "refs", "views"  # how a reply carries its frames
+
+
+class CopyOut:
+    def __init__(self, cameras: dict[str, CameraHandle], settings: dict, buffers: BufferPool | None = None):
+        self.cameras = cameras
+        self.settings = settings
+        self.buffers = buffers or BufferPool()
+        self.encoded = EncodeCache()
+
+    def period(self, cam: str) -> int:
+        return self.cameras[cam].period_ns
+
+    def snapshots(self, names: list[str], now: int) -> dict[str, Snapshot]:
+        """Each camera's frames now; Reject if one is down or has none."""
+        snaps = {}
+        for cam in names:
+            reason = self.cameras[cam].down_reason(now)
+            if reason:
+                raise Reject(Code.CAMERA_DOWN, reason)
+            snaps[cam] = self.cameras[cam].snapshot()
+        check_not_empty(snaps)
+        return snaps
+
+    def select_frames(self, mode: str, timelines: dict[str, Timeline], t: int) -> Selection:
+        periods = {c: self.period(c) for c in timelines}
+        return select(
+            mode, timelines, t, radius_for(periods), tolerance_for(periods, self.settings["sync_tolerance_ms"])
+        )
+
+    def reply(self, reply: Reply, how: str | None = None) -> tuple[dict, list]:
+        """The body and images of the reply ``reply`` plans; raises Overwritten if a chosen
+        slot was overwritten before its copy was complete. ``how``: COPY (pooled buffers),
+        REFS (where each frame is, for a client on this kernel) or VIEWS (read-only views
+        of the slots, for a reader in this process); default REFS for a local client."""
+        p, plan = reply.pending, reply.plan
+        searched = timebase.now()
+        how = how or (REFS if p.local else COPY)
+        frames, images, position = self.copy(
+            reply.snapshots, plan.picks, how, p.request.get("encoding") or RAW, p.request.get("quality")
+        )
+        body = {**plan.body, "frames": frames}
+        if plan.groups is not None:
+            body["groups"] = [[position[pick] for pick in group] for group in plan.groups]
+        body["timing"] = {
+            "searched": searched,
+            "received": p.t_received,
+            "waited": reply.t_decided,
+            "copied": timebase.now(),
+            "cameras": {c: {"waited": p.ready_at.get(c, reply.t_decided)} for c in p.cameras},
+        }
+        if how == REFS:
+            body["delivery"] = protocol.LOCAL
+        return body, images
+
+    def copy(
+        self,
+        snaps: dict,
+        picks: list[tuple[str, int]],
+        how: str = COPY,
+        encoding: str = RAW,
+        quality: int | None = None,
+    ) -> tuple[list, list, dict]:
+        """Copy each distinct (camera, snapshot index) once: metadata, images (in ``encoding``),
+        and each pick's position. With REFS nothing is copied: the metadata says where each frame is."""
+        frames, images, position = [], [], {}
+        for cam, i in picks:
+            if (cam, i) in position:
+                continue
+            position[(cam, i)] = len(frames)
+            if how == REFS:
+                frames.append(self._reference(cam, snaps[cam], i))
+            elif encoding != RAW and how == COPY:
+                frames.append(self._encoded(cam, snaps[cam], i, len(images), images, encoding, quality))
+            else:
+                frames.append(self._copied(cam, snaps[cam], i, len(images), images, how == VIEWS))
+        return frames, images, position
+
+    def _encoded(
+        self, cam: str, snap: Snapshot, i: int, buffer: int, images: list, encoding: str, quality: int | None
+    ) -> dict:
+        """A frame in ``encoding``: copied out of the ring (and checked whole) only if no reply or
+        stream has encoded it so yet."""
+        meta = snap.frame_meta(i)
+
+        def pixels():
+            copied: list = []
+            self._copied(cam, snap, i, buffer, copied, False)
+            return copied[0]
+
+        data = self.encoded.get((cam, meta.generation, meta.frame_id), pixels, encoding, quality)
+        images.append(data)
+        layout = self.cameras[cam].reader.layout
+        described = protocol.described(
+            cam,
+            meta.frame_id,
+            meta.t_capture,
+            meta.t_stored,
+            meta.generation,
+            layout.shape,
+            layout.dtype,
+            meta.t_available,
+        )
+        return protocol.encoded_meta({**described, "buffer": buffer}, encoding, len(data))
+
+    def _copied(self, cam: str, snap: Snapshot, i: int, buffer: int, images: list, view: bool) -> dict:
+        handle = self.cameras[cam]
+        reader = handle.reader
+        try:
+            if view:
+                image = reader.view_slot(snap.slot(i), snap.seq(i))
+            else:
+                image = reader.copy(snap, i, self.buffers.take(reader.layout.shape, reader.layout.dtype))
+        except Overwritten:
+            handle.torn_reads += 1
+            raise
+        images.append(image)
+        meta = snap.frame_meta(i)
+        return protocol.frame_meta(
+            cam, meta.frame_id, meta.t_capture, meta.t_stored, meta.generation, image, buffer, meta.t_available
+        )
+
+    def encode(self, meta: dict, image, encoding: str, quality: int | None) -> tuple[dict, bytes]:
+        """A copied frame (checked whole) in ``encoding``, encoded once for every reply and stream."""
+        data = self.encoded.get(
+            (meta["camera"], meta["generation"], meta["frame_id"]), lambda: image, encoding, quality
+        )
+        return protocol.encoded_meta(meta, encoding, len(data)), data
+
+    def _reference(self, cam: str, snap: Snapshot, i: int) -> dict:
+        reader = self.cameras[cam].reader
+        slot, seq = snap.slot(i), snap.seq(i)
+        reader.check_slot(slot, seq, "before")  # already gone: choose again rather than send it
+        meta = snap.frame_meta(i)
+        return protocol.frame_ref(
+            cam,
+            meta.frame_id,
+            meta.t_capture,
+            meta.t_stored,
+            meta.generation,
+            reader.layout.shape,
+            reader.layout.dtype,
+            meta.t_available,
+            ring=reader.name,
+            instance=reader.instance,
+            slot=slot,
+            seq=seq,
+        )

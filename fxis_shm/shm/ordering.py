@@ -1,0 +1,70 @@
+"""Ordered accesses for the ring's seqlock, on every CPU the service supports.
+
+The seqlock (fxis_shm.shm.ring) needs the writer's ``seq`` and write-counter stores
+release-ordered, a release fence between the odd ``seq`` and the data it announces,
+and on the reader's side acquire loads and an acquire fence before the final check.
+x86-64 gives all of that for free (stores and loads each stay in program order), so
+plain accesses are correct there. Weakly ordered CPUs (ARM64: Jetson, Raspberry Pi)
+need real fences: the small C helper ``fxis_shm.shm._ordered``, built by the package's
+install. Without it, rings refuse to open on such a CPU rather than risk torn frames.
+
+``MODE`` says which is in use: "fenced" (the helper), "x86-tso" (plain accesses,
+correct on x86-64) or None (unsupported: the helper is missing on a weak CPU).
+"""
+
+from __future__ import annotations
+
+import os
+import platform
+
+from fxis_shm.errors import RingError
+
+try:
+    from fxis_shm.shm import _ordered
+except ImportError:  # not built (a source checkout, or no C compiler at install time)
+    _ordered = None
+
+_TSO_MACHINES = ("x86_64", "amd64", "i386", "i686")
+
+
+def choose_mode(helper_built: bool, machine: str, want_plain: bool = False) -> str | None:
+    """The accesses to use: the helper's fences where built, plain ones only on x86
+    (``want_plain``: measure the plain ones where they are correct), else None."""
+    plain_is_correct = machine.lower() in _TSO_MACHINES
+    if helper_built and not (want_plain and plain_is_correct):
+        return "fenced"
+    return "x86-tso" if plain_is_correct else None
+
+
+# FXIS_PLAIN_ORDERING=1: plain accesses where they are correct (bench/ring_ordering.py compares).
+MODE = choose_mode(_ordered is not None, platform.machine(), os.environ.get("FXIS_PLAIN_ORDERING") == "1")
+
+
+def require_supported() -> None:
+    """Raise RingError if the rings cannot be read or written correctly on this CPU."""
+    if MODE is None:
+        raise RingError(
+            f"this CPU ({platform.machine()}) orders memory weakly and the ring's fence helper "
+            "fxis_shm.shm._ordered is not built: reinstall fxis-shm with a C compiler present "
+            "(pip install -e . builds it)"
+        )
+
+
+if MODE == "fenced":
+    load_acquire = _ordered.load_acquire
+    store_release = _ordered.store_release
+    fence_acquire = _ordered.fence_acquire
+    fence_release = _ordered.fence_release
+else:
+
+    def load_acquire(buffer, offset: int) -> int:
+        return int.from_bytes(buffer[offset : offset + 8], "little")
+
+    def store_release(buffer, offset: int, value: int) -> None:
+        buffer[offset : offset + 8] = value.to_bytes(8, "little")
+
+    def fence_acquire() -> None:
+        """Nothing to do on x86-64: loads are not reordered with other loads."""
+
+    def fence_release() -> None:
+        """Nothing to do on x86-64: stores are not reordered with other stores."""

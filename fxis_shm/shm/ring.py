@@ -1,0 +1,420 @@
+"""The per-camera shared-memory ring: one writer (the camera worker), any readers.
+
+Layout of the segment ``/fxis.<service>.<camera>.ring``:
+
+    [header, 1 KiB][slot table: slots x 48 bytes][pad to 4 KiB][slot 0 data][slot 1 data]...
+
+Each slot record holds ``seq``, ``frame_id``, ``t_capture``, ``t_stored``,
+``t_available`` and ``generation``. ``seq`` encodes the global write index w
+of the frame in the slot: ``2w+1`` while the writer fills it, ``2w+2`` once it
+is complete. A reader therefore knows from ``seq`` alone which frame a slot
+holds, and a copy is valid only if ``seq`` had the expected value both before
+and after it (a seqlock); a torn copy is detected and never returned.
+
+The writer never waits for a reader. After every stored frame it posts the
+semaphore ``/fxis.<service>.<camera>.new`` (only when its value is 0, so an
+absent reader cannot make it grow). Segments and semaphores are mode 0600.
+
+Ordering: ``seq`` and ``write_count`` are stored with release order and loaded with
+acquire order, with a release fence after the odd ``seq`` and an acquire fence before
+a reader's final checks (fxis_shm.shm.ordering: C11 fences on ARM64, plain accesses on
+x86-64, whose stores and loads keep program order).
+"""
+
+from __future__ import annotations
+
+import mmap
+import os
+from dataclasses import dataclass
+
+import numpy as np
+import posix_ipc
+
+from fxis_shm.core import timebase
+from fxis_shm.core.snapshot import SLOT, Snapshot
+from fxis_shm.core.timesearch import Timeline
+from fxis_shm.errors import Overwritten, RingError
+from fxis_shm.shm import naming, ordering
+
+MAGIC = b"FXISRNG1"
+LAYOUT_VERSION = 2
+HEADER_BYTES = 1024
+PAGE = 4096
+STATE_INIT, STATE_LIVE, STATE_RETIRED = 0, 1, 2
+FLAG_TRIGGERED = 1  # the camera captures when triggered (trigger=software), not free-running
+_PERIOD_SMOOTHING = 16  # EWMA weight 1/16: follows rate changes within a second at 20 fps
+
+HEADER = np.dtype(
+    [
+        ("magic", "S8"),
+        ("version", "<u4"),
+        ("state", "<u4"),
+        ("flags", "<u4"),
+        ("_pad", "<u4"),
+        ("height", "<u4"),
+        ("width", "<u4"),
+        ("channels", "<u4"),
+        ("slots", "<u4"),
+        ("dtype", "S8"),
+        ("slot_stride", "<u8"),
+        ("data_offset", "<u8"),
+        ("generation", "<u8"),
+        ("writer_pid", "<u8"),
+        ("write_count", "<u8"),
+        ("instance", "<u8"),  # random, drawn when the segment is created: names this very segment
+        ("heartbeat_ns", "<i8"),
+        ("generation_started_ns", "<i8"),
+        ("period_ns", "<i8"),
+        ("nominal_period_ns", "<i8"),
+        ("delay_ns", "<i8"),
+        ("frames_captured", "<u8"),
+        ("frames_dropped", "<u8"),
+        ("hook_errors", "<u8"),
+        ("status_text", "S256"),
+    ]
+)
+assert HEADER.itemsize <= HEADER_BYTES and SLOT.itemsize == 48
+WRITE_COUNT_AT = HEADER.fields["write_count"][1]  # byte offsets of the ordered words
+
+
+def _seq_at(slot: int) -> int:
+    return HEADER_BYTES + slot * SLOT.itemsize  # seq is a slot record's first field
+
+
+def _align(n: int, to: int = PAGE) -> int:
+    return (n + to - 1) // to * to
+
+
+@dataclass(frozen=True)
+class FrameLayout:
+    """Shape and type of the frames a ring holds."""
+
+    height: int
+    width: int
+    channels: int = 1
+    dtype: str = "uint8"
+
+    @classmethod
+    def of(cls, image: np.ndarray) -> FrameLayout:
+        if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] not in (1, 3, 4)):
+            raise ValueError(f"an image must be (h, w) or (h, w, 1|3|4), got {image.shape}")
+        channels = 1 if image.ndim == 2 else image.shape[2]
+        return cls(image.shape[0], image.shape[1], channels, image.dtype.name)
+
+    @property
+    def shape(self) -> tuple[int, ...]:
+        if self.channels == 1:
+            return (self.height, self.width)
+        return (self.height, self.width, self.channels)
+
+    @property
+    def nbytes(self) -> int:
+        return self.height * self.width * self.channels * np.dtype(self.dtype).itemsize
+
+
+class _Mapping:
+    """The numpy views shared by writer and reader over one mapped segment."""
+
+    def _map(self, fd: int, size: int, writable: bool) -> None:
+        ordering.require_supported()
+        prot = mmap.PROT_READ | (mmap.PROT_WRITE if writable else 0)
+        self._mm = mmap.mmap(fd, size, flags=mmap.MAP_SHARED | mmap.MAP_POPULATE, prot=prot)
+        self.header = np.ndarray((), dtype=HEADER, buffer=self._mm)
+        if self.header["magic"] != MAGIC or self.header["version"] != LAYOUT_VERSION:
+            if writable and self.header["magic"] == b"":
+                return  # being created
+            raise RingError(f"segment is not an fxis ring of layout version {LAYOUT_VERSION}")
+        self._views()
+
+    def _views(self) -> None:
+        h = self.header
+        self.layout = FrameLayout(int(h["height"]), int(h["width"]), int(h["channels"]), h["dtype"].item().decode())
+        self.slots = int(h["slots"])
+        self.table = np.ndarray((self.slots,), dtype=SLOT, buffer=self._mm, offset=HEADER_BYTES)
+        self.seq = np.ndarray(
+            (self.slots,), dtype="<u8", buffer=self._mm, offset=HEADER_BYTES, strides=(SLOT.itemsize,)
+        )
+        stride = int(h["slot_stride"])
+        self.data = np.ndarray(
+            (self.slots, self.layout.nbytes),
+            dtype=np.uint8,
+            buffer=self._mm,
+            offset=int(h["data_offset"]),
+            strides=(stride, 1),
+        )
+
+    def slot_image(self, slot: int) -> np.ndarray:
+        return self.data[slot].view(self.layout.dtype).reshape(self.layout.shape)
+
+    def field(self, name: str) -> int:
+        if name == "write_count":  # the word that publishes frames: read it ordered
+            return ordering.load_acquire(self._mm, WRITE_COUNT_AT)
+        return int(self.header[name])
+
+    def _unmap(self) -> None:
+        for attr in ("header", "table", "seq", "data"):
+            self.__dict__.pop(attr, None)
+        if getattr(self, "_mm", None) is not None:
+            try:
+                self._mm.close()
+            except BufferError:  # a zero-copy view handed out still maps it; unmapped when it goes
+                pass
+            self._mm = None
+
+
+def segment_size(layout: FrameLayout, slots: int) -> tuple[int, int, int]:
+    """(total size, data offset, slot stride) of a ring."""
+    data_offset = _align(HEADER_BYTES + slots * SLOT.itemsize)
+    stride = _align(layout.nbytes)
+    return data_offset + slots * stride, data_offset, stride
+
+
+class RingWriter(_Mapping):
+    """The camera worker's side: creates (or re-attaches to) the ring and stores frames."""
+
+    def __init__(self, service: str, camera: str, layout: FrameLayout, slots: int, nominal_period_ns: int = 0):
+        if slots < 2:
+            raise ValueError(f"a ring needs at least 2 slots, got {slots}")
+        self.name = naming.ring_name(service, camera)
+        self.layout = layout
+        self._open_or_create(layout, slots)
+        h = self.header
+        h["generation"] = int(h["generation"]) + 1
+        h["writer_pid"] = os.getpid()
+        h["generation_started_ns"] = h["heartbeat_ns"] = timebase.now()
+        h["nominal_period_ns"] = nominal_period_ns
+        if int(h["period_ns"]) <= 0:
+            h["period_ns"] = nominal_period_ns
+        self.generation = int(h["generation"])
+        self._count = int(h["write_count"])
+        self._last = None  # (frame_id, t_capture) of the previous stored frame
+        self._samples = 0
+        self.semaphore = posix_ipc.Semaphore(
+            naming.semaphore_name(service, camera), posix_ipc.O_CREAT, mode=0o600, initial_value=0
+        )
+        h["state"] = STATE_LIVE
+
+    def _open_or_create(self, layout: FrameLayout, slots: int) -> None:
+        size, data_offset, stride = segment_size(layout, slots)
+        try:
+            shm = posix_ipc.SharedMemory(self.name)
+        except posix_ipc.ExistentialError:
+            shm = None
+        if shm is not None:
+            try:
+                self._map(shm.fd, shm.size, writable=True)
+                compatible = getattr(self, "layout", None) == layout and self.slots == slots and shm.size == size
+            except (RingError, ValueError, TypeError):  # not a ring, or truncated
+                compatible = False
+            finally:
+                shm.close_fd()
+            if compatible:
+                return
+            # Another layout: retire the old segment so readers re-open by name.
+            if getattr(self, "header", None) is not None and self.header["magic"] == MAGIC:
+                self.header["state"] = STATE_RETIRED
+            posix_ipc.unlink_shared_memory(self.name)
+        old = getattr(self, "header", None)
+        generation = int(old["generation"]) if old is not None and old["magic"] == MAGIC else 0
+        del old
+        self._unmap()
+        shm = posix_ipc.SharedMemory(self.name, posix_ipc.O_CREX, mode=0o600, size=size)
+        try:
+            self._map(shm.fd, size, writable=True)
+        finally:
+            shm.close_fd()
+        np.frombuffer(self._mm, dtype=np.uint8)[:] = 0  # touch every page now, not on first frames
+        h = self.header
+        h["version"], h["state"] = LAYOUT_VERSION, STATE_INIT
+        h["height"], h["width"], h["channels"] = layout.height, layout.width, layout.channels
+        h["dtype"], h["slots"] = layout.dtype.encode(), slots
+        h["generation"] = generation  # continues across a layout change: never repeats
+        h["slot_stride"], h["data_offset"] = stride, data_offset
+        h["instance"] = int.from_bytes(os.urandom(8), "little")
+        h["magic"] = MAGIC
+        self._views()
+
+    def write(self, image: np.ndarray, frame_id: int, t_capture: int, t_available: int | None = None) -> int:
+        """Store one frame; returns its t_stored. Never blocks on readers."""
+        w = self._count
+        slot = w % self.slots
+        ordering.store_release(self._mm, _seq_at(slot), 2 * w + 1)
+        ordering.fence_release()  # the slot reads as being written before any of its new bytes show
+        np.copyto(self.slot_image(slot), image, casting="no")
+        rec = self.table[slot]
+        t_stored = timebase.now()
+        rec["frame_id"], rec["t_capture"], rec["t_stored"] = frame_id, t_capture, t_stored
+        rec["t_available"] = t_capture if t_available is None else t_available
+        rec["generation"] = self.generation
+        ordering.store_release(self._mm, _seq_at(slot), 2 * w + 2)  # after every byte of the frame
+        self._count = w + 1
+        ordering.store_release(self._mm, WRITE_COUNT_AT, self._count)
+        h = self.header
+        h["heartbeat_ns"] = t_stored
+        self._update_timing(frame_id, t_capture, t_stored)
+        if self.semaphore.value == 0:
+            self.semaphore.release()
+        return t_stored
+
+    def _update_timing(self, frame_id: int, t_capture: int, t_stored: int) -> None:
+        """Running estimates of the frame period and the capture-to-storage delay:
+        a plain mean over this generation's first samples (so one slow start-up
+        frame does not linger), then an exponential average."""
+        h = self.header
+        self._samples += 1
+        weight = min(self._samples, _PERIOD_SMOOTHING)
+        if self._last is not None and frame_id > self._last[0] and t_capture > self._last[1]:
+            interval = (t_capture - self._last[1]) // (frame_id - self._last[0])
+            old = int(h["period_ns"])
+            h["period_ns"] = interval if old <= 0 else old + (interval - old) // weight
+        self._last = (frame_id, t_capture)
+        old_delay = int(h["delay_ns"])
+        h["delay_ns"] = old_delay + (t_stored - t_capture - old_delay) // weight
+
+    def new_generation(self) -> int:
+        """The camera came back after an outage: later frames carry a new generation."""
+        h = self.header
+        self.generation = int(h["generation"]) + 1
+        h["generation"] = self.generation
+        h["generation_started_ns"] = timebase.now()
+        self._last, self._samples = None, 0
+        return self.generation
+
+    def heartbeat(self) -> None:
+        self.header["heartbeat_ns"] = timebase.now()
+
+    def count(self, field: str, n: int = 1) -> None:
+        """Add to one of the counters frames_captured, frames_dropped, hook_errors."""
+        self.header[field] = int(self.header[field]) + n
+
+    def set_flags(self, flags: int) -> None:
+        self.header["flags"] = flags
+
+    def set_status(self, text: str) -> None:
+        self.header["status_text"] = text.encode()[:255]
+
+    def close(self) -> None:
+        """Detach; the segment stays for the next generation (the supervisor unlinks it)."""
+        if getattr(self, "header", None) is not None:
+            self.header["writer_pid"] = 0
+        self._unmap()
+        self.semaphore.close()
+
+
+class RingReader(_Mapping):
+    """A read-only view of a camera's ring (the coordinator, or a local client)."""
+
+    def __init__(self, service: str, camera: str, with_semaphore: bool = True):
+        self._open(naming.ring_name(service, camera))
+        self.semaphore = None
+        if with_semaphore:
+            try:
+                self.semaphore = posix_ipc.Semaphore(naming.semaphore_name(service, camera))
+            except posix_ipc.ExistentialError:
+                self.close()
+                raise RingError(f"semaphore of ring {self.name} does not exist") from None
+
+    @classmethod
+    def named(cls, name: str) -> RingReader:
+        """The ring of segment ``name`` (as a reply of the local fast path names it), without its semaphore."""
+        reader = cls.__new__(cls)
+        reader.semaphore = None
+        reader._open(name)
+        return reader
+
+    def _open(self, name: str) -> None:
+        self.name = name
+        try:
+            shm = posix_ipc.SharedMemory(self.name, read_only=True)
+        except posix_ipc.ExistentialError:
+            raise RingError(f"ring {self.name} does not exist (is the camera worker running?)") from None
+        except posix_ipc.PermissionsError:
+            raise RingError(f"ring {self.name} belongs to another user") from None
+        try:
+            if shm.size < HEADER_BYTES:
+                raise RingError(f"ring {self.name} is not initialised yet")
+            self._map(shm.fd, shm.size, writable=False)
+        finally:
+            shm.close_fd()
+
+    @property
+    def retired(self) -> bool:
+        return int(self.header["state"]) == STATE_RETIRED
+
+    def snapshot(self) -> Snapshot:
+        """The frames that are complete now, oldest first."""
+        for _ in range(4):
+            before = self.field("write_count")
+            table = self.table.copy()
+            ordering.fence_acquire()  # the copy is complete before the checks below read
+            after = self.field("write_count")
+            if before == after:
+                break
+        seq_now = self.seq.copy()  # a record the writer began to overwrite during the copy shows here
+        count = after
+        lo = max(0, count - self.slots)
+        writes = np.arange(lo, count, dtype=np.uint64)
+        slots = writes % np.uint64(self.slots)
+        copied = table["seq"][slots]
+        valid = (copied == 2 * writes + 2) & (seq_now[slots] == copied)
+        # Only the oldest end can be invalid (being overwritten); keep the newest valid run.
+        bad = np.flatnonzero(~valid)
+        first = lo + (int(bad[-1]) + 1 if bad.size else 0)
+        # Oldest first in a list: the searches read single elements, which a list serves far
+        # faster than numpy, and a vector that does not wrap is searched by plain bisection.
+        times = table["t_capture"].tolist()
+        oldest = first % self.slots
+        timeline = Timeline(times[oldest:] + times[:oldest], 0, count - first)
+        return Snapshot(timeline, first, table)
+
+    @property
+    def instance(self) -> int:
+        return int(self.header["instance"])
+
+    def copy(self, snapshot: Snapshot, i: int, out: np.ndarray | None = None) -> np.ndarray:
+        """Copy the frame of logical index ``i``; raises Overwritten if the slot changed."""
+        return self.copy_slot(snapshot.slot(i), snapshot.seq(i), out)
+
+    def copy_slot(self, slot: int, expected_seq: int, out: np.ndarray | None = None) -> np.ndarray:
+        """Copy the frame in ``slot`` if it is the one ``expected_seq`` names and stays
+        so to the end of the copy; raises Overwritten otherwise."""
+        self.check_slot(slot, expected_seq, "before")
+        if out is None:
+            out = np.empty(self.layout.shape, dtype=self.layout.dtype)
+        np.copyto(out, self.slot_image(slot))
+        ordering.fence_acquire()  # every byte was read before the seq is read again
+        self.check_slot(slot, expected_seq, "during")
+        return out
+
+    def view_slot(self, slot: int, expected_seq: int) -> np.ndarray:
+        """A read-only view of the frame in ``slot`` (no copy): valid only while
+        ``slot_holds(slot, expected_seq)`` stays true; the writer may overwrite it any time."""
+        self.check_slot(slot, expected_seq, "before")
+        view = self.slot_image(slot)
+        view.flags.writeable = False
+        return view
+
+    def slot_holds(self, slot: int, expected_seq: int) -> bool:
+        """True while the slot still holds that frame; what was read of it before is valid."""
+        ordering.fence_acquire()
+        return ordering.load_acquire(self._mm, _seq_at(slot)) == expected_seq
+
+    def check_slot(self, slot: int, expected_seq: int, when: str) -> None:
+        if not 0 <= slot < self.slots:
+            raise Overwritten(f"{self.name} has no slot {slot}")
+        if ordering.load_acquire(self._mm, _seq_at(slot)) != expected_seq:
+            raise Overwritten(f"slot {slot} of {self.name} was overwritten {when} the copy")
+
+    def wait_for_frame(self, timeout: float) -> bool:
+        """Block until the writer posts a new frame or ``timeout`` seconds pass."""
+        try:
+            self.semaphore.acquire(timeout)
+        except posix_ipc.BusyError:
+            return False
+        return True
+
+    def close(self) -> None:
+        self._unmap()
+        if self.semaphore is not None:
+            self.semaphore.close()
+            self.semaphore = None

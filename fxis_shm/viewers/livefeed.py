@@ -1,0 +1,171 @@
+"""What the dashboard reads from the service, through the public client API only.
+
+Two clients, each used by one thread of its own (a ZeroMQ socket is not shared between
+threads): one brings pictures (``latest`` without copying: on this host a view of the
+ring slot, so the cameras never wait for a viewer), the other samples the service twice a
+second (status, frame times, one synchronized tuple for its skew). The web side
+(fxis_shm.viewers.dashboard) awaits these on the event loop.
+"""
+
+from __future__ import annotations
+
+import asyncio
+import io
+import logging
+import time
+import zipfile
+from collections.abc import Callable
+from concurrent.futures import ThreadPoolExecutor
+from typing import TypeVar
+
+from fxis_shm.client.client import Client
+from fxis_shm.errors import Code, FxisError, UnknownCamera
+from fxis_shm.formats.tuplefiles import tuple_files
+from fxis_shm.service.childspec import ViewerSpec
+from fxis_shm.viewers.preview import EncodedCache, RateMeter, SkewHistory, frame_intervals_ms, preview_jpeg, preview_key
+from fxis_shm.wire.security import ClientKeys, load_pair
+
+log = logging.getLogger("dashboard")
+
+SAMPLE_PERIOD_S = 0.5  # status, rates and plots refresh this often
+REQUEST_TIMEOUT_S = 1.5  # a service silent this long is shown as gone
+INTERVALS_SHOWN = 60  # frame intervals plotted per camera
+T = TypeVar("T")
+
+
+def feed_for(spec: ViewerSpec) -> LiveFeed:
+    """The feed of a viewer process (the dashboard, the Foxglove server) from its spec. With
+    CurveZMQ it connects with the service's own pair: its public key must be among the clients'."""
+    keys = None
+    if spec.curve_secret:
+        public, secret = load_pair(spec.curve_secret)
+        keys = ClientKeys(public, public, secret)
+    return LiveFeed(spec.endpoint, spec.cameras, keys=keys)
+
+
+class LiveFeed:
+    """Pictures and figures of one service for every viewer of the dashboard."""
+
+    def __init__(
+        self,
+        endpoint: str,
+        cameras: dict[str, dict],
+        keys: ClientKeys | None = None,
+        timeout: float = REQUEST_TIMEOUT_S,
+    ):
+        self.endpoint = endpoint
+        self.cameras = cameras  # name -> {"kind", "fps" (configured, or None)}
+        self._pictures = ThreadPoolExecutor(1, thread_name_prefix="dashboard-pictures")
+        self._sampler = ThreadPoolExecutor(1, thread_name_prefix="dashboard-sampler")
+        self._picture_client = Client(endpoint, timeout=timeout, keys=keys)
+        self._sample_client = Client(endpoint, timeout=timeout, keys=keys)
+        self.cache = EncodedCache()
+        self._rates = {name: RateMeter() for name in cameras}
+        self._skews = SkewHistory()
+        self.started = time.monotonic()
+        self.view: dict = {"service_ok": False, "error": "not sampled yet", "status": None}
+
+    def close(self) -> None:
+        for pool in (self._pictures, self._sampler):
+            pool.shutdown(wait=True)
+        self._picture_client.close()
+        self._sample_client.close()
+
+    def check_camera(self, camera: str) -> None:
+        if camera not in self.cameras:
+            raise UnknownCamera(
+                Code.UNKNOWN_CAMERA, f"no camera {camera!r} in this service; known: {', '.join(sorted(self.cameras))}"
+            )
+
+    # ---- pictures ----
+
+    async def latest(self, camera: str, make: Callable[..., T], torn: Callable[[T], None] | None = None) -> T:
+        """``make(frame)`` of the newest frame of ``camera``, read without a copy where it can
+        (a view of the ring slot: the camera never waits for a viewer). If the ring came round
+        while ``make`` read the pixels, ``torn(result)`` is told and the newest frame is read
+        again, copied. Raises the client's errors (CameraDown, RequestTimeout, ...)."""
+        self.check_camera(camera)
+        return await asyncio.get_running_loop().run_in_executor(self._pictures, self._latest, camera, make, torn)
+
+    def _latest(self, camera: str, make: Callable[..., T], torn: Callable[[T], None] | None) -> T:
+        for copy in (False, True):
+            with self._picture_client.latest([camera], copy=copy) as frames:
+                frame = frames[camera]
+                result = make(frame)
+                if frame.still_valid():
+                    return result
+                if torn:
+                    torn(result)
+        raise FxisError(f"the frames of {camera!r} were overwritten while being read twice")
+
+    async def latest_jpeg(self, camera: str, width: int) -> tuple[bytes, tuple]:
+        """The newest frame of ``camera`` as a preview JPEG and its cache key (a new key:
+        a new frame)."""
+
+        def make(frame) -> tuple[bytes, tuple]:
+            key = preview_key(camera, frame.generation, frame.frame_id, width)
+            return self.cache.get(key, lambda: preview_jpeg(frame.image, width)), key
+
+        return await self.latest(camera, make, torn=lambda result: self.cache.discard(result[1]))
+
+    async def tuple_zip(self) -> tuple[bytes, str]:
+        """One synchronized tuple of the cameras that are up, as a zip of PNGs and tuple.json
+        (what ``fxis grab`` writes), and a file name for it."""
+        return await asyncio.get_running_loop().run_in_executor(self._pictures, self._tuple_zip)
+
+    def _tuple_zip(self) -> tuple[bytes, str]:
+        with self._picture_client.tuple(partial=True) as frames:
+            files = tuple_files(frames)
+            name = f"fxis-tuple-{frames.t_request}.zip"
+        buffer = io.BytesIO()
+        with zipfile.ZipFile(buffer, "w", zipfile.ZIP_STORED) as archive:  # PNGs are compressed
+            for file_name, data in files.items():
+                archive.writestr(file_name, data)
+        return buffer.getvalue(), name
+
+    # ---- figures ----
+
+    async def status(self) -> dict:
+        """The service's ``status`` reply now (what ``fxis status --json`` prints)."""
+        return await asyncio.get_running_loop().run_in_executor(self._sampler, self._sample_client.status)
+
+    async def sample(self) -> dict:
+        """Look at the service once; ``view`` holds what the page shows until the next look."""
+        self.view = await asyncio.get_running_loop().run_in_executor(self._sampler, self._sample)
+        return self.view
+
+    def _sample(self) -> dict:
+        client = self._sample_client
+        try:
+            status = client.status()
+        except FxisError as exc:
+            log.debug("status failed: %s", exc)
+            return {
+                **self.view,
+                "service_ok": False,
+                "error": f"the service at {self.endpoint} does not answer ({exc})",
+            }
+        cameras = {}
+        for name, cam in status["cameras"].items():
+            config = self.cameras.get(name, {})
+            measured = (
+                self._rates[name].add(status["now"], cam.get("frames_stored") or 0) if name in self._rates else None
+            )
+            cameras[name] = {"configured_fps": config.get("fps"), "measured_fps": measured, "intervals_ms": []}
+        try:
+            times = client.frame_times()
+            for name, info in times["cameras"].items():
+                cameras[name]["intervals_ms"] = frame_intervals_ms(info["frames"], times["columns"], INTERVALS_SHOWN)
+            with client.tuple(partial=True, copy=False) as tup:
+                if len(tup) > 1:  # one camera has no skew to show
+                    self._skews.add(time.monotonic() - self.started, tup.skew_ns)
+        except FxisError as exc:  # e.g. every camera down: the status still says why
+            log.debug("sampling frames failed: %s", exc)
+        return {
+            "service_ok": True,
+            "error": None,
+            "status": status,
+            "cameras": cameras,
+            "skew_ms": self._skews.points(),
+            "sampled": time.time(),
+        }
