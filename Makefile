@@ -1,7 +1,8 @@
 # Two entry points for a newcomer on a fresh machine (see README.md):
 #   make demo   set everything up, start the default service, run the paper's experiment
 #   make test   set everything up and run the whole test suite
-#   make lint   ruff (lint) over the tree, mypy --strict over the modules pyproject.toml lists
+#   make lint   ruff (lint and format) over the tree, mypy --strict over the modules pyproject.toml
+#               lists, import-linter over the layers ([tool.importlinter] in pyproject.toml)
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
@@ -27,6 +28,7 @@ lint: setup
 	$(BIN)/ruff check .
 	$(BIN)/ruff format --check .
 	$(BIN)/mypy
+	$(BIN)/lint-imports
 
 clean:
 	rm -rf $(VENV) build *.egg-info bench/results

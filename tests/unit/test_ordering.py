@@ -56,7 +56,7 @@ def test_the_helper_refuses_unaligned_or_outside_words():
 
 def test_plain_accesses_can_be_chosen_to_measure_them_on_x86_only():
     out = subprocess.run(
-        [sys.executable, "-c", "from fxis_shm import ordering; print(ordering.MODE)"],
+        [sys.executable, "-c", "from fxis_shm.shm import ordering; print(ordering.MODE)"],
         capture_output=True,
         text=True,
         env={"FXIS_PLAIN_ORDERING": "1", "PATH": ""},
