@@ -4,9 +4,9 @@
 
 ``device`` is an id as ``fxis cameras`` lists it (Aravis' device id; an IP
 address or a serial number work too); without it the first camera Aravis finds
-is used. Settings the camera refuses stop start-up with a ValueError naming the
-key and what the camera allows; settings that are not given stay as the camera
-has them.
+is used. The keys are set through Aravis' camera API (aravis_settings.py):
+settings the camera refuses stop start-up with a ValueError naming the key and
+what the camera allows; settings that are not given stay as the camera has them.
 
 Frames: a pool of buffers is queued on the Aravis stream, ``grab`` pops one,
 copies the image out (Bayer demosaiced to BGR, RGB8 reordered to BGR, unless
@@ -40,12 +40,13 @@ from typing import Any
 import numpy as np
 
 from fxis_shm.core import timebase
-from fxis_shm.core.clocks import DeviceClockFit, PtpClock, wall_to_monotonic
-from fxis_shm.service.camerakinds import ARAVIS_PIXEL_FORMATS
+from fxis_shm.core.clocks import wall_to_monotonic
 from fxis_shm.shm.ring import FrameLayout
 
+from .aravis_settings import PIXEL_FORMATS, apply_options
 from .base import Camera, CameraLost, Capture
-from .pixelformats import PIXEL_FORMATS as GENICAM_FORMATS
+from .genicam_timing import SilenceWatch, device_clock, period_ns
+from .pixelformats import image_layout
 
 log = logging.getLogger("camera")
 
@@ -67,9 +68,6 @@ def load_aravis():
         raise ImportError(f"{EXTRA_HINT} ({type(exc).__name__}: {exc})") from exc
     return Aravis, GLib
 
-
-# The formats this backend stores (a subset of the GenICam table).
-PIXEL_FORMATS = {name: GENICAM_FORMATS[name] for name in ARAVIS_PIXEL_FORMATS}
 
 N_BUFFERS = 12  # frames Aravis can hold for us; ~0.6 s at 20 fps if the worker stalls
 MIN_SOCKET_BUFFER = 1 << 20  # bytes; the kernel caps it at net.core.rmem_max
@@ -168,20 +166,7 @@ class AravisCamera(Camera):
         except GLib.Error:
             pass
         try:
-            self._configure_trigger()
-            if o["pixel_format"] is not None:
-                offered = list(cam.dup_available_pixel_formats_as_strings())
-                if o["pixel_format"] not in offered:
-                    usable = [f for f in offered if f in PIXEL_FORMATS]
-                    raise self._refuse(
-                        "pixel_format",
-                        o["pixel_format"],
-                        f"it offers {', '.join(offered)}"
-                        + (f" (fxis stores {', '.join(usable) or 'none of them'})" if usable != offered else ""),
-                    )
-                cam.set_pixel_format_from_string(o["pixel_format"])
-            self._configure_region()
-            self._configure_numbers()
+            apply_options(cam, o, self._refuse, self._Aravis)
         except GLib.Error as exc:
             raise RuntimeError(
                 f"camera {self.name!r} ({self.device_id}): configuration failed: {exc.message}"
@@ -198,13 +183,10 @@ class AravisCamera(Camera):
         self._pfnc = cam.get_pixel_format()
         _, _, w, h = cam.get_region()
         self._width, self._height = w, h
-        converts = self._pixel.to_bgr and not o["raw"]
-        channels = 3 if converts else self._pixel.channels
-        self._layout = FrameLayout(h, w, channels, self._pixel.dtype)
+        self._layout = image_layout(fmt, w, h, o["raw"])
         self._period_ns = 0
         if self.options["trigger"] == "free" and cam.is_frame_rate_available():
-            rate = cam.get_frame_rate()
-            self._period_ns = round(1e9 / rate) if rate > 0 else 0
+            self._period_ns = period_ns(cam.get_frame_rate())
         log.info(
             "camera %s: %s %s %dx%d %s, %s, timestamp=%s",
             self.name,
@@ -220,96 +202,6 @@ class AravisCamera(Camera):
             else "frame rate unknown",
             o["timestamp"],
         )
-
-    def _configure_trigger(self) -> None:
-        cam = self._cam
-        if self.options["trigger"] == "software":
-            if not cam.is_software_trigger_supported():
-                raise self._refuse("trigger", "software", "the camera has no TriggerSoftware command; use trigger=free")
-            sources = list(cam.dup_available_trigger_sources() or [])
-            if "Software" not in sources:
-                raise self._refuse("trigger", "software", f"its TriggerSource offers {', '.join(sources) or 'nothing'}")
-            cam.set_trigger("Software")  # TriggerSelector=FrameStart, TriggerMode=On, TriggerSource=Software
-        elif cam.is_feature_available("TriggerMode"):
-            cam.clear_triggers()  # TriggerMode=Off: free-running
-
-    def _configure_region(self) -> None:
-        cam, o = self._cam, self.options
-        if all(o[k] is None for k in ("width", "height", "offset_x", "offset_y")):
-            return
-        x, y, w, h = cam.get_region()
-        sized = o["width"] is not None or o["height"] is not None
-        x = (0 if sized else x) if o["offset_x"] is None else o["offset_x"]  # a new size starts at 0,0
-        y = (0 if sized else y) if o["offset_y"] is None else o["offset_y"]
-        w = w if o["width"] is None else o["width"]
-        h = h if o["height"] is None else o["height"]
-        if cam.is_region_offset_available():
-            cam.set_integer("OffsetX", 0)  # the largest width is allowed at offset 0
-            cam.set_integer("OffsetY", 0)
-        elif x or y:
-            raise self._refuse("offset_x" if x else "offset_y", x or y, "the camera has no region offset")
-        for key, value, bounds, step, offset, okey in (
-            ("width", w, cam.get_width_bounds(), cam.get_width_increment(), x, "offset_x"),
-            ("height", h, cam.get_height_bounds(), cam.get_height_increment(), y, "offset_y"),
-        ):
-            lo, hi = bounds
-            if not lo <= value <= hi:
-                raise self._refuse(key, value, f"it allows {lo}..{hi}" + (f" in steps of {step}" if step > 1 else ""))
-            if step > 1 and (value - lo) % step:
-                raise self._refuse(key, value, f"it allows {lo}..{hi} in steps of {step}")
-            if offset + value > hi:
-                raise self._refuse(okey, offset, f"with {key}={value} it allows at most {hi - value}")
-        cam.set_integer("Width", w)
-        cam.set_integer("Height", h)
-        if x or y:
-            for key, value, bounds in (
-                ("offset_x", x, cam.get_x_offset_bounds()),
-                ("offset_y", y, cam.get_y_offset_bounds()),
-            ):
-                if not bounds[0] <= value <= bounds[1]:
-                    raise self._refuse(key, value, f"it allows {bounds[0]}..{bounds[1]}")
-            cam.set_integer("OffsetX", x)
-            cam.set_integer("OffsetY", y)
-        got = tuple(cam.get_region())
-        if got != (x, y, w, h):
-            raise self._refuse(
-                "width/height/offset_x/offset_y", f"{w}x{h}+{x}+{y}", f"it set {got[2]}x{got[3]}+{got[0]}+{got[1]}"
-            )
-
-    def _configure_numbers(self) -> None:
-        cam, o = self._cam, self.options
-        if o["fps"] is not None:
-            if not cam.is_frame_rate_available():
-                raise self._refuse("fps", o["fps"], "the camera has no frame rate control")
-            lo, hi = cam.get_frame_rate_bounds()
-            if not lo <= o["fps"] <= hi:
-                raise self._refuse("fps", o["fps"], f"it allows {lo:g}..{hi:g}")
-            cam.set_frame_rate(o["fps"])
-        if o["exposure_us"] is not None:
-            if not cam.is_exposure_time_available():
-                raise self._refuse("exposure_us", o["exposure_us"], "the camera has no exposure time control")
-            lo, hi = cam.get_exposure_time_bounds()
-            if not lo <= o["exposure_us"] <= hi:
-                raise self._refuse("exposure_us", o["exposure_us"], f"it allows {lo:g}..{hi:g} us")
-            if cam.is_exposure_auto_available():
-                cam.set_exposure_time_auto(self._Aravis.Auto.OFF)
-            cam.set_exposure_time(o["exposure_us"])
-        if o["gain"] is not None:
-            if not cam.is_gain_available():
-                raise self._refuse("gain", o["gain"], "the camera has no gain control")
-            lo, hi = cam.get_gain_bounds()
-            if not lo <= o["gain"] <= hi:
-                raise self._refuse("gain", o["gain"], f"it allows {lo:g}..{hi:g}")
-            if cam.is_gain_auto_available():
-                cam.set_gain_auto(self._Aravis.Auto.OFF)
-            cam.set_gain(o["gain"])
-        if o["packet_size"] is not None:
-            if not cam.is_gv_device():
-                raise self._refuse("packet_size", o["packet_size"], "only GigE Vision cameras have one")
-            lo, hi = self._device.get_integer_feature_bounds("GevSCPSPacketSize")
-            if not lo <= o["packet_size"] <= hi:
-                raise self._refuse("packet_size", o["packet_size"], f"it allows {lo}..{hi} bytes")
-            cam.gv_set_packet_size(o["packet_size"])
 
     def _start_stream(self) -> None:
         Aravis, cam = self._Aravis, self._cam
@@ -341,24 +233,19 @@ class AravisCamera(Camera):
             self._converted = np.empty(self._layout.shape, np.uint8)
         self._ids = FrameCounter(0xFFFF if self._gv else None)
         self._failed_since_good = 0
-        self._clock = None
-        if self.options["timestamp"] == "ptp":
-            self._clock = PtpClock(timebase.service_and_tai)  # Aravis gives device timestamps in ns
-        if self.options["timestamp"] == "device":
-            # Aravis gives device timestamps in ns: it converts GigE Vision ticks with the
-            # camera's timestamp tick frequency (USB3 Vision timestamps are ns already).
-            self._clock = DeviceClockFit(tick_ns=1.0)
-            if self._gv and not self._device.get_timestamp_tick_frequency():
-                log.warning(
-                    "camera %s reports no timestamp tick frequency: Aravis stamps its frames "
-                    "with the host's clock, so timestamp=device is the arrival time",
-                    self.name,
-                )
+        # Aravis gives device timestamps in ns: it converts GigE Vision ticks with the
+        # camera's timestamp tick frequency (USB3 Vision timestamps are ns already).
+        self._clock = device_clock(self.options["timestamp"], tick_ns=1.0)
+        if self.options["timestamp"] == "device" and self._gv and not self._device.get_timestamp_tick_frequency():
+            log.warning(
+                "camera %s reports no timestamp tick frequency: Aravis stamps its frames "
+                "with the host's clock, so timestamp=device is the arrival time",
+                self.name,
+            )
         self._probe: threading.Thread | None = None
-        self._probe_started = 0.0
         self._warned_device_ts = False
         self._cam.start_acquisition()
-        self._last_frame = time.monotonic()
+        self._silence = SilenceWatch()
 
     # ---- what the worker asks --------------------------------------------------------------
 
@@ -387,7 +274,7 @@ class AravisCamera(Camera):
             if buffer is None:
                 self._check_alive()
                 return None
-            self._last_frame = time.monotonic()
+            self._silence.frame_arrived()
             try:
                 capture = self._take(buffer, Aravis, mono_now, wall_now)
             finally:
@@ -469,15 +356,13 @@ class AravisCamera(Camera):
         camera makes a read block for seconds); raise CameraLost once the probe failed."""
         if self._probe_error is not None:
             raise CameraLost(self._probe_error)
-        now = time.monotonic()
         if self._probe is not None:
             if not self._probe.is_alive():
                 self._probe = None
             return
-        if now - max(self._last_frame, self._probe_started) < self._idle_limit():
+        idle = self._silence.check_due(self._idle_limit())
+        if idle is None:
             return
-        self._probe_started = now
-        idle = now - self._last_frame
         self._probe = threading.Thread(
             target=self._run_probe, args=(idle,), daemon=True, name=f"aravis-probe-{self.name}"
         )

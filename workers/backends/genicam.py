@@ -10,8 +10,9 @@ producers are those of the standard GenTL environment variable
 
 The generic keys (fps, width, height, offsets, pixel format, exposure, gain,
 trigger) are set through the device's SFNC features when the device offers
-them; a key the device lacks or a value it refuses stops start-up with a
-ValueError that names the camera, the key and what the device allows.
+them (genicam_features.py); a key the device lacks or a value it refuses stops
+start-up with a ValueError that names the camera, the key and what the device
+allows.
 
 Images (workers/backends/pixelformats.py): the buffer's component is converted to NumPy and copied out before the
 buffer goes back to the producer. Mono8 -> (h, w) uint8; Mono10..16 -> (h, w)
@@ -29,7 +30,6 @@ from __future__ import annotations
 import glob
 import logging
 import os
-import time
 
 from fxis_shm.core import timebase
 from fxis_shm.core.clocks import DeviceClockFit, PtpClock
@@ -37,7 +37,9 @@ from fxis_shm.service.camerakinds import GENTL_PATH_VAR
 from fxis_shm.shm.ring import FrameLayout
 
 from .base import Camera, CameraLost, Capture
-from .pixelformats import PIXEL_FORMATS, image_layout, to_image
+from .genicam_features import DeviceFeatures, refusal, short_error
+from .genicam_timing import SilenceWatch, device_clock
+from .pixelformats import image_layout, to_image  # noqa: F401 (image_layout: tests import it from here)
 
 log = logging.getLogger("camera")
 
@@ -82,20 +84,6 @@ def producers_from_env(environ=os.environ) -> list[str]:
     return files
 
 
-def _readable(node, genapi) -> bool:
-    return node.get_access_mode() in (genapi.EAccessMode.RO, genapi.EAccessMode.RW)
-
-
-def _writable(node, genapi) -> bool:
-    return node.get_access_mode() in (genapi.EAccessMode.WO, genapi.EAccessMode.RW)
-
-
-def _short(exc: Exception) -> str:
-    """GenICam exception texts carry file and line; keep their first sentence."""
-    message = str(exc).strip().splitlines()[0] if str(exc).strip() else type(exc).__name__
-    return message[:200]
-
-
 class GenicamCamera(Camera):
     kind = "genicam"
 
@@ -111,13 +99,14 @@ class GenicamCamera(Camera):
         self._incomplete = 0
         self._fit: DeviceClockFit | PtpClock | None = None
         self._device_ns = True  # the buffers' timestamps are in ns (else in ticks)
-        self._last_frame_s = 0.0
+        self._silence = SilenceWatch()
+        self._features: DeviceFeatures | None = None
         self._pixel_format = ""
 
     # -- configuration ---------------------------------------------------------------
 
     def _refuse(self, key: str, why: str) -> ValueError:
-        return ValueError(f"camera {self.name!r}: key {key!r}: {why}")
+        return refusal(self.name, key, why)
 
     def _producers(self) -> list[str]:
         cti = self.options["cti"]
@@ -155,174 +144,11 @@ class GenicamCamera(Camera):
         )
         raise self._refuse("device", f"no device {want!r}; the producer(s) offer (index: serial (id, model)) {listing}")
 
-    def _node(self, *names):
-        """The first of ``names`` the device implements and makes available now, or None."""
-        _, genapi, _ = _sdk()
-        nm = self._ia.remote_device.node_map
-        for name in names:
-            try:
-                node = getattr(nm, name)
-            except AttributeError:
-                continue
-            if node.get_access_mode() not in (genapi.EAccessMode.NI, genapi.EAccessMode.NA):
-                return node
-        return None
-
-    def _set_enum(self, key: str | None, node, value: str, quiet: bool = False) -> str:
-        """Set an enumeration by its symbolic name (case-insensitive); returns the name set."""
-        _, genapi, _ = _sdk()
-        offered = [
-            e.symbolic
-            for e in node.entries
-            if e.node.get_access_mode() not in (genapi.EAccessMode.NI, genapi.EAccessMode.NA)
-        ]
-        match = next((s for s in offered if s.lower() == value.lower()), None)
-        if match is not None and _readable(node.node, genapi) and node.value == match:
-            return match  # already so, whether or not it could change now
-        if match is None or not _writable(node.node, genapi):
-            if quiet:
-                return ""
-            if match is None:
-                raise self._refuse(
-                    key, f"the device does not offer {value!r}; it offers {', '.join(offered) or 'nothing'}"
-                )
-            raise self._refuse(key, f"the device does not let {node.node.name} change now")
-        try:
-            node.value = match
-        except Exception as exc:  # GenApi exceptions: the device refused
-            if quiet:
-                return ""
-            raise self._refuse(key, f"the device refused {match!r}: {_short(exc)}") from None
-        return match
-
-    def _set_number(self, key: str, names: tuple[str, ...], value: float, integer: bool) -> None:
-        _, genapi, _ = _sdk()
-        node = self._node(*names)
-        if node is None:
-            raise self._refuse(key, f"the device has no {' or '.join(names)} feature")
-        if not _writable(node.node, genapi):
-            raise self._refuse(key, f"the device does not let {node.node.name} change now")
-        if integer:
-            value = int(round(value))
-        lo, hi = node.min, node.max
-        step = ""
-        if integer:
-            inc = node.inc
-            step = f" in steps of {inc}" if inc > 1 else ""
-            if inc > 1 and (value - lo) % inc:
-                raise self._refuse(key, f"{value} is not allowed; the device allows {lo}..{hi}{step}")
-        if not lo <= value <= hi:
-            raise self._refuse(key, f"{value:g} is out of range; the device allows {lo:g}..{hi:g}{step}")
-        try:
-            node.value = value
-        except Exception as exc:  # GenApi exceptions: the device refused
-            raise self._refuse(key, f"the device refused {value:g}: {_short(exc)}") from None
-
-    def _switch_off(self, *names: str) -> None:
-        """Turn an automatic mode (ExposureAuto, GainAuto) off if the device has it."""
-        node = self._node(*names)
-        if node is not None:
-            self._set_enum(None, node, "Off", quiet=True)
-
     def _configure(self) -> None:
-        o = self.options
         _, genapi, _ = _sdk()
-        node = self._node("PixelFormat")
-        if o["pixel_format"]:
-            if node is None:
-                raise self._refuse("pixel_format", "the device has no PixelFormat feature")
-            self._set_enum("pixel_format", node, o["pixel_format"])
-        if node is None or not _readable(node.node, genapi):
-            raise ValueError(
-                f"camera {self.name!r}: the device does not say its PixelFormat; "
-                f"fxis cannot tell how to read its images"
-            )
-        self._pixel_format = node.value
-        if self._pixel_format not in PIXEL_FORMATS:
-            offered = [
-                e.symbolic
-                for e in node.entries
-                if e.symbolic in PIXEL_FORMATS
-                and e.node.get_access_mode() not in (genapi.EAccessMode.NI, genapi.EAccessMode.NA)
-            ]
-            raise self._refuse(
-                "pixel_format",
-                f"fxis cannot convert {self._pixel_format!r} to NumPy; "
-                f"set one the device offers that it can: "
-                f"{', '.join(offered) or 'none'}",
-            )
-        for size, offset, axis in (("width", "offset_x", "OffsetX"), ("height", "offset_y", "OffsetY")):
-            if o[size] is None and o[offset] is None:
-                continue
-            node = self._node(axis)
-            if node is not None and _writable(node.node, genapi) and node.value != node.min:
-                try:
-                    node.value = node.min  # room for the largest size first
-                except Exception as exc:  # GenApi exceptions: the device refused
-                    raise self._refuse(
-                        offset, f"the device refused to move {axis} to {node.min}: {_short(exc)}"
-                    ) from None
-            if o[size] is not None:
-                self._set_number(size, (size.capitalize(),), o[size], integer=True)
-            if o[offset] is not None:
-                self._set_number(offset, (axis,), o[offset], integer=True)
-        if o["exposure_us"] is not None:
-            self._switch_off("ExposureAuto")
-            self._set_number("exposure_us", ("ExposureTime", "ExposureTimeAbs"), o["exposure_us"], False)
-        if o["gain"] is not None:
-            self._switch_off("GainAuto")
-            gain = self._node("Gain", "GainRaw")
-            integer = gain is not None and gain.node.name == "GainRaw"
-            self._set_number("gain", ("Gain", "GainRaw"), o["gain"], integer)
-        if o["fps"] is not None:
-            enable = self._node("AcquisitionFrameRateEnable", "AcquisitionFrameRateEnabled")
-            if enable is not None and _writable(enable.node, genapi):
-                enable.value = True
-            self._set_number("fps", ("AcquisitionFrameRate", "AcquisitionFrameRateAbs"), o["fps"], False)
-        self._configure_trigger()
-        width, height = self._node("Width"), self._node("Height")
-        if width is None or height is None:
-            raise ValueError(
-                f"camera {self.name!r}: the device has no Width/Height features; fxis cannot tell its image size"
-            )
-        self._layout = image_layout(self._pixel_format, width.value, height.value, o["raw"])
-        self._period_ns = self._read_period()
-
-    def _configure_trigger(self) -> None:
-        software = self.options["trigger"] == "software"
-        mode = self._node("TriggerMode")
-        selector = self._node("TriggerSelector")
-        if software:
-            if self._node("TriggerSoftware") is None or mode is None or self._node("TriggerSource") is None:
-                raise self._refuse(
-                    "trigger",
-                    "software triggering needs the device's TriggerMode, "
-                    "TriggerSource and TriggerSoftware features, which it "
-                    "lacks; it allows trigger=free only",
-                )
-            if selector is not None:
-                for name in ("FrameStart", "AcquisitionStart"):
-                    if self._set_enum(None, selector, name, quiet=True):
-                        break
-            self._set_enum("trigger", self._node("TriggerSource"), "Software")
-            self._set_enum("trigger", mode, "On")
-        elif mode is not None:  # a device left in trigger mode would never stream freely
-            if selector is not None:
-                self._set_enum(None, selector, "FrameStart", quiet=True)
-            self._set_enum(None, mode, "Off", quiet=True)
-
-    def _read_period(self) -> int:
-        if self.supports_trigger:
-            return 0
-        _, genapi, _ = _sdk()
-        node = self._node(
-            "ResultingFrameRate", "AcquisitionResultingFrameRate", "AcquisitionFrameRate", "AcquisitionFrameRateAbs"
-        )
-        try:
-            fps = float(node.value) if node is not None and _readable(node.node, genapi) else 0.0
-        except Exception:  # some devices compute it only while acquiring
-            fps = 0.0
-        return round(1e9 / fps) if fps > 0 else 0
+        self._features = DeviceFeatures(self._ia.remote_device.node_map, genapi, self.name)
+        self._pixel_format, self._layout = self._features.configure(self.options)
+        self._period_ns = 0 if self.supports_trigger else self._features.frame_period_ns()
 
     # -- the Camera interface ------------------------------------------------------------
 
@@ -347,7 +173,7 @@ class GenicamCamera(Camera):
             except gentl.GenericException as exc:
                 raise RuntimeError(
                     f"camera {self.name!r}: cannot open device "
-                    f"{_prop(infos[index], 'id_')!r}: {_short(exc)} "
+                    f"{_prop(infos[index], 'id_')!r}: {short_error(exc)} "
                     f"(is another program using it?)"
                 ) from None
             try:
@@ -362,7 +188,7 @@ class GenicamCamera(Camera):
             self._last_device_id = None
             self._ia.add_callback(self._ia.Events.INCOMPLETE_BUFFER, _incomplete_counter(core, self))
             self._ia.start()
-            self._last_frame_s = time.monotonic()
+            self._silence = SilenceWatch()
             if self.options["timestamp"] in ("device", "ptp"):
                 self._fit = None
                 self._check_device_timestamps()
@@ -400,7 +226,8 @@ class GenicamCamera(Camera):
                 except gentl.GenericException as exc:
                     raise self._refuse(
                         "timestamp",
-                        f"the device does not timestamp its buffers ({_short(exc)}); it allows timestamp=host only",
+                        f"the device does not timestamp its buffers ({short_error(exc)}); "
+                        "it allows timestamp=host only",
                     ) from None
                 self._device_ns = False
         tick_ns = 1.0
@@ -409,18 +236,14 @@ class GenicamCamera(Camera):
             try:
                 frequency = self._ia.device.module.timestamp_frequency
             except gentl.GenericException:
-                node = self._node("GevTimestampTickFrequency")
+                node = self._features.node("GevTimestampTickFrequency")
                 frequency = node.value if node is not None else 0
             if not frequency:
                 raise self._refuse(
                     "timestamp", "the device's timestamp tick frequency is unknown; it allows timestamp=host only"
                 )
             tick_ns = 1e9 / frequency
-        self._fit = (
-            PtpClock(timebase.service_and_tai, tick_ns)
-            if self.options["timestamp"] == "ptp"
-            else DeviceClockFit(tick_ns=tick_ns)
-        )
+        self._fit = device_clock(self.options["timestamp"], tick_ns)
 
     def grab(self, timeout: float) -> Capture | None:
         _, genapi, gentl = _sdk()
@@ -429,12 +252,12 @@ class GenicamCamera(Camera):
         try:
             buffer = self._ia.try_fetch(timeout=timeout)
         except (gentl.GenericException, genapi.GenericException) as exc:
-            raise CameraLost(f"the producer reports {_short(exc)}") from None
+            raise CameraLost(f"the producer reports {short_error(exc)}") from None
         if buffer is None:
             self._check_alive()
             return None
         t_host = timebase.now()
-        self._last_frame_s = time.monotonic()
+        self._silence.frame_arrived()
         with buffer:  # re-queued on exit: everything we keep is copied out before
             try:
                 component = buffer.payload.components[0]
@@ -450,7 +273,7 @@ class GenicamCamera(Camera):
                 t_capture = self._device_time(buffer, t_host, gentl) if self._fit is not None else t_host
             except (gentl.GenericException, genapi.GenericException, ValueError, IndexError, AttributeError) as exc:
                 self.frames_dropped += 1
-                log.warning("camera %s: frame dropped: %s", self.name, _short(exc))
+                log.warning("camera %s: frame dropped: %s", self.name, short_error(exc))
                 return None
         return Capture(image, self._next_index(device_id), t_capture)
 
@@ -478,16 +301,15 @@ class GenicamCamera(Camera):
 
     def _check_alive(self) -> None:
         """Silence may be a lost device: after a second of it, read a register (not a cached value)."""
-        if time.monotonic() - self._last_frame_s < _PROBE_AFTER_S:
+        if self._silence.check_due(_PROBE_AFTER_S) is None:
             return
-        self._last_frame_s = time.monotonic()
         _, genapi, gentl = _sdk()
         try:
             node = self._ia.remote_device.node_map.Width
             node.node.invalidate_node()
             _ = node.value  # a read the device must answer
         except (gentl.GenericException, genapi.GenericException) as exc:
-            raise CameraLost(f"the device does not answer: {_short(exc)}") from None
+            raise CameraLost(f"the device does not answer: {short_error(exc)}") from None
 
     def close(self) -> None:
         ia, harvester = self._ia, self._harvester
