@@ -15,7 +15,7 @@ $(VENV)/.installed: pyproject.toml setup.py fxis_shm/shm/_ordered.c scripts/inst
 	bash scripts/install-system-packages.sh
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[test,bench,aravis,genicam,record,foxglove]"
+	$(BIN)/python -m pip install --quiet -e ".[test,bench,aravis,genicam,record,foxglove,ros2]"
 	touch $@
 
 demo: setup

@@ -1,0 +1,402 @@
+"""A ROS 2 participant on plain Cyclone DDS (the ``cyclonedds`` wheel, no ROS install): writers
+of pre-built CDR messages and a reader of ``std_msgs/msg/Header`` requests.
+
+What makes a ROS 2 node (rmw_cyclonedds_cpp) talk to us:
+
+* names: topic ``/a/b`` is DDS topic ``rt/a/b``, type ``pkg/msg/Name`` is
+  ``pkg::msg::dds_::Name_`` (``fxis_shm.formats.rosnames``);
+* payload: XCDR1 (classic CDR), little endian, key-less, ``final`` (``fxis_shm.formats.cdr``);
+* QoS: DATA_REPRESENTATION = [XCDR1] on every endpoint, since rmw_cyclonedds' sertype allows
+  only XCDR1 and Cyclone never matches an XCDR2 writer with its readers; reliability, history
+  and durability as the ROS profiles below, the rest as rmw's ``create_readwrite_qos``;
+* USER_DATA: ``enclave=/;`` on the participant and ``typehash=RIHS01_<hex>;`` on endpoints, as
+  rmw_cyclonedds ≥ Iron writes them (informational: rmw never refuses a match on them).
+
+rmw_cyclonedds' sertype carries no XTypes type information, so Cyclone matches a ROS endpoint
+with ours by type *name* only (XTypes 7.6.3.4.2); the TypeInformation derived from the
+IdlStruct declarations here only matters to XTypes-aware peers such as our test peer.
+
+Raw CDR: ``cyclonedds._clayer.ddspy_write`` takes any C-contiguous buffer and calls
+``dds_write``; Cyclone copies it once and validates it against the type's CDR ops, so a
+malformed buffer is refused (``DDSException``) instead of going on the wire. The binding's own
+``DataWriter.write`` would serialize element by element and copy again; we skip both.
+``ddspy_write`` is private API: the ``ros2`` extra pins cyclonedds to 11.0.x for it.
+
+``ddspy_write`` holds the GIL for the whole ``dds_write``, and a reliable writer may block in
+it up to RELIABILITY.max_blocking_time when its readers lag: hence ``CAMERA_PUBLISHER``'s
+100 ms (rmw uses infinity).
+"""
+
+# No ``from __future__ import annotations`` here: cyclonedds resolves an IdlStruct's string
+# annotations ("t.uint32") by importing a module of that name, and fails.
+
+import time
+from dataclasses import dataclass
+from typing import Any
+
+from cyclonedds._clayer import ddspy_take, ddspy_write, ddspy_write_ts
+from cyclonedds.core import (
+    DDSException,
+    DDSStatus,
+    Entity,
+    InstanceState,
+    ReadCondition,
+    SampleState,
+    ViewState,
+    WaitSet,
+)
+from cyclonedds.domain import Domain, DomainParticipant
+from cyclonedds.idl import IdlStruct, types as t
+from cyclonedds.idl.annotations import final
+from cyclonedds.pub import DataWriter
+from cyclonedds.qos import Policy, Qos
+from cyclonedds.sub import DataReader
+from cyclonedds.topic import Topic
+from cyclonedds.util import duration
+
+from fxis_shm.formats import cdr
+from fxis_shm.formats.rosnames import dds_topic_name, dds_type_name
+
+# Cyclone's dds_qos_policy_id_t, as *_incompatible_qos statuses report the policy that failed.
+RELIABILITY_QOS_POLICY_ID = 11
+DATA_REPRESENTATION_QOS_POLICY_ID = 25
+
+# RIHS01 type hashes (REP-2011), the same in Iron, Jazzy and Kilted for these types; Humble has
+# none and ignores USER_DATA. tests/unit/test_cdr.py checks them against rosbags' hash_rihs01.
+TYPE_HASHES: dict[str, str] = {
+    "std_msgs/msg/Header": "RIHS01_f49fb3ae2cf070f793645ff749683ac6b06203e41c891e17701b1cb597ce6a01",
+    "std_msgs/msg/String": "RIHS01_df668c740482bbd48fb39d76a70dfd4bd59db1288021743503259e948f6b1a18",
+    "sensor_msgs/msg/Image": "RIHS01_d31d41a9a4c4bc8eae9be757b0beed306564f7526c88ea6a4588fb9582527d47",
+    "sensor_msgs/msg/CompressedImage": "RIHS01_15640771531571185e2efc8a100baf923961a4d15d5569652e6cb6691e8e371a",
+    "sensor_msgs/msg/CameraInfo": "RIHS01_b3dfd68ff46c9d56c80fd3bd4ed22c7a4ddce8c8348f2f59c299e73118e7e275",
+}
+
+
+# The ROS types as IdlStructs, written from the .msg files. Never used to serialize (cdr does);
+# they give Cyclone the topic's type name, key-less-ness and extensibility, the TypeInformation
+# it advertises and the CDR ops it checks written buffers against, so they must match the ROS
+# IDL exactly: ``data`` is sequence<uint8>, not bytes.
+
+
+@dataclass
+@final
+class _Time(IdlStruct, typename="builtin_interfaces.msg.dds_.Time_"):
+    sec: t.int32
+    nanosec: t.uint32
+
+
+@dataclass
+@final
+class _Header(IdlStruct, typename="std_msgs.msg.dds_.Header_"):
+    stamp: _Time
+    frame_id: str
+
+
+@dataclass
+@final
+class _String(IdlStruct, typename="std_msgs.msg.dds_.String_"):
+    data: str
+
+
+@dataclass
+@final
+class _Image(IdlStruct, typename="sensor_msgs.msg.dds_.Image_"):
+    header: _Header
+    height: t.uint32
+    width: t.uint32
+    encoding: str
+    is_bigendian: t.uint8
+    step: t.uint32
+    data: t.sequence[t.uint8]
+
+
+@dataclass
+@final
+class _CompressedImage(IdlStruct, typename="sensor_msgs.msg.dds_.CompressedImage_"):
+    header: _Header
+    format: str
+    data: t.sequence[t.uint8]
+
+
+@dataclass
+@final
+class _RegionOfInterest(IdlStruct, typename="sensor_msgs.msg.dds_.RegionOfInterest_"):
+    x_offset: t.uint32
+    y_offset: t.uint32
+    height: t.uint32
+    width: t.uint32
+    do_rectify: bool
+
+
+@dataclass
+@final
+class _CameraInfo(IdlStruct, typename="sensor_msgs.msg.dds_.CameraInfo_"):
+    header: _Header
+    height: t.uint32
+    width: t.uint32
+    distortion_model: str
+    d: t.sequence[t.float64]
+    k: t.array[t.float64, 9]
+    r: t.array[t.float64, 9]
+    p: t.array[t.float64, 12]
+    binning_x: t.uint32
+    binning_y: t.uint32
+    roi: _RegionOfInterest
+
+
+IDL_TYPES: dict[str, type[IdlStruct]] = {
+    "std_msgs/msg/Header": _Header,
+    "std_msgs/msg/String": _String,
+    "sensor_msgs/msg/Image": _Image,
+    "sensor_msgs/msg/CompressedImage": _CompressedImage,
+    "sensor_msgs/msg/CameraInfo": _CameraInfo,
+}
+
+
+def _check_ros_compatible(idl: type[IdlStruct], ros_type: str) -> None:
+    """Refuse a declaration a ROS reader would not match: another name, not final or not XCDR1
+    (an @appendable or @mutable type, or optional members, default to XCDR2), or keyed."""
+    spec = idl.__idl__
+    spec.populate()
+    if spec.idl_transformed_typename != dds_type_name(ros_type):
+        raise TypeError(f"{idl} is named {spec.idl_transformed_typename}, ROS wants {dds_type_name(ros_type)}")
+    extensibility = idl.__idl_annotations__.get("extensibility", "final")  # cyclonedds' default: final
+    if extensibility != "final" or spec.default_version != 1 or not spec.supported_versions & 1:
+        raise TypeError(f"{idl} is not final/XCDR1 (ROS readers only accept XCDR1): {extensibility}")
+    if not spec.keyless:
+        raise TypeError(f"{idl} has key fields; ROS topics are key-less")
+
+
+@dataclass(frozen=True)
+class QosProfile:
+    """The part of an rmw QoS profile that decides matching, and a writer's blocking bound."""
+
+    reliable: bool = True
+    depth: int = 10
+    transient_local: bool = False
+    # RELIABILITY.max_blocking_time (not part of matching); None: infinite, as rmw has it.
+    max_blocking_ms: float | None = None
+
+    def to_qos(self, user_data: bytes | None = None) -> Qos:
+        """The Cyclone QoS rmw_cyclonedds' ``create_readwrite_qos`` makes of this profile."""
+        if not self.reliable:
+            reliability: Any = Policy.Reliability.BestEffort
+        elif self.max_blocking_ms is None:
+            reliability = Policy.Reliability.Reliable(max_blocking_time=duration(infinite=True))
+        else:
+            reliability = Policy.Reliability.Reliable(max_blocking_time=duration(milliseconds=self.max_blocking_ms))
+        policies: list[Any] = [
+            reliability,
+            Policy.History.KeepLast(self.depth),
+            Policy.Durability.TransientLocal if self.transient_local else Policy.Durability.Volatile,
+            Policy.WriterDataLifecycle(autodispose=False),
+            Policy.Liveliness.Automatic(lease_duration=duration(infinite=True)),
+            Policy.DataRepresentation(use_cdrv0_representation=True),  # XCDR1 only, as rmw
+        ]
+        if user_data is not None:
+            policies.append(Policy.Userdata(user_data))
+        return Qos(*policies)
+
+
+# rclcpp's SensorDataQoS: best effort, keep last 5, volatile.
+SENSOR_DATA = QosProfile(reliable=False, depth=5)
+# rclcpp's default, QoS(10): reliable, keep last 10, volatile.
+DEFAULT_SUBSCRIBER = QosProfile(reliable=True, depth=10)
+# A camera's publisher: reliable, so that both kinds of subscriber above match; a short history.
+CAMERA_PUBLISHER = QosProfile(reliable=True, depth=2, max_blocking_ms=100)
+
+
+def _delete_now(entity: Entity) -> None:
+    """Delete a cyclonedds entity and its children now (sockets freed), not whenever GC runs."""
+    if Entity._entities.get(entity._ref) is entity:
+        del Entity._entities[entity._ref]
+        entity._delete(entity._ref)
+
+
+def _typehash_user_data(ros_type: str) -> bytes:
+    type_hash = TYPE_HASHES.get(ros_type)
+    return f"typehash={type_hash};".encode() if type_hash else b""
+
+
+class RosParticipant:
+    """One DDS participant that looks like an rmw_cyclonedds context; a context manager.
+
+    ``config``: Cyclone XML, applied by creating the ``Domain`` explicitly, so nothing global
+    (``CYCLONEDDS_URI``) is touched; None: Cyclone reads ``CYCLONEDDS_URI`` as usual. A process
+    can hold only one explicitly configured domain per id: share the participant. ``close``
+    deletes the participant, its readers and writers, and that domain.
+    """
+
+    def __init__(self, domain_id: int, config: str | None = None, enclave: str = "/") -> None:
+        self.domain_id = domain_id
+        self.domain: Domain | None = Domain(domain_id, config) if config is not None else None
+        self.participant = DomainParticipant(domain_id, qos=Qos(Policy.Userdata(f"enclave={enclave};".encode())))
+        self._topics: dict[tuple[str, str], Topic] = {}
+        self._closed = False
+
+    def topic(self, ros_topic: str, ros_type: str) -> Topic:
+        """The DDS topic of (ROS topic, ROS type), made once per participant."""
+        key = (ros_topic, ros_type)
+        if key not in self._topics:
+            idl = IDL_TYPES[ros_type]
+            _check_ros_compatible(idl, ros_type)
+            self._topics[key] = Topic(self.participant, dds_topic_name(ros_topic), idl)
+        return self._topics[key]
+
+    def writer(self, ros_topic: str, ros_type: str, profile: QosProfile | None = None) -> "RawWriter":
+        """A :class:`RawWriter`, with :data:`CAMERA_PUBLISHER` unless told otherwise."""
+        return RawWriter(self, ros_topic, ros_type, profile or CAMERA_PUBLISHER)
+
+    def raw_reader(self, ros_topic: str, ros_type: str, profile: QosProfile | None = None) -> "RawReader":
+        """A :class:`RawReader`, with :data:`DEFAULT_SUBSCRIBER` unless told otherwise."""
+        return RawReader(self, ros_topic, ros_type, profile or DEFAULT_SUBSCRIBER)
+
+    def header_reader(self, ros_topic: str, profile: QosProfile | None = None) -> "HeaderReader":
+        """A :class:`HeaderReader`, with :data:`DEFAULT_SUBSCRIBER` unless told otherwise."""
+        return HeaderReader(self, ros_topic, profile or DEFAULT_SUBSCRIBER)
+
+    def close(self) -> None:
+        """Delete the participant (with its readers and writers) and its domain now; idempotent."""
+        if self._closed:
+            return
+        self._closed = True
+        self._topics.clear()
+        _delete_now(self.participant)
+        if self.domain is not None:
+            _delete_now(self.domain)
+
+    def __enter__(self) -> "RosParticipant":
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class RawWriter:
+    """Publishes pre-built XCDR1 messages of one (ROS topic, ROS type).
+
+    A write costs no Python serialization: one memcpy and a validation inside Cyclone, then
+    the transport.
+    """
+
+    def __init__(self, node: RosParticipant, ros_topic: str, ros_type: str, profile: QosProfile) -> None:
+        self.ros_topic, self.ros_type = ros_topic, ros_type
+        qos = profile.to_qos(_typehash_user_data(ros_type))
+        self._writer = DataWriter(node.participant, node.topic(ros_topic, ros_type), qos=qos)
+        self._ref: int = self._writer._ref
+        # A change of the matched readers wakes wait_for_readers (reading the status re-arms it).
+        self._writer.set_status_mask(DDSStatus.PublicationMatched)
+        self._matches = WaitSet(node.participant)
+        self._matches.attach(self._writer)
+
+    def write(self, payload: bytes | bytearray | memoryview, timestamp_ns: int | None = None) -> None:
+        """Publish one serialized message (encapsulation header included); DDSException if
+        Cyclone refuses it (malformed CDR) or the writer is gone.
+
+        ``payload`` should be padded to a multiple of 4 bytes (``cdr.encode_*(..., pad=True)``),
+        else it is padded here at the cost of a copy. ``timestamp_ns``: the DDS source
+        timestamp (ROS's ``MessageInfo.source_timestamp``); None: now.
+        """
+        if memoryview(payload).nbytes % 4:
+            payload = cdr.pad4(bytes(payload))
+        if timestamp_ns is None:
+            ret = ddspy_write(self._ref, payload)
+        else:
+            ret = ddspy_write_ts(self._ref, payload, timestamp_ns)
+        if ret < 0:
+            raise DDSException(ret, f"dds_write on {self.ros_topic} ({self.ros_type})")
+
+    def matched_count(self) -> int:
+        """Readers matched now (PUBLICATION_MATCHED.current_count)."""
+        return int(self._writer.get_publication_matched_status().current_count)
+
+    def incompatible_qos(self) -> tuple[int, int]:
+        """(total_count, last_policy_id) of OFFERED_INCOMPATIBLE_QOS: readers refused, and why."""
+        status = self._writer.get_offered_incompatible_qos_status()
+        return int(status.total_count), int(status.last_policy_id)
+
+    def wait_for_readers(self, n: int = 1, timeout: float = 5.0) -> bool:
+        """Block until at least ``n`` readers match, at most ``timeout`` s; whether they did."""
+        deadline = time.monotonic() + timeout
+        while self.matched_count() < n:
+            left = deadline - time.monotonic()
+            if left <= 0:
+                return False
+            self._matches.wait(duration(seconds=left))
+        return True
+
+    def wait_for_acks(self, timeout: float = 5.0) -> bool:
+        """Block until the reliable readers acknowledged everything written (at most ``timeout``
+        s); True at once for best effort."""
+        return bool(self._writer.wait_for_acks(duration(seconds=timeout)))
+
+
+@dataclass(frozen=True)
+class ReceivedHeader:
+    """A request: the Header, and the DDS source timestamp its publisher gave it (ns)."""
+
+    header: cdr.Header
+    source_timestamp_ns: int
+
+
+class RawReader:
+    """Reads one (ROS topic, ROS type) as the serialized CDR bytes, decoded by the caller
+    (fxis_shm.formats.cdr): no per-element Python deserialization, whatever the size."""
+
+    _ANY = SampleState.Any | ViewState.Any | InstanceState.Any
+
+    def __init__(self, node: RosParticipant, ros_topic: str, ros_type: str, profile: QosProfile) -> None:
+        self.ros_topic = ros_topic
+        qos = profile.to_qos(_typehash_user_data(ros_type))
+        self._reader = DataReader(node.participant, node.topic(ros_topic, ros_type), qos=qos)
+        self._waitset = WaitSet(node.participant)
+        self._waitset.attach(ReadCondition(self._reader, self._ANY))
+
+    def take_raw(self, max_samples: int = 64) -> list[tuple[bytes, int]]:
+        """Without blocking: what has arrived, as (CDR bytes, source timestamp ns)."""
+        ret = ddspy_take(self._reader._ref, self._ANY, max_samples)
+        if isinstance(ret, int):
+            raise DDSException(ret, f"take on {self.ros_topic}")
+        return [(data, int(info.source_timestamp)) for data, info in ret if info.valid_data]
+
+    def wait_raw(self, timeout: float) -> list[tuple[bytes, int]]:
+        """Block up to ``timeout`` s for messages, then take them (may be [])."""
+        received = self.take_raw()
+        if received:
+            return received
+        self._waitset.wait(duration(seconds=timeout))
+        return self.take_raw()
+
+    def matched_count(self) -> int:
+        """Writers matched now (SUBSCRIPTION_MATCHED.current_count)."""
+        return int(self._reader.get_subscription_matched_status().current_count)
+
+
+class HeaderReader(RawReader):
+    """Reads ``std_msgs/msg/Header`` messages (the bridge's requests), decoded by ``cdr``.
+
+    Reliable by default, so that no request is lost: it then does not match a best-effort
+    publisher (``ros2 topic pub --qos-reliability best_effort``); ``ros2 topic pub``, rclpy
+    and rclcpp publish reliably unless told otherwise.
+    """
+
+    def __init__(self, node: RosParticipant, ros_topic: str, profile: QosProfile) -> None:
+        super().__init__(node, ros_topic, "std_msgs/msg/Header", profile)
+
+    def take(self, max_samples: int = 64) -> list[ReceivedHeader]:
+        """Without blocking: what has arrived (malformed messages are dropped)."""
+        return self._decoded(self.take_raw(max_samples))
+
+    def wait(self, timeout: float) -> list[ReceivedHeader]:
+        """Block up to ``timeout`` s for messages, then take them (may be [])."""
+        return self._decoded(self.wait_raw(timeout))
+
+    @staticmethod
+    def _decoded(received: list[tuple[bytes, int]]) -> list[ReceivedHeader]:
+        headers = []
+        for data, source_timestamp in received:
+            try:
+                headers.append(ReceivedHeader(cdr.decode_header(data), source_timestamp))
+            except cdr.CdrError:
+                continue
+        return headers
