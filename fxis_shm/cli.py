@@ -12,7 +12,7 @@ import textwrap
 
 from fxis_shm.client.client import Client
 from fxis_shm.errors import ConfigError, FxisError
-from fxis_shm.service.camerakinds import KINDS, PROCESS_OPTIONS
+from fxis_shm.service.camerakinds import COMMON_OPTIONS, KINDS
 from fxis_shm.service.config import DEFAULT_FOXGLOVE_RATE_HZ, MAX_FOXGLOVE_RATE_HZ, build_config, load_toml
 from fxis_shm.shm import naming
 from fxis_shm.wire import defaults
@@ -43,6 +43,10 @@ def _run(args) -> int:
                 "http": args.http,
                 "foxglove": args.foxglove,
                 "foxglove_rate": args.foxglove_rate,
+                "ros2": args.ros2 or None,
+                "ros2_domain": args.ros2_domain,
+                "ros2_namespace": args.ros2_namespace,
+                "ros2_tuples": args.ros2_tuples,
             },
         )
     except ConfigError as exc:
@@ -100,7 +104,19 @@ def _status(args) -> int:
     for name, cam in status["cameras"].items():
         if not cam["alive"] and cam.get("reason"):
             print(f"  {name}: {cam['reason']}")
+    if status.get("ros2"):
+        print(_ros2_line(status["ros2"]))
     return 0
+
+
+def _ros2_line(ros2: dict) -> str:
+    """What the ROS 2 bridge reported: frames published and skipped per camera, frames_at."""
+    cameras = ", ".join(f"{n} {c['published']} ({c['skipped']} skipped)" for n, c in ros2["cameras"].items())
+    asked = ros2["frames_at"]
+    return (
+        f"ros2 on domain {ros2['domain']} under {ros2['namespace'] or '/'}: published {cameras}; "
+        f"frames_at answered {asked['published']}, refused {asked['refused']}"
+    )
 
 
 def _grab(args) -> int:
@@ -227,7 +243,7 @@ def _clean(args) -> int:
 
 def _kinds_help() -> str:
     """The camera kinds --camera takes, and their keys (docs/cameras.md tells more)."""
-    lines = [f"camera kinds (KIND) and their keys (any kind also takes {', '.join(PROCESS_OPTIONS)}):"]
+    lines = [f"camera kinds (KIND) and their keys (any kind also takes {', '.join(COMMON_OPTIONS)}):"]
     for kind in KINDS.values():
         lines += [
             f"  {kind.name:<10} {kind.description}",
@@ -302,6 +318,21 @@ def parser() -> argparse.ArgumentParser:
         metavar="HZ",
         help=f"pictures a second per camera to Foxglove, at most {MAX_FOXGLOVE_RATE_HZ:g} "
         f"(default {DEFAULT_FOXGLOVE_RATE_HZ:g}); the app can change it live (parameter rate_hz)",
+    )
+    run.add_argument(
+        "--ros2",
+        action="store_true",
+        help="join the ROS 2 graph: every camera's image_raw, image_raw/compressed and camera_info, "
+        "and frames at t* on request (docs/ros2.md; needs the ros2 extra, no ROS install)",
+    )
+    run.add_argument(
+        "--ros2-domain", metavar="ID", help="DDS domain of the ROS 2 topics (default: $ROS_DOMAIN_ID, else 0)"
+    )
+    run.add_argument("--ros2-namespace", metavar="NS", help="namespace of the ROS 2 topics, e.g. /cell1 (default none)")
+    run.add_argument(
+        "--ros2-tuples",
+        metavar="HZ",
+        help="also publish joint tuples at this rate on NS/tuple/NAME/image_raw, one header.stamp per tuple",
     )
     run.set_defaults(func=_run)
 

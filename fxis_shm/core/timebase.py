@@ -72,3 +72,17 @@ def service_and_tai() -> tuple[int, int]:
     first = now()
     tai = time.clock_gettime_ns(CLOCK_IDS["tai"])
     return (first + now()) // 2, tai
+
+
+def offset(to_clock: str, from_clock: str, reads: int = 5) -> int:
+    """``to_clock`` minus ``from_clock`` now, in ns: the two read back to back ``reads`` times and
+    the closest pair kept (a pair split by a preemption would be off by the preemption)."""
+    read_to, read_from = reader(to_clock), reader(from_clock)
+    best_gap, best = None, 0
+    for _ in range(reads):
+        before = read_from()
+        target = read_to()
+        after = read_from()
+        if best_gap is None or after - before < best_gap:
+            best_gap, best = after - before, target - (before + after) // 2
+    return best

@@ -14,6 +14,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from fxis_shm.errors import ConfigError
+from fxis_shm.formats.calibration import read_calibration
 from fxis_shm.service.options import Option, boolean, choice, number, parse_options, text
 
 BACKENDS_PACKAGE = "fxis_shm.workers.backends"
@@ -34,7 +35,8 @@ class CameraKind:
         return f"{BACKENDS_PACKAGE}.{module}", cls
 
 
-# ---- options every kind takes: the processing hook (workers/processing.py) ----
+# ---- options every kind takes: the processing hook (workers/processing.py), and how
+# ROS 2 messages and recordings name the camera and describe its optics ----
 
 
 def hook_path(value: Any) -> str:
@@ -44,9 +46,25 @@ def hook_path(value: Any) -> str:
     return str(value)
 
 
-PROCESS_OPTIONS = {
+def calibration_file(value: Any) -> str:
+    read_calibration(str(value))  # refused at start-up, not when the first frame is published
+    return str(value)
+
+
+def frame_id(value: Any) -> str:
+    name = text(value)
+    if not name or any(c.isspace() for c in name):
+        raise ValueError(f"expected a frame name without spaces, got {value!r}")
+    return name
+
+
+COMMON_OPTIONS = {
     "process": Option(hook_path, None, "package.module:function run on every frame before it is stored"),
     "process_workers": Option(number(int, 1, 64), 1, "processes that run the hook side by side"),
+    "frame_id": Option(frame_id, None, "header.frame_id of the camera's ROS 2 messages (default: its name)"),
+    "calibration": Option(
+        calibration_file, None, "camera_info_manager YAML file for its ROS 2 camera_info (default: size only)"
+    ),
 }
 
 
@@ -257,4 +275,4 @@ def camera_kind(kind: str) -> CameraKind:
 def camera_options(camera: str, kind: str, raw: Mapping[str, Any]) -> dict[str, Any]:
     """The typed options of a camera of this kind (its own and the processing hook's),
     defaults filled in; ConfigError naming the camera and key for a bad one."""
-    return parse_options(camera, kind, {**camera_kind(kind).options, **PROCESS_OPTIONS}, raw)
+    return parse_options(camera, kind, {**camera_kind(kind).options, **COMMON_OPTIONS}, raw)

@@ -18,6 +18,7 @@ from dataclasses import dataclass
 from typing import Any, ClassVar, TypeVar
 
 from fxis_shm.errors import SpecError
+from fxis_shm.wire.security import ClientKeys, load_pair
 
 S = TypeVar("S", bound="ChildSpec")
 
@@ -129,6 +130,14 @@ class ViewerSpec(ChildSpec):
     cameras: dict[str, Any]  # camera name -> {"kind", "fps" configured or None}
     curve_secret: str | None = None  # the service's pair, to connect with under CurveZMQ
 
+    def client_keys(self) -> ClientKeys | None:
+        """Under CurveZMQ the child connects with the service's own pair (its public key is
+        among the clients' keys); None without CurveZMQ."""
+        if not self.curve_secret:
+            return None
+        public, secret = load_pair(self.curve_secret)
+        return ClientKeys(public, public, secret)
+
 
 @dataclass(frozen=True, kw_only=True)
 class DashboardSpec(ViewerSpec):
@@ -149,6 +158,20 @@ class FoxgloveSpec(ViewerSpec):
     rate_hz: float  # pictures a second per camera, until a viewer sets another rate
 
 
+@dataclass(frozen=True, kw_only=True)
+class Ros2Spec(ViewerSpec):
+    """The ROS 2 bridge (fxis_shm.ros2); its ``cameras`` also name each camera's frame_id
+    and calibration file (None: size only)."""
+
+    ROLE = "ros2"
+    MODULE = "fxis_shm.workers.ros2_bridge"
+    VERSION = 1
+
+    domain: int
+    namespace: str  # "" or "/a/b"
+    tuples_hz: float | None = None
+
+
 ROLES: dict[str, type[ChildSpec]] = {
-    cls.ROLE: cls for cls in (CameraWorkerSpec, CoordinatorSpec, DashboardSpec, FoxgloveSpec)
+    cls.ROLE: cls for cls in (CameraWorkerSpec, CoordinatorSpec, DashboardSpec, FoxgloveSpec, Ros2Spec)
 }

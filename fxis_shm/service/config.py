@@ -14,6 +14,7 @@ from fxis_shm.core.engine import REQUEST_DEFAULTS
 from fxis_shm.errors import ConfigError
 from fxis_shm.service.camerakinds import camera_options
 from fxis_shm.service.options import split_key_values
+from fxis_shm.service.ros2config import KEYS as ROS2_KEYS, Ros2Settings, ros2_settings
 from fxis_shm.shm.naming import check_name
 from fxis_shm.wire import defaults
 
@@ -56,6 +57,7 @@ class ServiceConfig:
     http: str = defaults.HTTP  # HOST:PORT of the live dashboard, or "off"
     foxglove: str = HTTP_OFF  # HOST:PORT of the Foxglove WebSocket server, or "off"
     foxglove_rate: float = DEFAULT_FOXGLOVE_RATE_HZ
+    ros2: Ros2Settings | None = None  # the ROS 2 bridge (fxis_shm.service.ros2config), None: off
 
     @property
     def exposed(self) -> list[str]:
@@ -192,6 +194,7 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
         "http",
         "foxglove",
         "foxglove_rate",
+        *ROS2_KEYS,
         *SERVICE_SETTINGS,
     }
     unknown = sorted(set(file_values) - known)
@@ -236,6 +239,7 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
             _check_foxglove_sdk()
     if "foxglove_rate" in values:
         config = replace(config, foxglove_rate=check_foxglove_rate(values["foxglove_rate"]))
+    config = replace(config, ros2=ros2_settings(values, (c.name for c in config.cameras)))
     endpoints = {"endpoint": config.endpoint, "pub": config.pub, "events": config.events}
     if len(set(endpoints.values())) < len(endpoints):
         raise ConfigError(f"endpoint, pub and events need an address each; got {endpoints}")

@@ -276,21 +276,23 @@ class Coordinator:
             "requests_served": self.requests_served,
             "events_dropped": self.events_dropped,
             "streams": self.streams.status(),
-            "supervisor": self._supervisor_state(),
+            "supervisor": self._state_of("supervisor"),
+            "ros2": self._state_of("ros2"),
             "settings": self.settings,
             "cameras": self._camera_status(now),
         }
 
     def _camera_status(self, now: int) -> dict:
-        processes = (self._supervisor_state() or {}).get("processes", {})
+        processes = (self._state_of("supervisor") or {}).get("processes", {})
         cameras = {name: cam.status(now) for name, cam in self.cameras.items()}
         for name, info in cameras.items():
             info["restarts"] = processes.get(f"camera:{name}", {}).get("restarts")
         return cameras
 
-    def _supervisor_state(self) -> dict | None:
+    def _state_of(self, process: str) -> dict | None:
+        """What the supervisor or the ROS 2 bridge last reported (None: nothing)."""
         try:
-            with open(naming.supervisor_state_path(self.service)) as f:
+            with open(naming.state_path(self.service, process)) as f:
                 return json.load(f)
         except (OSError, ValueError):
             return None

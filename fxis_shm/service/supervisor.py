@@ -21,7 +21,14 @@ import threading
 import time
 
 from fxis_shm.core import timebase
-from fxis_shm.service.childspec import CameraWorkerSpec, ChildSpec, CoordinatorSpec, DashboardSpec, FoxgloveSpec
+from fxis_shm.service.childspec import (
+    CameraWorkerSpec,
+    ChildSpec,
+    CoordinatorSpec,
+    DashboardSpec,
+    FoxgloveSpec,
+    Ros2Spec,
+)
 from fxis_shm.service.config import ServiceConfig
 from fxis_shm.shm import naming
 
@@ -132,7 +139,7 @@ class Child:
 def viewer_children(config: ServiceConfig, common: dict) -> list[Child]:
     """The processes that show the cameras, clients of the service like any other: the live
     dashboard (fxis_shm.viewers.dashboard) and the Foxglove server (fxis_shm.viewers.foxglove_live), each
-    when its address is not off."""
+    when its address is not off, and the ROS 2 bridge (fxis_shm.ros2) when it is on."""
     viewer = {
         **common,
         "endpoint": config.endpoint,
@@ -150,6 +157,23 @@ def viewer_children(config: ServiceConfig, common: dict) -> list[Child]:
                 key="foxglove",
             )
         )
+    if config.ros2 is not None:
+        cameras = {
+            c.name: {
+                **viewer["cameras"][c.name],
+                "frame_id": c.options.get("frame_id") or c.name,
+                "calibration": c.options.get("calibration"),
+            }
+            for c in config.cameras
+        }
+        ros2 = config.ros2
+        spec = Ros2Spec(
+            **{**viewer, "cameras": cameras},
+            domain=ros2.domain,
+            namespace=ros2.namespace,
+            tuples_hz=ros2.tuples_hz,
+        )
+        children.append(Child(spec, "ros2", key="ros2"))
     return children
 
 
@@ -238,6 +262,9 @@ class Supervisor:
             lines.append(f"  live dashboard on {c.http_url}/")
         if c.foxglove_url:
             lines.append(f"  Foxglove WebSocket server on {c.foxglove_url} ({c.foxglove_rate:g} pictures/s per camera)")
+        if c.ros2 is not None:
+            tuples = f", tuples at {c.ros2.tuples_hz:g} Hz" if c.ros2.tuples_hz else ""
+            lines.append(f"  ROS 2 topics under {c.ros2.namespace or '/'} on DDS domain {c.ros2.domain}{tuples}")
         if c.curve_secret:
             lines.append(f"  CurveZMQ: only the clients whose keys are in {c.curve_clients}")
         if c.exposed_unencrypted:

@@ -45,7 +45,12 @@ def trigger_name(service: str, camera: str) -> str:
 
 def supervisor_state_path(service: str) -> str:
     """The supervisor's process table, read by the coordinator for status."""
-    return os.path.join(SHM_DIR, f"{prefix(service)}supervisor.json")
+    return state_path(service, "supervisor")
+
+
+def state_path(service: str, process: str) -> str:
+    """What a process of the service reports for the status (its counters, as JSON)."""
+    return os.path.join(SHM_DIR, f"{prefix(service)}{process}.json")
 
 
 def leftovers(service: str) -> list[str]:

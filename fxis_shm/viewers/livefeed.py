@@ -23,7 +23,7 @@ from fxis_shm.errors import Code, FxisError, UnknownCamera
 from fxis_shm.formats.tuplefiles import tuple_files
 from fxis_shm.service.childspec import ViewerSpec
 from fxis_shm.viewers.preview import EncodedCache, RateMeter, SkewHistory, frame_intervals_ms, preview_jpeg, preview_key
-from fxis_shm.wire.security import ClientKeys, load_pair
+from fxis_shm.wire.security import ClientKeys
 
 log = logging.getLogger("dashboard")
 
@@ -36,11 +36,7 @@ T = TypeVar("T")
 def feed_for(spec: ViewerSpec) -> LiveFeed:
     """The feed of a viewer process (the dashboard, the Foxglove server) from its spec. With
     CurveZMQ it connects with the service's own pair: its public key must be among the clients'."""
-    keys = None
-    if spec.curve_secret:
-        public, secret = load_pair(spec.curve_secret)
-        keys = ClientKeys(public, public, secret)
-    return LiveFeed(spec.endpoint, spec.cameras, keys=keys)
+    return LiveFeed(spec.endpoint, spec.cameras, keys=spec.client_keys())
 
 
 class LiveFeed:

@@ -7,7 +7,7 @@ import json
 import pytest
 
 from fxis_shm.errors import SpecError
-from fxis_shm.service.childspec import ROLES, CameraWorkerSpec, CoordinatorSpec, DashboardSpec, FoxgloveSpec
+from fxis_shm.service.childspec import ROLES, CameraWorkerSpec, CoordinatorSpec, DashboardSpec, FoxgloveSpec, Ros2Spec
 
 CAMERA = CameraWorkerSpec(
     service="svc",
@@ -95,4 +95,5 @@ def test_roles_name_their_spec_classes():
         "coordinator": CoordinatorSpec,
         "dashboard": DashboardSpec,
         "foxglove": FoxgloveSpec,
+        "ros2": Ros2Spec,
     }

@@ -21,7 +21,9 @@ SYNTHETIC_DEFAULTS = {
     "shift_px": 0,
     "trigger": "free",
     "process": None,
-    "process_workers": 1,  # generic to every kind (camerakinds.PROCESS_OPTIONS)
+    "process_workers": 1,  # generic to every kind (camerakinds.COMMON_OPTIONS)
+    "frame_id": None,
+    "calibration": None,
 }
 
 

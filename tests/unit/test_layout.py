@@ -12,7 +12,7 @@ import pathlib
 import pytest
 
 import fxis_shm
-from fxis_shm.service.camerakinds import DISCOVERY_MODULE, KINDS, PROCESS_OPTIONS
+from fxis_shm.service.camerakinds import COMMON_OPTIONS, DISCOVERY_MODULE, KINDS
 from fxis_shm.service.childspec import ROLES
 
 LIBRARY = pathlib.Path(fxis_shm.__file__).parent
@@ -41,7 +41,7 @@ def test_each_kind_names_a_backend_that_implements_it(kind):
     module, cls = KINDS[kind].backend_path
     backend = getattr(importlib.import_module(module), cls)
     assert backend.kind == kind
-    assert KINDS[kind].description and not set(KINDS[kind].options) & set(PROCESS_OPTIONS)
+    assert KINDS[kind].description and not set(KINDS[kind].options) & set(COMMON_OPTIONS)
 
 
 @pytest.mark.parametrize("module", sorted([DISCOVERY_MODULE, *(cls.MODULE for cls in ROLES.values())]))

@@ -1,0 +1,90 @@
+"""The ROS 2 bridge's settings (``fxis run --ros2``): on or off, the DDS domain, the
+namespace of its topics and the rate of its tuple topics, checked before anything starts.
+
+Every ROS name the bridge will use is checked here against ROS's naming rules, so that a
+camera name ROS cannot carry is refused at start-up with a message saying which and why.
+"""
+
+from __future__ import annotations
+
+import os
+from collections.abc import Iterable, Mapping
+from dataclasses import dataclass
+from typing import Any
+
+from fxis_shm.errors import ConfigError
+from fxis_shm.formats import rosnames
+
+KEYS = ("ros2", "ros2_domain", "ros2_namespace", "ros2_tuples")
+DOMAIN_ENV = "ROS_DOMAIN_ID"  # what every ROS 2 node reads
+MAX_DOMAIN = 232  # the highest id DDS's port mapping allows (ROS's own advice: 0-101)
+MAX_TUPLES_HZ = 120.0
+
+
+@dataclass(frozen=True)
+class Ros2Settings:
+    domain: int = 0
+    namespace: str = ""  # "" or "/a/b"
+    tuples_hz: float | None = None  # joint tuples on NS/tuple/NAME/..., None: no tuple topics
+
+
+def ros2_settings(values: Mapping[str, Any], cameras: Iterable[str], environ=os.environ) -> Ros2Settings | None:
+    """The bridge's settings from the file and flags (None: no bridge); ConfigError naming the setting."""
+    enabled = values.get("ros2", False)
+    if not isinstance(enabled, bool):
+        raise ConfigError(f"ros2 must be true or false, got {enabled!r}")
+    if not enabled:
+        given = [k for k in KEYS[1:] if values.get(k) is not None]
+        if given:
+            raise ConfigError(f"{', '.join(given)} set without ros2: turn the bridge on (--ros2, ros2 = true)")
+        return None
+    _check_cyclonedds()
+    settings = Ros2Settings(_domain(values.get("ros2_domain"), environ), _namespace(values.get("ros2_namespace")))
+    tuples = values.get("ros2_tuples")
+    if tuples is not None:
+        settings = Ros2Settings(settings.domain, settings.namespace, _rate(tuples))
+    for camera in cameras:  # every topic the bridge will publish must be a ROS name
+        try:
+            rosnames.topic(settings.namespace, camera, "image_raw")
+        except ValueError as exc:
+            raise ConfigError(f"camera {camera!r} cannot be a ROS 2 topic name: {exc}") from None
+    return settings
+
+
+def _domain(value: Any, environ: Mapping[str, str]) -> int:
+    setting = "ros2_domain"
+    if value is None:
+        value, setting = environ.get(DOMAIN_ENV) or "0", DOMAIN_ENV  # unset or empty: ROS's default
+    digits = str(value).strip()
+    if isinstance(value, bool) or not digits.isdigit() or int(digits) > MAX_DOMAIN:
+        raise ConfigError(f"{setting} must be a DDS domain id from 0 to {MAX_DOMAIN}, got {value!r}")
+    return int(digits)
+
+
+def _namespace(value: Any) -> str:
+    if value is None or value == "":
+        return ""
+    try:
+        return rosnames.check_namespace(str(value))
+    except ValueError as exc:
+        raise ConfigError(f"ros2_namespace {value!r}: {exc}") from None
+
+
+def _rate(value: Any) -> float:
+    try:
+        rate = float(value) if not isinstance(value, bool) else -1.0
+    except (TypeError, ValueError):
+        rate = -1.0
+    if not 0 < rate <= MAX_TUPLES_HZ:  # also refuses nan
+        raise ConfigError(f"ros2_tuples must be a rate in Hz, > 0 and at most {MAX_TUPLES_HZ:g}, got {value!r}")
+    return rate
+
+
+def _check_cyclonedds() -> None:
+    """The bridge needs the optional cyclonedds package: say how to get it."""
+    try:
+        import cyclonedds  # noqa: F401
+    except ImportError as exc:
+        raise ConfigError(
+            f"ros2 needs the cyclonedds package ({exc}): install the \"ros2\" extra, pip install 'fxis-shm[ros2]'"
+        ) from None

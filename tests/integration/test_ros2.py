@@ -1,0 +1,257 @@
+"""`fxis run --ros2` seen from the ROS 2 graph: an independent DDS participant in another
+process (tests/dds_peer: its own type definitions, ROS's QoS profiles) receives every topic
+the bridge publishes, as a ROS 2 node would, and checks what it holds against the service's
+own record of each frame."""
+
+from __future__ import annotations
+
+import os
+import signal
+from types import SimpleNamespace
+
+import pytest
+
+from fxis_shm import Client
+from fxis_shm.core import timebase
+from fxis_shm.formats.stamp import read_stamp
+from fxis_shm.service.launch import ServiceProcess
+from tests.dds_peer import Peer, domain_id, loopback_config, stamp_rows
+
+from ..conftest import fxis_run_alone, wait_until
+
+pytestmark = pytest.mark.integration
+
+NS = "/cell"
+IMAGE, INFO, COMPRESSED, STRING = (
+    "sensor_msgs/msg/Image",
+    "sensor_msgs/msg/CameraInfo",
+    "sensor_msgs/msg/CompressedImage",
+    "std_msgs/msg/String",
+)
+K = [500.0, 0.0, 320.0, 0.0, 500.0, 240.0, 0.0, 0.0, 1.0]
+D = [0.1, -0.2, 0.001, 0.002, 0.0]
+P = [500.0, 0.0, 320.0, 0.0, 0.0, 500.0, 240.0, 0.0, 0.0, 0.0, 1.0, 0.0]
+CALIBRATION = f"""image_width: 640
+image_height: 480
+camera_name: cam0
+camera_matrix: {{rows: 3, cols: 3, data: {K}}}
+distortion_model: plumb_bob
+distortion_coefficients: {{rows: 1, cols: 5, data: {D}}}
+rectification_matrix: {{rows: 3, cols: 3, data: [1, 0, 0, 0, 1, 0, 0, 0, 1]}}
+projection_matrix: {{rows: 3, cols: 4, data: {P}}}
+"""
+STAMP_TOLERANCE_NS = 100_000  # 0.1 ms: the two clocks read side by side, here and in the bridge
+
+
+@pytest.fixture(scope="module")
+def bridge(tmp_path_factory):
+    calibration = tmp_path_factory.mktemp("calibration") / "cam0.yaml"
+    calibration.write_text(CALIBRATION)
+    domain = domain_id()
+    args = [
+        "--camera",
+        f"cam0=synthetic:width=640,height=480,fps=20,calibration={calibration},frame_id=cam0_optical",
+        "--camera",
+        "cam1=synthetic:width=320,height=240,fps=20,pixel_format=bgr8,phase_ms=7",
+        "--slots",
+        "100",
+        "--ros2",
+        "--ros2-domain",
+        str(domain),
+        "--ros2-namespace",
+        NS,
+        "--ros2-tuples",
+        "5",
+    ]
+    with ServiceProcess(args, env={**os.environ, "CYCLONEDDS_URI": loopback_config()}) as svc:
+        yield SimpleNamespace(svc=svc, domain=domain)
+
+
+def capture_times(svc) -> dict[tuple[str, int], int]:
+    """(camera, frame id) -> capture time in ROS time, from the service's own frame list."""
+    with Client(svc.endpoint) as client:
+        listing = client.frame_times()
+    to_ros = timebase.offset("realtime", "monotonic")
+    return {(camera, row[0]): row[1] + to_ros for camera, info in listing["cameras"].items() for row in info["frames"]}
+
+
+def ns_of(sample: dict) -> int:
+    sec, nanosec = sample["stamp"]
+    return sec * 1_000_000_000 + nanosec
+
+
+@pytest.mark.parametrize("profile", ["sensor_data", "default"])
+def test_every_camera_topic_reaches_a_ros_reader_as_the_frames_were_captured(bridge, profile):
+    topics = [
+        (f"{NS}/cam0/image_raw", IMAGE),
+        (f"{NS}/cam1/image_raw", IMAGE),
+        (f"{NS}/cam0/camera_info", INFO),
+        (f"{NS}/cam1/camera_info", INFO),
+        (f"{NS}/cam1/image_raw/compressed", COMPRESSED),
+    ]
+    with Peer(bridge.domain, topics, profile=profile) as peer:
+        for topic, _ in topics:
+            peer.wait_matched(topic)
+        for topic, _ in topics:
+            peer.wait_for_samples(topic, 8)
+        captured = capture_times(bridge.svc)
+        images = {cam: peer.samples(f"{NS}/{cam}/image_raw") for cam in ("cam0", "cam1")}
+        infos = {cam: {ns_of(s): s for s in peer.samples(f"{NS}/{cam}/camera_info")} for cam in ("cam0", "cam1")}
+        compressed = peer.samples(f"{NS}/cam1/image_raw/compressed")
+
+    layouts = {"cam0": (480, 640, "mono8", 640, "cam0_optical"), "cam1": (240, 320, "bgr8", 960, "cam1")}
+    for cam, samples in images.items():
+        height, width, encoding, step, frame_id = layouts[cam]
+        ids = []
+        for sample in samples:
+            assert (sample["height"], sample["width"], sample["encoding"], sample["step"]) == (
+                height,
+                width,
+                encoding,
+                step,
+            )
+            assert sample["size"] == height * step and sample["is_bigendian"] == 0 and sample["frame_id"] == frame_id
+            frame = read_stamp(stamp_rows(sample))
+            assert frame is not None, "the pixels are not a whole frame of the synthetic camera"
+            ids.append(frame)
+            if (cam, frame) in captured:
+                assert abs(ns_of(sample) - captured[(cam, frame)]) <= STAMP_TOLERANCE_NS
+            info = infos[cam].get(ns_of(sample))
+            if info is not None:
+                assert (info["height"], info["width"], info["frame_id"]) == (height, width, frame_id)
+        assert sum((cam, i) in captured for i in ids) >= 4, "too few received frames are still in the ring"
+        assert set(ns_of(s) for s in samples) & set(infos[cam]), "no camera_info with its image's stamp"
+        if profile == "default":  # reliable: every frame the camera stored, in order
+            assert ids == list(range(ids[0], ids[0] + len(ids)))
+    assert infos["cam0"] and all(s["k"] == K and s["d"] == D and s["p"] == P for s in infos["cam0"].values())
+    assert all(s["distortion_model"] == "plumb_bob" for s in infos["cam0"].values())
+    assert all(s["k"] == [0.0] * 9 for s in infos["cam1"].values())  # no calibration: size only
+    assert all(s["format"] == "bgr8; jpeg compressed bgr8" and s["head"].startswith("ffd8") for s in compressed)
+
+
+def test_tuple_topics_carry_one_stamp_per_tuple_the_middle_of_its_captures(bridge):
+    topics = [
+        (f"{NS}/tuple/{cam}/{kind}", t)
+        for cam in ("cam0", "cam1")
+        for kind, t in (("image_raw", IMAGE), ("camera_info", INFO))
+    ]
+    with Peer(bridge.domain, topics) as peer:
+        for topic, _ in topics:
+            peer.wait_for_samples(topic, 6)
+        captured = capture_times(bridge.svc)
+        by_camera = {
+            cam: {ns_of(s): s for s in peer.samples(f"{NS}/tuple/{cam}/image_raw")} for cam in ("cam0", "cam1")
+        }
+        info_stamps = {ns_of(s) for s in peer.samples(f"{NS}/tuple/cam0/camera_info")}
+    common = sorted(set(by_camera["cam0"]) & set(by_camera["cam1"]))
+    assert len(common) >= 4, "the cameras' tuple images do not share stamps (ExactTime could not group them)"
+    assert info_stamps & set(common)
+    checked = 0
+    for stamp in common:
+        frames = {cam: read_stamp(stamp_rows(by_camera[cam][stamp])) for cam in by_camera}
+        times = [captured.get((cam, frame)) for cam, frame in frames.items()]
+        if None not in times:
+            assert abs(stamp - (min(times) + max(times)) // 2) <= STAMP_TOLERANCE_NS
+            checked += 1
+    assert checked >= 2
+    assert all(b - a >= 150_000_000 for a, b in zip(common, common[1:])), "more than 5 tuples a second"
+
+
+def frames_at_peer(bridge, names, with_errors=()):
+    topics = [(f"{NS}/frames_at/{name}/{cam}/image_raw", IMAGE) for name in names for cam in ("cam0", "cam1")]
+    topics += [(f"{NS}/frames_at/{name}/error", STRING) for name in with_errors]
+    topics += [(f"{NS}/frames_at/error", STRING)]
+    return Peer(bridge.domain, topics, publish_headers=[f"{NS}/frames_at"])
+
+
+def ask(peer, t_ros: int, name: str) -> None:
+    peer.publish_header(f"{NS}/frames_at", *divmod(t_ros, 1_000_000_000), name)
+
+
+def nearest(captured: dict, cam: str, t: int) -> int:
+    return min((abs(time - t), frame) for (c, frame), time in captured.items() if c == cam)[1]
+
+
+def test_frames_at_a_past_and_a_near_future_t_star_from_two_requesters_at_once(bridge):
+    with frames_at_peer(bridge, ["robot1", "arm/left"]) as peer:
+        now = timebase.reader("realtime")()
+        past, future = now - 400_000_000, now + 300_000_000
+        ask(peer, past, "robot1")
+        ask(peer, future, "arm/left")
+        for name in ("robot1", "arm/left"):
+            for cam in ("cam0", "cam1"):
+                peer.wait_for_samples(f"{NS}/frames_at/{name}/{cam}/image_raw", 1)
+        captured = capture_times(bridge.svc)
+        for name, t_star in (("robot1", past), ("arm/left", future)):
+            for cam in ("cam0", "cam1"):
+                (sample,) = peer.samples(f"{NS}/frames_at/{name}/{cam}/image_raw")
+                frame = read_stamp(stamp_rows(sample))
+                assert abs(ns_of(sample) - captured[(cam, frame)]) <= STAMP_TOLERANCE_NS  # its own capture time
+                # the joint selection's pick: the nearest frame, or its neighbour for a smaller skew
+                assert abs(frame - nearest(captured, cam, t_star)) <= 1
+        assert not peer.samples(f"{NS}/frames_at/error")
+
+
+def test_frames_at_refuses_bad_requests_with_a_reason_and_keeps_serving(bridge):
+    with frames_at_peer(bridge, ["ok"], with_errors=["late"]) as peer:
+        now = timebase.reader("realtime")()
+        ask(peer, now - 3600 * 1_000_000_000, "late")  # an hour ago: outside any history
+        ask(peer, now, "not a name!")
+        ask(peer, now - 200_000_000, "ok")
+        (late,) = peer.wait_for_samples(f"{NS}/frames_at/late/error", 1)
+        (bad,) = peer.wait_for_samples(f"{NS}/frames_at/error", 1)
+        peer.wait_for_samples(f"{NS}/frames_at/ok/cam0/image_raw", 1)
+    assert late["data"].startswith("OUT_OF_RANGE")
+    assert "not a name!" in bad["data"]
+    with Client(bridge.svc.endpoint) as client:  # the bridge reports its counters once a second
+
+        def counted():
+            counts = client.status()["ros2"]["frames_at"]
+            return counts["refused"] >= 2 and counts["published"] >= 1
+
+        wait_until(counted, what="the refused and answered requests in the service's status")
+
+
+def test_a_reader_that_asks_for_xcdr2_only_is_not_matched_as_a_ros_reader_would_not_be(bridge):
+    topic = f"{NS}/cam0/image_raw"
+    with Peer(bridge.domain, [(topic, IMAGE, "xcdr2"), (topic, IMAGE, "default")]) as peer:
+        peer.wait_for(lambda _: peer.of("incompatible_qos", topic, "xcdr2"), what="the XCDR2 reader's refusal")
+        peer.wait_for_samples(topic, 5, profile="default")  # the XCDR2 reader had as long
+        assert peer.samples(topic, profile="xcdr2") == []
+    assert peer.of("incompatible_qos", topic, "xcdr2")[-1]["policy_id"] == 25  # DATA_REPRESENTATION
+
+
+def test_a_reader_that_stops_reading_holds_up_neither_the_cameras_nor_another_reader(bridge):
+    topic = f"{NS}/cam0/image_raw"
+    with Client(bridge.svc.endpoint) as client:
+        dropped = client.status()["cameras"]["cam0"]["frames_dropped"]
+    with Peer(bridge.domain, [(topic, IMAGE)]) as stuck, Peer(bridge.domain, [(topic, IMAGE)]) as reader:
+        stuck.wait_for_samples(topic, 1)
+        os.kill(stuck.proc.pid, signal.SIGSTOP)
+        try:
+            before = len(reader.wait_for_samples(topic, 1))
+            received = reader.wait_for_samples(topic, before + 40)  # 2 s of frames at 20 fps
+        finally:
+            os.kill(stuck.proc.pid, signal.SIGCONT)
+    ids = [read_stamp(stamp_rows(s)) for s in received]
+    assert ids == list(range(ids[0], ids[0] + len(ids))), "the reading subscriber lost frames"
+    with Client(bridge.svc.endpoint) as client:
+        status = client.status()
+    assert status["cameras"]["cam0"]["frames_dropped"] == dropped
+    assert status["ros2"]["cameras"]["cam0"]["skipped"] == 0
+
+
+@pytest.mark.parametrize(
+    "args, message",
+    [
+        (["--camera", "cam-0=synthetic"], "cam-0"),
+        (["--ros2-namespace", "/bad//ns"], "ros2_namespace"),
+        (["--ros2-domain", "300"], "ros2_domain"),
+        (["--ros2-tuples", "0"], "ros2_tuples"),
+        (["--camera", "a=synthetic:calibration=/nonexistent.yaml"], "calibration"),
+    ],
+)
+def test_settings_ros_cannot_carry_stop_the_start_with_a_clear_message(args, message):
+    result = fxis_run_alone("--ros2", *args)
+    assert result.returncode == 2
+    assert message in result.stderr and "Traceback" not in result.stderr
