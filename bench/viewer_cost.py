@@ -9,6 +9,12 @@ dashboard; /proc/PID/stat) and of this script, in these stages:
   mjpeg xN       N viewers, each reading every camera's MJPEG stream at --fps (a page open)
   foxglove       a Foxglove WebSocket subscriber of every camera's pictures at --fps (where
                  this build has ``fxis run --foxglove`` and ``websockets`` is installed)
+  ros2           ``fxis run --ros2`` with a ROS 2 subscriber (plain DDS, reliable, as
+                 image_transport subscribes) of every camera's image_raw: every frame, not
+                 --fps; it counts the frames that did not reach it (where cyclonedds is installed)
+
+``--stages`` runs some of them; e.g. the bridge at the issue's load:
+``viewer_cost.py --stages "no dashboard" ros2 --cameras 4 --camera-fps 30``.
 
 Also counts the frames each stage's viewers received, and the frames the cameras stored
 and dropped, to show the viewers do not slow the cameras. Prints a table, writes
@@ -26,6 +32,8 @@ import sys
 import threading
 import time
 import urllib.request
+
+import numpy as np
 
 if __package__:
     from . import _common as common
@@ -64,6 +72,9 @@ def parser() -> argparse.ArgumentParser:
         help="seconds between starting a stage's viewers and measuring",
     )
     p.add_argument("--no-foxglove", action="store_true", help="leave out the Foxglove stage")
+    p.add_argument(
+        "--stages", nargs="+", metavar="STAGE", help='run only these ("no dashboard", idle, mjpeg, foxglove, ros2)'
+    )
     common.add_output_args(p)
     return p
 
@@ -133,6 +144,46 @@ class FoxgloveViewer(threading.Thread):
             self.error = common.describe_error(exc)
 
 
+class Ros2Viewer(threading.Thread):
+    """Subscribes to one camera's ``image_raw`` as a ROS 2 node would (reliable, keep last
+    10), counting the images and the frame ids missing between them (the pixel stamp)."""
+
+    def __init__(self, domain: int, topic: str, stop: threading.Event):
+        super().__init__(daemon=True)
+        self.domain, self.topic, self.stop = domain, topic, stop
+        self.pictures = self.lost = 0
+        self.error = None
+
+    def run(self) -> None:
+        from fxis_shm.formats import cdr
+        from fxis_shm.formats.rosmsgs import IMAGE
+        from fxis_shm.formats.stamp import read_stamp
+        from fxis_shm.ros2.dds import RosParticipant
+
+        last = None
+        try:
+            with RosParticipant(self.domain) as participant:
+                reader = participant.raw_reader(self.topic, IMAGE)
+                while not self.stop.is_set():
+                    for data, _ in reader.wait_raw(0.2):
+                        image = cdr.decode_image(data)
+                        rows = np.frombuffer(image.data, np.uint8).reshape(image.height, image.step)
+                        frame = read_stamp(rows)
+                        self.lost += 0 if last is None or frame is None else max(0, frame - last - 1)
+                        last, self.pictures = frame, self.pictures + 1
+        except Exception as exc:
+            self.error = common.describe_error(exc)
+
+
+def ros2_available() -> str | None:
+    """Why the ROS 2 stage cannot run here (None: it can)."""
+    try:
+        import cyclonedds  # noqa: F401
+    except ImportError:
+        return "the cyclonedds package is not installed (the ros2 extra)"
+    return None
+
+
 def foxglove_available() -> str | None:
     """Why the Foxglove stage cannot run here (None: it can)."""
     from fxis_shm.cli import parser as fxis_parser
@@ -191,6 +242,7 @@ def measure_stage(client, viewers: list, seconds: float, warmup: float) -> dict:
         "cpu_percent": cpu,
         "viewer_pictures_per_s": [(b - a) / elapsed for a, b in zip(pics0, pics1)],
         "viewer_errors": [v.error for v in viewers if v.error],
+        "viewer_lost": sum(getattr(v, "lost", 0) for v in viewers),
         "camera_fps": {n: (cams1[n][0] - cams0[n][0]) / elapsed for n in cams1 if n in cams0},
         "frames_dropped": {n: cams1[n][1] - cams0[n][1] for n in cams1 if n in cams0},
     }
@@ -219,10 +271,12 @@ def run_stage(name: str, run_args: list[str], make_viewers, args, out: str, http
 def stages(args, out: str) -> list[dict]:
     cams = [f"cam{i}" for i in range(args.cameras)]
     run_args = common.synthetic_camera_flags(cams, args.camera_fps, args.width, args.height)
-    results = [run_stage("no dashboard", run_args, lambda stop: [], args, out)]
+    wanted = set(args.stages or ["no dashboard", "idle", "mjpeg", "foxglove", "ros2"])
+    results = [run_stage("no dashboard", run_args, lambda stop: [], args, out)] if "no dashboard" in wanted else []
     http = f"127.0.0.1:{free_tcp_port()}"
-    results.append(run_stage("idle", run_args, lambda stop: [], args, out, http))
-    for n in args.viewers:
+    if "idle" in wanted:
+        results.append(run_stage("idle", run_args, lambda stop: [], args, out, http))
+    for n in args.viewers if "mjpeg" in wanted else []:
         urls = [f"http://{http}/cameras/{c}/stream.mjpg?fps={args.fps:g}&width={args.preview_width}" for c in cams]
         results.append(
             run_stage(
@@ -234,6 +288,10 @@ def stages(args, out: str) -> list[dict]:
                 http,
             )
         )
+    if "ros2" in wanted:
+        results.append(ros2_stage(cams, run_args, args, out))
+    if "foxglove" not in wanted:
+        return results
     why_not = "left out (--no-foxglove)" if args.no_foxglove else foxglove_available()
     if why_not is None:
         fox = f"127.0.0.1:{free_tcp_port()}"
@@ -249,6 +307,23 @@ def stages(args, out: str) -> list[dict]:
     else:
         results.append({"stage": "foxglove", "skipped": why_not})
     return results
+
+
+def ros2_stage(cams: list[str], run_args: list[str], args, out: str) -> dict:
+    why_not = ros2_available()
+    if why_not is not None:
+        return {"stage": "ros2", "skipped": why_not}
+    from fxis_shm.ros2.loopback import loopback_config
+
+    domain = 200 + os.getpid() % 30  # apart from the tests' (they hold their ids with lock files)
+    os.environ["CYCLONEDDS_URI"] = loopback_config()  # this host only; the service inherits it
+    return run_stage(
+        "ros2",
+        run_args + ["--ros2", "--ros2-domain", str(domain)],
+        lambda stop: [Ros2Viewer(domain, f"/{c}/image_raw", stop) for c in cams],
+        args,
+        out,
+    )
 
 
 def report(results: list[dict], args) -> None:
@@ -270,6 +345,7 @@ def report(results: list[dict], args) -> None:
                 min(r["camera_fps"].values(), default=None),
                 sum(r["frames_dropped"].values()),
                 (sum(pictures) / len(pictures)) if pictures else None,
+                r.get("viewer_lost"),
             ]
         )
     print(
@@ -279,7 +355,7 @@ def report(results: list[dict], args) -> None:
     )
     print(
         common.table(
-            ["stage"] + names + ["cameras", "cam fps min", "dropped", "pics/s per stream"],
+            ["stage"] + names + ["cameras", "cam fps min", "dropped", "pics/s per stream", "lost"],
             rows,
             title="CPU % of one core per process",
             digits=1,
