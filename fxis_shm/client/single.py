@@ -27,6 +27,7 @@ import zmq
 
 from fxis_shm.client.clocktracker import ClockTracker
 from fxis_shm.client.frames import LOCAL, NETWORK, Frame, FrameTuple, frames_of, in_caller_clock, sequence_of, tuple_of
+from fxis_shm.client.handshake import HandshakeWatch
 from fxis_shm.client.localreads import LocalReads
 from fxis_shm.client.requesttimes import fixed_mapping, last_needed, same_moment
 from fxis_shm.client.sockets import SocketOwner, checked_encoding, connected_socket, wire_timeout_ms
@@ -96,6 +97,7 @@ class SingleClient(SocketOwner):
         self._ids = itertools.count(1)
         self._context, self._keys = context, keys
         self._sock = connected_socket(context, zmq.DEALER, endpoint, keys)
+        self._handshake = HandshakeWatch(self._sock)  # says why, when a request times out
         self._identity: dict | None = None  # the service's kernel, time namespace and clock, from its status
         self._mapping: ClockEstimate | None = None  # fixed: the service reads our clock (or one shared)
         self._tracker: ClockTracker | None = None  # else: estimated
@@ -112,6 +114,7 @@ class SingleClient(SocketOwner):
             self._tracker.close()
         self._drop_reads()
         self._rings.close()
+        self._handshake.close()
         super().close()
 
     @property
@@ -367,16 +370,24 @@ class SingleClient(SocketOwner):
     def _read_locally(self, op: str, extra_wait: float, copy: bool, fields: dict) -> tuple[dict, list, Callable | None]:
         deadline = self._reads.now() + int((self.timeout + extra_wait) * 1e9)
         try:
-            header, images, check = self._reads.answer(op, fields, deadline, copy)
+            header, images, check = self._answer_locally(op, fields, deadline, copy)
         except (CameraDown, UnknownCamera):
             # The service may have been restarted with new rings or other cameras: learn them again, once.
             self._drop_reads()
             if self._local_reads() is None:
                 raise
-            header, images, check = self._reads.answer(op, fields, deadline, copy)
+            header, images, check = self._answer_locally(op, fields, deadline, copy)
         self.paths[LOCAL] += 1
         header["path"] = LOCAL
         return header, images, check
+
+    def _answer_locally(self, op: str, fields: dict, deadline: int, copy: bool) -> tuple[dict, list, Callable | None]:
+        reads = self._reads
+        torn = sum(h.torn_reads for h in reads.cameras.values())
+        try:
+            return reads.answer(op, fields, deadline, copy)
+        finally:  # the copies it found torn (and made again) count as those of the other local path
+            self.paths["torn"] += sum(h.torn_reads for h in reads.cameras.values()) - torn
 
     def _local_reads(self) -> LocalReads | None:
         """The client's own reads of the rings, learnt from the service's status once."""
@@ -431,7 +442,7 @@ class SingleClient(SocketOwner):
             f"{self.timeout:.3g} s (is the service running, and are our keys accepted?)"
         )
         if not self._sock.poll(self.timeout * 1000, zmq.POLLOUT):
-            raise unsendable
+            raise RequestTimeout(self._handshake.problem(self.endpoint, self._keys is not None) or str(unsendable))
         try:
             self._sock.send_multipart([b""] + protocol.encode_request(op, id=request_id, **fields), flags=zmq.NOBLOCK)
         except zmq.Again:  # the peer went away between the poll and the send
@@ -440,7 +451,8 @@ class SingleClient(SocketOwner):
             remaining = deadline - time.monotonic()
             if remaining <= 0 or not self._sock.poll(remaining * 1000, zmq.POLLIN):
                 raise RequestTimeout(
-                    f"no reply to {op!r} from {self.endpoint} within {self.timeout + extra_wait:.3g} s "
+                    self._handshake.problem(self.endpoint, self._keys is not None)
+                    or f"no reply to {op!r} from {self.endpoint} within {self.timeout + extra_wait:.3g} s "
                     "(is the service running?)"
                 )
             frames = self._sock.recv_multipart(copy=False)

@@ -29,6 +29,7 @@ MAX_FOXGLOVE_RATE_HZ = 60.0
 ZERO_ALLOWED = {"sync_tolerance_ms"}  # 0: always the least skew, however far from t*
 # The request defaults a config may change, each of its default's type (max_skew_ms, None
 # by default, takes a number of ms)
+PORT_BASE_ORDER = ("endpoint", "pub", "events", "http")  # port_base + index
 SERVICE_SETTINGS = {key: float if value is None else type(value) for key, value in REQUEST_DEFAULTS.items()}
 
 
@@ -55,6 +56,7 @@ class ServiceConfig:
     insecure_bind: bool = False  # allow non-loopback endpoints without CURVE
     clock: str = "monotonic"  # the clock every time of the service is in (fxis_shm.core.timebase)
     http: str = defaults.HTTP  # HOST:PORT of the live dashboard, or "off"
+    http_given: bool = False  # asked for (else the dashboard gives way when its default port is taken)
     foxglove: str = HTTP_OFF  # HOST:PORT of the Foxglove WebSocket server, or "off"
     foxglove_rate: float = DEFAULT_FOXGLOVE_RATE_HZ
     ros2: Ros2Settings | None = None  # the ROS 2 bridge (fxis_shm.service.ros2config), None: off
@@ -109,7 +111,36 @@ def parse_camera_flag(flag: str) -> CameraSpec:
 def _check_endpoint(setting: str, endpoint: Any) -> str:
     if not isinstance(endpoint, str) or not endpoint.startswith(("tcp://", "ipc://")):
         raise ConfigError(f"{setting} {endpoint!r}: expected tcp://HOST:PORT or ipc://PATH")
+    tcp_host_port(endpoint, setting)
     return endpoint
+
+
+def tcp_host_port(endpoint: str, setting: str) -> tuple[str, int] | None:
+    """(host, port) of a ``tcp://HOST:PORT`` endpoint, None for ``ipc://``; ConfigError if the
+    port is missing or is not a number (ZeroMQ would only fail on it later, in the coordinator)."""
+    if endpoint.startswith("ipc://"):
+        return None
+    host, sep, port = endpoint[len("tcp://") :].rpartition(":")
+    host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+    if not sep or not host or not port.isdigit() or not 1 <= int(port) <= 65535:
+        raise ConfigError(f"{setting} {endpoint!r}: expected tcp://HOST:PORT with a port from 1 to 65535")
+    return ("0.0.0.0" if host == "*" else host), int(port)
+
+
+def _with_port_base(config: ServiceConfig, base: Any, given: set[str]) -> ServiceConfig:
+    """Ports from ``base`` (requests, streams, events, dashboard: base + 0..3) for every
+    address not ``given`` explicitly, on loopback as the defaults are."""
+    if isinstance(base, bool) or not isinstance(base, int) or not 1 <= base <= 65535 - len(PORT_BASE_ORDER):
+        raise ConfigError(f"port_base must be a port from 1 to {65535 - len(PORT_BASE_ORDER)}, got {base!r}")
+    changes: dict[str, Any] = {}
+    for index, setting in enumerate(PORT_BASE_ORDER):
+        if setting in given:
+            continue
+        if setting in ("endpoint", "pub", "events"):
+            changes[setting] = f"tcp://127.0.0.1:{base + index}"
+        elif config.http != HTTP_OFF:  # a dashboard that is on moves with the base
+            changes[setting] = f"127.0.0.1:{base + index}"
+    return replace(config, **changes)
 
 
 def http_address(value: str, setting: str = "http") -> tuple[str, int]:
@@ -194,9 +225,11 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
         "http",
         "foxglove",
         "foxglove_rate",
+        "port_base",
         *ROS2_KEYS,
         *SERVICE_SETTINGS,
     }
+    file_values.pop("client", None)  # the [client] table: what fxis status, grab, record connect with
     unknown = sorted(set(file_values) - known)
     if unknown:
         raise ConfigError(f"unknown setting(s) {unknown} in the config file; known: {sorted(known)}")
@@ -232,13 +265,15 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
     if "events" in values:
         config = replace(config, events=_check_endpoint("events", values["events"]))
     if "http" in values:
-        config = replace(config, http=_check_http(values["http"]))
+        config = replace(config, http=_check_http(values["http"]), http_given=True)
     if "foxglove" in values:
         config = replace(config, foxglove=_check_http(values["foxglove"], "foxglove"))
         if config.foxglove_url:
             _check_foxglove_sdk()
     if "foxglove_rate" in values:
         config = replace(config, foxglove_rate=check_foxglove_rate(values["foxglove_rate"]))
+    if values.get("port_base") is not None:
+        config = _with_port_base(config, values["port_base"], {k for k in PORT_BASE_ORDER if k in values})
     config = replace(config, ros2=ros2_settings(values, (c.name for c in config.cameras)))
     endpoints = {"endpoint": config.endpoint, "pub": config.pub, "events": config.events}
     if len(set(endpoints.values())) < len(endpoints):

@@ -1,0 +1,60 @@
+"""What every command that talks to a service takes: its endpoint, a timeout, and the
+CurveZMQ keys of a service that requires them, from flags, the environment or a config file
+(the one ``fxis run --config`` reads, with a ``[client]`` table), in that order.
+
+    [client]
+    server_key = "keys/server.key"          # the service's public key
+    client_key = "keys/robot1.key_secret"   # this client's pair
+"""
+
+from __future__ import annotations
+
+import os
+
+from fxis_shm.client.client import Client
+from fxis_shm.errors import ConfigError
+from fxis_shm.service.config import load_toml
+from fxis_shm.wire import defaults
+from fxis_shm.wire.security import ClientKeys
+
+EXIT_USAGE = 2
+ENV_SERVER_KEY, ENV_CLIENT_KEY = "FXIS_SERVER_KEY", "FXIS_CLIENT_KEY"
+
+
+def add_client_options(sp) -> None:
+    sp.add_argument("--endpoint", help=f"service endpoint (default: the config file's, else {defaults.ENDPOINT})")
+    sp.add_argument("--timeout", type=float, default=3.0, help="seconds to wait for the reply (default 3)")
+    sp.add_argument(
+        "--server-key", metavar="FILE", help=f"the service's public key (CurveZMQ; default ${ENV_SERVER_KEY})"
+    )
+    sp.add_argument(
+        "--client-key", metavar="FILE", help=f"this client's .key_secret (CurveZMQ; default ${ENV_CLIENT_KEY})"
+    )
+    sp.add_argument(
+        "--config", metavar="FILE", help="a config file: its endpoint, and server_key and client_key of its [client]"
+    )
+
+
+def client_for(args) -> Client:
+    """A client as the command's options, the environment and the config file say."""
+    file_values = load_toml(args.config) if args.config else {}
+    client_table = file_values.get("client", {})
+    if not isinstance(client_table, dict):
+        raise ConfigError(f"--config {args.config}: [client] must be a table (server_key, client_key)")
+    endpoint = args.endpoint or file_values.get("endpoint") or defaults.ENDPOINT
+    server_key = args.server_key or os.environ.get(ENV_SERVER_KEY) or client_table.get("server_key")
+    client_key = args.client_key or os.environ.get(ENV_CLIENT_KEY) or client_table.get("client_key")
+    return Client(endpoint, timeout=args.timeout, keys=client_keys(server_key, client_key))
+
+
+def client_keys(server_key: str | None, client_key: str | None) -> ClientKeys | None:
+    if not server_key and not client_key:
+        return None
+    if not (server_key and client_key):
+        raise ConfigError(
+            "CurveZMQ needs both the service's public key (--server-key) and this client's pair (--client-key)"
+        )
+    try:
+        return ClientKeys.from_files(server_key, client_key)
+    except (OSError, ValueError) as exc:
+        raise ConfigError(f"CurveZMQ keys {server_key}, {client_key}: {exc}") from None

@@ -1,0 +1,104 @@
+"""``fxis status`` and ``fxis grab``: ask a running service."""
+
+from __future__ import annotations
+
+import json
+import os
+import sys
+
+from fxis_shm.cli.options import add_client_options, client_for
+
+
+def status_command(args) -> int:
+    with client_for(args) as client:
+        status = client.status()
+        # this host's view of the service's clock (what a client here maps times with)
+        status["clock_mapping"] = client.clock_estimate().as_dict()
+    if args.json:
+        print(json.dumps(status, indent=2))
+        return 0
+    print(
+        f"service {status['service']!r}  uptime {status['uptime_s']:.1f} s  "
+        f"requests {status['requests_served']}  waiting {status['pending']}"
+    )
+    mapping = status["clock_mapping"]
+    print(
+        f"clock {status.get('clock', 'monotonic')}: {mapping['method']}, offset from this host's monotonic "
+        f"{mapping['offset_ns'] / 1e6:+.3f} ms, drift {mapping['drift_ppm']:+.2f} ppm, "
+        f"uncertainty {mapping['uncertainty_ns'] / 1e3:.0f} us"
+    )
+    columns = ["camera", "kind", "alive", "shape", "fps", "stored", "dropped", "age_ms", "slots", "gen", "torn"]
+    rows = []
+    for name, cam in status["cameras"].items():
+        shape = "x".join(map(str, cam.get("shape", []))) or "-"
+        rows.append(
+            [
+                name,
+                cam["kind"],
+                "yes" if cam["alive"] else "NO",
+                shape,
+                cam.get("fps"),
+                cam.get("frames_stored"),
+                cam.get("frames_dropped"),
+                cam.get("last_frame_age_ms"),
+                cam.get("ring_slots"),
+                cam.get("generation"),
+                cam.get("torn_reads"),
+            ]
+        )
+    cells = [columns] + [["-" if v is None else str(v) for v in r] for r in rows]
+    widths = [max(len(row[i]) for row in cells) for i in range(len(columns))]
+    for row in cells:
+        print("  ".join(v.ljust(w) for v, w in zip(row, widths)).rstrip())
+    for name, cam in status["cameras"].items():
+        if not cam["alive"] and cam.get("reason"):
+            print(f"  {name}: {cam['reason']}")
+    if status.get("ros2"):
+        print(_ros2_line(status["ros2"]))
+    return 0
+
+
+def _ros2_line(ros2: dict) -> str:
+    """What the ROS 2 bridge reported: frames published and skipped per camera, frames_at."""
+    cameras = ", ".join(f"{n} {c['published']} ({c['skipped']} skipped)" for n, c in ros2["cameras"].items())
+    asked = ros2["frames_at"]
+    return (
+        f"ros2 on domain {ros2['domain']} under {ros2['namespace'] or '/'}: published {cameras}; "
+        f"frames_at answered {asked['published']}, refused {asked['refused']}"
+    )
+
+
+def grab_command(args) -> int:
+    from fxis_shm.formats.tuplefiles import tuple_files
+
+    cameras = args.cameras.split(",") if args.cameras else None
+    with client_for(args) as client:
+        frames = client.tuple(cameras=cameras, at=args.at)
+    files = tuple_files(frames)
+    os.makedirs(args.out, exist_ok=True)
+    for name, data in files.items():
+        path = os.path.join(args.out, name)
+        try:
+            with open(path, "wb") as f:
+                f.write(data)
+        except OSError as exc:
+            print(f"fxis grab: could not write {path}: {exc.strerror}", file=sys.stderr)
+            return 1
+    print(f"saved {len(frames)} image(s) and tuple.json to {args.out} (skew {frames.skew_ns / 1e6:.3f} ms)")
+    return 0
+
+
+def add_parsers(sub) -> None:
+    status = sub.add_parser("status", help="show the cameras and the service")
+    add_client_options(status)
+    status.add_argument("--json", action="store_true", help="print the raw status as JSON")
+    status.set_defaults(func=status_command)
+
+    grab = sub.add_parser("grab", help="save one synchronized tuple as PNG files plus JSON metadata")
+    add_client_options(grab)
+    grab.add_argument("--out", required=True, metavar="DIR", help="folder to write into")
+    grab.add_argument("--cameras", help="comma-separated cameras (default all)")
+    grab.add_argument(
+        "--at", type=int, help="t* in ns of this host's CLOCK_MONOTONIC, mapped to the service's clock (default now)"
+    )
+    grab.set_defaults(func=grab_command)

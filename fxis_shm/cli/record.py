@@ -1,0 +1,89 @@
+"""``fxis record``: the cameras into a rosbag2 bag (fxis_shm.record.recorder)."""
+
+from __future__ import annotations
+
+import sys
+
+from fxis_shm.cli.options import EXIT_USAGE, add_client_options, client_for
+from fxis_shm.errors import ConfigError
+
+
+def record_command(args) -> int:
+    from fxis_shm.record.recorder import Recorder, RecordSettings, summary_table
+    from fxis_shm.wire import encoding
+
+    def usage(message: str) -> int:
+        print(f"fxis record: {message}", file=sys.stderr)
+        return EXIT_USAGE
+
+    for flag, value in (("--seconds", args.seconds), ("--frames", args.frames), ("--rate", args.rate)):
+        if value is not None and not value > 0:
+            return usage(f"{flag} must be > 0, got {value}")
+    if args.quality is not None and args.encoding != encoding.JPEG:
+        return usage("--quality applies to --encoding jpeg only")
+    if args.quality is not None and not 1 <= args.quality <= 100:
+        return usage(f"--quality must be from 1 to 100, got {args.quality}")
+    cameras = [c.strip() for c in args.cameras.split(",") if c.strip()] if args.cameras else None
+    if args.cameras is not None and not cameras:
+        return usage("--cameras names no camera")
+    settings = RecordSettings(
+        out=args.out,
+        endpoint=args.endpoint,
+        cameras=cameras,
+        seconds=args.seconds,
+        frames=args.frames,
+        rate_hz=args.rate,
+        tuples=args.tuples,
+        encoding=args.encoding,
+        quality=args.quality or encoding.DEFAULT_JPEG_QUALITY,
+    )
+    with client_for(args) as client:
+        try:
+            recorder = Recorder(settings, client)
+        except ConfigError as exc:
+            return usage(str(exc))
+        summary = recorder.run()
+    print(summary_table(summary))
+    return 0
+
+
+def add_parser(sub) -> None:
+    record = sub.add_parser(
+        "record",
+        help="record the cameras into a rosbag2 bag (MCAP) for Foxglove, ros2 bag, rosbags",
+        description="Record every frame of the cameras (or one synchronized tuple per step with "
+        "--tuples) into a rosbag2 folder with MCAP storage: /NAME/image_raw "
+        "(sensor_msgs/msg/Image) or /NAME/image_raw/compressed (JPEG), stamps in the "
+        "service's clock (CLOCK_MONOTONIC unless fxis run --clock says otherwise). "
+        "Ctrl-C ends the recording with a valid bag. "
+        "Replay it with a camera of kind bag (docs/recording.md).",
+    )
+    add_client_options(record)
+    record.add_argument("--out", required=True, metavar="DIR", help="the bag folder to create (must not exist)")
+    record.add_argument("--cameras", metavar="A,B", help="comma-separated cameras (default all)")
+    until = record.add_mutually_exclusive_group()
+    until.add_argument("--seconds", type=float, metavar="S", help="stop after S seconds (default: at Ctrl-C)")
+    until.add_argument(
+        "--frames", type=int, metavar="N", help="stop after N frames per camera (N tuples with --tuples)"
+    )
+    record.add_argument(
+        "--rate",
+        type=float,
+        metavar="HZ",
+        help="thin each camera to HZ on purpose (default every frame); with --tuples, "
+        "the step rate (default the slowest camera's)",
+    )
+    record.add_argument(
+        "--tuples",
+        action="store_true",
+        help="one synchronized tuple per step: its images share the step's stamp, "
+        "and /fxis/tuples lists their frame ids",
+    )
+    record.add_argument(
+        "--encoding",
+        choices=("raw", "jpeg"),
+        default="raw",
+        help="raw: sensor_msgs/Image (default); jpeg: sensor_msgs/CompressedImage",
+    )
+    record.add_argument("--quality", type=int, metavar="Q", help="JPEG quality 1-100 (default 90)")
+    record.set_defaults(func=record_command)

@@ -1,0 +1,157 @@
+"""``fxis run``: the service, from flags and a config file, checked before anything starts."""
+
+from __future__ import annotations
+
+import argparse
+import logging
+import sys
+import textwrap
+
+from fxis_shm.cli.options import EXIT_USAGE
+from fxis_shm.errors import ConfigError
+from fxis_shm.service.camerakinds import COMMON_OPTIONS, KINDS
+from fxis_shm.service.config import DEFAULT_FOXGLOVE_RATE_HZ, MAX_FOXGLOVE_RATE_HZ, build_config, load_toml
+from fxis_shm.wire import defaults
+
+
+def run_command(args) -> int:
+    from fxis_shm.service.addresses import check_free
+    from fxis_shm.service.supervisor import StartError, Supervisor
+
+    try:
+        file_values = load_toml(args.config) if args.config else {}
+        config = build_config(
+            file_values,
+            {
+                "name": args.name,
+                "endpoint": args.endpoint,
+                "pub": args.pub,
+                "events": args.events,
+                "slots": args.slots,
+                "cameras": args.camera,
+                "restart_limit": args.restart_limit,
+                "log_level": args.log_level,
+                "curve_secret": args.curve_secret,
+                "curve_clients": args.curve_clients,
+                "insecure_bind": args.insecure_bind or None,
+                "clock": args.clock,
+                "http": args.http,
+                "foxglove": args.foxglove,
+                "foxglove_rate": args.foxglove_rate,
+                "ros2": args.ros2 or None,
+                "ros2_domain": args.ros2_domain,
+                "ros2_namespace": args.ros2_namespace,
+                "ros2_tuples": args.ros2_tuples,
+                "port_base": args.port_base,
+            },
+        )
+        config, warnings = check_free(config)  # before anything starts: a port in use is one line
+    except ConfigError as exc:
+        print(f"fxis run: {exc}", file=sys.stderr)
+        return EXIT_USAGE
+    for warning in warnings:
+        print(f"fxis run: {warning}", file=sys.stderr)
+    logging.basicConfig(level=config.log_level, format="%(asctime)s supervisor %(levelname)s %(message)s")
+    try:
+        return Supervisor(config).run()
+    except StartError as exc:
+        print(f"fxis run: {exc}", file=sys.stderr)
+        return 1
+
+
+def _kinds_help() -> str:
+    """The camera kinds --camera takes, and their keys (docs/cameras.md tells more)."""
+    lines = [f"camera kinds (KIND) and their keys (any kind also takes {', '.join(COMMON_OPTIONS)}):"]
+    for kind in KINDS.values():
+        lines += [
+            f"  {kind.name:<10} {kind.description}",
+            *textwrap.wrap(", ".join(kind.options), 88, initial_indent=" " * 13, subsequent_indent=" " * 13),
+        ]
+    return "\n".join(lines)
+
+
+def add_parser(sub) -> None:
+    run = sub.add_parser(
+        "run",
+        help="start the service (default: two synthetic cameras)",
+        description="Start camera workers and the coordinator; Ctrl-C stops them and removes their shared memory.",
+        epilog=_kinds_help(),
+        formatter_class=argparse.RawDescriptionHelpFormatter,
+    )
+    run.add_argument("--name", help=f"service name (default {defaults.SERVICE}); names its shared memory")
+    run.add_argument(
+        "--camera",
+        action="append",
+        metavar="NAME=KIND[:key=value,...]",
+        help="a camera, e.g. left=synthetic:fps=30,phase_ms=5 (repeatable)",
+    )
+    run.add_argument("--endpoint", help=f"request/reply endpoint (default {defaults.ENDPOINT})")
+    run.add_argument("--pub", help=f"publish endpoint (default {defaults.PUB})")
+    run.add_argument("--events", help=f"endpoint receiving request events (default {defaults.EVENTS})")
+    run.add_argument("--slots", type=int, help=f"frames held per camera ring (default {defaults.SLOTS})")
+    run.add_argument("--config", metavar="FILE.toml", help="settings file (flags override it)")
+    run.add_argument(
+        "--clock",
+        choices=("monotonic", "realtime", "tai"),
+        help="the clock of every time the service gives and takes (default monotonic); "
+        "realtime or tai where PTP or chrony keeps the cell's hosts in step "
+        "(docs/deployment.md)",
+    )
+    run.add_argument(
+        "--restart-limit",
+        type=int,
+        help=f"restarts of a crashed process before giving up (default {defaults.RESTART_LIMIT})",
+    )
+    run.add_argument("--log-level", help=f"DEBUG, INFO, WARNING or ERROR (default {defaults.LOG_LEVEL})")
+    run.add_argument("--curve-secret", metavar="FILE", help="the service's NAME.key_secret: CurveZMQ on every socket")
+    run.add_argument(
+        "--curve-clients", metavar="DIR", help="folder of the public keys (.key) of the clients allowed in"
+    )
+    run.add_argument(
+        "--insecure-bind",
+        action="store_true",
+        help="allow endpoints reachable from other hosts without CurveZMQ (prints a warning)",
+    )
+    run.add_argument(
+        "--http",
+        metavar="HOST:PORT|off",
+        help=f"serve the live dashboard (pictures, rates, skew; docs/dashboard.md) here "
+        f"(default {defaults.HTTP}); off: none. Another host's address needs "
+        "--insecure-bind: HTTP has no authentication",
+    )
+    run.add_argument(
+        "--foxglove",
+        metavar="HOST:PORT|off",
+        help="serve the cameras to the Foxglove app over its WebSocket protocol here, e.g. "
+        "127.0.0.1:8765 (default off; needs the foxglove extra). Another host's "
+        "address needs --insecure-bind: it has no authentication (docs/dashboard.md)",
+    )
+    run.add_argument(
+        "--foxglove-rate",
+        metavar="HZ",
+        help=f"pictures a second per camera to Foxglove, at most {MAX_FOXGLOVE_RATE_HZ:g} "
+        f"(default {DEFAULT_FOXGLOVE_RATE_HZ:g}); the app can change it live (parameter rate_hz)",
+    )
+    run.add_argument(
+        "--port-base",
+        type=int,
+        metavar="N",
+        help="every port from N: requests N, streams N+1, events N+2, dashboard N+3 (for a second "
+        "service on this host; an address given explicitly still wins)",
+    )
+    run.add_argument(
+        "--ros2",
+        action="store_true",
+        help="join the ROS 2 graph: every camera's image_raw, image_raw/compressed and camera_info, "
+        "and frames at t* on request (docs/ros2.md; needs the ros2 extra, no ROS install)",
+    )
+    run.add_argument(
+        "--ros2-domain", metavar="ID", help="DDS domain of the ROS 2 topics (default: $ROS_DOMAIN_ID, else 0)"
+    )
+    run.add_argument("--ros2-namespace", metavar="NS", help="namespace of the ROS 2 topics, e.g. /cell1 (default none)")
+    run.add_argument(
+        "--ros2-tuples",
+        metavar="HZ",
+        help="also publish joint tuples at this rate on NS/tuple/NAME/image_raw, one header.stamp per tuple",
+    )
+    run.set_defaults(func=run_command)

@@ -1,0 +1,172 @@
+"""Everything a newcomer meets when starting a service or talking to one: every address is
+checked before anything starts, a port in use is one line and exit code 2, one base moves
+every port, and a command against a CurveZMQ service takes keys and says when they are
+what is missing."""
+
+from __future__ import annotations
+
+import json
+import os
+import socket
+import subprocess
+import sys
+from contextlib import contextmanager
+
+import pytest
+
+from fxis_shm import Client, RequestTimeout
+from fxis_shm.errors import ConfigError
+from fxis_shm.service.addresses import check_free
+from fxis_shm.service.config import HTTP_OFF, build_config
+from fxis_shm.service.launch import free_tcp_port
+from fxis_shm.shm import naming
+from fxis_shm.wire import defaults
+
+from ..conftest import assert_nothing_left, fxis, fxis_run_alone, wait_until
+from .conftest import SMALL, client_keys
+
+pytestmark = pytest.mark.integration
+
+
+@contextmanager
+def listening(port: int | None = None):
+    """A port some other program holds (listening, as a running service's would be)."""
+    with socket.socket() as sock:
+        sock.setsockopt(socket.SOL_SOCKET, socket.SO_REUSEADDR, 1)
+        sock.bind(("127.0.0.1", port or 0))
+        sock.listen()
+        yield sock.getsockname()[1]
+
+
+@pytest.mark.parametrize("option", ["--endpoint", "--pub", "--events", "--http", "--foxglove"])
+def test_a_port_in_use_stops_the_start_before_anything_runs(option):
+    with listening() as port:
+        address = f"tcp://127.0.0.1:{port}" if option in ("--endpoint", "--pub", "--events") else f"127.0.0.1:{port}"
+        name = f"busy{port}"
+        result = fxis_run_alone("--name", name, option, address, "--camera", f"a=synthetic:{SMALL}")
+    assert result.returncode == 2
+    (line,) = result.stderr.strip().splitlines()  # one line, no traceback
+    assert option in line and str(port) in line and "in use" in line and "--port-base" in line
+    assert naming.leftovers(name) == []  # no camera worker was started
+
+
+def test_an_endpoint_without_a_port_is_refused_with_what_it_needs():
+    result = fxis_run_alone("--endpoint", "tcp://127.0.0.1")
+    assert result.returncode == 2
+    assert "expected tcp://HOST:PORT with a port" in result.stderr and "Traceback" not in result.stderr
+
+
+def test_the_dashboard_on_its_default_address_gives_way_to_a_program_holding_that_port():
+    zmq_endpoints = {"endpoint": free_endpoint(), "pub": free_endpoint(), "events": free_endpoint()}
+    port = int(defaults.HTTP.rsplit(":", 1)[1])
+    with occupied(port):
+        config, warnings = check_free(build_config(zmq_endpoints))  # the dashboard nobody asked for
+        assert config.http == HTTP_OFF and "default address" in warnings[0] and "--http" in warnings[0]
+        with pytest.raises(ConfigError, match="--http"):  # asked for explicitly: refused, not dropped
+            check_free(build_config({**zmq_endpoints, "http": defaults.HTTP}))
+
+
+@contextmanager
+def occupied(port: int):
+    """``port`` in use: held here, or already by some other program."""
+    try:
+        with listening(port):
+            yield
+    except OSError:
+        yield
+
+
+def free_endpoint() -> str:
+    return f"tcp://127.0.0.1:{free_tcp_port()}"
+
+
+def free_block(size: int = 4) -> int:
+    """A first port of ``size`` free ports in a row."""
+    for _ in range(50):
+        base = free_tcp_port()
+        if base + size > 65535:
+            continue
+        try:
+            with listening(base), listening(base + 1), listening(base + 2), listening(base + 3):
+                return base
+        except OSError:
+            continue
+    raise AssertionError(f"no {size} free ports in a row")
+
+
+def test_port_base_moves_every_port_and_clients_find_the_service_there():
+    base = free_block()
+    config = build_config({"port_base": base})
+    assert (config.endpoint, config.pub, config.events) == tuple(f"tcp://127.0.0.1:{base + i}" for i in range(3))
+    assert config.http == f"127.0.0.1:{base + 3}"
+    assert build_config({"port_base": base, "pub": "tcp://127.0.0.1:7"}).pub == "tcp://127.0.0.1:7"  # given wins
+    name = f"based{base}"
+    run = [sys.executable, "-m", "fxis_shm.cli", "run", "--name", name, "--port-base", str(base), "--http", "off"]
+    service = subprocess.Popen([*run, "--camera", f"a=synthetic:{SMALL}"], stderr=subprocess.DEVNULL)
+    try:
+        with Client(f"tcp://127.0.0.1:{base}", timeout=1.0) as client:
+            status = wait_until(lambda: answered(client), timeout=30, what="the service on the port base")
+        assert status["pub"] == f"tcp://127.0.0.1:{base + 1}" and status["events"] == f"tcp://127.0.0.1:{base + 2}"
+        assert status["service"] == name
+    finally:
+        service.terminate()
+        service.wait(timeout=30)
+    assert_nothing_left(name)
+
+
+def answered(client: Client) -> dict | None:
+    try:
+        return client.status()
+    except RequestTimeout:
+        return None
+
+
+@pytest.fixture
+def curve_service(start_service, keys):
+    folder, allowed = keys
+    svc = start_service(
+        "--camera",
+        f"a=synthetic:fps=50,{SMALL}",
+        "--curve-secret",
+        str(folder / "server.key_secret"),
+        "--curve-clients",
+        str(allowed),
+        client_keys=client_keys(folder, "alice"),
+    )
+    return svc, folder
+
+
+def test_a_client_without_keys_is_told_the_service_wants_curvezmq(curve_service):
+    svc, folder = curve_service
+    with Client(svc.endpoint, timeout=3.0) as stranger, pytest.raises(RequestTimeout) as info:
+        stranger.status()
+    assert "answers only CurveZMQ" in str(info.value) and "--server-key" in str(info.value)
+    with Client(svc.endpoint, timeout=3.0, keys=client_keys(folder, "mallory")) as mallory:
+        with pytest.raises(RequestTimeout) as info:
+            mallory.status()
+    assert "refused this client's key" in str(info.value) or "handshake" in str(info.value)
+
+
+def test_status_grab_and_record_take_keys_from_flags_the_environment_or_the_config(curve_service, tmp_path):
+    svc, folder = curve_service
+    server, alice = str(folder / "server.key"), str(folder / "alice.key_secret")
+    keyless = fxis("status", "--endpoint", svc.endpoint, "--timeout", "1")
+    assert keyless.returncode == 1 and "answers only CurveZMQ" in keyless.stderr
+    flags = fxis("status", "--endpoint", svc.endpoint, "--server-key", server, "--client-key", alice, "--json")
+    assert flags.returncode == 0 and json.loads(flags.stdout)["service"] == svc.name
+    env = {"FXIS_SERVER_KEY": server, "FXIS_CLIENT_KEY": alice}
+    grabbed = subprocess.run(
+        [sys.executable, "-m", "fxis_shm.cli", "grab", "--endpoint", svc.endpoint, "--out", str(tmp_path / "g")],
+        capture_output=True,
+        text=True,
+        timeout=60,
+        env={**os.environ, **env},
+    )
+    assert grabbed.returncode == 0, grabbed.stderr
+    assert (tmp_path / "g" / "tuple.json").exists()
+    config = tmp_path / "cell.toml"
+    config.write_text(f'endpoint = "{svc.endpoint}"\n[client]\nserver_key = "{server}"\nclient_key = "{alice}"\n')
+    recorded = fxis("record", "--config", str(config), "--out", str(tmp_path / "bag"), "--frames", "3")
+    assert recorded.returncode == 0, recorded.stderr
+    half = fxis("status", "--endpoint", svc.endpoint, "--server-key", server)
+    assert half.returncode == 2 and "--client-key" in half.stderr
