@@ -19,7 +19,8 @@ def status_command(args) -> int:
         return 0
     print(
         f"service {status['service']!r}  uptime {status['uptime_s']:.1f} s  "
-        f"requests {status['requests_served']}  waiting {status['pending']}"
+        f"requests {status['requests_served']}  waiting {status['pending']}  "
+        f"ring ordering {status.get('ring_ordering', '-')}"
     )
     mapping = status["clock_mapping"]
     print(

@@ -59,7 +59,9 @@ def add_parser(sub) -> None:
         "Replay it with a camera of kind bag (docs/recording.md).",
     )
     add_client_options(record)
-    record.add_argument("--out", required=True, metavar="DIR", help="the bag folder to create (must not exist)")
+    record.add_argument(
+        "--out", required=True, metavar="DIR", help="the bag folder to create (new, or empty)"
+    )
     record.add_argument("--cameras", metavar="A,B", help="comma-separated cameras (default all)")
     until = record.add_mutually_exclusive_group()
     until.add_argument("--seconds", type=float, metavar="S", help="stop after S seconds (default: at Ctrl-C)")

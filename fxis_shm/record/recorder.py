@@ -10,12 +10,16 @@ Message layout, clock and topics: docs/recording.md.
 
 from __future__ import annotations
 
+import math
 import os
+import shutil
 import signal
 import sys
 import threading
 import time
 from dataclasses import dataclass
+
+import numpy as np
 
 from fxis_shm.client.client import Client
 from fxis_shm.core import timebase
@@ -102,6 +106,7 @@ class Recorder:
             else {}
         )
         self.progress.stage(f"recording {', '.join(self.cameras)} into {self.s.out}")
+        self.progress.stage(self._data_rate_line())
         try:
             while not self._stopping and not self._done():
                 began = time.monotonic()
@@ -117,6 +122,22 @@ class Recorder:
         summary = self.summary()
         self.progress.stage(f"recorded {summary['seconds']:.1f} s into {self.s.out}")
         return summary
+
+    def _data_rate_line(self) -> str:
+        """What the recording will write a second, and how long the disk lasts at that rate
+        (a raw recording of two 1360x1024 cameras at 20 fps writes 56 MB/s)."""
+        status = self.client.status()["cameras"]
+        rate = 0.0
+        for cam in self.cameras:
+            info = status[cam]
+            frame_bytes = math.prod(info.get("shape") or [0]) * np.dtype(info.get("dtype") or "uint8").itemsize
+            fps = self.s.rate_hz or info.get("fps") or 0.0
+            rate += frame_bytes * min(fps, info.get("fps") or fps)
+        free = shutil.disk_usage(os.path.dirname(os.path.abspath(self.s.out))).free
+        if self.s.encoding != codec.RAW:
+            return f"about {rate / 1e6:.0f} MB/s of pixels before JPEG; {free / 1e9:.1f} GB free"
+        lasts = f"full in about {free / rate / 60:.0f} min" if rate else "no frame rate known yet"
+        return f"writing about {rate / 1e6:.0f} MB/s (raw); {free / 1e9:.1f} GB free there: {lasts}"
 
     def _ask_to_stop(self, signum, frame) -> None:
         self._stopping = True

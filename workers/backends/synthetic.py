@@ -104,7 +104,7 @@ class SyntheticCamera(Camera):
             pattern = (np.stack(planes, axis=-1) & 255).astype(np.uint8)
             self._pattern = pattern[..., 0] if lay.channels == 1 else pattern
         self._image = np.empty(lay.shape, np.uint8)
-        self._k = self._index_at(timebase.now())
+        self._k = -1  # set by the first grab: frames due while the worker was still setting up are not drops
 
     def _draw_board(self, width: int, height: int) -> np.ndarray:
         """A canvas ``2 * sway`` px wider than the image: frame k shows a window of it."""
@@ -142,6 +142,7 @@ class SyntheticCamera(Camera):
         if self.supports_trigger:
             return self._grab_triggered(timeout)
         give_up = timebase.now() + int(timeout * 1e9)
+        self._start()
         while True:
             now = timebase.now()
             late = self._index_at(now - int(self._period)) - self._k
@@ -168,9 +169,15 @@ class SyntheticCamera(Camera):
             t_trigger = self._triggers.get(timeout=timeout)
         except queue.Empty:
             return None
+        self._start()
         k = self._k
         self._k += 1
         return Capture(self._render(k), k, t_trigger)
+
+    def _start(self) -> None:
+        """Frame numbers start with the first grab, at the frame due then."""
+        if self._k < 0:
+            self._k = self._index_at(timebase.now())
 
     def _render(self, k: int) -> np.ndarray:
         x = self._window(k)
