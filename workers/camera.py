@@ -12,8 +12,8 @@ import posix_ipc
 
 from fxis_shm.core import timebase
 from fxis_shm.service.childspec import CameraWorkerSpec
-from fxis_shm.shm import naming
-from fxis_shm.shm.ring import FLAG_TRIGGERED, FrameLayout, RingWriter
+from fxis_shm.shm import history, naming
+from fxis_shm.shm.ring import FLAG_TRIGGERED, FrameLayout, RingWriter, segment_size
 
 from . import processing
 from ._child import Ready, child_main
@@ -34,12 +34,20 @@ def run(spec: CameraWorkerSpec, ready: Ready, stop: threading.Event) -> None:
     camera.open()
     try:
         first, layout, hook_errors = _layout(camera, process, stop)
-        ring = RingWriter(spec.service, name, layout, spec.slots, camera.nominal_period_ns)
+        slots = history.slots_for(spec.history_s, camera.nominal_period_ns, spec.slots)
+        ring = RingWriter(spec.service, name, layout, slots, camera.nominal_period_ns)
         ring.count("hook_errors", hook_errors)
         ring.set_flags(FLAG_TRIGGERED if camera.supports_trigger else 0)
         triggers = _TriggerListener(spec.service, camera, stop) if camera.supports_trigger else None
         log.info(
-            "camera %s (%s) streaming %s into %s, generation %d", name, spec.kind, layout, ring.name, ring.generation
+            "camera %s (%s) streaming %s into %s (%d slots, %s), generation %d",
+            name,
+            spec.kind,
+            layout,
+            ring.name,
+            slots,
+            history.mib(segment_size(layout, slots)[0]),
+            ring.generation,
         )
         ready.ok()
         try:

@@ -1,13 +1,5 @@
-"""The ``fxis`` command: one module per group of commands, ``main`` in fxis_shm.cli.main.
-
-    run                        the service (cli/run.py)
-    status, grab               ask a running service (cli/query.py)
-    record                     a rosbag2 bag (cli/record.py)
-    keys, cameras, clean       this host only (cli/local.py)
-
-Commands that talk to a service share their options (endpoint, timeout, CurveZMQ keys) in
-cli/options.py.
-"""
+"""The ``fxis`` command, a module per group of commands (run, query, record, local; options
+for those that talk to a service). The top layer: may import every layer below."""
 
 from fxis_shm.cli.main import main, parser
 

@@ -28,7 +28,20 @@ def status_command(args) -> int:
         f"{mapping['offset_ns'] / 1e6:+.3f} ms, drift {mapping['drift_ppm']:+.2f} ppm, "
         f"uncertainty {mapping['uncertainty_ns'] / 1e3:.0f} us"
     )
-    columns = ["camera", "kind", "alive", "shape", "fps", "stored", "dropped", "age_ms", "slots", "gen", "torn"]
+    columns = [
+        "camera",
+        "kind",
+        "alive",
+        "shape",
+        "fps",
+        "stored",
+        "dropped",
+        "age_ms",
+        "slots",
+        "history_s",
+        "gen",
+        "torn",
+    ]
     rows = []
     for name, cam in status["cameras"].items():
         shape = "x".join(map(str, cam.get("shape", []))) or "-"
@@ -43,6 +56,7 @@ def status_command(args) -> int:
                 cam.get("frames_dropped"),
                 cam.get("last_frame_age_ms"),
                 cam.get("ring_slots"),
+                cam.get("history_s"),
                 cam.get("generation"),
                 cam.get("torn_reads"),
             ]

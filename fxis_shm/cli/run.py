@@ -16,6 +16,7 @@ from fxis_shm.wire import defaults
 
 def run_command(args) -> int:
     from fxis_shm.service.addresses import check_free
+    from fxis_shm.service.memory import check_room
     from fxis_shm.service.supervisor import StartError, Supervisor
 
     try:
@@ -43,9 +44,11 @@ def run_command(args) -> int:
                 "ros2_namespace": args.ros2_namespace,
                 "ros2_tuples": args.ros2_tuples,
                 "port_base": args.port_base,
+                "history": args.history,
             },
         )
         config, warnings = check_free(config)  # before anything starts: a port in use is one line
+        check_room(config)  # and rings /dev/shm cannot hold
     except ConfigError as exc:
         print(f"fxis run: {exc}", file=sys.stderr)
         return EXIT_USAGE
@@ -131,6 +134,12 @@ def add_parser(sub) -> None:
         metavar="HZ",
         help=f"pictures a second per camera to Foxglove, at most {MAX_FOXGLOVE_RATE_HZ:g} "
         f"(default {DEFAULT_FOXGLOVE_RATE_HZ:g}); the app can change it live (parameter rate_hz)",
+    )
+    run.add_argument(
+        "--history",
+        metavar="SECONDS",
+        help="seconds of frames each ring holds, sized from its camera's rate (instead of --slots; a camera's "
+        "history= key wins)",
     )
     run.add_argument(
         "--port-base",

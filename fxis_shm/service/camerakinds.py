@@ -61,6 +61,9 @@ def frame_id(value: Any) -> str:
 COMMON_OPTIONS = {
     "process": Option(hook_path, None, "package.module:function run on every frame before it is stored"),
     "process_workers": Option(number(int, 1, 64), 1, "processes that run the hook side by side"),
+    "history": Option(
+        number(float, 0, 86_400, exclusive_min=True), None, "seconds of frames its ring holds (default: slots)"
+    ),
     "frame_id": Option(frame_id, None, "header.frame_id of the camera's ROS 2 messages (default: its name)"),
     "calibration": Option(
         calibration_file, None, "camera_info_manager YAML file for its ROS 2 camera_info (default: size only)"

@@ -103,8 +103,9 @@ class CameraWorkerSpec(ChildSpec):
     camera: str
     kind: str  # an entry of fxis_shm.service.camerakinds.KINDS
     options: dict[str, Any]  # typed by the kind's schema; the worker checks them again
-    slots: int
+    slots: int  # without history_s, or without a frame period to size it by
     time_origin_ns: int  # shared by the service's cameras (synthetic frame times)
+    history_s: float | None = None  # seconds the ring holds at the camera's nominal rate
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -120,6 +121,7 @@ class CoordinatorSpec(ChildSpec):
     settings: dict[str, Any]  # request defaults the config changed (engine.REQUEST_DEFAULTS)
     curve_secret: str | None = None
     curve_clients: str | None = None
+    history: dict[str, float] = dataclasses.field(default_factory=dict)  # camera -> seconds asked for
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -47,6 +47,7 @@ class ServiceConfig:
     pub: str = defaults.PUB
     events: str = defaults.EVENTS
     slots: int = defaults.SLOTS
+    history: float | None = None  # seconds each ring holds, sized from its camera's rate (else slots)
     cameras: tuple[CameraSpec, ...] = ()
     settings: dict[str, Any] = field(default_factory=dict)
     restart_limit: int = defaults.RESTART_LIMIT
@@ -226,6 +227,7 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
         "foxglove",
         "foxglove_rate",
         "port_base",
+        "history",
         *ROS2_KEYS,
         *SERVICE_SETTINGS,
     }
@@ -280,6 +282,8 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
         raise ConfigError(f"endpoint, pub and events need an address each; got {endpoints}")
     if "slots" in values:
         config = replace(config, slots=_check_int("slots", values["slots"], 2))
+    if values.get("history") is not None:
+        config = replace(config, history=_setting("history", float, values["history"]))
     if "restart_limit" in values:
         config = replace(config, restart_limit=_check_int("restart_limit", values["restart_limit"], 0))
     config = _security(config, values)

@@ -84,7 +84,9 @@ class Coordinator:
         self.curve = None
         if spec.curve_secret:
             self.curve = (load_pair(spec.curve_secret), spec.curve_clients)
-        self.cameras = {name: CameraHandle(self.service, name, kind) for name, kind in spec.cameras.items()}
+        self.cameras = {
+            name: CameraHandle(self.service, name, kind, spec.history.get(name)) for name, kind in spec.cameras.items()
+        }
         self.engine = RequestEngine(self.cameras, spec.settings)
         self.settings = self.engine.settings
         self.copyout = CopyOut(self.cameras, self.settings)

@@ -30,6 +30,7 @@ from fxis_shm.service.childspec import (
     Ros2Spec,
 )
 from fxis_shm.service.config import ServiceConfig
+from fxis_shm.service.memory import ring_lines
 from fxis_shm.shm import naming
 
 log = logging.getLogger("supervisor")
@@ -136,6 +137,11 @@ class Child:
             self.proc.kill()
 
 
+def history_of(camera, config: ServiceConfig) -> float | None:
+    """The seconds a camera's ring holds: its own history= key, else the service's."""
+    return camera.options.get("history") or config.history
+
+
 def viewer_children(config: ServiceConfig, common: dict) -> list[Child]:
     """The processes that show the cameras, clients of the service like any other: the live
     dashboard (fxis_shm.viewers.dashboard) and the Foxglove server (fxis_shm.viewers.foxglove_live), each
@@ -187,7 +193,13 @@ class Supervisor:
         self.cameras = [
             Child(
                 CameraWorkerSpec(
-                    **common, camera=c.name, kind=c.kind, options=c.options, slots=config.slots, time_origin_ns=origin
+                    **common,
+                    camera=c.name,
+                    kind=c.kind,
+                    options=c.options,
+                    slots=config.slots,
+                    time_origin_ns=origin,
+                    history_s=history_of(c, config),
                 ),
                 f"camera {c.name!r}",
                 key=f"camera:{c.name}",
@@ -204,6 +216,7 @@ class Supervisor:
                 settings=config.settings,
                 curve_secret=config.curve_secret,
                 curve_clients=config.curve_clients,
+                history={c.name: h for c in config.cameras if (h := history_of(c, config))},
             ),
             "coordinator",
             key="coordinator",
@@ -257,7 +270,7 @@ class Supervisor:
             opts = ", ".join(f"{k}={v}" for k, v in cam.options.items())
             lines.append(f"  {cam.name:<10} {cam.kind:<10} {opts}")
         lines.append(f"  requests on {c.endpoint}, publishing on {c.pub}, request events on {c.events}")
-        lines.append(f"  rings of {c.slots} slots in /dev/shm/fxis.{c.name}.*")
+        lines += ring_lines(c)
         if c.http_url:
             lines.append(f"  live dashboard on {c.http_url}/")
         if c.foxglove_url:

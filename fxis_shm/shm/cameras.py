@@ -11,6 +11,7 @@ from fxis_shm.core.snapshot import Snapshot
 from fxis_shm.core.waitpolicy import CameraState
 from fxis_shm.errors import RingError
 from fxis_shm.shm import naming, procstat
+from fxis_shm.shm.history import held_seconds
 from fxis_shm.shm.ring import FLAG_TRIGGERED, RingReader
 
 # The columns of the ``frames`` op's rows, one row per frame.
@@ -29,8 +30,9 @@ def process_alive(pid: int) -> bool:
 
 
 class CameraHandle:
-    def __init__(self, service: str, name: str, kind: str):
+    def __init__(self, service: str, name: str, kind: str, history_s: float | None = None):
         self.service, self.name, self.kind = service, name, kind
+        self.history_s = history_s  # the seconds asked for (history=), None: sized in slots
         self.reader: RingReader | None = None
         self.torn_reads = 0
         self.last_error = ""
@@ -126,8 +128,10 @@ class CameraHandle:
             fps=round(1e9 / period, 3) if period > 0 else None,
             frames_stored=ring.field("write_count"),
             frames_dropped=ring.field("frames_dropped"),
-            last_frame_age_ms=round((now - newest_stored) / 1e6, 3) if newest_stored else None,
+            # a frame stored after ``now`` was read (between it and the snapshot) is 0 ms old, not negative
+            last_frame_age_ms=round(max(0, now - newest_stored) / 1e6, 3) if newest_stored else None,
             ring_slots=ring.slots,
+            history_s=held_seconds(ring.slots, period),
             ring=ring.name,
             instance=ring.instance,
             generation=ring.field("generation"),
@@ -137,6 +141,11 @@ class CameraHandle:
             hook_errors=ring.field("hook_errors"),
             note=ring.header["status_text"].item().decode(errors="replace"),
         )
+        held = info["history_s"]
+        if self.history_s and held is not None and held < self.history_s * 0.98:
+            # the ring was sized at the camera's nominal rate; it runs faster now
+            short = f"holds {held:.2f} s of the {self.history_s:g} s asked: the camera runs faster than its ring's size"
+            info["note"] = f"{info['note']}; {short}" if info["note"] else short
         return info
 
     def timeline(self, now: int) -> dict:

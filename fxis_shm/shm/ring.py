@@ -34,7 +34,7 @@ from fxis_shm.core import timebase
 from fxis_shm.core.snapshot import SLOT, Snapshot
 from fxis_shm.core.timesearch import Timeline
 from fxis_shm.errors import Overwritten, RingError
-from fxis_shm.shm import naming, ordering
+from fxis_shm.shm import history, naming, ordering
 
 MAGIC = b"FXISRNG1"
 LAYOUT_VERSION = 2
@@ -218,6 +218,7 @@ class RingWriter(_Mapping):
         generation = int(old["generation"]) if old is not None and old["magic"] == MAGIC else 0
         del old
         self._unmap()
+        history.check_room(size, f"the ring {self.name} ({slots} slots of {layout.shape} {layout.dtype})")
         shm = posix_ipc.SharedMemory(self.name, posix_ipc.O_CREX, mode=0o600, size=size)
         try:
             self._map(shm.fd, size, writable=True)

@@ -22,6 +22,7 @@ SYNTHETIC_DEFAULTS = {
     "trigger": "free",
     "process": None,
     "process_workers": 1,  # generic to every kind (camerakinds.COMMON_OPTIONS)
+    "history": None,
     "frame_id": None,
     "calibration": None,
 }
