@@ -14,6 +14,7 @@ import time
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 
+from fxis_shm.client import snapshot
 from fxis_shm.client.frames import FrameTuple, frames_of, sequence_of, tuple_of
 from fxis_shm.client.localreads import settled
 from fxis_shm.client.single import SingleClient
@@ -85,6 +86,25 @@ class MultiClient:
         self.close()
 
     # ---- operations (as Client's, over every service) ----
+
+    def snapshot(
+        self,
+        at: int | None = None,
+        before: float = 2.0,
+        after: float = 1.0,
+        out: str = "snapshot",
+        cameras: list[str] | None = None,
+        encoding: str = "raw",
+        quality: int | None = None,
+    ) -> dict:
+        """As ``Client.snapshot``, the cameras of every service into one bag, every stamp in
+        the caller's clock."""
+        names = cameras or list(self.owner)
+        unknown = [n for n in names if n not in self.owner]
+        if unknown:
+            raise ConfigError(f"unknown camera(s) {unknown}; the services have {sorted(self.owner)}")
+        owners = {name: self.owner[name] for name in names}
+        return snapshot.take(owners, self.clock, out, at, before, after, encoding, quality)
 
     def image(self, camera: str, *, at: int | None = None, wait: str | None = None, timeout: float | None = None):
         return frames_of(

@@ -25,6 +25,7 @@ from collections.abc import Callable
 import numpy as np
 import zmq
 
+from fxis_shm.client import snapshot
 from fxis_shm.client.clocktracker import ClockTracker
 from fxis_shm.client.frames import LOCAL, NETWORK, Frame, FrameTuple, frames_of, in_caller_clock, sequence_of, tuple_of
 from fxis_shm.client.handshake import HandshakeWatch
@@ -239,6 +240,23 @@ class SingleClient(SocketOwner):
             sync=sync,
         )
         return sequence_of(header, images, check, single=camera is not None)
+
+    def snapshot(
+        self,
+        at: int | None = None,
+        before: float = 2.0,
+        after: float = 1.0,
+        out: str = "snapshot",
+        cameras: list[str] | None = None,
+        encoding: str = codec.RAW,
+        quality: int | None = None,
+    ) -> dict:
+        """Every frame of ``cameras`` (default all) captured in [at - before, at + after]
+        (``at``: ns of the caller's clock, default now; seconds) into the rosbag2/MCAP bag
+        ``out``, stamps in the caller's clock; returns per camera the frames kept and the ids
+        of any missing (fxis_shm.client.snapshot). Blocks until ``at + after`` has passed."""
+        names = cameras or list(self.status()["cameras"])
+        return snapshot.take(dict.fromkeys(names, self), self.clock, out, at, before, after, encoding, quality)
 
     @property
     def clocks(self) -> dict[str, ClockEstimate]:

@@ -10,6 +10,7 @@ from __future__ import annotations
 import numpy as np
 
 from fxis_shm.errors import InvalidArgument
+from fxis_shm.wire import encoding as codec
 
 IMAGE, COMPRESSED, TUPLE = "sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage", "fxis_msgs/msg/FrameTuple"
 TUPLES_TOPIC = "/fxis/tuples"
@@ -102,6 +103,16 @@ def compressed_message(jpeg: bytes, t_ns: int, camera: str) -> dict:
     only the plain names, and ROS's compressed_image_transport reads it too (the verbose
     "bgr8; jpeg compressed bgr8" it writes is what Foxglove does not show)."""
     return {"header": header(t_ns, camera), "format": "jpeg", "data": jpeg}
+
+
+def frame_message(frame, t_ns: int, encoding: str, quality: int | None = None) -> tuple[str, str, dict, int]:
+    """(topic, type, message, payload bytes) of a frame as a recording holds it: raw as an
+    Image, or JPEG-encoded as a CompressedImage on the ``compressed`` topic."""
+    if encoding == codec.JPEG:
+        data = codec.encode(frame.image, codec.JPEG, codec.DEFAULT_JPEG_QUALITY if quality is None else quality)
+        return image_topic(frame.camera, True), COMPRESSED, compressed_message(data, t_ns, frame.camera), len(data)
+    message = image_message(frame.image, t_ns, frame.camera)
+    return image_topic(frame.camera), IMAGE, message, frame.image.nbytes
 
 
 def tuple_message(t_step: int, frames: list) -> dict:

@@ -1,0 +1,144 @@
+"""Snapshots: every frame captured in [t - before, t + after], the past from the rings and the
+future as it comes, into a bag that rosbags reads; nothing missing without saying so."""
+
+from __future__ import annotations
+
+import json
+import subprocess
+import sys
+import threading
+
+import numpy as np
+import pytest
+
+from fxis_shm import Client, InvalidArgument
+from fxis_shm.formats import rosmsgs
+from fxis_shm.formats.stamp import read_stamp
+
+from ..conftest import fxis, run_in_threads, wait_until
+from .bags import read_bag
+from .conftest import SMALL, module_service
+
+pytestmark = pytest.mark.integration
+
+CAMERAS = ("a", "b")
+
+
+@pytest.fixture(scope="module")
+def history3():
+    """A service with three seconds of history per camera, its rings full (as after a while)."""
+    args = ["--camera", f"a=synthetic:fps=25,{SMALL}", "--camera", f"b=synthetic:fps=20,phase_ms=7,{SMALL}"]
+    for svc in module_service([*args, "--history", "3"]):
+        with Client(svc.endpoint) as client:
+            wait_until(
+                lambda: all(c["frames_stored"] >= c["ring_slots"] for c in client.status()["cameras"].values()),
+                timeout=20,
+                what="full rings",
+            )
+        yield svc
+
+
+def images(bag, camera: str) -> list:
+    return bag.messages[rosmsgs.image_topic(camera)]
+
+
+def check_window(bag, t: int, before: float, after: float) -> None:
+    """Every frame of the window, none missing: consecutive pixel stamps, stamps inside it."""
+    for camera in CAMERAS:
+        messages = images(bag, camera)
+        ids = [read_stamp(rosmsgs.image_array(m.msg)) for m in messages]
+        assert ids == list(range(ids[0], ids[0] + len(ids))), f"{camera}: frames missing from the window"
+        stamps = [m.stamp for m in messages]
+        assert t - before * 1e9 <= stamps[0] and stamps[-1] <= t + after * 1e9
+        fps = 25 if camera == "a" else 20
+        assert len(ids) >= (before + after) * fps - 2  # the whole window, not a part of it
+    assert json.loads(bag.custom_data["missing"]) == {c: [] for c in CAMERAS}
+    assert int(bag.custom_data["event_ns"]) == t
+
+
+def test_an_event_that_arrives_late_keeps_the_seconds_around_it(history3, tmp_path):
+    with Client(history3.endpoint) as client:
+        t = client.clock()
+        wait_until(lambda: client.clock() > t + 1_500_000_000, what="the event, 1.5 s late")
+        result = client.snapshot(at=t, before=1.0, after=1.0, out=str(tmp_path / "event"))
+    for name, kept in result["cameras"].items():
+        assert not kept["missing"] and kept["complete"] and not kept["gone_before_ms"], (name, kept)
+    check_window(read_bag(tmp_path / "event"), t, 1.0, 1.0)
+    assert not (tmp_path / "event.partial").exists()
+
+
+def test_a_window_into_the_future_while_tuples_are_pulled_and_a_recording_runs(history3, tmp_path):
+    stop = threading.Event()
+
+    def pull_tuples():
+        with Client(history3.endpoint) as puller:
+            while not stop.is_set():
+                puller.tuple()
+
+    puller = threading.Thread(target=pull_tuples, daemon=True)
+    puller.start()
+    record = ["record", "--endpoint", history3.endpoint, "--out", str(tmp_path / "rec"), "--seconds", "3"]
+    recording = subprocess.Popen([sys.executable, "-m", "fxis_shm.cli", *record], stderr=subprocess.DEVNULL)
+    try:
+        with Client(history3.endpoint) as client:
+            t = client.clock()
+            result = client.snapshot(at=t, before=0.5, after=1.5, out=str(tmp_path / "future"))
+    finally:
+        stop.set()
+        puller.join(10)
+        recording.wait(30)
+    assert all(not kept["missing"] for kept in result["cameras"].values())
+    check_window(read_bag(tmp_path / "future"), t, 0.5, 1.5)
+
+
+def test_overlapping_snapshots_each_hold_their_own_window(history3, tmp_path):
+    with Client(history3.endpoint) as client:
+        t = client.clock()
+    numbers = iter(range(3))
+
+    def one() -> None:
+        i = next(numbers)
+        with Client(history3.endpoint) as client:
+            client.snapshot(at=t + i * 300_000_000, before=0.6, after=0.6, out=str(tmp_path / f"s{i}"))
+
+    run_in_threads(one, 3, timeout=30)
+    for i in range(3):
+        check_window(read_bag(tmp_path / f"s{i}"), t + i * 300_000_000, 0.6, 0.6)
+
+
+def test_a_window_older_than_the_history_says_what_was_gone(history3, tmp_path):
+    with Client(history3.endpoint) as client:
+        t = client.clock() - 3_500_000_000  # its start is 4 s ago: the rings hold 3
+        result = client.snapshot(at=t, before=0.5, after=1.0, out=str(tmp_path / "old"))
+    gone = {name: kept["gone_before_ms"] for name, kept in result["cameras"].items()}
+    assert all(900 <= ms <= 1200 for ms in gone.values()), gone
+    assert json.loads(read_bag(tmp_path / "old").custom_data["gone_before_ms"]) == gone
+
+
+@pytest.mark.parametrize(
+    "kwargs, words",
+    [
+        ({"before": -1}, "before must be seconds >= 0"),
+        ({"after": float("nan")}, "after must be seconds >= 0"),
+        ({"before": 0, "after": 0}, "needs a window"),
+        ({"at": "now"}, "at must be int ns"),
+        ({"encoding": "png"}, "encoding must be raw or jpeg"),
+    ],
+)
+def test_bad_windows_get_clear_errors_and_the_service_keeps_serving(history3, tmp_path, kwargs, words):
+    with Client(history3.endpoint) as client:
+        with pytest.raises(InvalidArgument, match=words):
+            client.snapshot(out=str(tmp_path / "bad"), **kwargs)
+        assert client.tuple()["a"].frame_id >= 0
+    assert not (tmp_path / "bad").exists()
+
+
+def test_fxis_snapshot_writes_the_bag_and_reports_each_camera(history3, tmp_path):
+    result = fxis(
+        "snapshot", "--endpoint", history3.endpoint, "--out", str(tmp_path / "cli"), "--before", "0.5", "--after", "0.2"
+    )
+    assert result.returncode == 0, result.stderr
+    assert "a: " in result.stdout and "0 missing" in result.stdout
+    bag = read_bag(tmp_path / "cli")
+    assert {rosmsgs.image_topic(c) for c in CAMERAS} <= set(bag.topics)
+    assert all(isinstance(rosmsgs.image_array(m.msg), np.ndarray) for m in images(bag, "a"))
