@@ -11,11 +11,15 @@
 #   gcc, which builds the ring's memory-ordering helper (fxis_shm/shm/_ordered.c);
 # - libturbojpeg0, the TurboJPEG library PyTurboJPEG loads (bench/jpeg_codecs.py measures it);
 # - chromium, the headless browser the dashboard's browser test drives
-#   (tests/integration/test_dashboard_browser.py).
+#   (tests/integration/test_dashboard_browser.py);
+# - g++, make, libzmq3-dev (libzmq), cppzmq-dev (its C++ header zmq.hpp) and nlohmann-json3-dev
+#   (nlohmann/json.hpp): the C++ client of examples/cpp_client/, which
+#   tests/integration/test_cpp_client.py builds and runs against a live service.
 # Runs as root (or with sudo); does nothing when everything is present.
 set -euo pipefail
 
-wanted=(gir1.2-aravis-0.8 aravis-tools libgirepository1.0-dev libcairo2-dev pkg-config iproute2 util-linux gcc libturbojpeg0 chromium)
+wanted=(gir1.2-aravis-0.8 aravis-tools libgirepository1.0-dev libcairo2-dev pkg-config iproute2 util-linux gcc libturbojpeg0 chromium
+        g++ make libzmq3-dev cppzmq-dev nlohmann-json3-dev)
 python3 -c "import venv, ensurepip" 2>/dev/null || wanted+=(python3-venv)
 
 missing=()

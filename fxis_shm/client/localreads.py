@@ -62,7 +62,7 @@ class LocalReads:
                 ring = handle.ring()
                 if ring is None:
                     raise LocalUnavailable(handle.last_error)
-                if info.get("instance") is not None and ring.instance != info["instance"]:
+                if info.get("instance") is not None and ring.instance != int(info["instance"]):
                     raise LocalUnavailable(
                         f"{ring.name} here is not the service's ring (another IPC namespace, or the ring was replaced)"
                     )

@@ -133,7 +133,7 @@ class CameraHandle:
             ring_slots=ring.slots,
             history_s=held_seconds(ring.slots, period),
             ring=ring.name,
-            instance=ring.instance,
+            instance=str(ring.instance),  # uint64: a decimal string on the wire (docs/protocol.md)
             generation=ring.field("generation"),
             writer_pid=ring.field("writer_pid"),
             delay_ms=round(ring.field("delay_ns") / 1e6, 3),

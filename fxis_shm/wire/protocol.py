@@ -399,11 +399,13 @@ def frame_ref(
     seq: int,
 ) -> dict:
     """A frame of a local reply: the client copies it out of ``slot`` of the ring
-    segment ``ring`` (whose header carries ``instance``) while the slot shows ``seq``."""
+    segment ``ring`` (whose header carries ``instance``) while the slot shows ``seq``.
+    ``instance`` is an unsigned 64-bit number, so it travels as a decimal string: a JSON
+    parser that reads numbers as doubles would lose its low bits."""
     return {
         **described(camera, frame_id, t_capture, t_stored, generation, shape, dtype, t_available),
         "ring": ring,
-        "instance": int(instance),
+        "instance": str(int(instance)),
         "slot": int(slot),
         "seq": int(seq),
     }

@@ -477,7 +477,7 @@ def test_a_local_reply_names_where_each_frame_is_and_carries_no_buffers():
         "shape": [1024, 1360],
         "dtype": "uint8",
         "ring": "/fxis.svc.cam0.ring",
-        "instance": 2**63 + 1,
+        "instance": str(2**63 + 1),  # uint64 travels as a decimal string
         "slot": 3,
         "seq": 88,
     }
