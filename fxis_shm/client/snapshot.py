@@ -19,7 +19,9 @@ from __future__ import annotations
 import json
 import math
 import os
+import queue
 import shutil
+import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
@@ -88,17 +90,19 @@ def take(
     custom = {"clock": "the caller's (Client(clock=...))", "stamps": "header.stamp: capture time in that clock"}
     custom.update(event_ns=t, before_s=before, after_s=after, window_ns=f"{window[0]} {window[1]}")
     bag = BagWriter(partial, {**custom, "cameras": ",".join(cameras), "encoding": encoding})
-    to_realtime = time.time_ns() - clock()  # MCAP log times are wall-clock (what the tools show as dates)
+    writer = _Writer(bag, time.time_ns() - clock(), encoding, quality)  # MCAP log times: wall-clock
     try:
         give_up = window[1] + round(GRACE_S * 1e9)
         while True:  # at least one look: a window long past is taken from the rings at once
             began = time.monotonic()
             for cam in cameras.values():
-                _poll(cam, bag, to_realtime, encoding, quality)
+                _poll(cam, writer)
             if all(c.past_end for c in cameras.values()) or clock() >= give_up:
                 break
             time.sleep(max(0.0, _poll_s(cameras) - (time.monotonic() - began)))
+        writer.finish()
     except BaseException:
+        writer.finish()
         bag.close()
         shutil.rmtree(partial, ignore_errors=True)
         raise
@@ -133,7 +137,45 @@ def _poll_s(cameras: dict[str, _Camera]) -> float:
     return min(0.1, max(0.005, min(periods, default=0.1) / 2))
 
 
-def _poll(cam: _Camera, bag: BagWriter, to_realtime: int, encoding: str, quality: int | None) -> None:
+class _Writer:
+    """Writes the copied frames into the bag in a thread of its own, so that copying the
+    window's past out of every camera's ring never waits for the disk: each ring is emptied
+    of the window's frames within milliseconds, long before it comes round."""
+
+    def __init__(self, bag: BagWriter, to_realtime: int, encoding: str, quality: int | None):
+        self.bag, self.to_realtime, self.encoding, self.quality = bag, to_realtime, encoding, quality
+        self._frames: queue.Queue = queue.Queue()
+        self._error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name="snapshot-writer", daemon=True)
+        self._thread.start()
+
+    def put(self, frame) -> None:
+        if self._error is not None:
+            raise self._error
+        self._frames.put(frame)
+
+    def finish(self) -> None:
+        """Every frame put is in the bag (or the writer's error is raised)."""
+        self._frames.put(None)
+        self._thread.join()
+        if self._error is not None:
+            raise self._error
+
+    def _run(self) -> None:
+        while (frame := self._frames.get()) is not None:
+            if self._error is not None:
+                continue  # drain: the error is raised to the caller
+            try:
+                with frame:
+                    topic, msgtype, message, size = rosmsgs.frame_message(
+                        frame, frame.t_capture, self.encoding, self.quality
+                    )
+                    self.bag.write(topic, msgtype, message, frame.t_capture + self.to_realtime, size)
+            except BaseException as exc:  # a full disk: the snapshot stops and says so
+                self._error = exc
+
+
+def _poll(cam: _Camera, writer: _Writer) -> None:
     if cam.past_end:
         return
     try:
@@ -160,7 +202,5 @@ def _poll(cam: _Camera, bag: BagWriter, to_realtime: int, encoding: str, quality
         cam.missing += sorted(wanted - got)
         for frame in frames:
             if frame.frame_id in got:
-                with frame:
-                    topic, msgtype, message, size = rosmsgs.frame_message(frame, frame.t_capture, encoding, quality)
-                    bag.write(topic, msgtype, message, frame.t_capture + to_realtime, size)
+                writer.put(frame)
                 cam.taken += 1
