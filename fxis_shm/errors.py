@@ -35,6 +35,28 @@ class ConfigError(FxisError):
     """A setting is invalid; the message names the setting."""
 
 
+class DiskFull(FxisError):
+    """Writing a bag stopped because its disk is full (or a quota or the file size limit was
+    reached). ``valid``: the bag was closed and holds ``kept`` (messages per topic), over
+    ``seconds``, in a file of ``file_bytes``; if not, ``fxis record --recover FOLDER`` makes
+    it readable once there is room. ``reason`` is the system's word (``strerror``)."""
+
+    def __init__(
+        self,
+        message: str,
+        *,
+        folder: str = "",
+        reason: str = "",
+        kept: dict[str, int] | None = None,
+        seconds: float = 0.0,
+        file_bytes: int = 0,
+        valid: bool = True,
+    ):
+        super().__init__(message)
+        self.folder, self.reason, self.kept = folder, reason, kept or {}
+        self.seconds, self.file_bytes, self.valid = seconds, file_bytes, valid
+
+
 class SpecError(FxisError):
     """A child process was given a spec it cannot use (another version, a bad field)."""
 

@@ -16,6 +16,14 @@ def record_command(args) -> int:
         print(f"fxis record: {message}", file=sys.stderr)
         return EXIT_USAGE
 
+    if args.recover is not None:
+        options = (("--cameras", args.cameras), ("--seconds", args.seconds), ("--frames", args.frames))
+        options += (("--rate", args.rate), ("--quality", args.quality), ("--tuples", args.tuples or None))
+        given = [flag for flag, value in options if value is not None]
+        if given:
+            return usage(f"--recover repairs a bag: it takes no {', '.join(given)}")
+        return recover_command(args.recover)
+
     for flag, value in (("--seconds", args.seconds), ("--frames", args.frames), ("--rate", args.rate)):
         if value is not None and not value > 0:
             return usage(f"{flag} must be > 0, got {value}")
@@ -47,6 +55,32 @@ def record_command(args) -> int:
     return 0
 
 
+def recover_command(path: str) -> int:
+    """``fxis record --recover DIR``: what was recovered and what was cut, on stdout."""
+    from datetime import datetime, timezone
+
+    from fxis_shm.formats.bagrecover import recover_bag
+
+    done = recover_bag(path)
+    if not done.wrote_metadata:
+        print(f"{done.folder}: the bag is whole (its .mcap file has its summary and metadata.yaml is there)")
+        return 0
+    lines = [
+        f"{done.file}: " + (f"no summary; {done.repair.describe()}" if done.repair else "metadata.yaml was missing")
+    ]
+    total = sum(n for _, n in done.topics.values())
+    span = (done.end_time - done.start_time) / 1e9 if total else 0.0
+    began = datetime.fromtimestamp(done.start_time / 1e9, timezone.utc).isoformat(timespec="milliseconds")
+    lines.append(f"recovered {total} messages over {span:.3f} s" + (f" from {began} (log time)" if total else ""))
+    width = max((len(t) for t in done.topics), default=0)
+    lines += [f"  {topic.ljust(width)}  {count:6d}  {kind}" for topic, (kind, count) in done.topics.items()]
+    if done.damaged:
+        lines.append(f"the damaged original is kept as {done.damaged}")
+    lines.append(f"{done.folder}: readable again (metadata.yaml written)")
+    print("\n".join(lines))
+    return 0
+
+
 def add_parser(sub) -> None:
     record = sub.add_parser(
         "record",
@@ -55,12 +89,18 @@ def add_parser(sub) -> None:
         "--tuples) into a rosbag2 folder with MCAP storage: /NAME/image_raw "
         "(sensor_msgs/msg/Image) or /NAME/image_raw/compressed (JPEG), stamps in the "
         "service's clock (CLOCK_MONOTONIC unless fxis run --clock says otherwise). "
-        "Ctrl-C ends the recording with a valid bag. "
+        "Ctrl-C ends the recording with a valid bag; so does a full disk, with a one-line "
+        "error saying what the bag kept and exit code 1. "
         "Replay it with a camera of kind bag (docs/recording.md).",
     )
     add_client_options(record)
-    record.add_argument(
-        "--out", required=True, metavar="DIR", help="the bag folder to create (new, or empty)"
+    bag = record.add_mutually_exclusive_group(required=True)
+    bag.add_argument("--out", metavar="DIR", help="the bag folder to create (new, or empty)")
+    bag.add_argument(
+        "--recover",
+        metavar="DIR",
+        help="make a bag whose recording was killed (kill -9, a power cut) readable up to its last "
+        "complete message, as ros2 bag reindex does; the damaged .mcap is kept as .mcap.damaged",
     )
     record.add_argument("--cameras", metavar="A,B", help="comma-separated cameras (default all)")
     until = record.add_mutually_exclusive_group()

@@ -23,7 +23,7 @@ import numpy as np
 
 from fxis_shm.client.client import Client
 from fxis_shm.core import timebase
-from fxis_shm.errors import CameraDown, ConfigError, Overwritten, ServiceError
+from fxis_shm.errors import CameraDown, ConfigError, DiskFull, Overwritten, ServiceError
 from fxis_shm.formats import rosmsgs
 from fxis_shm.formats.bagfile import BagWriter
 from fxis_shm.record.recording import Follower, Steps
@@ -108,20 +108,38 @@ class Recorder:
         self.progress.stage(f"recording {', '.join(self.cameras)} into {self.s.out}")
         self.progress.stage(self._data_rate_line())
         try:
-            while not self._stopping and not self._done():
-                began = time.monotonic()
-                self._poll()
-                self.progress.update(self._line())
-                time.sleep(max(0.0, self.poll_s - (time.monotonic() - began)))
-            if self._stopping:
-                self.progress.stage("interrupted: closing the bag")
+            try:
+                while not self._stopping and not self._done():
+                    began = time.monotonic()
+                    self._poll()
+                    self.progress.update(self._line())
+                    time.sleep(max(0.0, self.poll_s - (time.monotonic() - began)))
+                if self._stopping:
+                    self.progress.stage("interrupted: closing the bag")
+            finally:
+                self.bag.close()
+        except DiskFull as exc:  # the bag was closed with what fitted
+            raise self._disk_full(exc) from None
         finally:
-            self.bag.close()
             for sig, handler in previous.items():
                 signal.signal(sig, handler)
         summary = self.summary()
         self.progress.stage(f"recorded {summary['seconds']:.1f} s into {self.s.out}")
         return summary
+
+    def _disk_full(self, exc: DiskFull) -> DiskFull:
+        """The bag's DiskFull in the recording's words: frames per camera, seconds, bytes."""
+        if not exc.valid:
+            return exc
+        jpeg = self.s.encoding == codec.JPEG
+        kept = ", ".join(f"{cam} {exc.kept.get(rosmsgs.image_topic(cam, jpeg), 0)} frames" for cam in self.cameras)
+        if self.s.tuples:
+            kept += f", {exc.kept.get(rosmsgs.TUPLES_TOPIC, 0)} tuples"
+        return DiskFull(
+            f"{exc.reason} in {self.s.out}: the recording stopped and kept {kept}, "
+            f"{exc.seconds:.1f} s, {exc.file_bytes / 1e6:.1f} MB, in a valid bag",
+            **{k: getattr(exc, k) for k in ("folder", "reason", "kept", "seconds", "file_bytes", "valid")},
+        )
 
     def _data_rate_line(self) -> str:
         """What the recording will write a second, and how long the disk lasts at that rate

@@ -4,16 +4,21 @@ record`` run against it, and the bag read back with the independent ``rosbags`` 
 from __future__ import annotations
 
 import os
+import shutil
+import struct
 from dataclasses import dataclass
 from pathlib import Path
 
+from mcap.reader import make_reader
+from mcap.stream_reader import StreamReader
 from rosbags.highlevel import AnyReader
 from ruamel.yaml import YAML
 
+from fxis_shm import read_stamp
 from fxis_shm.formats import rosmsgs
 from fxis_shm.service.launch import ServiceProcess
 
-from ..conftest import assert_nothing_left, fxis
+from ..conftest import assert_nothing_left, fxis, wait_until
 
 FPS = 20
 CAMERAS = [
@@ -68,3 +73,66 @@ def record(svc: ServiceProcess, out, *args):
     assert result.returncode == 0, result.stderr
     assert os.path.exists(os.path.join(out, "metadata.yaml"))
     return result
+
+
+def record_a_cell(folder, *args) -> Path:
+    """``fxis record ARGS`` of the two cameras, from a service of their own started and stopped
+    for it, into ``folder``/bag."""
+    svc = start_cameras(Path(folder, "service.log"))
+    try:
+        record(svc, Path(folder, "bag"), *args)
+    finally:
+        stop(svc)
+    return Path(folder, "bag")
+
+
+def frame_ids(bag: Bag, cam: str) -> list[int]:
+    """The frame ids the synthetic camera stamped into the pixels of the bag's raw images."""
+    return [read_stamp(rosmsgs.image_array(m.msg)) for m in bag.messages[f"/{cam}/image_raw"]]
+
+
+def message_ends(mcap_path) -> list[tuple[int, str]]:
+    """(the byte at which the message's record ends, its topic) for every message of a whole,
+    uncompressed MCAP file, in file order, found through the file's own summary and message
+    indexes read by the mcap library: what a cut at byte B leaves complete."""
+    with open(mcap_path, "rb") as f:
+        summary = make_reader(f).get_summary()
+        ends = []
+        for chunk in summary.chunk_indexes:
+            assert chunk.compression == ""
+            records = chunk.chunk_start_offset + 49  # opcode, length, 3 x u64, crc, "" and the records' length
+            for channel, offset in chunk.message_index_offsets.items():
+                f.seek(offset)
+                index = next(StreamReader(f, skip_magic=True).records)
+                for _, inner in index.records:
+                    f.seek(records + inner + 1)
+                    ends.append(
+                        (records + inner + 9 + struct.unpack("<Q", f.read(8))[0], summary.channels[channel].topic)
+                    )
+    return sorted(ends)
+
+
+def cut_copy(bag, out, at: int):
+    """A copy of the bag folder ``bag`` at ``out`` whose .mcap file ends at byte ``at``."""
+    shutil.copytree(bag, out)
+    (mcap,) = Path(out).glob("*.mcap")
+    os.truncate(mcap, at)
+    return mcap
+
+
+def played_once(client, camera: str, recorded_ids: list[int]):
+    """Waits until the ``loop=false`` bag camera ``camera`` has played its bag; its status and
+    its frames. Checks what holds on any machine: every frame stored is a recorded one, in the
+    recorded order, and frames stored plus frames dropped (a loaded worker drops late ones)
+    are the frames recorded."""
+    status = wait_until(
+        lambda: "end of bag" in (s := client.status()["cameras"][camera])["note"] and s,
+        timeout=30,
+        what=f"the end of {camera}'s bag",
+    )
+    frames = client.sequence("consecutive", camera=camera, count=status["frames_stored"])
+    played = [read_stamp(f.image) for f in frames]
+    assert len(played) == status["frames_stored"] > 0
+    assert status["frames_stored"] + status["frames_dropped"] == len(recorded_ids)
+    assert set(played) <= set(recorded_ids) and played == sorted(set(played)), (played, recorded_ids)
+    return status, frames

@@ -1,4 +1,5 @@
 import os
+import subprocess
 
 import pytest
 
@@ -53,3 +54,17 @@ def client_keys(folder, name):
     from fxis_shm import ClientKeys
 
     return ClientKeys.from_files(str(folder / "server.key"), str(folder / f"{name}.key_secret"))
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """An 8 MiB tmpfs mounted for the test (root), unmounted afterwards whatever happened."""
+    mount = tmp_path / "disk"
+    mount.mkdir()
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=8m", "tmpfs", str(mount)], capture_output=True)
+    if done.returncode != 0:
+        pytest.fail(f"mounting a tmpfs needs root: {done.stderr.decode().strip()}", pytrace=False)
+    try:
+        yield mount
+    finally:
+        subprocess.run(["umount", str(mount)], check=True)

@@ -14,6 +14,10 @@ fastest image topic, the same for every topic of the bag. A camera that starts (
 restarts) late joins the playback where it is now, like a live camera; a frame more
 than one interval late is dropped and counted, as a camera would, to stay in step.
 
+A bag whose recording was cut off (no summary, a torn last record) plays its complete
+messages (fxis_shm.formats.bagfile.BagReader reads it record by record, without changing
+it), and the camera's status note says how many and where the file ends.
+
 Stamps: ``stamps=now`` (default) stamps each frame with its play time, so a client
 asks for ``at=now`` as of a live camera; ``stamps=recorded`` keeps the recorded
 header.stamp (plus ``pass * loop``, so that stamps keep increasing), for code that
@@ -23,6 +27,7 @@ matches frames with other recorded data: it must then ask for frames by those ti
 
 from __future__ import annotations
 
+import logging
 import time
 from contextlib import closing
 
@@ -37,6 +42,7 @@ from fxis_shm.wire import encoding as codec
 
 from .base import Camera, Capture
 
+log = logging.getLogger("camera")
 _IMAGE_TYPES = (rosmsgs.IMAGE, rosmsgs.COMPRESSED)
 _DEFAULT_INTERVAL_NS = 100_000_000  # the loop's gap for a topic of a single frame
 # The bag starts playing this long after the service's origin: time enough for every camera
@@ -73,7 +79,10 @@ class BagCamera(Camera):
         self._k = 0
         self._frames = None
         self._next: tuple[int, int, np.ndarray] | None = None  # (due, t_capture, image)
-        self.note = ""
+        self._damage = self._bag.damage(self._topic)  # a file cut off plays what is complete, and says so
+        self.note = self._damage
+        if self._damage:
+            log.warning("camera %s (%s): %s", name, self._topic, self._bag.damage(self._topic, detail=True))
 
     def _choose_topic(self, topic) -> str:
         images = sorted(t for t, kind in self._bag.topics.items() if kind in _IMAGE_TYPES)
@@ -128,7 +137,9 @@ class BagCamera(Camera):
                 yield due, due if self.options["stamps"] == "now" else recorded, msg
             within = 0
             playback += 1
-        self.note = f"end of bag {self._bag.path} (loop=false)"
+        self.note = (
+            f"end of bag (loop=false); {self._damage}" if self._damage else f"end of bag {self._bag.path} (loop=false)"
+        )
 
     def _image(self, msg) -> np.ndarray:
         if self._compressed:
