@@ -16,6 +16,7 @@ like any client), also while the service serves at full rate.
 
 from __future__ import annotations
 
+import contextlib
 import json
 import math
 import os
@@ -27,7 +28,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from fxis_shm.errors import CameraDown, InvalidArgument, Overwritten, ServiceError
+from fxis_shm.errors import CameraDown, DiskFull, InvalidArgument, Overwritten, ServiceError
 from fxis_shm.formats import rosmsgs
 from fxis_shm.formats.bagfile import BagWriter
 from fxis_shm.wire import encoding as codec
@@ -101,8 +102,20 @@ def take(
                 break
             time.sleep(max(0.0, _poll_s(cameras) - (time.monotonic() - began)))
         writer.finish()
-    except BaseException:
-        writer.finish()
+    except BaseException as exc:
+        with contextlib.suppress(BaseException):
+            writer.finish()  # stops the writer; its own error is the one being raised
+        if isinstance(exc, DiskFull) and exc.valid:  # the bag was closed whole up to its last message
+            os.rename(partial, out)
+            kept = ", ".join(f"{topic} {n}" for topic, n in exc.kept.items())
+            raise DiskFull(
+                f"{exc.reason or 'the disk is full'}: the snapshot stopped and kept {kept} in {out}, a valid bag",
+                folder=out,
+                reason=exc.reason,
+                kept=exc.kept,
+                seconds=exc.seconds,
+                file_bytes=exc.file_bytes,
+            ) from None
         bag.close()
         shutil.rmtree(partial, ignore_errors=True)
         raise

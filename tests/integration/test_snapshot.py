@@ -12,6 +12,7 @@ import numpy as np
 import pytest
 
 from fxis_shm import Client, InvalidArgument
+from fxis_shm.errors import DiskFull
 from fxis_shm.formats import rosmsgs
 from fxis_shm.formats.stamp import read_stamp
 
@@ -142,3 +143,18 @@ def test_fxis_snapshot_writes_the_bag_and_reports_each_camera(history3, tmp_path
     bag = read_bag(tmp_path / "cli")
     assert {rosmsgs.image_topic(c) for c in CAMERAS} <= set(bag.topics)
     assert all(isinstance(rosmsgs.image_array(m.msg), np.ndarray) for m in images(bag, "a"))
+
+
+def test_a_full_disk_stops_a_snapshot_with_a_valid_bag_of_what_it_kept(start_service, small_disk):
+    svc = start_service("--camera", "a=synthetic:fps=25,width=640,height=480", "--history", "2")
+    out = small_disk / "event"
+    with Client(svc.endpoint) as client:
+        wait_until(lambda: client.status()["cameras"]["a"]["frames_stored"] >= 52, what="2 s of history")
+        with pytest.raises(DiskFull) as info:
+            client.snapshot(before=2.0, after=0.0, out=str(out), cameras=["a"])  # 15 MB into an 8 MiB disk
+        assert client.tuple()["a"].frame_id >= 0  # the service goes on
+    assert "the snapshot stopped and kept" in str(info.value) and str(out) in str(info.value)
+    kept = images(read_bag(out), "a")
+    assert 0 < len(kept) == info.value.kept[rosmsgs.image_topic("a")]
+    ids = [read_stamp(rosmsgs.image_array(m.msg)) for m in kept]
+    assert ids == list(range(ids[0], ids[0] + len(ids)))
