@@ -43,6 +43,7 @@ def run_command(args) -> int:
                 "ros2_domain": args.ros2_domain,
                 "ros2_namespace": args.ros2_namespace,
                 "ros2_tuples": args.ros2_tuples,
+                "ros2_snapshots": args.ros2_snapshots,
                 "port_base": args.port_base,
                 "history": args.history,
             },
@@ -162,5 +163,11 @@ def add_parser(sub) -> None:
         "--ros2-tuples",
         metavar="HZ",
         help="also publish joint tuples at this rate on NS/tuple/NAME/image_raw, one header.stamp per tuple",
+    )
+    run.add_argument(
+        "--ros2-snapshots",
+        metavar="DIR",
+        help="answer std_msgs/Header requests on NS/snapshot (stamp t, frame_id a bag name) with a snapshot of "
+        "[t - 2 s, t + 1 s] into DIR/NAME (docs/ros2.md)",
     )
     run.set_defaults(func=run_command)

@@ -31,6 +31,7 @@ from fxis_shm.ros2.dds import RosParticipant
 from fxis_shm.ros2.follow import CameraFollower
 from fxis_shm.ros2.frames_at import FramesAt
 from fxis_shm.ros2.rostime import RosTime
+from fxis_shm.ros2.snapshots import SnapshotRequests
 from fxis_shm.ros2.topics import CameraTopics
 from fxis_shm.ros2.tuples import TupleStream
 from fxis_shm.service.childspec import Ros2Spec
@@ -77,6 +78,17 @@ class Bridge:
             else None
         )
         self.frames_at = FramesAt(self.participant, ns, self.topics_under, self.make_client, self.ros_time, stop)
+        self.snapshots = (
+            SnapshotRequests(
+                self.participant,
+                ns,
+                spec.snapshots,
+                lambda: Client(spec.endpoint, timeout=CLIENT_TIMEOUT_S, keys=keys, clock="realtime"),
+                stop,
+            )
+            if spec.snapshots
+            else None
+        )
 
     def _of(self, camera: str) -> dict:
         return {"frame_id": self.spec.cameras[camera]["frame_id"], "calibration": self.calibrations[camera]}
@@ -93,6 +105,8 @@ class Bridge:
         for thread in threads:
             thread.start()
         self.frames_at.start()
+        if self.snapshots:
+            self.snapshots.start()
         self.report()
         on_ready()
         log.info(
@@ -120,6 +134,7 @@ class Bridge:
             "cameras": {f.camera: f.counts.as_dict() for f in self.followers},
             "tuples": self.tuples.counts.as_dict() if self.tuples else None,
             "frames_at": self.frames_at.status(),
+            "snapshots": self.snapshots.counts.as_dict() if self.snapshots else None,
         }
 
     def report(self) -> None:

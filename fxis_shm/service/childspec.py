@@ -172,6 +172,7 @@ class Ros2Spec(ViewerSpec):
     domain: int
     namespace: str  # "" or "/a/b"
     tuples_hz: float | None = None
+    snapshots: str | None = None  # where NS/snapshot requests write their bags (None: no such topic)
 
 
 ROLES: dict[str, type[ChildSpec]] = {

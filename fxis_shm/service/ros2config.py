@@ -9,13 +9,13 @@ from __future__ import annotations
 
 import os
 from collections.abc import Iterable, Mapping
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from fxis_shm.errors import ConfigError
 from fxis_shm.formats import rosnames
 
-KEYS = ("ros2", "ros2_domain", "ros2_namespace", "ros2_tuples")
+KEYS = ("ros2", "ros2_domain", "ros2_namespace", "ros2_tuples", "ros2_snapshots")
 DOMAIN_ENV = "ROS_DOMAIN_ID"  # what every ROS 2 node reads
 MAX_DOMAIN = 232  # the highest id DDS's port mapping allows (ROS's own advice: 0-101)
 MAX_TUPLES_HZ = 120.0
@@ -26,6 +26,7 @@ class Ros2Settings:
     domain: int = 0
     namespace: str = ""  # "" or "/a/b"
     tuples_hz: float | None = None  # joint tuples on NS/tuple/NAME/..., None: no tuple topics
+    snapshots: str | None = None  # the folder NS/snapshot requests write their bags into, None: no topic
 
 
 def ros2_settings(values: Mapping[str, Any], cameras: Iterable[str], environ=os.environ) -> Ros2Settings | None:
@@ -42,7 +43,9 @@ def ros2_settings(values: Mapping[str, Any], cameras: Iterable[str], environ=os.
     settings = Ros2Settings(_domain(values.get("ros2_domain"), environ), _namespace(values.get("ros2_namespace")))
     tuples = values.get("ros2_tuples")
     if tuples is not None:
-        settings = Ros2Settings(settings.domain, settings.namespace, _rate(tuples))
+        settings = replace(settings, tuples_hz=_rate(tuples))
+    if values.get("ros2_snapshots") is not None:
+        settings = replace(settings, snapshots=_folder(values["ros2_snapshots"]))
     for camera in cameras:  # every topic the bridge will publish must be a ROS name
         try:
             rosnames.topic(settings.namespace, camera, "image_raw")
@@ -78,6 +81,13 @@ def _rate(value: Any) -> float:
     if not 0 < rate <= MAX_TUPLES_HZ:  # also refuses nan
         raise ConfigError(f"ros2_tuples must be a rate in Hz, > 0 and at most {MAX_TUPLES_HZ:g}, got {value!r}")
     return rate
+
+
+def _folder(value: Any) -> str:
+    folder = os.path.abspath(str(value))
+    if not os.path.isdir(folder) or not os.access(folder, os.W_OK):
+        raise ConfigError(f"ros2_snapshots {value!r}: not a folder this user can write snapshots into")
+    return folder
 
 
 def _check_cyclonedds() -> None:

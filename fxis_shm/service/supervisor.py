@@ -178,6 +178,7 @@ def viewer_children(config: ServiceConfig, common: dict) -> list[Child]:
             domain=ros2.domain,
             namespace=ros2.namespace,
             tuples_hz=ros2.tuples_hz,
+            snapshots=ros2.snapshots,
         )
         children.append(Child(spec, "ros2", key="ros2"))
     return children

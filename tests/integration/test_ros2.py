@@ -5,6 +5,7 @@ own record of each frame."""
 
 from __future__ import annotations
 
+import json
 import os
 import signal
 from types import SimpleNamespace
@@ -18,6 +19,7 @@ from fxis_shm.service.launch import ServiceProcess
 from tests.dds_peer import Peer, domain_id, loopback_config, stamp_rows
 
 from ..conftest import fxis_run_alone, wait_until
+from .bags import read_bag
 
 pytestmark = pytest.mark.integration
 
@@ -45,6 +47,7 @@ STAMP_TOLERANCE_NS = 100_000  # 0.1 ms: the two clocks read side by side, here a
 
 @pytest.fixture(scope="module")
 def bridge(tmp_path_factory):
+    snapshots = tmp_path_factory.mktemp("snapshots")
     calibration = tmp_path_factory.mktemp("calibration") / "cam0.yaml"
     calibration.write_text(CALIBRATION)
     domain = domain_id()
@@ -62,9 +65,13 @@ def bridge(tmp_path_factory):
         NS,
         "--ros2-tuples",
         "5",
+        "--ros2-snapshots",
+        str(snapshots),
+        "--history",
+        "3",
     ]
     with ServiceProcess(args, env={**os.environ, "CYCLONEDDS_URI": loopback_config()}) as svc:
-        yield SimpleNamespace(svc=svc, domain=domain)
+        yield SimpleNamespace(svc=svc, domain=domain, snapshots=snapshots)
 
 
 def capture_times(svc) -> dict[tuple[str, int], int]:
@@ -255,3 +262,19 @@ def test_settings_ros_cannot_carry_stop_the_start_with_a_clear_message(args, mes
     result = fxis_run_alone("--ros2", *args)
     assert result.returncode == 2
     assert message in result.stderr and "Traceback" not in result.stderr
+
+
+def test_a_snapshot_asked_for_on_the_snapshot_topic_keeps_the_window_in_ros_time(bridge):
+    result = f"{NS}/snapshot/result"
+    with Peer(bridge.domain, [(result, STRING)], publish_headers=[f"{NS}/snapshot"]) as peer:
+        t = timebase.reader("realtime")() - 1_000_000_000  # an event a second ago, in ROS time
+        peer.publish_header(f"{NS}/snapshot", *divmod(t, 1_000_000_000), "grasp_17")
+        peer.publish_header(f"{NS}/snapshot", *divmod(t, 1_000_000_000), "bad name")
+        answers = [json.loads(s["data"]) for s in peer.wait_for_samples(result, 2, timeout=20)]
+    by_name = {a["name"]: a for a in answers}
+    assert "error" in by_name["bad name"] and "frame_id must name the bag" in by_name["bad name"]["error"]
+    kept = by_name["grasp_17"]
+    assert kept["bag"] == str(bridge.snapshots / "grasp_17") and all(not c["missing"] for c in kept["cameras"].values())
+    bag = read_bag(bridge.snapshots / "grasp_17")
+    stamps = [m.stamp for m in bag.messages["/cam0/image_raw"]]
+    assert len(stamps) >= 55 and t - 2_000_000_000 <= stamps[0] and stamps[-1] <= t + 1_000_000_000
