@@ -17,6 +17,7 @@ from fxis_shm import CameraDown, Client, read_stamp
 
 from ..conftest import wait_until
 from ..hosts import SUBNET, Lab, links, namespaces
+from .bags import read_bag
 from .conftest import SMALL
 
 pytestmark = pytest.mark.integration
@@ -247,3 +248,21 @@ def test_the_two_hosts_example_runs(emulated_hosts):
     from ..hosts import _owner_alive, ours
 
     assert [n for n in ours(namespaces() + links()) if not _owner_alive(n)] == []  # run.py removed its hosts
+
+
+def test_a_snapshot_across_two_hosts_holds_both_cameras_in_the_callers_clock(emulated_hosts, tmp_path):
+    a = emulated_hosts.host(clock_offset_s=1000)
+    b = emulated_hosts.host(clock_offset_s=2000)
+    sa = a.service("--camera", f"left=synthetic:fps={FPS},{SMALL}", "--history", "2")
+    sb = b.service("--camera", f"right=synthetic:fps={FPS},{SMALL}", "--history", "2")
+    with _client(emulated_hosts, [sa.endpoint, sb.endpoint]) as client:
+        ea, eb = _estimated(client, sa.endpoint), _estimated(client, sb.endpoint)
+        t = time.monotonic_ns()  # our clock: 1000 s and 2000 s behind the hosts'
+        kept = client.snapshot(at=t, before=0.5, after=0.5, out=str(tmp_path / "cell"))
+    assert set(kept["cameras"]) == {"left", "right"}
+    assert all(not c["missing"] and c["frames"] >= 18 for c in kept["cameras"].values()), kept
+    bag = read_bag(tmp_path / "cell")
+    for camera, estimate in (("left", ea), ("right", eb)):
+        stamps = [m.stamp for m in bag.messages[f"/{camera}/image_raw"]]
+        slack = estimate.uncertainty_ns + MARGIN_NS
+        assert t - 500_000_000 - slack <= stamps[0] and stamps[-1] <= t + 500_000_000 + slack  # our clock, not theirs
