@@ -18,14 +18,18 @@ import collections
 import itertools
 import secrets
 import time
-from dataclasses import dataclass
+from collections.abc import Callable
+from dataclasses import dataclass, field
 
 import numpy as np
 import zmq
 
-from fxis_shm.client.frames import FrameTuple, frames_of, sequence_of, tuple_of
+from fxis_shm.client.clocktracker import ClockTracker
+from fxis_shm.client.frames import FrameTuple, frames_of, in_caller_clock, sequence_of, tuple_of
 from fxis_shm.client.sockets import SocketOwner, checked_encoding, connected_socket
-from fxis_shm.errors import ProtocolError, RequestTimeout, service_error
+from fxis_shm.core import timebase
+from fxis_shm.core.clockmap import ClockEstimate
+from fxis_shm.errors import InvalidArgument, ProtocolError, RequestTimeout, service_error
 from fxis_shm.wire import defaults, protocol
 from fxis_shm.wire.encoding import JPEG, RAW
 from fxis_shm.wire.protocol import StreamTopic
@@ -35,13 +39,26 @@ DEFAULT_PUB = defaults.PUB
 DEFAULT_EVENTS = defaults.EVENTS
 
 
+Estimate = Callable[[], ClockEstimate]  # the caller's clock against the service's, now
+
+
 @dataclass
 class Message:
-    """One published message: a stream item or the answer to a request event."""
+    """One published message: a stream item or the answer to a request event. Its frames'
+    times are in the caller's clock when the subscriber has one (``Client.subscribe()``,
+    ``Subscriber(clock=...)``), the service's own kept as ``service_t_*``."""
 
     topic: str
     header: dict
     images: list[np.ndarray]
+    estimate: Estimate | None = field(default=None, repr=False)
+
+    def _in_caller_clock(self) -> dict:
+        if self.estimate is None or self.header.get("_caller_clock"):
+            return self.header
+        self.header = in_caller_clock(self.header, self.estimate())
+        self.header["_caller_clock"] = True  # moved once, however often it is read
+        return self.header
 
     @property
     def seq(self) -> int | None:
@@ -66,16 +83,16 @@ class Message:
     @property
     def frames(self):
         self.raise_for_error()
-        return frames_of(self.header, self.images)
+        return frames_of(self._in_caller_clock(), self.images)
 
     @property
     def tuple(self) -> FrameTuple:
         self.raise_for_error()
-        return tuple_of(self.header, self.images)
+        return tuple_of(self._in_caller_clock(), self.images)
 
     def sequence(self, single: bool = False) -> list:
         self.raise_for_error()
-        return sequence_of(self.header, self.images, single=single)
+        return sequence_of(self._in_caller_clock(), self.images, single=single)
 
 
 def _stream(kind: str, camera: str | None, rate_hz: float | None, encoding: str, quality: int | None) -> StreamTopic:
@@ -83,8 +100,36 @@ def _stream(kind: str, camera: str | None, rate_hz: float | None, encoding: str,
     return StreamTopic(kind, camera, rate_hz, encoding, quality if encoding == JPEG else None)
 
 
+class CallerClock:
+    """The caller's clock against one service's, for a subscriber or an event publisher:
+    the estimate of a client of that service (``Client.subscribe()``, ``Client.events()``),
+    or one kept here from exchanges with the service's request ``service`` endpoint."""
+
+    def __init__(self, clock, service: str | None, keys: ClientKeys | None, estimate: Estimate | None):
+        self._tracker: ClockTracker | None = None
+        self.now: Callable[[], int] | None = None
+        if estimate is None and clock is not None:
+            if service is None:
+                raise InvalidArgument(
+                    "clock= needs the service's request endpoint (service=...) to estimate the clocks "
+                    "from; or use Client(endpoint, clock=...).subscribe() / .events()"
+                )
+            self.now = clock if callable(clock) else timebase.reader(clock)
+            self._tracker = ClockTracker(lambda: connected_socket(None, zmq.DEALER, service, keys), self.now, service)
+            estimate = self._tracker.estimate
+        self.estimate = estimate
+
+    def close(self) -> None:
+        if self._tracker is not None:
+            self._tracker.close()
+
+
 class Subscriber(SocketOwner):
-    """A SUB socket with a bounded queue; iterate it or call ``receive``."""
+    """A SUB socket with a bounded queue; iterate it or call ``receive``.
+
+    ``clock`` (with ``service``, the service's request endpoint): every time a message
+    holds is in that clock, as ``Client(clock=...)`` gives them; ``Client.subscribe()``
+    makes one bound to its client's clock and the service's publisher."""
 
     def __init__(
         self,
@@ -93,9 +138,14 @@ class Subscriber(SocketOwner):
         queue: int = 16,
         context: zmq.Context | None = None,
         keys: ClientKeys | None = None,
+        *,
+        clock: Callable[[], int] | str | None = None,
+        service: str | None = None,
+        estimate: Estimate | None = None,
     ):
         self.endpoint = endpoint
         self.timeout = timeout
+        self._clock = CallerClock(clock, service, keys, estimate)
         self._sock = (context or zmq.Context.instance()).socket(zmq.SUB)
         self._sock.setsockopt(zmq.LINGER, 0)
         self._sock.setsockopt(zmq.RCVHWM, queue)  # set before connecting, so it applies
@@ -146,7 +196,7 @@ class Subscriber(SocketOwner):
         if len(found) < 2:
             raise ProtocolError("a published message needs a topic and a header")
         header, images = protocol.decode_reply([f.buffer for f in found[1:]])
-        return Message(found[0].bytes.decode(errors="replace"), header, images)
+        return Message(found[0].bytes.decode(errors="replace"), header, images, self._clock.estimate)
 
     def hold(self, message: Message) -> None:
         """Put back a message read too early: the next ``receive`` returns it first."""
@@ -156,24 +206,53 @@ class Subscriber(SocketOwner):
         while True:
             yield self.receive()
 
+    def close(self) -> None:
+        self._clock.close()
+        super().close()
+
 
 class EventPublisher(SocketOwner):
-    """Publishes request events; the service answers each on its ``reply_topic``."""
+    """Publishes request events; the service answers each on its ``reply_topic``.
+
+    ``clock`` (with ``service``, the service's request endpoint): ``at``, ``start`` and
+    ``end`` are in that clock and a request without ``at`` asks for the moment of the call,
+    as with ``Client(clock=...)``; ``Client.events()`` makes one bound to its client."""
 
     def __init__(
-        self, endpoint: str = DEFAULT_EVENTS, context: zmq.Context | None = None, keys: ClientKeys | None = None
+        self,
+        endpoint: str = DEFAULT_EVENTS,
+        context: zmq.Context | None = None,
+        keys: ClientKeys | None = None,
+        *,
+        clock: Callable[[], int] | str | None = None,
+        service: str | None = None,
+        estimate: Estimate | None = None,
+        now: Callable[[], int] | None = None,
     ):
         self.endpoint = endpoint
         self._prefix = secrets.token_hex(4)  # ids stay unique across publishers sharing a topic
         self._ids = (f"{self._prefix}-{n}" for n in itertools.count(1))
         self._sock = connected_socket(context, zmq.PUB, endpoint, keys)
+        self._clock = CallerClock(clock, service, keys, estimate)
+        self._now = now or self._clock.now
 
     def request(self, op: str, reply_topic: str, **fields) -> str:
         """Publish one request event (op image, tuple, latest, sequence or time); returns its
         id ("<publisher>-<n>"), which the answer's ``header["id"]`` repeats."""
         request_id = next(self._ids)
+        if self._clock.estimate is not None and op != "time":
+            mapping = self._clock.estimate()
+            if op not in ("latest",) and fields.get("at") is None and self._now is not None:
+                fields["t_call"] = mapping.to_service(self._now())  # t*: the moment of this call
+            for key in ("at", "start", "end"):
+                if fields.get(key) is not None:
+                    fields[key] = mapping.to_service(fields[key])
         self._sock.send_multipart(protocol.encode_event(op, reply_topic, id=request_id, **fields))
         return request_id
+
+    def close(self) -> None:
+        self._clock.close()
+        super().close()
 
 
 def handshake(events: EventPublisher, answers: Subscriber, reply_topic: str, timeout: float = 5.0) -> None:

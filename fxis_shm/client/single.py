@@ -30,8 +30,9 @@ from fxis_shm.client.clocktracker import ClockTracker
 from fxis_shm.client.frames import LOCAL, NETWORK, Frame, FrameTuple, frames_of, in_caller_clock, sequence_of, tuple_of
 from fxis_shm.client.handshake import HandshakeWatch
 from fxis_shm.client.localreads import LocalReads
+from fxis_shm.client.pubsub import EventPublisher, Subscriber
 from fxis_shm.client.requesttimes import fixed_mapping, last_needed, same_moment
-from fxis_shm.client.sockets import SocketOwner, checked_encoding, connected_socket, wire_timeout_ms
+from fxis_shm.client.sockets import SocketOwner, checked_encoding, connected_socket, reachable, wire_timeout_ms
 from fxis_shm.core import timebase
 from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.errors import (
@@ -240,6 +241,19 @@ class SingleClient(SocketOwner):
             sync=sync,
         )
         return sequence_of(header, images, check, single=camera is not None)
+
+    def subscribe(self, timeout: float = 2.0, queue: int = 16) -> Subscriber:
+        """A Subscriber of this service's streams (its publisher, learnt from the status), every
+        time in this client's clock; a context manager like the client."""
+        pub = reachable(self.status()["pub"], self.endpoint)
+        return Subscriber(pub, timeout, queue, self._context, self._keys, estimate=self.clock_estimate)
+
+    def events(self) -> EventPublisher:
+        """An EventPublisher to this service's events endpoint (learnt from the status) whose
+        ``at``, ``start`` and ``end`` are in this client's clock, t* the moment of the call
+        without ``at``. Answers arrive on ``subscribe()``'s Subscriber, ``topic(reply_topic)``."""
+        events = reachable(self.status()["events"], self.endpoint)
+        return EventPublisher(events, self._context, self._keys, estimate=self.clock_estimate, now=self.clock)
 
     def snapshot(
         self,

@@ -57,3 +57,14 @@ def wire_timeout_ms(timeout: float | None, timeout_ms: float | None) -> float | 
         if timeout is None:
             return timeout_ms
     return None if timeout is None else timeout * 1000
+
+
+def reachable(endpoint: str, via: str) -> str:
+    """``endpoint`` as a status reports it (a service bound to ``*`` or ``0.0.0.0`` reports
+    that), with such a wildcard host replaced by the host the caller reaches it by (``via``)."""
+    scheme, _, rest = endpoint.partition("://")
+    host, sep, port = rest.rpartition(":")
+    if scheme != "tcp" or not sep or host not in ("*", "0.0.0.0", "[::]", "::"):
+        return endpoint
+    via_host = via.partition("://")[2].rpartition(":")[0]
+    return f"tcp://{via_host}:{port}"
