@@ -17,7 +17,7 @@ from fxis_shm.wire import defaults
 def run_command(args) -> int:
     from fxis_shm.service.addresses import check_free
     from fxis_shm.service.memory import check_room
-    from fxis_shm.service.supervisor import StartError, Supervisor
+    from fxis_shm.service.supervisor import StartError, Supervisor, service_running
 
     try:
         file_values = load_toml(args.config) if args.config else {}
@@ -48,6 +48,9 @@ def run_command(args) -> int:
                 "history": args.history,
             },
         )
+        if service_running(config.name):  # its ports are in use too: say the more useful thing
+            print(f"fxis run: service {config.name!r} is already running (give --name another)", file=sys.stderr)
+            return 1
         config, warnings = check_free(config)  # before anything starts: a port in use is one line
         check_room(config)  # and rings /dev/shm cannot hold
     except ConfigError as exc:

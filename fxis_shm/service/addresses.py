@@ -32,7 +32,7 @@ def check_free(config: ServiceConfig) -> tuple[ServiceConfig, list[str]]:
     warnings = []
     for setting in ("endpoint", "pub", "events"):
         address = tcp_host_port(getattr(config, setting), setting)
-        if address is not None:
+        if address is not None and address[1] != 0:  # 0: the system chooses, nothing to clash with
             _probe(*address, setting, getattr(config, setting))
         else:
             _check_ipc(getattr(config, setting), setting)

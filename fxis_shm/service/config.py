@@ -123,8 +123,8 @@ def tcp_host_port(endpoint: str, setting: str) -> tuple[str, int] | None:
         return None
     host, sep, port = endpoint[len("tcp://") :].rpartition(":")
     host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
-    if not sep or not host or not port.isdigit() or not 1 <= int(port) <= 65535:
-        raise ConfigError(f"{setting} {endpoint!r}: expected tcp://HOST:PORT with a port from 1 to 65535")
+    if not sep or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
+        raise ConfigError(f"{setting} {endpoint!r}: expected tcp://HOST:PORT with a port from 0 to 65535")
     return ("0.0.0.0" if host == "*" else host), int(port)
 
 
