@@ -7,7 +7,7 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 
-.PHONY: setup demo test lint clean
+.PHONY: setup demo test lint clean mutation
 
 setup: $(VENV)/.installed
 
@@ -29,6 +29,24 @@ lint: setup
 	$(BIN)/ruff format --check .
 	$(BIN)/mypy
 	$(BIN)/lint-imports
+
+# Mutation testing of the pure core's decision modules (not part of `make test`; a few minutes on
+# 2 cores): mutmut plants one fault at a time ([tool.mutmut] in pyproject.toml) and runs the unit
+# tests that cover it; fails if a mutant survives that docs/mutation.md does not explain.
+# Its work is left in mutants/ (`.venv/bin/mutmut show NAME` shows a mutant).
+$(VENV)/.mutation-installed: $(VENV)/.installed pyproject.toml
+	$(BIN)/python -m pip install --quiet -e ".[mutation]"
+	touch $@
+
+mutation: $(VENV)/.mutation-installed
+	rm -rf mutants
+	$(BIN)/mutmut run --max-children 2
+	$(BIN)/mutmut results
+	@$(BIN)/mutmut results 2>/dev/null | sed -n 's/^ *\([^: ]*\): \(survived\|no tests\|suspicious\|skipped\)$$/\1/p' > mutants/survivors.txt
+	@grep -o 'fxis_shm\.core\.[^` ]*__mutmut_[0-9]*' docs/mutation.md > mutants/explained.txt || true
+	@if grep -vxF -f mutants/explained.txt mutants/survivors.txt; then \
+		echo "make mutation: the mutants above survived and docs/mutation.md does not explain them"; exit 1; fi
+	@echo "make mutation: $$(wc -l < mutants/survivors.txt) surviving mutants, each explained in docs/mutation.md"
 
 clean:
 	rm -rf $(VENV) build *.egg-info bench/results

@@ -4,7 +4,7 @@ long from a frame's arrival to its being stored?
 Starts two GigE Vision camera emulators (arv-fake-gv-camera-0.8, on 127.0.0.1 and 127.0.0.2;
 the second address is added to lo for the run if missing, which needs root) and measures two
 runs of --seconds each, each with its own `fxis run` service of two aravis cameras (default
-640x480 Mono8 at 20 fps, timestamp=host, rings of --slots):
+640x480 Mono8 at 20 fps, timestamp=host or --timestamp device, rings of --slots):
 
   no hook      frames stored as they arrive;
   hook         every frame first goes through a processing hook of known cost
@@ -28,6 +28,13 @@ Per camera and run:
                       the frame, the copy out of the buffer, the hook, the copy into the ring
   available->stored   t_stored - t_available: t_available is when the camera worker had the
                       frame (grab returned): the worker's own share (hook + ring copy)
+  fps            the rate the service measured (its status at the end of the run)
+  period         t_capture of a frame minus that of the frame before it (consecutive ids):
+                 the camera's period as the service stamps it; with --timestamp device, the
+                 device's clock mapped onto the host's (arrival->stored is then capture->stored)
+
+(tests/backends/test_aravis.py asserts what is stored is complete, in order and accounted
+for; the rates, losses, periods and delays on this machine are this bench's.)
 
 Goal: every complete frame stored (not stored == dropped, both 0 without --loss).
 
@@ -68,6 +75,12 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument("--width", type=common.positive_int, default=640)
     p.add_argument("--height", type=common.positive_int, default=480)
     p.add_argument("--pixel-format", default="Mono8", help="Mono8, Mono16, RGB8, BayerRG8, ...")
+    p.add_argument(
+        "--timestamp",
+        choices=("host", "device"),
+        default="host",
+        help="t_capture: the frame's arrival on the host, or the emulator's own clock mapped onto the host's",
+    )
     p.add_argument(
         "--loss", type=int, default=0, metavar="N", help="the emulators drop N GVSP packets per thousand (-r N)"
     )
@@ -151,7 +164,7 @@ def camera_flags(args, device_ids, process: str | None) -> list[str]:
             f"width={args.width}",
             f"height={args.height}",
             f"pixel_format={args.pixel_format}",
-            "timestamp=host",
+            f"timestamp={args.timestamp}",
         ]
         if process:
             opts.append(f"process={process}")
@@ -240,6 +253,11 @@ def summarise(run: dict) -> dict:
             delivered += max(ids) - min(ids) + 1
         before, after = run["status_before"]["cameras"][cam], run["status_after"]["cameras"][cam]
         arrival = [common.ms(r["t_stored"] - r["t_capture"]) for r in recs]
+        periods = [
+            common.ms(b["t_capture"] - a["t_capture"])
+            for a, b in zip(recs, recs[1:])
+            if b["generation"] == a["generation"] and b["frame_id"] == a["frame_id"] + 1
+        ]
         available = [common.ms(r["t_stored"] - r["t_available"]) for r in recs if r["t_available"] is not None]
         rows[cam] = {
             "delivered": delivered,
@@ -249,6 +267,7 @@ def summarise(run: dict) -> dict:
             "generations": sorted({r["generation"] for r in recs}),
             "arrival_to_stored_ms": common.summary(arrival),
             "available_to_stored_ms": common.summary(available),
+            "period_ms": common.summary(periods),
             "fps": after.get("fps"),
         }
     return rows
@@ -304,13 +323,14 @@ def main(argv: list[str] | None = None) -> int:
     summaries = [summarise(run) for run in runs]
     title = (
         f"gige: 2 emulated GigE Vision cameras ({EMULATOR}, loopback{f', -r {args.loss}' if args.loss else ''}) "
-        f"{args.width}x{args.height} {args.pixel_format} at {args.fps:g} fps, {args.seconds:g} s per run"
+        f"{args.width}x{args.height} {args.pixel_format} at {args.fps:g} fps, timestamp={args.timestamp}, "
+        f"{args.seconds:g} s per run"
     )
     rows = []
     for run, summ in zip(runs, summaries):
         for cam in CAMERAS:
             s = summ[cam]
-            a, v = s["arrival_to_stored_ms"], s["available_to_stored_ms"]
+            a, v, t = s["arrival_to_stored_ms"], s["available_to_stored_ms"], s["period_ms"]
             rows.append(
                 [
                     f"{run['label']}  {cam}",
@@ -323,6 +343,10 @@ def main(argv: list[str] | None = None) -> int:
                     a["max"],
                     v["median"],
                     v["p99"],
+                    s["fps"],
+                    t["median"],
+                    t["min"],
+                    t["max"],
                 ]
             )
     print(common.code_line(host["code"]))
@@ -340,16 +364,21 @@ def main(argv: list[str] | None = None) -> int:
                 "max",
                 "avail->st med",
                 "p99",
+                "fps",
+                "period med",
+                "min",
+                "max",
             ],
             rows,
             digits=2,
-            separators=(5, 8),
+            separators=(5, 8, 10),
         )
     )
     print(
         "delivered: span of the frame ids the camera sent; dropped: frames_dropped counted by the service "
         "during the run; arr->st: t_stored - t_capture (arrival on the host), avail->st: t_stored - "
-        f"t_available (the worker's share), ms; the hook costs {HOOK_COST_MS:g} ms"
+        f"t_available (the worker's share), ms; the hook costs {HOOK_COST_MS:g} ms; fps: measured by "
+        "the service; period: t_capture of consecutive frames, ms"
     )
     errors = [e for run in runs for e in run["errors"]]
     unaccounted = sum(max(0, s["not_stored"] - s["dropped"]) for summ in summaries for s in summ.values())
@@ -367,7 +396,12 @@ def main(argv: list[str] | None = None) -> int:
             "settings": vars(args),
             "host": host,
             "hook": {"process": HOOK, "cost_ms": HOOK_COST_MS},
-            "clock": "CLOCK_MONOTONIC ns; t_capture is the host arrival time (timestamp=host)",
+            "clock": "CLOCK_MONOTONIC ns; t_capture: "
+            + (
+                "the host arrival time (timestamp=host)"
+                if args.timestamp == "host"
+                else "the device's clock mapped onto the host's (timestamp=device)"
+            ),
             "summary": [{"label": run["label"], "cameras": summ} for run, summ in zip(runs, summaries)],
             "unaccounted": unaccounted,
             "runs": runs,

@@ -14,8 +14,11 @@ name, a line of text and the command that starts it):
   record-jpeg   fxis record --encoding jpeg
   record-tuples fxis record --tuples (one synchronized tuple per step)
 
-Prints a table (rows: processes; columns: phases) and writes observer_cost.json (settings,
-host, per phase the CPU percent of each process, the observer's own output) into --out.
+Prints a table (rows: processes; columns: phases), then each observer's own report (for
+`fxis record`: frames, missed and dropped by camera per camera, the losses of a recording on
+this machine, which tests/integration/test_record.py does not assert to be 0: it asserts that
+each one is reported), and writes observer_cost.json (settings, host, per phase the CPU
+percent of each process, the observer's own output) into --out.
 Exit status 0 when every phase ran; 1 if the service did not stream or an observer failed;
 2 on bad flags.
 """
@@ -162,6 +165,8 @@ def main(argv: list[str] | None = None) -> int:
             digits=1,
         )
     )
+    for name in args.observers:
+        print(f"\n{name}: its own report\n{phases[name]['output'].rstrip()}")
     print(common.code_line(common.code_version()))
     common.write_json(
         os.path.join(out, "observer_cost.json"),

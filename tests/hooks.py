@@ -1,5 +1,6 @@
 """Processing hooks used by the tests (``process=tests.hooks:NAME``)."""
 
+import os
 import time
 
 import cv2
@@ -30,3 +31,18 @@ def slow_60ms(image):
     """Slower than a 20 fps frame period (50 ms): needs 2 processes."""
     time.sleep(0.06)
     return image
+
+
+PID_ROW = 24  # slow_60ms_pid writes its process id here: between the stamp's first and last row
+
+
+def slow_60ms_pid(image):
+    """slow_60ms, and the id of the process that ran it written into row PID_ROW (4 bytes)."""
+    time.sleep(0.06)
+    out = image.copy()
+    out[PID_ROW, :4] = np.frombuffer(os.getpid().to_bytes(4, "little"), np.uint8)
+    return out
+
+
+def pid_of(image) -> int:
+    return int.from_bytes(bytes(image[PID_ROW, :4]), "little")

@@ -3,6 +3,8 @@
 (A caller on another host, with a clock of its own, is tested in emulated hosts.)
 """
 
+import ctypes
+import ctypes.util
 import time
 
 import numpy as np
@@ -13,6 +15,7 @@ from fxis_shm.core.clockmap import ESTIMATED, SAME_CLOCK
 
 from ..conftest import wait_until
 
+pytestmark = pytest.mark.integration
 MS = 1_000_000
 MEDIUM = "width=320,height=240"
 
@@ -171,9 +174,153 @@ def test_a_service_in_realtime_serves_callers_of_either_clock(start_service):
         assert wall.status()["clock"] == "realtime"
         assert wall.clocks[svc.endpoint].method == SAME_CLOCK
         assert mono.clocks[svc.endpoint].method == ESTIMATED
-        frame = wall.image("a", at=time.time_ns() - 50 * MS)
-        assert abs(frame.t_capture - (time.time_ns() - 50 * MS)) < 100 * MS
+        t_star = time.time_ns() - 50 * MS
+        frame = wall.image("a", at=t_star)
         assert frame.path == "local"  # CLOCK_REALTIME is the same in every time namespace
+        assert frame.t_capture == frame.service_t_capture  # the service's times are the caller's
+        # the frame nearest to t* of those in the ring, in wall-clock time
+        ring = wall.frame_times(["a"])
+        i_t = ring["columns"].index("t_capture")
+        nearest = min((row[i_t] for row in ring["cameras"]["a"]["frames"]), key=lambda t: abs(t - t_star))
+        assert frame.t_capture == nearest
         later = mono.image("a", wait="none")
-        assert abs(later.t_capture - time.monotonic_ns()) < 200 * MS
+        (estimate,) = mono.clocks.values()
+        mono_minus_wall = time.monotonic_ns() - time.time_ns()
+        # moved into the monotonic caller's clock by the estimated offset, right within its uncertainty
+        assert abs(later.t_capture - later.service_t_capture - mono_minus_wall) < estimate.uncertainty_ns + 2 * MS
+        assert later.t_capture <= time.monotonic_ns()
         assert read_stamp(later.image) == later.frame_id
+
+
+class _Timex(ctypes.Structure):
+    """Linux's struct timex (adjtimex(2)), for reading and setting the kernel's TAI offset."""
+
+    _fields_ = [
+        ("modes", ctypes.c_uint),
+        ("offset", ctypes.c_long),
+        ("freq", ctypes.c_long),
+        ("maxerror", ctypes.c_long),
+        ("esterror", ctypes.c_long),
+        ("status", ctypes.c_int),
+        ("constant", ctypes.c_long),
+        ("precision", ctypes.c_long),
+        ("tolerance", ctypes.c_long),
+        ("time_sec", ctypes.c_long),
+        ("time_usec", ctypes.c_long),
+        ("tick", ctypes.c_long),
+        ("ppsfreq", ctypes.c_long),
+        ("jitter", ctypes.c_long),
+        ("shift", ctypes.c_int),
+        ("stabil", ctypes.c_long),
+        ("jitcnt", ctypes.c_long),
+        ("calcnt", ctypes.c_long),
+        ("errcnt", ctypes.c_long),
+        ("stbcnt", ctypes.c_long),
+        ("tai", ctypes.c_int),
+        ("padding", ctypes.c_int * 11),
+    ]
+
+
+_ADJ_TAI = 0x0080
+TAI_OFFSET_S = 37  # TAI - UTC since 2017
+
+
+def _tai_offset(set_to: int | None = None) -> int:
+    libc = ctypes.CDLL(ctypes.util.find_library("c"), use_errno=True)
+    timex = _Timex(modes=_ADJ_TAI, constant=set_to) if set_to is not None else _Timex()
+    if libc.adjtimex(ctypes.byref(timex)) < 0:
+        raise OSError(ctypes.get_errno(), "adjtimex")
+    return timex.tai
+
+
+@pytest.fixture
+def tai_apart_from_realtime():
+    """CLOCK_TAI 37 s ahead of CLOCK_REALTIME, as PTP or chrony keep it: without that offset
+    (a host nothing sets it on) the two clocks read alike and a mix-up would go unseen. Sets the
+    kernel's TAI offset for the test if it is 0 (needs root, as the suite does) and puts it back."""
+    before = _tai_offset()
+    if before == 0:
+        try:
+            _tai_offset(TAI_OFFSET_S)
+        except OSError as exc:
+            pytest.fail(f"cannot set the kernel's TAI offset (adjtimex ADJ_TAI needs root): {exc}", pytrace=False)
+    try:
+        apart = time.clock_gettime_ns(time.CLOCK_TAI) - time.time_ns()
+        assert abs(apart - max(before, TAI_OFFSET_S) * 10**9) < 10 * MS, apart
+        yield apart
+    finally:
+        if before == 0:
+            _tai_offset(0)
+
+
+def _nearest_in_ring(client, camera, t_star):
+    """The capture time nearest to ``t_star`` among the frames in the camera's ring (service clock)."""
+    ring = client.frame_times([camera])
+    i_t = ring["columns"].index("t_capture")
+    return min((row[i_t] for row in ring["cameras"][camera]["frames"]), key=lambda t: abs(t - t_star))
+
+
+def test_a_caller_in_tai_time_against_a_monotonic_service(medium, tai_apart_from_realtime):
+    with Client(medium.endpoint, clock="tai") as client:
+        _ready(client)
+        (clock,) = client.clocks.values()
+        tai_minus_mono = time.clock_gettime_ns(time.CLOCK_TAI) - time.monotonic_ns()
+        assert clock.method == ESTIMATED
+        assert abs(-clock.offset_ns - tai_minus_mono) < clock.uncertainty_ns + 2 * MS
+        t_star = time.clock_gettime_ns(time.CLOCK_TAI) - 100 * MS
+        frame = client.image("cam0", at=t_star, wait="none")
+        # in TAI, right within the estimate's uncertainty; the frame nearest to t* in the service's clock
+        assert abs(frame.t_capture - frame.service_t_capture - tai_minus_mono) < clock.uncertainty_ns + 2 * MS
+        assert frame.service_t_capture == _nearest_in_ring(client, "cam0", clock.to_service(t_star))
+        assert frame.t_capture <= time.clock_gettime_ns(time.CLOCK_TAI)
+        assert read_stamp(frame.image) == frame.frame_id
+
+
+def test_a_service_and_a_caller_both_on_tai(start_service, tai_apart_from_realtime):
+    svc = start_service("--clock", "tai", "--camera", f"a=synthetic:fps=50,{MEDIUM}")
+    with Client(svc.endpoint, clock="tai") as client:
+        _ready(client)
+        assert client.status()["clock"] == "tai"
+        (clock,) = client.clocks.values()
+        assert clock.method == SAME_CLOCK and clock.offset_ns == 0
+        t_star = time.clock_gettime_ns(time.CLOCK_TAI) - 50 * MS
+        frame = client.image("a", at=t_star)
+        assert frame.path == "local"  # CLOCK_TAI is the same in every time namespace
+        assert frame.t_capture == frame.service_t_capture == _nearest_in_ring(client, "a", t_star)
+        now_tai = time.clock_gettime_ns(time.CLOCK_TAI)
+        # TAI, not the wall clock it is 37 s ahead of: captured within the ring's 400 ms before now
+        assert now_tai - 5 * 10**9 < frame.t_capture <= now_tai
+        assert read_stamp(frame.image) == frame.frame_id
+
+
+DRIFT_PPM = 200.0
+
+
+def test_the_drift_of_a_caller_clock_that_runs_fast_is_estimated_from_the_exchanges(medium):
+    """A caller whose clock runs 200 ppm fast (crystals differ by tens of ppm; a time namespace
+    gives an offset only): after the estimator's span of exchanges (10 s) the client has fitted
+    the drift, and its mapping still puts the caller's times where they are on the service."""
+
+    def fast_clock() -> int:
+        return int(time.monotonic_ns() * (1 + DRIFT_PPM * 1e-6))
+
+    with Client(medium.endpoint, clock=fast_clock, local="off") as client:
+        _ready(client)
+        assert client.clocks[medium.endpoint].method == ESTIMATED
+        estimate = wait_until(
+            lambda: (e := client.clocks[medium.endpoint]).drift_ppm != 0 and e,
+            timeout=60,
+            interval=0.5,
+            what="a drift fitted over the exchanges",
+        )
+        # service = caller / (1 + 200e-6): the service's clock runs 200 ppm slow against the caller's
+        assert estimate.drift_ppm == pytest.approx(-DRIFT_PPM, abs=20), estimate
+        assert estimate.samples >= 3
+        for _ in range(3):
+            caller, service = fast_clock(), time.monotonic_ns()  # the same moment, on either clock
+            assert abs(estimate.to_service(caller) - service) < estimate.uncertainty_ns + 1 * MS
+            t_star = fast_clock() - 100 * MS
+            frame = client.image("cam0", at=t_star, wait="none")
+            mapped = client.clocks[medium.endpoint].to_service(t_star)
+            assert abs(mapped - round(t_star / (1 + DRIFT_PPM * 1e-6))) < estimate.uncertainty_ns + 1 * MS
+            assert frame.service_t_capture == _nearest_in_ring(client, "cam0", mapped)

@@ -11,6 +11,8 @@ import pytest
 
 from fxis_shm.service.childspec import ROLES
 
+pytestmark = pytest.mark.integration
+
 
 @pytest.mark.parametrize("role", sorted(ROLES))
 def test_a_child_given_another_version_fails_through_the_handshake(role):

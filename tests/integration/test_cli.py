@@ -1,6 +1,8 @@
 """The fxis commands against a real service."""
 
 import json
+import os
+import subprocess
 
 import cv2
 import posix_ipc
@@ -8,8 +10,11 @@ import pytest
 
 from fxis_shm import read_stamp
 from fxis_shm.service.camerakinds import KINDS
+from fxis_shm.service.launch import ServiceProcess
+from fxis_shm.service.supervisor import lock_path
 from fxis_shm.shm import naming
 
+from .conftest import SMALL, child_pids
 from .test_lifecycle import fxis
 
 pytestmark = pytest.mark.integration
@@ -63,6 +68,42 @@ def test_clean_removes_leftovers():
     assert result.returncode == 0 and "removed" in result.stdout
     assert naming.leftovers(name) == []
     assert "nothing" in fxis("clean", "--name", name).stdout
+
+
+def test_clean_removes_every_kind_of_leftover_of_a_killed_service(start_service, wait):
+    """kill -9 of the supervisor of a service with a free-running and a software-triggered camera
+    leaves its ring segments, their "new frame" and trigger semaphores, the processes' state files
+    and a lock file no one holds: `fxis clean` removes them all and the name runs again."""
+    first = ServiceProcess(
+        ["--camera", f"a=synthetic:{SMALL}", "--camera", f"t=synthetic:trigger=software,{SMALL}"],
+        stderr=subprocess.DEVNULL,
+    ).start()
+    name, children = first.name, child_pids(first, "camera") + child_pids(first, "coordinator")
+    first.proc.kill()
+    first.proc.wait()
+    wait(lambda: not any(os.path.exists(f"/proc/{pid}") for pid in children), what="its children to exit")
+    left = set(naming.leftovers(name))
+    prefix = os.path.join(naming.SHM_DIR, naming.prefix(name))
+    semaphore = os.path.join(naming.SHM_DIR, "sem." + naming.prefix(name))
+    kinds = {
+        prefix + "a.ring",
+        prefix + "t.ring",
+        semaphore + "a.new",
+        semaphore + "t.new",
+        semaphore + "t.trigger",
+        naming.supervisor_state_path(name),
+    }
+    assert kinds <= left, sorted(left)
+    assert os.path.exists(lock_path(name))  # the kernel dropped its lock with the process; the file stays
+    result = fxis("clean", "--name", name)
+    assert result.returncode == 0, result.stderr
+    assert {line.removeprefix("removed ") for line in result.stdout.splitlines()} == left
+    assert naming.leftovers(name) == []
+    assert not os.path.exists(lock_path(name))
+    assert "nothing" in fxis("clean", "--name", name).stdout
+    again = start_service("--camera", f"a=synthetic:{SMALL}", name=name)  # stopped and checked by the fixture
+    with again.client() as client:
+        assert client.image("a").frame_id >= 0
 
 
 def test_clean_refuses_while_running(two_cameras):

@@ -15,6 +15,8 @@ from .browser import Browser, find_chromium
 from .conftest import child_pids
 from .test_dashboard import get, start_dashboard
 
+pytestmark = pytest.mark.integration
+
 # what the page's JavaScript reports of each camera tile
 TILES_JS = """Array.from(document.querySelectorAll('.camera')).map(tile => {
   const img = tile.querySelector('img'), box = img.getBoundingClientRect();

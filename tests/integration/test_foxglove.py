@@ -25,6 +25,8 @@ from ..conftest import fxis, fxis_run_alone
 from ..foxglove_decode import message_class
 from .conftest import SMALL
 
+pytestmark = pytest.mark.integration
+
 # foxglove-sdk 0.30 speaks "foxglove.sdk.v1"; earlier servers "foxglove.websocket.v1"
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]
 MESSAGE_DATA = 0x01  # opcode of a binary message: u32 subscription id, u64 log time (ns), payload
@@ -198,9 +200,21 @@ def test_the_viewer_sets_the_rate_and_a_bad_one_is_refused(served):
     set_to = client.until(lambda m: isinstance(m, dict) and m.get("id") == "set" and m, what="the new rate confirmed")
     assert set_to["parameters"][0]["value"] == 2.0
     client.subscribe(["/a/image"])  # a camera at 20 fps, sent at 2 pictures a second
-    sent = [t for t, _ in images(client, {"/a/image": 5})["/a/image"]]
-    gaps = np.diff(sent[1:]) / 1e9  # the first may have been sent before the rate changed
-    assert gaps.mean() > 0.5 / 2.0, f"sent faster than 2 a second: gaps {gaps} s"
+    # Pictures sent (log time: when the server sent them) over 8 s from the second one on (the
+    # first may have been sent before the rate changed): 2 a second is 16 (17 counting both
+    # ends). The server never catches up on pictures it was late for, so a loaded machine can
+    # only make fewer: at least 8 (1 a second) is asked. 3 a second would be 24, 4 would be 32.
+    window_ns = 8 * 10**9
+    sent = []
+
+    def window_done(message):
+        if isinstance(message, tuple) and message[0]["topic"] == "/a/image":
+            sent.append(message[1])
+        return len(sent) >= 2 and sent[-1] - sent[1] > window_ns
+
+    client.until(window_done, timeout=30, what="8 s of pictures")
+    in_window = [t for t in sent[1:] if t - sent[1] <= window_ns]
+    assert 8 <= len(in_window) <= 17, f"{len(in_window)} pictures in 8 s at 2 a second: {np.diff(in_window) / 1e9} s"
 
 
 def test_a_killed_foxglove_process_is_restarted(start_service, wait):
@@ -293,5 +307,5 @@ def test_a_port_in_use_stops_start_up_naming_the_foxglove_server():
         busy.listen()
         port = busy.getsockname()[1]
         result = fxis_run_alone("--camera", f"a=synthetic:{SMALL}", "--http", "off", "--foxglove", f"127.0.0.1:{port}")
-    assert result.returncode == 1
-    assert "foxglove" in result.stderr and "address" in result.stderr.lower(), result.stderr
+    assert result.returncode == 2  # a bad setting, found before anything started (issue 24)
+    assert f"--foxglove 127.0.0.1:{port}" in result.stderr and "in use" in result.stderr, result.stderr

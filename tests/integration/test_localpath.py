@@ -17,6 +17,8 @@ from fxis_shm import Client, LocalPathUnavailable, read_stamp
 from ..conftest import wait_until
 from .conftest import SMALL
 
+pytestmark = pytest.mark.integration
+
 
 def test_a_local_client_copies_the_frames_the_service_would_send(two_cameras):
     with Client(two_cameras.endpoint, local="auto") as local, Client(two_cameras.endpoint, local="off") as remote:

@@ -65,3 +65,48 @@ def test_dealer_without_delimiter_is_answered(raw):
     reply = raw.recv_multipart()
     header = json.loads(reply[0])
     assert header["ok"] and header["id"] == 7
+
+
+def test_a_message_over_1_mib_drops_that_connection_and_the_service_goes_on(two_cameras):
+    """The service takes messages (each frame of one) of up to 1 MiB (MAX_MESSAGE_BYTES); ZeroMQ
+    drops the connection of a peer that sends a larger one, before the service reads it
+    (docs/protocol.md, 1). Just under the limit a request is read, and refused with a reply."""
+    from fxis_shm.service.coordinator import MAX_MESSAGE_BYTES
+
+    assert MAX_MESSAGE_BYTES == 1 << 20
+    sock = zmq.Context.instance().socket(zmq.DEALER)
+    sock.setsockopt(zmq.LINGER, 0)
+    monitor = sock.get_monitor_socket(zmq.EVENT_CONNECTED | zmq.EVENT_DISCONNECTED)
+    sock.connect(two_cameras.endpoint)
+    try:
+        assert next_event(monitor) == zmq.EVENT_CONNECTED
+
+        def padded(request_id, size):
+            head = b'{"v": 1, "op": "time", "id": %d, "pad": "' % request_id
+            return head + b"x" * (size - len(head) - 2) + b'"}'
+
+        sock.send_multipart([b"", padded(1, MAX_MESSAGE_BYTES - 1024)])  # under the limit: read, refused
+        assert sock.poll(5000), "no reply to a request just under the limit"
+        header = json.loads(sock.recv_multipart()[1])
+        assert header["id"] == 1 and header["error"]["code"] == Code.TOO_LARGE
+        assert "exceeds the limit" in header["error"]["message"]
+        sock.send_multipart([b"", padded(2, MAX_MESSAGE_BYTES + 1024)])  # over it: the connection goes
+        assert next_event(monitor) == zmq.EVENT_DISCONNECTED
+        with two_cameras.client() as client:  # the others are served
+            assert_stamps_match(client.tuple())
+        assert next_event(monitor) == zmq.EVENT_CONNECTED  # ZeroMQ connects again by itself
+        sock.send_multipart([b"", b'{"v": 1, "op": "time", "id": 3}'])
+        assert sock.poll(5000), "no reply after the connection was made again"
+        header = json.loads(sock.recv_multipart()[1])
+        assert header["id"] == 3 and header["ok"] is True  # never an answer to id 2
+    finally:
+        sock.disable_monitor()
+        monitor.close()
+        sock.close()
+
+
+def next_event(monitor, timeout_ms: int = 10_000) -> int:
+    from zmq.utils.monitor import recv_monitor_message
+
+    assert monitor.poll(timeout_ms), "no connection event"
+    return int(recv_monitor_message(monitor)["event"])

@@ -13,6 +13,8 @@ from fxis_shm.errors import ConfigError
 from ..conftest import wait_until
 from .conftest import SMALL, child_pids
 
+pytestmark = pytest.mark.integration
+
 
 @pytest.fixture
 def two_services(start_service):

@@ -50,17 +50,26 @@ def test_a_hook_that_raises_is_counted_and_the_worker_goes_on(start_service, wai
     assert all(f.frame_id % 3 != 0 for f in frames)
 
 
-def test_a_slow_hook_spread_over_processes_keeps_order_and_rate(start_service, wait):
-    svc = start_service("--camera", f"a=synthetic:fps=20,{SMALL},process=tests.hooks:slow_60ms,process_workers=3")
+def test_a_slow_hook_spread_over_processes_keeps_order_and_counts_any_drop(start_service, wait):
+    """A 60 ms hook at 20 fps (50 ms apart) over 3 processes: the frames are stored in capture
+    order, each after the hook ran on it in one of several processes (not in the worker); a
+    frame no process was free for is counted as dropped. How many a loaded machine drops is
+    bench/hook_rate.py's figure."""
+    from tests.hooks import pid_of
+
+    svc = start_service("--camera", f"a=synthetic:fps=20,{SMALL},process=tests.hooks:slow_60ms_pid,process_workers=3")
     wait(lambda: status_of(svc, "a")["frames_stored"] >= 25, timeout=20, what="frames through the hook")
-    status = status_of(svc, "a")
     with svc.client() as client:
         frames = client.sequence("consecutive", camera="a", count=15)
+    status = status_of(svc, "a")
     ids = [f.frame_id for f in frames]
-    assert ids == list(range(ids[0], ids[0] + 15))  # capture order, none lost
+    assert all(b > a for a, b in zip(ids, ids[1:])), ids  # capture order
     assert all(read_stamp(f.image) == f.frame_id for f in frames)
-    assert status["frames_dropped"] == 0 and status["hook_errors"] == 0
-    # stored about one hook's cost after the frame was available
+    assert status["hook_errors"] == 0
+    assert ids[-1] - ids[0] + 1 - len(ids) <= status["frames_dropped"]  # a frame not stored is counted
+    pids = {pid_of(f.image) for f in frames}
+    assert len(pids) >= 2 and status["writer_pid"] not in pids, pids  # spread over processes
+    # stored after the hook's 60 ms, counted from the frame's capture
     assert all(f.t_stored - f.t_capture >= 60_000_000 for f in frames)
 
 

@@ -40,17 +40,18 @@ def test_a_recording_opens_with_rosbags_one_image_topic_per_camera(raw_bag):
     assert bag.custom_data["clock"] == "CLOCK_MONOTONIC"
     for cam, encoding, shape in (("left", "mono8", (120, 160)), ("right", "bgr8", (120, 160, 3))):
         messages = bag.messages[f"/{cam}/image_raw"]
-        assert abs(len(messages) - SECONDS * FPS) <= 2, len(messages)  # the first and last frame may fall either side
         stamps = [m.stamp for m in messages]
         assert all(b > a for a, b in zip(stamps, stamps[1:]))
-        assert stamps[-1] - stamps[0] < SECONDS * 1e9
+        assert SECONDS * 1e9 / 2 < stamps[-1] - stamps[0] < SECONDS * 1e9  # the frames of the 2 s asked
         for m in messages:
             assert (m.msg.encoding, m.msg.height, m.msg.width, m.msg.header.frame_id) == (encoding, *shape[:2], cam)
             assert m.msg.step == shape[1] * (3 if encoding == "bgr8" else 1)
             assert rosmsgs.image_array(m.msg).shape == shape
-        # every frame, none missed: the pixel stamps (the frame counter) go up by one
+        # each frame once, in order: the pixel stamps (the frame counter) go up; a frame not
+        # recorded is reported (test_the_summary_counts_frames_and_missed; how many a loaded
+        # machine loses: bench/observer_cost.py prints the recorder's report)
         ids = [read_stamp(rosmsgs.image_array(m.msg)) for m in messages]
-        assert ids == list(range(ids[0], ids[0] + len(ids)))
+        assert all(b > a for a, b in zip(ids, ids[1:])), ids
         # log times are wall-clock: the stamp plus one offset, written in the metadata
         offset = int(bag.custom_data["clock_to_realtime_ns"])
         assert all(m.log_time == m.stamp + offset for m in messages)
@@ -62,8 +63,13 @@ def test_the_summary_counts_frames_and_missed(raw_bag):
     rows = {line.split()[0]: line.split() for line in result.stdout.splitlines()[1:3]}
     bag = read_bag(out)
     for cam in ("left", "right"):
-        assert rows[cam][2] == str(len(bag.messages[f"/{cam}/image_raw"]))
-        assert rows[cam][3] == "0"  # missed
+        messages = bag.messages[f"/{cam}/image_raw"]
+        assert rows[cam][2] == str(len(messages))
+        # every frame id absent from the bag is reported: missed by the recorder, or dropped by the camera
+        ids = [read_stamp(rosmsgs.image_array(m.msg)) for m in messages]
+        absent = ids[-1] - ids[0] + 1 - len(ids)
+        missed, dropped = int(rows[cam][3]), int(rows[cam][4])
+        assert 0 <= absent <= missed + dropped, (absent, rows[cam])
     assert "recording left, right" in result.stderr  # one line per stage: not a terminal
 
 

@@ -8,7 +8,7 @@ import pytest
 import zmq
 
 from fxis_shm import Client, RequestTimeout, read_stamp
-from fxis_shm.wire.protocol import encode_request
+from fxis_shm.wire.protocol import decode_reply, encode_request
 
 from ..conftest import run_in_threads
 from .conftest import child_pids
@@ -91,14 +91,24 @@ def test_a_waiting_request_does_not_delay_other_clients(two_cameras):
     waiter.connect(two_cameras.endpoint)
     try:
         with two_cameras.client() as other:
-            t_future = other.time() + 1_500_000_000  # frames for this do not exist for 1.5 s
+            t_sent = other.time()
+            t_future = t_sent + 1_500_000_000  # frames for this do not exist for 1.5 s
             waiter.send_multipart([b""] + encode_request("tuple", id=1, at=t_future))
             for _ in range(5):
                 other.status()  # answered while the tuple request waits
             assert waiter.poll(0) == 0, "the waiting request was answered before its frames existed"
         assert waiter.poll(5000), "the waiting request was never answered"
+        header, images = decode_reply(waiter.recv_multipart()[1:])
     finally:
         waiter.close()
+    # answered with the frames of t*, captured after the request was sent, not with an error
+    assert header["ok"] is True and header["id"] == 1, header
+    assert header["t_request"] == t_future
+    frames = {meta["camera"]: (meta, image) for meta, image in zip(header["frames"], images)}
+    assert set(frames) == {"cam0", "cam1"}
+    for meta, image in frames.values():
+        assert read_stamp(image) == meta["frame_id"]
+        assert meta["t_capture"] > t_sent + 1_000_000_000  # nearest to t*, not to the moment of sending
 
 
 def test_req_socket_clients_are_served(two_cameras):

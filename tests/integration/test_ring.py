@@ -14,6 +14,8 @@ from fxis_shm.formats.stamp import write_stamp
 from fxis_shm.shm import naming
 from fxis_shm.shm.ring import FrameLayout, Overwritten, RingReader, RingWriter
 
+pytestmark = pytest.mark.integration
+
 LAYOUT = FrameLayout(8, 32)
 
 

@@ -7,7 +7,7 @@ import time
 import pytest
 
 from fxis_shm import Client, RequestTimeout
-from fxis_shm.client.pubsub import Subscriber
+from fxis_shm.client.pubsub import EventPublisher, Subscriber, handshake
 from fxis_shm.service.launch import free_tcp_port
 
 from .conftest import SMALL, client_keys
@@ -44,6 +44,47 @@ def test_only_allowed_clients_are_served(start_service, keys):
         eavesdropper.frames("a")
         with pytest.raises(RequestTimeout):
             eavesdropper.receive()
+
+
+def test_request_events_are_taken_only_from_allowed_keys(start_service, keys):
+    """The events endpoint is a CurveZMQ server too: a keyless EventPublisher, or one with a key
+    the service does not allow, is refused (its events are never answered), while events of an
+    allowed key, published in between, are."""
+    folder, allowed = keys
+    svc = start_service(
+        "--camera",
+        f"a=synthetic:fps=50,{SMALL}",
+        "--curve-secret",
+        str(folder / "server.key_secret"),
+        "--curve-clients",
+        str(allowed),
+        client_keys=client_keys(folder, "alice"),
+    )
+    topic = "cell/answers"
+    with (
+        Subscriber(svc.pub, keys=client_keys(folder, "alice"), timeout=15) as answers,
+        EventPublisher(svc.events, keys=client_keys(folder, "alice")) as alice,
+        EventPublisher(svc.events) as stranger,
+        EventPublisher(svc.events, keys=client_keys(folder, "mallory")) as mallory,
+    ):
+        answers.topic(topic)
+        handshake(alice, answers, topic, timeout=15)  # handshakes under load
+        refused, answered = set(), []
+        for _ in range(20):  # a second and more: a keyless PUB would have connected long before
+            refused |= {stranger.request("time", topic), mallory.request("time", topic)}
+            rid = alice.request("time", topic)
+            while True:
+                header = answers.receive().header
+                assert header.get("id") not in refused, f"an event without an allowed key was answered: {header}"
+                if header.get("id") == rid:
+                    answered.append(header)
+                    break
+            time.sleep(0.05)
+        with pytest.raises(RequestTimeout):  # and nothing else is on its way
+            while True:
+                header = answers.receive(timeout=0.5).header
+                assert header.get("id") not in refused, f"an event without an allowed key was answered: {header}"
+    assert len(answered) == 20 and all(h["ok"] for h in answered)
 
 
 def test_an_exposed_endpoint_needs_keys():

@@ -133,16 +133,23 @@ def test_too_many_frames_is_refused(start_service):
 
 
 def test_partly_filled_and_empty_rings(start_service):
+    # "slow" captures its first frame 10 minutes after the service starts: its ring stays empty
     svc = start_service(
-        "--camera", f"slow=synthetic:fps=0.2,{SMALL}", "--camera", f"a=synthetic:fps=5,{SMALL}", "--slots", "30"
+        "--camera",
+        f"slow=synthetic:fps=0.2,phase_ms=600000,{SMALL}",
+        "--camera",
+        f"a=synthetic:fps=5,{SMALL}",
+        "--slots",
+        "30",
     )
     with svc.client() as client:
         with pytest.raises(ServiceError, match="frame") as err:
             client.sequence("consecutive", camera="a", count=25)
         assert err.value.code == "OUT_OF_RANGE"
-        if client.status()["cameras"]["slow"]["frames_stored"] == 0:
-            with pytest.raises(FrameTimeout):
-                client.sequence("consecutive", camera="slow", count=1, timeout=0.1)
+        assert client.status()["cameras"]["slow"]["frames_stored"] == 0
+        with pytest.raises(FrameTimeout, match="did not arrive within 100 ms"):
+            client.sequence("consecutive", camera="slow", count=1, timeout=0.1)
+        assert client.status()["cameras"]["slow"]["frames_stored"] == 0  # it was empty all along
 
 
 def _config_with(**settings) -> str:

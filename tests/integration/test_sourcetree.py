@@ -17,6 +17,7 @@ from fxis_shm.service.launch import ServiceProcess
 
 from ..conftest import assert_nothing_left
 
+pytestmark = pytest.mark.integration
 CHECKOUT = Path(__file__).resolve().parents[2]
 
 
@@ -59,17 +60,27 @@ def test_the_workers_package_is_the_checkouts_folder(bare_python, checkout_env, 
 
 
 def test_fxis_cameras_runs_from_the_checkout(bare_python, checkout_env, tmp_path):
+    """The discovery child finds the backends in the checkout's workers/: with the simulated GenTL
+    producer the genicam wheel ships (viky.cti, three devices) on the producer path, it lists them."""
+    import genicam
+
+    from fxis_shm.service.camerakinds import GENTL_PATH_VAR
+
+    viky = os.path.join(os.path.dirname(genicam.__file__), "viky.cti")
     result = subprocess.run(
         [bare_python, "-m", "fxis_shm.cli", "cameras", "--json"],
         cwd=tmp_path,
-        env=checkout_env,
+        env={**checkout_env, GENTL_PATH_VAR: os.path.dirname(viky)},
         capture_output=True,
         text=True,
         timeout=120,
     )
     assert result.returncode == 0, result.stderr
     listing = json.loads(result.stdout)
-    assert isinstance(listing["cameras"], list) and isinstance(listing["unavailable"], dict)
+    assert "genicam" not in listing["unavailable"] and "aravis" not in listing["unavailable"], listing
+    listed = [c for c in listing["cameras"] if c["kind"] == "genicam"]
+    assert [c["id"] for c in listed] == ["0", "1", "2"], listing
+    assert all("Viky" in c["model"] and c["cti"] == viky for c in listed), listed
 
 
 def test_a_service_runs_from_the_checkout(bare_python, checkout_env, tmp_path):

@@ -1,5 +1,7 @@
 """Software-triggered cameras: a request triggers every camera of its tuple at once."""
 
+import time
+
 import pytest
 
 from fxis_shm import read_stamp
@@ -38,3 +40,26 @@ def test_a_free_running_camera_joins_a_triggered_one(start_service):
         frames = client.tuple()
     assert frames["trig"].t_capture >= frames.t_request
     assert abs(frames["free"].t_capture - frames["trig"].t_capture) <= 10_000_000  # half a 50 fps period
+
+
+def test_an_image_request_triggers_its_camera_and_returns_that_frame(start_service):
+    svc = start_service(
+        "--camera", f"a=synthetic:trigger=software,{SMALL}", "--camera", f"b=synthetic:trigger=software,{SMALL}"
+    )
+    with svc.client() as client:
+        previous = None
+        for n in range(1, 4):
+            called = time.monotonic_ns()  # the service's clock too: same host, CLOCK_MONOTONIC
+            frame = client.image("a")
+            assert frame.camera == "a" and frame.t_capture >= called  # captured because of this request
+            assert read_stamp(frame.image) == frame.frame_id
+            if previous is not None:
+                assert frame.frame_id == previous.frame_id + 1
+            previous = frame
+            cameras = client.status()["cameras"]
+            # one frame per request, of the camera asked for only
+            assert (cameras["a"]["frames_stored"], cameras["b"]["frames_stored"]) == (n, 0)
+        # no trigger for a t* in the past: the stored frame answers it
+        again = client.image("a", at=previous.t_capture)
+        assert again.frame_id == previous.frame_id
+        assert client.status()["cameras"]["a"]["frames_stored"] == 3
