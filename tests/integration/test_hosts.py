@@ -255,6 +255,9 @@ def test_a_snapshot_across_two_hosts_holds_both_cameras_in_the_callers_clock(emu
     b = emulated_hosts.host(clock_offset_s=2000)
     sa = a.service("--camera", f"left=synthetic:fps={FPS},{SMALL}", "--history", "2")
     sb = b.service("--camera", f"right=synthetic:fps={FPS},{SMALL}", "--history", "2")
+    for svc in (sa, sb):  # the window's half second before t is in both rings
+        with _client(emulated_hosts, svc.endpoint) as one:
+            wait_until(lambda one=one: one.status()["cameras"].popitem()[1]["frames_stored"] >= FPS, timeout=30)
     with _client(emulated_hosts, [sa.endpoint, sb.endpoint]) as client:
         ea, eb = _estimated(client, sa.endpoint), _estimated(client, sb.endpoint)
         t = time.monotonic_ns()  # our clock: 1000 s and 2000 s behind the hosts'
