@@ -12,6 +12,7 @@ import zmq
 from zmq.utils.monitor import recv_monitor_message
 
 _FAILED = zmq.EVENT_HANDSHAKE_FAILED_NO_DETAIL | zmq.EVENT_HANDSHAKE_FAILED_PROTOCOL | zmq.EVENT_HANDSHAKE_FAILED_AUTH
+GRACE_MS = 500  # after a time-out, how long to wait for a handshake event not yet reported
 KEY_OPTIONS = "ClientKeys in Python, --server-key and --client-key on the command line (docs/security.md)"
 
 
@@ -23,8 +24,10 @@ class HandshakeWatch:
 
     def problem(self, endpoint: str, keyed: bool) -> str | None:
         """What the handshakes with ``endpoint`` say is wrong (None: nothing, or none seen)."""
-        while self._monitor.poll(0):
+        grace_ms = 0 if self._last is not None else GRACE_MS  # none seen yet: a busy host may be late
+        while self._monitor.poll(grace_ms):
             self._last = int(recv_monitor_message(self._monitor)["event"])
+            grace_ms = 0
         if self._last is None or not self._last & _FAILED:
             return None
         if not keyed:

@@ -150,7 +150,7 @@ def test_a_client_without_keys_is_told_the_service_wants_curvezmq(curve_service)
 def test_status_grab_and_record_take_keys_from_flags_the_environment_or_the_config(curve_service, tmp_path):
     svc, folder = curve_service
     server, alice = str(folder / "server.key"), str(folder / "alice.key_secret")
-    keyless = fxis("status", "--endpoint", svc.endpoint, "--timeout", "1")
+    keyless = fxis("status", "--endpoint", svc.endpoint, "--timeout", "3")
     assert keyless.returncode == 1 and "answers only CurveZMQ" in keyless.stderr
     flags = fxis("status", "--endpoint", svc.endpoint, "--server-key", server, "--client-key", alice, "--json")
     assert flags.returncode == 0 and json.loads(flags.stdout)["service"] == svc.name
