@@ -96,11 +96,12 @@ def test_a_local_client_follows_a_restarted_worker_by_itself(start_service):
         with pytest.raises(CameraDown):
             client.image("a")
 
-        def restarted_frame():
+        def restarted_frame():  # until the new worker stored a frame, the newest is the old one's
             try:
-                return client.image("a")
+                frame = client.image("a")
             except CameraDown:
                 return None
+            return frame if frame.generation == 2 else None
 
         after = wait_until(restarted_frame, timeout=20, what="the restarted camera's frames")
     assert after.generation == 2 and after.path == "local"
