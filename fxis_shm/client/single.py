@@ -98,8 +98,9 @@ class SingleClient(SocketOwner):
         self.clock: Callable[[], int] = clock if callable(clock) else timebase.reader(self._clock_name or "")
         self._ids = itertools.count(1)
         self._context, self._keys = context, keys
-        self._sock = connected_socket(context, zmq.DEALER, endpoint, keys)
-        self._handshake = HandshakeWatch(self._sock)  # says why, when a request times out
+        watches: list[HandshakeWatch] = []  # says why, when a request times out
+        self._sock = connected_socket(context, zmq.DEALER, endpoint, keys, lambda s: watches.append(HandshakeWatch(s)))
+        self._handshake = watches[0]
         self._identity: dict | None = None  # the service's kernel, time namespace and clock, from its status
         self._mapping: ClockEstimate | None = None  # fixed: the service reads our clock (or one shared)
         self._tracker: ClockTracker | None = None  # else: estimated

@@ -5,6 +5,7 @@ request's own timeout as the wire carries it."""
 from __future__ import annotations
 
 import warnings
+from collections.abc import Callable
 
 import zmq
 
@@ -23,13 +24,19 @@ def checked_encoding(encoding: str, quality: int | None) -> tuple[str, int | Non
 
 
 def connected_socket(
-    context: zmq.Context | None, kind: int, endpoint: str, keys: ClientKeys | None = None
+    context: zmq.Context | None,
+    kind: int,
+    endpoint: str,
+    keys: ClientKeys | None = None,
+    before_connect: Callable[[zmq.Socket], object] | None = None,
 ) -> zmq.Socket:
     """A client socket: LINGER 0 (closing never blocks), CURVE if keys are given."""
     sock = (context or zmq.Context.instance()).socket(kind)
     sock.setsockopt(zmq.LINGER, 0)
     if keys is not None:
         keys.apply(sock)
+    if before_connect is not None:  # e.g. a monitor, which must see the first handshake too
+        before_connect(sock)
     sock.connect(endpoint)
     return sock
 
