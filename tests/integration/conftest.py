@@ -68,3 +68,19 @@ def small_disk(tmp_path):
         yield mount
     finally:
         subprocess.run(["umount", str(mount)], check=True)
+
+
+@pytest.fixture
+def curve_service(start_service, keys):  # noqa: F811  (the fixture, by name)
+    """A service with CurveZMQ that lets alice in (not mallory), and the folder of the keys."""
+    folder, allowed = keys
+    svc = start_service(
+        "--camera",
+        f"a=synthetic:fps=50,{SMALL}",
+        "--curve-secret",
+        str(folder / "server.key_secret"),
+        "--curve-clients",
+        str(allowed),
+        client_keys=client_keys(folder, "alice"),
+    )
+    return svc, folder

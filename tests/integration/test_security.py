@@ -16,17 +16,8 @@ from .test_lifecycle import fxis
 pytestmark = pytest.mark.integration
 
 
-def test_only_allowed_clients_are_served(start_service, keys):
-    folder, allowed = keys
-    svc = start_service(
-        "--camera",
-        f"a=synthetic:fps=50,{SMALL}",
-        "--curve-secret",
-        str(folder / "server.key_secret"),
-        "--curve-clients",
-        str(allowed),
-        client_keys=client_keys(folder, "alice"),
-    )
+def test_only_allowed_clients_are_served(curve_service):
+    svc, folder = curve_service
     alice = Client(svc.endpoint, timeout=15.0, keys=client_keys(folder, "alice"))  # handshakes under load
     mallory = Client(svc.endpoint, timeout=0.5, keys=client_keys(folder, "mallory"))
     stranger = Client(svc.endpoint, timeout=0.5)
@@ -46,20 +37,11 @@ def test_only_allowed_clients_are_served(start_service, keys):
             eavesdropper.receive()
 
 
-def test_request_events_are_taken_only_from_allowed_keys(start_service, keys):
+def test_request_events_are_taken_only_from_allowed_keys(curve_service):
     """The events endpoint is a CurveZMQ server too: a keyless EventPublisher, or one with a key
     the service does not allow, is refused (its events are never answered), while events of an
     allowed key, published in between, are."""
-    folder, allowed = keys
-    svc = start_service(
-        "--camera",
-        f"a=synthetic:fps=50,{SMALL}",
-        "--curve-secret",
-        str(folder / "server.key_secret"),
-        "--curve-clients",
-        str(allowed),
-        client_keys=client_keys(folder, "alice"),
-    )
+    svc, folder = curve_service
     topic = "cell/answers"
     with (
         Subscriber(svc.pub, keys=client_keys(folder, "alice"), timeout=15) as answers,

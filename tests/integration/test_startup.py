@@ -121,21 +121,6 @@ def answered(client: Client) -> dict | None:
         return None
 
 
-@pytest.fixture
-def curve_service(start_service, keys):
-    folder, allowed = keys
-    svc = start_service(
-        "--camera",
-        f"a=synthetic:fps=50,{SMALL}",
-        "--curve-secret",
-        str(folder / "server.key_secret"),
-        "--curve-clients",
-        str(allowed),
-        client_keys=client_keys(folder, "alice"),
-    )
-    return svc, folder
-
-
 def test_a_client_without_keys_is_told_the_service_wants_curvezmq(curve_service):
     svc, folder = curve_service
     with Client(svc.endpoint, timeout=3.0) as stranger, pytest.raises(RequestTimeout) as info:
