@@ -133,10 +133,18 @@ def test_two_emulated_cameras_answer_a_tuple(emulator, second_address, start_ser
     )
     with svc.client() as client:
         frames = client.tuple()
+        times = client.frame_times()
     assert frames["left"].image.shape == (48, 64) and is_frame(frames["left"])
     assert frames["right"].image.shape == (48, 64, 3)  # demosaiced to BGR
-    # both emulators start their frames on multiples of the period (of the same clock)
-    assert frames.skew_ns < 25_000_000  # well within half a period
+    # the least skewed pair near t* (a loaded machine may stamp a frame late: a speed, not a
+    # behaviour, so the pair is compared with the frames the rings held, not with a bound)
+    near = {
+        cam: [row[times["columns"].index("t_capture")] for row in info["frames"]]
+        for cam, info in times["cameras"].items()
+    }
+    near = {cam: [t for t in ts if abs(t - frames.t_request) <= 50_000_000] for cam, ts in near.items()}
+    least = min(abs(a - b) for a in near["left"] for b in near["right"])
+    assert frames.skew_ns <= least + 1_000_000, (frames.skew_ns, least)
 
 
 def test_a_tuple_request_software_triggers_both_cameras(emulator, second_address, start_service):
