@@ -8,7 +8,7 @@ import asyncio
 import threading
 
 from fxis_shm.service.childspec import DashboardSpec
-from fxis_shm.service.config import http_address
+from fxis_shm.service.config import ViewerAccess, http_address
 
 from ._child import Ready, child_main
 
@@ -18,9 +18,10 @@ def run(spec: DashboardSpec, ready: Ready, stop: threading.Event) -> None:
     from fxis_shm.viewers.livefeed import feed_for
 
     host, port = http_address(spec.http)
+    access = ViewerAccess.from_environment()  # the token: from the environment, never from argv
     feed = feed_for(spec)
     try:
-        asyncio.run(serve(feed, host, port, stop, on_ready=ready.ok))
+        asyncio.run(serve(feed, host, port, stop, on_ready=ready.ok, access=access))
     finally:
         feed.close()
 

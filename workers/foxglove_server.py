@@ -7,7 +7,7 @@ from __future__ import annotations
 import threading
 
 from fxis_shm.service.childspec import FoxgloveSpec
-from fxis_shm.service.config import http_address
+from fxis_shm.service.config import ViewerAccess, http_address
 
 from ._child import Ready, child_main
 
@@ -17,9 +17,10 @@ def run(spec: FoxgloveSpec, ready: Ready, stop: threading.Event) -> None:
     from fxis_shm.viewers.livefeed import feed_for
 
     host, port = http_address(spec.foxglove, "foxglove")
+    access = ViewerAccess.from_environment()  # the token: from the environment, never from argv
     feed = feed_for(spec)
     try:
-        serve(feed, host, port, spec.rate_hz, stop, on_ready=ready.ok, name=f"fxis {spec.service}")
+        serve(feed, host, port, spec.rate_hz, stop, on_ready=ready.ok, name=f"fxis {spec.service}", access=access)
     finally:
         feed.close()
 

@@ -39,6 +39,9 @@ def run_command(args) -> int:
                 "http": args.http,
                 "foxglove": args.foxglove,
                 "foxglove_rate": args.foxglove_rate,
+                "viewer_token_file": args.viewer_token_file,
+                "viewer_tls_cert": args.viewer_tls_cert,
+                "viewer_tls_key": args.viewer_tls_key,
                 "ros2": args.ros2 or None,
                 "ros2_domain": args.ros2_domain,
                 "ros2_namespace": args.ros2_namespace,
@@ -61,7 +64,7 @@ def run_command(args) -> int:
     logging.basicConfig(level=config.log_level, format="%(asctime)s supervisor %(levelname)s %(message)s")
     try:
         return Supervisor(config).run()
-    except StartError as exc:
+    except (StartError, ConfigError) as exc:  # ConfigError: the viewers' token file went since it was checked
         print(f"fxis run: {exc}", file=sys.stderr)
         return 1
 
@@ -117,21 +120,22 @@ def add_parser(sub) -> None:
     run.add_argument(
         "--insecure-bind",
         action="store_true",
-        help="allow endpoints reachable from other hosts without CurveZMQ (prints a warning)",
+        help="allow endpoints reachable from other hosts without CurveZMQ, and a dashboard or Foxglove server "
+        "there without a token (prints a warning)",
     )
     run.add_argument(
         "--http",
         metavar="HOST:PORT|off",
         help=f"serve the live dashboard (pictures, rates, skew; docs/dashboard.md) here "
-        f"(default {defaults.HTTP}); off: none. Another host's address needs "
-        "--insecure-bind: HTTP has no authentication",
+        f"(default {defaults.HTTP}); off: none. On an address other hosts reach it requires a "
+        "token: the link to open is printed at start",
     )
     run.add_argument(
         "--foxglove",
         metavar="HOST:PORT|off",
         help="serve the cameras to the Foxglove app over its WebSocket protocol here, e.g. "
-        "127.0.0.1:8765 (default off; needs the foxglove extra). Another host's "
-        "address needs --insecure-bind: it has no authentication (docs/dashboard.md)",
+        "127.0.0.1:8765 (default off; needs the foxglove extra). On an address other hosts "
+        "reach it requires a token, as the dashboard (docs/dashboard.md)",
     )
     run.add_argument(
         "--foxglove-rate",
@@ -139,6 +143,19 @@ def add_parser(sub) -> None:
         help=f"pictures a second per camera to Foxglove, at most {MAX_FOXGLOVE_RATE_HZ:g} "
         f"(default {DEFAULT_FOXGLOVE_RATE_HZ:g}); the app can change it live (parameter rate_hz)",
     )
+    run.add_argument(
+        "--viewer-token-file",
+        metavar="FILE",
+        help="the token the dashboard and the Foxglove server require (at least 16 characters of "
+        "A-Z a-z 0-9 . _ ~ -), on every address, loopback too (default: a random one, printed at "
+        "start, where other hosts reach them)",
+    )
+    run.add_argument(
+        "--viewer-tls-cert",
+        metavar="FILE",
+        help="PEM certificate: the dashboard serves https and the Foxglove server wss (with --viewer-tls-key)",
+    )
+    run.add_argument("--viewer-tls-key", metavar="FILE", help="the PEM private key of --viewer-tls-cert")
     run.add_argument(
         "--history",
         metavar="SECONDS",

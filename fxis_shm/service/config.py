@@ -5,9 +5,13 @@ Every problem raises ConfigError with a message that names the setting.
 
 from __future__ import annotations
 
+import json
 import os
+import re
+import secrets
+import ssl
 import sys
-from dataclasses import dataclass, field, replace
+from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 from fxis_shm.core.engine import REQUEST_DEFAULTS
@@ -31,6 +35,9 @@ ZERO_ALLOWED = {"sync_tolerance_ms"}  # 0: always the least skew, however far fr
 # by default, takes a number of ms)
 PORT_BASE_ORDER = ("endpoint", "pub", "events", "http")  # port_base + index
 SERVICE_SETTINGS = {key: float if value is None else type(value) for key, value in REQUEST_DEFAULTS.items()}
+VIEWER_ACCESS_ENV = "FXIS_VIEWER_ACCESS"  # how a viewer process learns its token (not argv: ps shows that)
+TOKEN_BYTES = 32  # of a random viewer token (secrets.token_urlsafe: 43 characters)
+TOKEN_PATTERN = re.compile(r"[A-Za-z0-9._~-]{16,}")  # fits a URL and a cookie as it is
 
 
 @dataclass(frozen=True)
@@ -60,6 +67,9 @@ class ServiceConfig:
     http_given: bool = False  # asked for (else the dashboard gives way when its default port is taken)
     foxglove: str = HTTP_OFF  # HOST:PORT of the Foxglove WebSocket server, or "off"
     foxglove_rate: float = DEFAULT_FOXGLOVE_RATE_HZ
+    viewer_token_file: str | None = None  # the viewers' token (else a random one where one is needed)
+    viewer_tls_cert: str | None = None  # PEM certificate and key: the viewers serve https and wss
+    viewer_tls_key: str | None = None
     ros2: Ros2Settings | None = None  # the ROS 2 bridge (fxis_shm.service.ros2config), None: off
 
     @property
@@ -72,12 +82,12 @@ class ServiceConfig:
     @property
     def http_url(self) -> str | None:
         """The dashboard's address (None: no dashboard)."""
-        return None if self.http == HTTP_OFF else f"http://{self.http}"
+        return None if self.http == HTTP_OFF else f"{'https' if self.viewer_tls_cert else 'http'}://{self.http}"
 
     @property
     def foxglove_url(self) -> str | None:
         """The Foxglove WebSocket server's address (None: none)."""
-        return None if self.foxglove == HTTP_OFF else f"ws://{self.foxglove}"
+        return None if self.foxglove == HTTP_OFF else f"{'wss' if self.viewer_tls_cert else 'ws'}://{self.foxglove}"
 
     @property
     def viewer_urls(self) -> dict[str, str]:
@@ -85,11 +95,86 @@ class ServiceConfig:
         return {k: v for k, v in (("http", self.http_url), ("foxglove", self.foxglove_url)) if v}
 
     @property
+    def token_viewers(self) -> list[str]:
+        """The viewers (settings) that require the token: every one with a token file, else
+        those other hosts reach, unless insecure_bind says no."""
+        return [
+            setting
+            for setting, url in self.viewer_urls.items()
+            if self.viewer_token_file or (url in self.exposed and not self.insecure_bind)
+        ]
+
+    @property
     def exposed_unencrypted(self) -> list[str]:
         """What other hosts could reach without authentication: every exposed endpoint
-        without CurveZMQ, and the dashboard and Foxglove server (no CurveZMQ) in any case."""
-        viewers = set(self.viewer_urls.values())
-        return [e for e in self.exposed if not self.curve_secret or e in viewers]
+        without CurveZMQ, and the dashboard and Foxglove server (no CurveZMQ) without a token."""
+        open_viewers = {url for setting, url in self.viewer_urls.items() if setting not in self.token_viewers}
+        zmq = set(self.exposed) - set(self.viewer_urls.values())
+        return [e for e in self.exposed if e in open_viewers or (e in zmq and not self.curve_secret)]
+
+
+@dataclass(frozen=True)
+class ViewerAccess:
+    """What a viewer process (dashboard, Foxglove server) is told of who may look: the token
+    it requires (None: none) and its TLS certificate and key (None: plain http and ws). It
+    travels in the child's environment (VIEWER_ACCESS_ENV), which only its user can read."""
+
+    token: str | None = field(default=None, repr=False)
+    tls_cert: str | None = None
+    tls_key: str | None = None
+
+    def environment(self) -> dict[str, str]:
+        return {VIEWER_ACCESS_ENV: json.dumps(asdict(self))}
+
+    @classmethod
+    def from_environment(cls, environ: dict | None = None) -> ViewerAccess:
+        """The access the supervisor gave; ConfigError if it gave none (another install's supervisor)."""
+        text = (os.environ if environ is None else environ).get(VIEWER_ACCESS_ENV)
+        try:
+            return cls(**json.loads(text or ""))
+        except (TypeError, ValueError):
+            raise ConfigError(f"a viewer needs {VIEWER_ACCESS_ENV} from its supervisor, got {text!r}") from None
+
+
+def viewer_accesses(config: ServiceConfig) -> dict[str, ViewerAccess]:
+    """Setting -> access of each viewer that is on. One token for them all: the token file's,
+    else a new random one (secrets), made only if some viewer requires it."""
+    needing, token = config.token_viewers, None
+    if needing:
+        token = read_token_file(config.viewer_token_file) if config.viewer_token_file else new_token()
+    return {
+        setting: ViewerAccess(token if setting in needing else None, config.viewer_tls_cert, config.viewer_tls_key)
+        for setting in config.viewer_urls
+    }
+
+
+def new_token() -> str:
+    return secrets.token_urlsafe(TOKEN_BYTES)
+
+
+def read_token_file(path: str) -> str:
+    """The token a file holds (surrounding white space dropped); ConfigError unless it is at
+    least 16 characters of A-Z a-z 0-9 . _ ~ - (what a URL and a cookie carry as they are)."""
+    try:
+        with open(path) as f:
+            token = f.read().strip()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"viewer_token_file {path}: {getattr(exc, 'strerror', None) or exc}") from None
+    if not TOKEN_PATTERN.fullmatch(token):
+        raise ConfigError(
+            f"viewer_token_file {path}: a token must be at least 16 characters of A-Z a-z 0-9 . _ ~ - "
+            f"(make one: python3 -c 'import secrets; print(secrets.token_urlsafe({TOKEN_BYTES}))' > {path})"
+        )
+    return token
+
+
+def check_tls_files(cert: str, key: str) -> None:
+    """ConfigError unless the certificate and key (PEM) load and match."""
+    context = ssl.create_default_context(ssl.Purpose.CLIENT_AUTH)
+    try:
+        context.load_cert_chain(cert, key, password=lambda: b"")  # a key with a passphrase fails, never prompts
+    except (OSError, ssl.SSLError) as exc:
+        raise ConfigError(f"viewer_tls_cert {cert}, viewer_tls_key {key}: {exc}") from None
 
 
 def _camera(name: str, kind: str, raw: dict) -> CameraSpec:
@@ -226,6 +311,9 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
         "http",
         "foxglove",
         "foxglove_rate",
+        "viewer_token_file",
+        "viewer_tls_cert",
+        "viewer_tls_key",
         "port_base",
         "history",
         *ROS2_KEYS,
@@ -343,15 +431,7 @@ def _security(config: ServiceConfig, values: dict) -> ServiceConfig:
     insecure = values.get("insecure_bind", False)
     if not isinstance(insecure, bool):
         raise ConfigError(f"insecure_bind must be true or false, got {insecure!r}")
-    config = replace(config, insecure_bind=insecure)
-    what = {"http": "the dashboard", "foxglove": "the Foxglove server"}
-    for setting, url in config.viewer_urls.items():
-        if url in config.exposed and not insecure:
-            raise ConfigError(
-                f"{setting} {url.split('://', 1)[1]} can be reached from other hosts, and "
-                f"{what[setting]} has no authentication (CurveZMQ does not cover it): bind it to "
-                f'127.0.0.1, turn it off ({setting} = "off"), or give insecure_bind to do it anyway'
-            )
+    config = _viewer_access(replace(config, insecure_bind=insecure), values)
     zmq_exposed = [e for e in config.exposed if e not in config.viewer_urls.values()]
     if zmq_exposed and not secret and not insecure:
         raise ConfigError(
@@ -360,3 +440,18 @@ def _security(config: ServiceConfig, values: dict) -> ServiceConfig:
             "to do it anyway"
         )
     return config
+
+
+def _viewer_access(config: ServiceConfig, values: dict) -> ServiceConfig:
+    """The viewers' token file and TLS files, checked now: a bad one stops the start here."""
+    token_file, cert, key = (values.get(k) or None for k in ("viewer_token_file", "viewer_tls_cert", "viewer_tls_key"))
+    for setting, value in (("viewer_token_file", token_file), ("viewer_tls_cert", cert), ("viewer_tls_key", key)):
+        if value is not None and not isinstance(value, str):
+            raise ConfigError(f"{setting} must be the path of a file, got {value!r}")
+    if token_file:
+        read_token_file(token_file)
+    if bool(cert) != bool(key):
+        raise ConfigError("viewer_tls_cert and viewer_tls_key go together: the certificate (PEM) and its key")
+    if cert:
+        check_tls_files(cert, key)
+    return replace(config, viewer_token_file=token_file, viewer_tls_cert=cert, viewer_tls_key=key)

@@ -14,6 +14,7 @@ import json
 import logging
 import os
 import signal
+import socket
 import subprocess
 import sys
 import tempfile
@@ -29,7 +30,7 @@ from fxis_shm.service.childspec import (
     FoxgloveSpec,
     Ros2Spec,
 )
-from fxis_shm.service.config import ServiceConfig
+from fxis_shm.service.config import ServiceConfig, ViewerAccess, http_address, viewer_accesses
 from fxis_shm.service.memory import ring_lines
 from fxis_shm.shm import naming
 
@@ -86,8 +87,9 @@ def service_running(service: str) -> bool:
 class Child:
     """One supervised process and its restart bookkeeping."""
 
-    def __init__(self, spec: ChildSpec, label: str, key: str):
+    def __init__(self, spec: ChildSpec, label: str, key: str, env: dict[str, str] | None = None):
         self.spec, self.label, self.key = spec, label, key
+        self.env = env  # added to the supervisor's environment (a viewer's token: never on argv, ps shows it)
         self.state = "starting"
         self.last_exit: int | None = None
         self.proc: subprocess.Popen | None = None
@@ -100,7 +102,12 @@ class Child:
     def start(self) -> None:
         read_fd, write_fd = os.pipe()
         try:
-            self.proc = subprocess.Popen(self.spec.command(write_fd), pass_fds=(write_fd,), stdin=subprocess.DEVNULL)
+            self.proc = subprocess.Popen(
+                self.spec.command(write_fd),
+                pass_fds=(write_fd,),
+                stdin=subprocess.DEVNULL,
+                env={**os.environ, **self.env} if self.env else None,
+            )
         finally:
             os.close(write_fd)
         self._ready_fd = read_fd
@@ -142,10 +149,11 @@ def history_of(camera, config: ServiceConfig) -> float | None:
     return camera.options.get("history") or config.history
 
 
-def viewer_children(config: ServiceConfig, common: dict) -> list[Child]:
+def viewer_children(config: ServiceConfig, common: dict, access: dict[str, ViewerAccess]) -> list[Child]:
     """The processes that show the cameras, clients of the service like any other: the live
     dashboard (fxis_shm.viewers.dashboard) and the Foxglove server (fxis_shm.viewers.foxglove_live), each
-    when its address is not off, and the ROS 2 bridge (fxis_shm.ros2) when it is on."""
+    when its address is not off and told its ``access`` (token, TLS), and the ROS 2 bridge
+    (fxis_shm.ros2) when it is on."""
     viewer = {
         **common,
         "endpoint": config.endpoint,
@@ -154,13 +162,16 @@ def viewer_children(config: ServiceConfig, common: dict) -> list[Child]:
     }
     children = []
     if config.http_url:
-        children.append(Child(DashboardSpec(**viewer, http=config.http), "dashboard", key="dashboard"))
+        children.append(
+            Child(DashboardSpec(**viewer, http=config.http), "dashboard", "dashboard", access["http"].environment())
+        )
     if config.foxglove_url:
         children.append(
             Child(
                 FoxgloveSpec(**viewer, foxglove=config.foxglove, rate_hz=config.foxglove_rate),
                 "foxglove",
-                key="foxglove",
+                "foxglove",
+                access["foxglove"].environment(),
             )
         )
     if config.ros2 is not None:
@@ -182,6 +193,35 @@ def viewer_children(config: ServiceConfig, common: dict) -> list[Child]:
         )
         children.append(Child(spec, "ros2", key="ros2"))
     return children
+
+
+def viewer_lines(config: ServiceConfig, access: dict[str, ViewerAccess]) -> list[str]:
+    """The banner's lines of the dashboard and the Foxglove server: with a token, the address
+    to open with it, as Jupyter prints it (the token itself only when it was made here)."""
+    lines, unencrypted = [], False
+    for setting, url in config.viewer_urls.items():
+        if setting == "http":
+            lines.append(f"  live dashboard on {url}/")
+        else:
+            lines.append(f"  Foxglove WebSocket server on {url} ({config.foxglove_rate:g} pictures/s per camera)")
+        token = access[setting].token
+        if token:
+            shown = f"<the token in {config.viewer_token_file}>" if config.viewer_token_file else token
+            scheme = url.split("://", 1)[0]
+            lines[-1] += ", which requires a token: open"
+            lines.append(f"      {scheme}://{link_host(getattr(config, setting), setting)}/?token={shown}")
+            unencrypted |= url in config.exposed and not config.viewer_tls_cert
+    if unencrypted:
+        lines.append("  (no --viewer-tls-cert: the token and the pictures travel unencrypted)")
+    return lines
+
+
+def link_host(address: str, setting: str) -> str:
+    """HOST:PORT to put in a link: a wildcard address (every interface) as this host's name."""
+    host, port = http_address(address, setting)
+    if host in ("0.0.0.0", "::", "*"):
+        host = socket.gethostname()
+    return f"[{host}]:{port}" if ":" in host else f"{host}:{port}"
 
 
 class Supervisor:
@@ -222,7 +262,8 @@ class Supervisor:
             "coordinator",
             key="coordinator",
         )
-        self.viewers = viewer_children(config, common)
+        self.viewer_access = viewer_accesses(config)  # the token, made or read once: restarts keep it
+        self.viewers = viewer_children(config, common, self.viewer_access)
         self.events: list[dict] = []  # the latest exits and restarts, for status
 
     @property
@@ -272,10 +313,7 @@ class Supervisor:
             lines.append(f"  {cam.name:<10} {cam.kind:<10} {opts}")
         lines.append(f"  requests on {c.endpoint}, publishing on {c.pub}, request events on {c.events}")
         lines += ring_lines(c)
-        if c.http_url:
-            lines.append(f"  live dashboard on {c.http_url}/")
-        if c.foxglove_url:
-            lines.append(f"  Foxglove WebSocket server on {c.foxglove_url} ({c.foxglove_rate:g} pictures/s per camera)")
+        lines += viewer_lines(c, self.viewer_access)
         if c.ros2 is not None:
             tuples = f", tuples at {c.ros2.tuples_hz:g} Hz" if c.ros2.tuples_hz else ""
             lines.append(f"  ROS 2 topics under {c.ros2.namespace or '/'} on DDS domain {c.ros2.domain}{tuples}")

@@ -10,7 +10,8 @@
 It runs in a process of its own (workers/dashboard.py) and reads through fxis_shm.Client
 (fxis_shm.viewers.livefeed). A slow viewer gets fewer frames, never a queue: each stream sends the
 newest frame when it is ready for one. Bad parameters get 400, unknown cameras 404, a camera
-down or a silent service 503, each with a message in plain text.
+down or a silent service 503, each with a message in plain text. Where a token is required
+(fxis_shm.viewers.access), a request without it gets 401 before anything else is looked at.
 """
 
 from __future__ import annotations
@@ -25,6 +26,8 @@ from importlib import resources
 from aiohttp import web
 
 from fxis_shm.errors import FxisError, InvalidArgument, UnknownCamera
+from fxis_shm.service.config import ViewerAccess
+from fxis_shm.viewers.access import middlewares, ssl_context
 from fxis_shm.viewers.livefeed import SAMPLE_PERIOD_S, LiveFeed
 from fxis_shm.viewers.preview import parse_fps, parse_width
 
@@ -140,8 +143,10 @@ async def _sample_forever(app: web.Application) -> None:
         await asyncio.sleep(SAMPLE_PERIOD_S)
 
 
-def make_app(feed: LiveFeed) -> web.Application:
-    app = web.Application()
+def make_app(feed: LiveFeed, access: ViewerAccess | None = None, port: int = 0) -> web.Application:
+    """The dashboard's web app; with ``access.token``, every path requires it (the cookie's name
+    has the ``port`` in it)."""
+    app = web.Application(middlewares=middlewares(access or ViewerAccess(), port))
     app[FEED] = feed
     app.router.add_get("/", _index)
     app.router.add_get("/status.json", _status)
@@ -161,14 +166,20 @@ def make_app(feed: LiveFeed) -> web.Application:
     return app
 
 
-async def serve(feed: LiveFeed, host: str, port: int, stop: threading.Event, on_ready) -> None:
-    """Serve until ``stop`` is set; ``on_ready`` once listening (a port in use raises OSError)."""
-    runner = web.AppRunner(make_app(feed), access_log=None, handle_signals=False)
+async def serve(
+    feed: LiveFeed, host: str, port: int, stop: threading.Event, on_ready, access: ViewerAccess | None = None
+) -> None:
+    """Serve until ``stop`` is set; ``on_ready`` once listening (a port in use raises OSError).
+    ``access``: the token it requires and its TLS files (default: neither)."""
+    access = access or ViewerAccess()
+    runner = web.AppRunner(make_app(feed, access, port), access_log=None, handle_signals=False)
     await runner.setup()
     try:
-        await web.TCPSite(runner, host, port, shutdown_timeout=1.0).start()
+        tls = ssl_context(access)
+        await web.TCPSite(runner, host, port, shutdown_timeout=1.0, ssl_context=tls).start()
         on_ready()
-        log.info("dashboard on http://%s:%d/", host, port)
+        scheme, needs = "https" if tls else "http", " (token required)" if access.token else ""
+        log.info("dashboard on %s://%s:%d/%s", scheme, host, port, needs)
         while not stop.is_set():
             await asyncio.sleep(0.1)
     finally:

@@ -9,7 +9,9 @@ It runs in a process of its own (workers/foxglove_server.py) reading through fxi
 (fxis_shm.viewers.livefeed), like the dashboard: a camera's channel gets its newest frame at most
 ``rate_hz`` times a second, only while some client subscribes to it, each frame once; a
 frame is read from the ring without a copy and copied once into the message. The rate is a
-setting (--foxglove-rate) and a parameter the app can change live (``rate_hz``).
+setting (--foxglove-rate) and a parameter the app can change live (``rate_hz``). Where a token
+or TLS is asked for, the SDK's server listens on loopback behind an authenticating front
+(fxis_shm.viewers.wsfront) on the address asked for.
 """
 
 from __future__ import annotations
@@ -26,9 +28,10 @@ from foxglove.messages import RawImage, Timestamp
 from foxglove.websocket import ServerListener
 
 from fxis_shm.errors import ConfigError, FxisError
-from fxis_shm.service.config import check_foxglove_rate
+from fxis_shm.service.config import ViewerAccess, check_foxglove_rate
 from fxis_shm.viewers.livefeed import SAMPLE_PERIOD_S, LiveFeed
 from fxis_shm.viewers.preview import displayable
+from fxis_shm.viewers.wsfront import BACKEND_HOST, start_front
 
 log = logging.getLogger("foxglove")
 
@@ -145,26 +148,54 @@ async def _send_newest(feed: LiveFeed, camera: str, channel: RawImageChannel, se
 
 
 def serve(
-    feed: LiveFeed, host: str, port: int, rate_hz: float, stop: threading.Event, on_ready, name: str = "fxis"
+    feed: LiveFeed,
+    host: str,
+    port: int,
+    rate_hz: float,
+    stop: threading.Event,
+    on_ready,
+    name: str = "fxis",
+    access: ViewerAccess | None = None,
 ) -> None:
-    """Serve until ``stop`` is set; ``on_ready`` once listening (a port in use raises)."""
+    """Serve until ``stop`` is set; ``on_ready`` once listening (a port in use raises).
+    ``access``: the token it requires and its TLS files (default: neither); with either, the
+    SDK's server listens on loopback behind the front (fxis_shm.viewers.wsfront)."""
+    access = access or ViewerAccess()
+    front = bool(access.token or access.tls_cert)
     context = foxglove.Context()  # this server's channels only, not the SDK's global ones
     cameras = {camera: RawImageChannel(image_topic(camera), context=context) for camera in feed.cameras}
     status = foxglove.Channel(STATUS_TOPIC, context=context)
     rate = RateParameter(rate_hz)
     server = foxglove.start_server(
         name=name,
-        host=host,
-        port=port,
+        host=BACKEND_HOST if front else host,
+        port=0 if front else port,  # behind the front: a port the system picks
         capabilities=[Capability.Parameters],
         server_listener=rate,
         context=context,
         message_backlog_size=BACKLOG_MESSAGES,
     )
     rate.server = server
+
+    async def run() -> None:
+        runner = await start_front(host, port, server.port, access) if front else None
+        try:
+            on_ready()
+            scheme, needs = "wss" if access.tls_cert else "ws", " (token required)" if access.token else ""
+            log.info(
+                "Foxglove WebSocket server on %s://%s:%d%s (%g pictures/s per camera)",
+                scheme,
+                host,
+                port,
+                needs,
+                rate.hz,
+            )
+            await publish(feed, cameras, status, rate, stop)
+        finally:
+            if runner is not None:
+                await runner.cleanup()
+
     try:
-        on_ready()
-        log.info("Foxglove WebSocket server on ws://%s:%d (%g pictures/s per camera)", host, server.port, rate.hz)
-        asyncio.run(publish(feed, cameras, status, rate, stop))
+        asyncio.run(run())
     finally:
         server.stop()

@@ -17,7 +17,7 @@ import pytest
 from fxis_shm import read_stamp
 from fxis_shm.service.launch import free_tcp_port
 
-from ..conftest import fxis, fxis_run_alone
+from ..conftest import fxis_run_alone
 from .conftest import SMALL, client_keys
 
 pytestmark = pytest.mark.integration
@@ -192,12 +192,6 @@ def test_a_port_in_use_stops_start_up_naming_the_dashboard():
         result = fxis_run_alone("--camera", f"a=synthetic:{SMALL}", "--http", f"127.0.0.1:{port}")
     assert result.returncode == 2  # a bad setting, found before anything started (issue 24)
     assert f"--http 127.0.0.1:{port}" in result.stderr and "in use" in result.stderr, result.stderr
-
-
-def test_a_dashboard_for_other_hosts_is_refused_without_insecure_bind():
-    result = fxis("run", "--http", "0.0.0.0:8080")
-    assert result.returncode == 2 and "--http" not in result.stdout
-    assert "http 0.0.0.0:8080" in result.stderr and "insecure_bind" in result.stderr
 
 
 def test_a_viewer_that_stops_reading_holds_up_nobody(dashboard):

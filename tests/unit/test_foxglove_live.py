@@ -62,11 +62,11 @@ def test_the_rate_setting():
             check_foxglove_rate(bad)
 
 
-def test_a_foxglove_server_for_other_hosts_needs_insecure_bind():
-    with pytest.raises(ConfigError, match="foxglove 0.0.0.0:8765 .*no authentication"):
-        build_config({}, {"foxglove": "0.0.0.0:8765"})
+def test_a_foxglove_server_for_other_hosts_requires_a_token_unless_insecure_bind():
+    config = build_config({}, {"foxglove": "0.0.0.0:8765"})
+    assert config.token_viewers == ["foxglove"] and config.exposed_unencrypted == []
     config = build_config({}, {"foxglove": "0.0.0.0:8765", "insecure_bind": True})
-    assert config.exposed_unencrypted == ["ws://0.0.0.0:8765"]
+    assert config.token_viewers == [] and config.exposed_unencrypted == ["ws://0.0.0.0:8765"]
 
 
 def test_the_app_sets_the_rate_and_a_bad_value_leaves_it():

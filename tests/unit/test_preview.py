@@ -137,8 +137,8 @@ def test_a_bad_http_address_names_the_setting(value):
         build_config({"http": value})
 
 
-def test_a_dashboard_for_other_hosts_needs_insecure_bind():
-    with pytest.raises(ConfigError, match="http 0.0.0.0:8080 .*no authentication"):
-        build_config({}, {"http": "0.0.0.0:8080"})
+def test_a_dashboard_for_other_hosts_requires_a_token_unless_insecure_bind():
+    config = build_config({}, {"http": "0.0.0.0:8080"})
+    assert config.token_viewers == ["http"] and config.exposed_unencrypted == []
     config = build_config({}, {"http": "0.0.0.0:8080", "insecure_bind": True})
-    assert config.exposed_unencrypted == ["http://0.0.0.0:8080"]
+    assert config.token_viewers == [] and config.exposed_unencrypted == ["http://0.0.0.0:8080"]
