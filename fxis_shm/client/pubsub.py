@@ -95,7 +95,9 @@ class Message:
         return sequence_of(self._in_caller_clock(), self.images, single=single)
 
 
-def _stream(kind: str, camera: str | None, rate_hz: float | None, encoding: str, quality: int | None) -> StreamTopic:
+def stream_topic(
+    kind: str, camera: str | None, rate_hz: float | None, encoding: str, quality: int | None
+) -> StreamTopic:
     checked_encoding(encoding, quality)
     return StreamTopic(kind, camera, rate_hz, encoding, quality if encoding == JPEG else None)
 
@@ -124,7 +126,25 @@ class CallerClock:
             self._tracker.close()
 
 
-class Subscriber(SocketOwner):
+class Receiver:
+    """What every subscriber does with the messages its ``receive`` gives: iterate them, and
+    put one back."""
+
+    _held: collections.deque[Message]
+
+    def receive(self, timeout: float | None = None, latest: bool = False) -> Message:
+        raise NotImplementedError
+
+    def hold(self, message: Message) -> None:
+        """Put back a message read too early: the next ``receive`` returns it first."""
+        self._held.append(message)
+
+    def __iter__(self):
+        while True:
+            yield self.receive()
+
+
+class Subscriber(Receiver, SocketOwner):
     """A SUB socket with a bounded queue; iterate it or call ``receive``.
 
     ``clock`` (with ``service``, the service's request endpoint): every time a message
@@ -155,6 +175,11 @@ class Subscriber(SocketOwner):
         self._topics: set[str] = set()
         self._held: collections.deque[Message] = collections.deque()
 
+    @property
+    def socket(self) -> zmq.Socket:
+        """The SUB socket, to poll it together with others (fxis_shm.client.multistreams)."""
+        return self._sock
+
     def topic(self, topic: str) -> str:
         """Subscribe to exactly ``topic`` (ZeroMQ matches prefixes; messages on
         longer topics that merely start with it are skipped here)."""
@@ -167,11 +192,11 @@ class Subscriber(SocketOwner):
     ) -> str:
         """Subscribe to every frame of ``camera`` (or ``rate_hz`` of them per second), its
         pixels raw or compressed (``encoding="jpeg"`` with ``quality``, or ``"png"``)."""
-        return self.topic(str(_stream("frames", camera, rate_hz, encoding, quality)))
+        return self.topic(str(stream_topic("frames", camera, rate_hz, encoding, quality)))
 
     def tuples(self, rate_hz: float | None = None, *, encoding: str = RAW, quality: int | None = None) -> str:
         """Subscribe to synchronized tuples of all cameras as they complete."""
-        return self.topic(str(_stream("tuples", None, rate_hz, encoding, quality)))
+        return self.topic(str(stream_topic("tuples", None, rate_hz, encoding, quality)))
 
     def unsubscribe(self, topic: str) -> None:
         self._sock.setsockopt(zmq.UNSUBSCRIBE, topic.encode())
@@ -197,14 +222,6 @@ class Subscriber(SocketOwner):
             raise ProtocolError("a published message needs a topic and a header")
         header, images = protocol.decode_reply([f.buffer for f in found[1:]])
         return Message(found[0].bytes.decode(errors="replace"), header, images, self._clock.estimate)
-
-    def hold(self, message: Message) -> None:
-        """Put back a message read too early: the next ``receive`` returns it first."""
-        self._held.append(message)
-
-    def __iter__(self):
-        while True:
-            yield self.receive()
 
     def close(self) -> None:
         self._clock.close()
@@ -259,6 +276,11 @@ def handshake(events: EventPublisher, answers: Subscriber, reply_topic: str, tim
     """Wait until events reach the service and its answers reach ``answers``
     (subscribed to ``reply_topic``): PUB/SUB connections form asynchronously
     and drop what is sent before."""
+    publishers = getattr(events, "publishers", None)  # a MultiEventPublisher: each service in turn
+    if publishers:
+        for publisher in publishers.values():
+            handshake(publisher, answers, reply_topic, timeout)
+        return
     deadline = time.monotonic() + timeout
     probes = set()
     while time.monotonic() < deadline:

@@ -101,6 +101,7 @@ def test_a_window_into_the_future_while_tuples_are_pulled_and_a_recording_runs(h
         with Client(history3.endpoint) as client:
             t = client.clock()
             result = client.snapshot(at=t, before=0.5, after=1.5, out=str(tmp_path / "future"))
+        assert all(kept["complete"] for kept in result["cameras"].values())
     finally:
         stop.set()
         puller.join(10)

@@ -1,0 +1,111 @@
+"""A stream of joint tuples across several services, made by the caller (``Client([a, b])
+.subscribe().tuples(rate_hz)``): at every time t* of a schedule (one every 1/rate, from the
+moment the stream starts) a tuple at t*, chosen by the request engine and joint selection
+exactly as ``Client([a, b]).tuple(at=t*)`` would choose it.
+
+Each tuple is asked for once its frames can all be stored (t* plus the slowest camera's
+period and delay), so the engine rarely waits and the rate is the schedule's. A stream that
+falls behind (a slow service, a stall) gives up the times it missed rather than send a
+burst; a tuple that cannot be made (a service down) is a message with its error, as
+``message.tuple`` raises it. The stream runs in a thread with clients of its own: the caller's
+sockets are not shared, and a subscriber slow to read holds up no one (its queue keeps the
+newest messages; ``seq`` gaps say what it missed).
+"""
+
+from __future__ import annotations
+
+import math
+import threading
+from collections.abc import Callable
+
+from fxis_shm.client.jointrequests import JointRequests
+from fxis_shm.client.pubsub import Message
+from fxis_shm.client.single import SingleClient
+from fxis_shm.core.decimation import every_frame
+from fxis_shm.errors import Code, FxisError, RequestTimeout
+from fxis_shm.wire.protocol import StreamTopic
+
+LAG_MARGIN_NS = 2_000_000  # after t* + period + delay, the frames around t* are stored
+FIRST_PERIOD_NS = 100_000_000  # the schedule's interval until the cameras' periods are known
+
+
+class TupleStream:
+    """Joint tuples of every camera of ``endpoints`` (camera -> endpoint in ``owner``), handed
+    to ``deliver`` as Messages on ``topic``."""
+
+    def __init__(
+        self,
+        topic: str,
+        stream: StreamTopic,
+        owner: dict[str, str],
+        options: dict,
+        deliver: Callable[[Message], None],
+        partial: bool = False,
+    ):
+        self.topic, self.stream, self.partial, self.deliver = topic, stream, partial, deliver
+        self._clients = {e: SingleClient(e, **options) for e in dict.fromkeys(owner.values())}
+        try:
+            first = next(iter(self._clients.values()))
+            self._clock = first.clock
+            self._requests = JointRequests({c: self._clients[e] for c, e in owner.items()}, self._clock, first.timeout)
+        except BaseException:
+            self._close_clients()
+            raise
+        self.seq = 0
+        self._stop = threading.Event()
+        self._thread = threading.Thread(target=self._run, name=f"fxis-tuples-{topic}", daemon=True)
+        self._thread.start()
+
+    def close(self) -> None:
+        self._stop.set()
+        self._thread.join()
+        self._requests.close()
+        self._close_clients()
+
+    def _close_clients(self) -> None:
+        for client in self._clients.values():
+            client.close()
+
+    # ---- the schedule ----
+
+    def _interval_ns(self) -> int:
+        """1/rate; without a rate (or above the cameras' rate), the slowest camera's period."""
+        slowest = max((c.period_ns for c in self._requests.cameras.values()), default=0)
+        if every_frame(self.stream.rate_hz, slowest):
+            return slowest or FIRST_PERIOD_NS
+        assert self.stream.rate_hz is not None
+        return round(1e9 / self.stream.rate_hz)
+
+    def _lag_ns(self) -> int:
+        """How long after t* every camera's frames around it are stored."""
+        cams = self._requests.cameras.values()
+        return max((c.period_ns + c.state(c.snapshot()).delay_ns for c in cams), default=0) + LAG_MARGIN_NS
+
+    def _run(self) -> None:
+        t_star = self._clock()
+        while not self._stop.is_set():
+            message = self._tuple_at(t_star)
+            if self._stop.is_set():
+                return
+            self.deliver(message)
+            interval, lag = self._interval_ns(), self._lag_ns()
+            t_star += interval
+            late = self._clock() - lag - t_star
+            if late > interval:  # fell behind: give up the times missed, no burst
+                t_star += math.floor(late / interval) * interval
+            self._stop.wait(max(0, t_star + lag - self._clock()) / 1e9)
+
+    def _tuple_at(self, t_star: int) -> Message:
+        self.seq += 1
+        body = {"stream": self.topic[:-1], "seq": self.seq}
+        if self.seq == 1 and self.stream.rate_hz:
+            body["rate"] = {"asked_hz": self.stream.rate_hz}
+        try:
+            header, images, _ = self._requests.answer(
+                "tuple", True, self.stream.encoding, self.stream.quality, at=t_star, partial=self.partial or None
+            )
+        except FxisError as exc:
+            code = Code.TIMEOUT if isinstance(exc, RequestTimeout) else getattr(exc, "code", Code.INTERNAL)
+            message = str(exc).removeprefix(f"{code}: ")
+            return Message(self.topic, {**body, "ok": False, "error": {"code": code, "message": message}}, [])
+        return Message(self.topic, {**header, **body, "ok": True}, images)
