@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from fxis_shm.cli import local, query, record, run, snapshot
+from fxis_shm.cli import dashboard, local, query, record, run, snapshot
 from fxis_shm.cli.options import EXIT_USAGE
 from fxis_shm.errors import ConfigError, FxisError
 
@@ -19,6 +19,7 @@ def parser() -> argparse.ArgumentParser:
     query.add_parsers(sub)
     record.add_parser(sub)
     snapshot.add_parser(sub)
+    dashboard.add_parser(sub)
     local.add_parsers(sub)
     return p
 

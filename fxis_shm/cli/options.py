@@ -38,13 +38,20 @@ def add_client_options(sp) -> None:
 def client_for(args) -> Client:
     """A client as the command's options, the environment and the config file say."""
     file_values = load_toml(args.config) if args.config else {}
+    endpoint = args.endpoint or file_values.get("endpoint") or defaults.ENDPOINT
+    return Client(endpoint, timeout=args.timeout, keys=client_keys_for(args, file_values))
+
+
+def client_keys_for(args, file_values: dict | None = None) -> ClientKeys | None:
+    """The CurveZMQ keys the command's flags, the environment or its config file's [client] name."""
+    if file_values is None:
+        file_values = load_toml(args.config) if args.config else {}
     client_table = file_values.get("client", {})
     if not isinstance(client_table, dict):
         raise ConfigError(f"--config {args.config}: [client] must be a table (server_key, client_key)")
-    endpoint = args.endpoint or file_values.get("endpoint") or defaults.ENDPOINT
     server_key = args.server_key or os.environ.get(ENV_SERVER_KEY) or client_table.get("server_key")
     client_key = args.client_key or os.environ.get(ENV_CLIENT_KEY) or client_table.get("client_key")
-    return Client(endpoint, timeout=args.timeout, keys=client_keys(server_key, client_key))
+    return client_keys(server_key, client_key)
 
 
 def client_keys(server_key: str | None, client_key: str | None) -> ClientKeys | None:

@@ -40,21 +40,28 @@ def feed_for(spec: ViewerSpec) -> LiveFeed:
 
 
 class LiveFeed:
-    """Pictures and figures of one service for every viewer of the dashboard."""
+    """Pictures and figures of one service, or of a cell of several (``endpoint`` a list: the
+    cameras of all of them through ``Client([...])``), for every viewer of the dashboard."""
 
     def __init__(
         self,
-        endpoint: str,
-        cameras: dict[str, dict],
+        endpoint: str | list[str],
+        cameras: dict[str, dict] | None = None,
         keys: ClientKeys | None = None,
         timeout: float = REQUEST_TIMEOUT_S,
     ):
         self.endpoint = endpoint
-        self.cameras = cameras  # name -> {"kind", "fps" (configured, or None)}
+        self.cell = isinstance(endpoint, list)
         self._pictures = ThreadPoolExecutor(1, thread_name_prefix="dashboard-pictures")
         self._sampler = ThreadPoolExecutor(1, thread_name_prefix="dashboard-sampler")
         self._picture_client = Client(endpoint, timeout=timeout, keys=keys)
         self._sample_client = Client(endpoint, timeout=timeout, keys=keys)
+        if cameras is None:  # a cell: the cameras its services have now
+            cameras = {
+                name: {"kind": cam.get("kind"), "fps": cam.get("fps"), "service": cam.get("service")}
+                for name, cam in self._sample_client.status()["cameras"].items()
+            }
+        self.cameras = cameras  # name -> {"kind", "fps" (configured, or None)[, "service"]}
         self.cache = EncodedCache()
         self._rates = {name: RateMeter() for name in cameras}
         self._skews = SkewHistory()
@@ -149,7 +156,7 @@ class LiveFeed:
             )
             cameras[name] = {"configured_fps": config.get("fps"), "measured_fps": measured, "intervals_ms": []}
         try:
-            times = client.frame_times()
+            times = client.frame_times(list(cameras)) if cameras else {"cameras": {}}  # of services that answer
             for name, info in times["cameras"].items():
                 cameras[name]["intervals_ms"] = frame_intervals_ms(info["frames"], times["columns"], INTERVALS_SHOWN)
             with client.tuple(partial=True, copy=False) as tup:
@@ -157,7 +164,7 @@ class LiveFeed:
                     self._skews.add(time.monotonic() - self.started, tup.skew_ns)
         except FxisError as exc:  # e.g. every camera down: the status still says why
             log.debug("sampling frames failed: %s", exc)
-        return {
+        view = {
             "service_ok": True,
             "error": None,
             "status": status,
@@ -165,3 +172,29 @@ class LiveFeed:
             "skew_ms": self._skews.points(),
             "sampled": time.time(),
         }
+        if self.cell:
+            view["services"] = services_view(status, client.clocks)
+        return view
+
+
+def services_view(status: dict, clocks: dict) -> dict:
+    """What the page shows of each service of a cell: whether it answers (and why not), its
+    name and uptime, and its clock against the dashboard's (offset, uncertainty, how known)."""
+    services = {}
+    for endpoint, answer in status["services"].items():
+        clock = clocks.get(endpoint)
+        services[endpoint] = {
+            "ok": answer.get("ok", False),
+            "error": answer.get("error"),
+            "service": answer.get("service"),
+            "uptime_s": answer.get("uptime_s"),
+            "cameras": sorted(answer.get("cameras", {})),
+            "clock": None
+            if clock is None
+            else {
+                "offset_ms": clock.offset_ns / 1e6,
+                "uncertainty_ms": clock.uncertainty_ns / 1e6,
+                "method": clock.method,
+            },
+        }
+    return services

@@ -1,0 +1,93 @@
+"""``fxis dashboard tcp://hostA:5555 tcp://hostB:5555``: one live page for a cell of several
+services (the dashboard ``fxis run --http`` serves for one, over ``Client([...])``): every
+camera of every service, each service's health and clock, the skew of tuples across hosts,
+and "Save tuple" across hosts. It runs here, in the foreground, until Ctrl-C."""
+
+from __future__ import annotations
+
+import asyncio
+import signal
+import sys
+import threading
+
+from fxis_shm.cli.options import client_keys_for
+from fxis_shm.errors import ConfigError
+from fxis_shm.service.config import ViewerAccess, check_tls_files, http_address, new_token, read_token_file
+from fxis_shm.service.supervisor import link_host
+from fxis_shm.viewers.dashboard import serve
+from fxis_shm.viewers.livefeed import LiveFeed
+from fxis_shm.wire.security import is_loopback
+
+DEFAULT_HTTP = "127.0.0.1:8080"
+
+
+def access_for(args) -> ViewerAccess:
+    """The token the page requires (a file's; a new one where other hosts reach it, unless
+    --insecure-bind), and its TLS files; ConfigError for a bad one."""
+    exposed = not is_loopback(f"tcp://{http_address(args.http)[0]}")
+    if bool(args.viewer_tls_cert) != bool(args.viewer_tls_key):
+        raise ConfigError("TLS needs both --viewer-tls-cert and --viewer-tls-key")
+    if args.viewer_tls_cert:
+        check_tls_files(args.viewer_tls_cert, args.viewer_tls_key)
+    token = None
+    if args.viewer_token_file:
+        token = read_token_file(args.viewer_token_file)
+    elif exposed and not args.insecure_bind:
+        token = new_token()
+    return ViewerAccess(token, args.viewer_tls_cert, args.viewer_tls_key)
+
+
+def dashboard_command(args) -> int:
+    if len(set(args.endpoints)) != len(args.endpoints):
+        raise ConfigError(f"an endpoint is given twice: {args.endpoints}")
+    access = access_for(args)
+    host, port = http_address(args.http)
+    feed = LiveFeed(list(args.endpoints), keys=client_keys_for(args), timeout=args.timeout)
+    stop = threading.Event()
+    for sig in (signal.SIGINT, signal.SIGTERM):
+        signal.signal(sig, lambda *_: stop.set())
+
+    def ready() -> None:
+        scheme = "https" if access.tls_cert else "http"
+        print(f"cell dashboard of {', '.join(args.endpoints)} on {scheme}://{host}:{port}/", flush=True)
+        if access.token:
+            shown = f"<the token in {args.viewer_token_file}>" if args.viewer_token_file else access.token
+            print(f"  it requires a token: open {scheme}://{link_host(args.http, 'http')}/?token={shown}", flush=True)
+        elif not is_loopback(f"tcp://{host}"):
+            print("  WARNING: other hosts reach it WITHOUT a token (--insecure-bind)", file=sys.stderr, flush=True)
+
+    try:
+        asyncio.run(serve(feed, host, port, stop, on_ready=ready, access=access))
+    except OSError as exc:
+        raise ConfigError(f"--http {args.http}: {exc.strerror or exc}") from None
+    finally:
+        feed.close()
+    return 0
+
+
+def add_parser(sub) -> None:
+    p = sub.add_parser(
+        "dashboard",
+        help="one live dashboard for a cell of several services",
+        description="Serve the live dashboard over several services at once: every camera of every service, "
+        "each service's health and clock against this host's, the skew of tuples across hosts, and 'Save tuple' "
+        "across hosts. On an address other hosts reach it requires a token (printed as a link at start). "
+        "Runs until Ctrl-C. For one service, fxis run --http serves the same page.",
+    )
+    p.add_argument("endpoints", nargs="+", metavar="ENDPOINT", help="the services' request endpoints (tcp://HOST:5555)")
+    p.add_argument(
+        "--http", default=DEFAULT_HTTP, metavar="ADDR", help=f"where to serve the page (default {DEFAULT_HTTP})"
+    )
+    p.add_argument("--timeout", type=float, default=1.5, help="seconds a service may take to answer (default 1.5)")
+    p.add_argument("--server-key", metavar="FILE", help="the services' public key (CurveZMQ; default $FXIS_SERVER_KEY)")
+    p.add_argument(
+        "--client-key", metavar="FILE", help="this client's .key_secret (CurveZMQ; default $FXIS_CLIENT_KEY)"
+    )
+    p.add_argument("--config", metavar="FILE", help="a config file: server_key and client_key of its [client]")
+    p.add_argument("--viewer-token-file", metavar="FILE", help="the token the page requires (default: a new one)")
+    p.add_argument("--viewer-tls-cert", metavar="FILE", help="serve https with this certificate (PEM)")
+    p.add_argument("--viewer-tls-key", metavar="FILE", help="... and this key (PEM)")
+    p.add_argument(
+        "--insecure-bind", action="store_true", help="serve other hosts without a token (warns; anyone may look)"
+    )
+    p.set_defaults(func=dashboard_command)
