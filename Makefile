@@ -11,7 +11,11 @@ BIN    := $(VENV)/bin
 
 setup: $(VENV)/.installed
 
-$(VENV)/.installed: pyproject.toml setup.py fxis_shm/shm/_ordered.c scripts/install-system-packages.sh
+# the compiled parts (setup.py): the C helpers and the request engine's modules mypyc compiles
+COMPILED_SOURCES := fxis_shm/shm/_ordered.c fxis_shm/shm/_slotio.c $(addprefix fxis_shm/core/,$(addsuffix .py,\
+                    timesearch snapshot selection waitpolicy sequences decisions engine))
+
+$(VENV)/.installed: pyproject.toml setup.py $(COMPILED_SOURCES) scripts/install-system-packages.sh
 	bash scripts/install-system-packages.sh
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
@@ -21,8 +25,15 @@ $(VENV)/.installed: pyproject.toml setup.py fxis_shm/shm/_ordered.c scripts/inst
 demo: setup
 	$(BIN)/python bench/latency.py
 
+# The whole suite on the compiled hot path, then the engine's, the ring's and the local path's tests
+# again on the pure-Python fallback (FXIS_PURE_PYTHON=1; docs/design.md, "The compiled hot path").
+PURE_TESTS := tests/unit tests/integration/test_ring.py tests/integration/test_localpath.py \
+              tests/integration/test_localwaits.py
+
 test: setup lint
+	$(BIN)/python -c "import fxis_shm, sys; sys.exit(not fxis_shm.compiled)"
 	$(BIN)/python -m pytest
+	FXIS_PURE_PYTHON=1 $(BIN)/python -m pytest -q $(PURE_TESTS)
 
 lint: setup
 	$(BIN)/ruff check .

@@ -1,7 +1,49 @@
-"""Builds the one compiled part, the ring's memory-ordering helper (fxis_shm/shm/_ordered.c).
-Everything else is in pyproject.toml. The helper is optional: without a C compiler the
-install goes on, and the rings then work on x86-64 only (fxis_shm/shm/ordering.py)."""
+"""Builds the compiled parts; everything else is in pyproject.toml. Each is optional: without a C
+compiler (or without mypy) the install goes on, and that part runs as Python, the slow path
+(fxis_shm/_compiled.py says so at import; docs/design.md, "The compiled hot path").
+
+- fxis_shm/shm/_ordered.c: the ring's memory-ordering helper (without it, rings work on x86-64 only);
+- fxis_shm/shm/_slotio.c: the ring reader's seqlock reads (snapshot records, copy, check);
+- the request engine's modules (fxis_shm/_compiled.py, MODULES), compiled by mypyc from the very
+  .py files mypy --strict checks, into one group library fxis_shm/core/_hot__mypyc.
+"""
+
+import os
+import sys
 
 from setuptools import Extension, setup
 
-setup(ext_modules=[Extension("fxis_shm.shm._ordered", ["fxis_shm/shm/_ordered.c"], optional=True)])
+HOT = [
+    "fxis_shm/core/timesearch.py",
+    "fxis_shm/core/snapshot.py",
+    "fxis_shm/core/selection.py",
+    "fxis_shm/core/waitpolicy.py",
+    "fxis_shm/core/sequences.py",
+    "fxis_shm/core/decisions.py",
+    "fxis_shm/core/engine.py",
+]
+
+
+def compiled_core() -> list:
+    if os.environ.get("FXIS_PURE_PYTHON") == "1":
+        print("setup.py: FXIS_PURE_PYTHON=1, the request engine stays Python", file=sys.stderr)
+        return []
+    try:
+        from mypyc.build import mypycify
+
+        extensions = mypycify(HOT, opt_level="3", group_name="fxis_shm.core._hot")
+    except (Exception, SystemExit) as exc:  # no mypy, or it failed: the .py files serve (slow path)
+        print(f"setup.py: the request engine stays Python (mypyc: {exc!r})", file=sys.stderr)
+        return []
+    for extension in extensions:
+        extension.optional = True  # no C compiler: the .py files serve
+    return extensions
+
+
+setup(
+    ext_modules=[
+        Extension("fxis_shm.shm._ordered", ["fxis_shm/shm/_ordered.c"], optional=True),
+        Extension("fxis_shm.shm._slotio", ["fxis_shm/shm/_slotio.c"], optional=True),
+        *compiled_core(),
+    ]
+)

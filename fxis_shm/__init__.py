@@ -2,7 +2,7 @@
 time-synchronized images over ZeroMQ. The public API is what ``__all__`` names
 (README.md, "The public API")."""
 
-from fxis_shm import _sourcetree
+from fxis_shm import _compiled, _sourcetree  # _compiled first: it chooses how the modules below load
 from fxis_shm.client.client import Client
 from fxis_shm.client.frames import Frame, FrameTuple
 from fxis_shm.client.multiclient import MultiClient
@@ -38,6 +38,7 @@ __all__ = [
     "Message",
     "handshake",
     "read_stamp",
+    "compiled",
     "FxisError",
     "ConfigError",
     "ProtocolError",
@@ -55,3 +56,4 @@ __all__ = [
 __version__ = "0.1.0"
 
 _sourcetree.install(__path__[0])  # fxis_shm.workers from a source checkout, too
+compiled = _compiled.check()  # the hot path runs compiled (False: the slow path, or FXIS_PURE_PYTHON=1)

@@ -8,7 +8,9 @@
 #   emulated hosts (ip netns, veth links, tc's token bucket: tests/hosts.py);
 #   util-linux for unshare (a client in its own mount namespace, test_localpath; the
 #   emulated hosts' time and mount namespaces);
-#   gcc, which builds the ring's memory-ordering helper (fxis_shm/shm/_ordered.c);
+#   gcc, which builds the ring's memory-ordering helper (fxis_shm/shm/_ordered.c), its seqlock reads
+#   (_slotio.c) and the request engine mypyc compiles (setup.py), and python3-dev (Python.h) for them
+#   when this Python has no headers of its own;
 # - libturbojpeg0, the TurboJPEG library PyTurboJPEG loads (bench/jpeg_codecs.py measures it);
 # - chromium, the headless browser the dashboard's browser test drives
 #   (tests/integration/test_dashboard_browser.py);
@@ -21,6 +23,8 @@ set -euo pipefail
 wanted=(gir1.2-aravis-0.8 aravis-tools libgirepository1.0-dev libcairo2-dev pkg-config iproute2 util-linux gcc libturbojpeg0 chromium
         g++ make libzmq3-dev cppzmq-dev nlohmann-json3-dev)
 python3 -c "import venv, ensurepip" 2>/dev/null || wanted+=(python3-venv)
+python3 -c "import os, sysconfig; assert os.path.isfile(os.path.join(sysconfig.get_paths()['include'], 'Python.h'))" \
+  2>/dev/null || wanted+=(python3-dev)
 
 missing=()
 for pkg in "${wanted[@]}"; do

@@ -204,10 +204,10 @@ def _sequence(
     else:
         try:
             indices = sequences.reference_indices(spec, timelines[ref])
-        except sequences.NotYet as exc:
-            return Wait({ref: None}, f"the frames of camera {ref!r} ({exc})")
-        except sequences.NotHeld as exc:
-            raise Reject(Code.OUT_OF_RANGE, f"camera {ref!r}: {exc}") from None
+        except sequences.NotYet as not_yet:  # (two names: mypyc types each by its first except)
+            return Wait({ref: None}, f"the frames of camera {ref!r} ({not_yet})")
+        except sequences.NotHeld as not_held:
+            raise Reject(Code.OUT_OF_RANGE, f"camera {ref!r}: {not_held}") from None
         targets = [timelines[ref].at(i) for i in indices]
         t_last = targets[-1] if targets else p.t_star
         for cam in p.cameras[1:]:

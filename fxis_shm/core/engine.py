@@ -266,7 +266,7 @@ class RequestEngine:
                 waited = (p.deadline - max(p.t_received, p.t_star)) / 1e6
                 raise Reject(Code.TIMEOUT, f"{decision.reason} did not arrive within {waited:.0f} ms")
             give_ups = [t for t in decision.until.values() if t is not None]
-            p.wake_at = min([p.deadline, now + LIVENESS_CHECK_NS, *give_ups])
+            p.wake_at = min(p.deadline, now + LIVENESS_CHECK_NS, *give_ups)
             return False
         except Reject as exc:
             actions.append(Failure(p, exc.code, exc.message))

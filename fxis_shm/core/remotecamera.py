@@ -42,8 +42,8 @@ class RemoteCamera:
 
     def service_row(self, i: int) -> dict[str, int]:
         """Frame ``i`` of the last snapshot: its id, generation and times (the caller's clock)."""
-        rec = self._snapshot.meta[i]
-        return {k: int(rec[k]) for k in ("frame_id", "generation", *_TIMES)}
+        rec = self._snapshot.frame_meta(i)  # logical index i is slot i here
+        return {k: int(getattr(rec, k)) for k in ("frame_id", "generation", *_TIMES)}
 
     # ---- what the request engine reads (fxis_shm.core.engine.CameraSource) ----
 
@@ -56,12 +56,11 @@ class RemoteCamera:
         return self._snapshot
 
     def state(self, snapshot: Snapshot) -> CameraState:
-        n = len(snapshot.timeline)
         return CameraState(
             newest=snapshot.newest,
             period_ns=self.period_ns,
             delay_ns=int(self._info.get("delay_ns", 0)),
-            newest_stored=int(snapshot.meta["t_stored"][n - 1]) if n else None,
+            newest_stored=snapshot.newest_stored,
         )
 
     @property
@@ -81,7 +80,7 @@ class RemoteCamera:
         n = len(self._snapshot.timeline)
         if not n or self.period_ns <= 0:
             return None
-        return int(self._snapshot.meta["t_stored"][n - 1]) + self.period_ns
+        return int(self._snapshot.frame_meta(n - 1).t_stored) + self.period_ns
 
 
 def _snapshot_of(rows: list[list[int]], columns: list[str], offset_ns: int) -> Snapshot:
@@ -93,4 +92,4 @@ def _snapshot_of(rows: list[list[int]], columns: list[str], offset_ns: int) -> S
         for k, column in enumerate(columns):
             meta[column] = table[:, k] - (offset_ns if column in _TIMES else 0)
     meta["seq"] = 2 * np.arange(len(rows)) + 2
-    return Snapshot(Timeline(meta["t_capture"].tolist(), 0, len(rows)), 0, meta)
+    return Snapshot.of_table(Timeline(meta["t_capture"].tolist(), 0, len(rows)), 0, meta)

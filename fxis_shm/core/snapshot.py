@@ -7,7 +7,9 @@ frame list (fxis_shm.core.remotecamera), without importing shared memory.
 
 from __future__ import annotations
 
+from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 
@@ -40,25 +42,43 @@ class Snapshot:
 
     timeline: Timeline  # over t_capture, oldest valid frame first
     first_write: int  # global write index of the timeline's logical index 0
-    meta: np.ndarray  # copy of the slot table (SLOT records)
+    rows: Sequence[SlotMeta | None]  # by physical slot: the frame each valid slot holds
+
+    @classmethod
+    def of_table(cls, timeline: Timeline, first_write: int, meta: Any) -> Snapshot:
+        """A snapshot over a copy of a slot table (SLOT records; slots outside the timeline unread)."""
+        count, slots = len(timeline), len(meta)
+        rows: list[SlotMeta | None] = [None] * slots
+        for w in range(first_write, first_write + count):
+            rec = meta[w % slots]
+            rows[w % slots] = SlotMeta(
+                int(rec["frame_id"]),
+                int(rec["t_capture"]),
+                int(rec["t_stored"]),
+                int(rec["t_available"]),
+                int(rec["generation"]),
+            )
+        return cls(timeline, first_write, rows)
 
     def slot(self, i: int) -> int:
-        return (self.first_write + i) % len(self.meta)  # logical index i is write first_write + i
+        return (self.first_write + i) % len(self.rows)  # logical index i is write first_write + i
 
     def seq(self, i: int) -> int:
         """The seq value the slot of logical index ``i`` must show for a valid copy."""
         return 2 * (self.first_write + i) + 2
 
     def frame_meta(self, i: int) -> SlotMeta:
-        rec = self.meta[self.slot(i)]
-        return SlotMeta(
-            int(rec["frame_id"]),
-            int(rec["t_capture"]),
-            int(rec["t_stored"]),
-            int(rec["t_available"]),
-            int(rec["generation"]),
-        )
+        row = self.rows[self.slot(i)]
+        if row is None:
+            raise IndexError(f"no frame at logical index {i} of a snapshot of {len(self.timeline)}")
+        return row
 
     @property
     def newest(self) -> int | None:
         return self.timeline.at(len(self.timeline) - 1) if len(self.timeline) else None
+
+    @property
+    def newest_stored(self) -> int | None:
+        """t_stored of the newest frame, None if there is none."""
+        n = len(self.timeline)
+        return self.frame_meta(n - 1).t_stored if n else None

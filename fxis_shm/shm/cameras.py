@@ -3,7 +3,6 @@ the worker replaces it), whether its worker is alive, and its status."""
 
 from __future__ import annotations
 
-import numpy as np
 import posix_ipc
 
 from fxis_shm.core import timebase
@@ -103,12 +102,11 @@ class CameraHandle:
 
     def state(self, snapshot: Snapshot) -> CameraState:
         ring = self.reader
-        n = len(snapshot.timeline)
         return CameraState(
             newest=snapshot.newest,
             period_ns=ring.field("period_ns"),
             delay_ns=max(0, ring.field("delay_ns")),
-            newest_stored=int(snapshot.meta["t_stored"][snapshot.slot(n - 1)]) if n else None,
+            newest_stored=snapshot.newest_stored,
         )
 
     def status(self, now: int) -> dict:
@@ -121,7 +119,7 @@ class CameraHandle:
             return info
         snap = ring.snapshot()
         period = ring.field("period_ns")
-        newest_stored = int(snap.meta[snap.slot(len(snap.timeline) - 1)]["t_stored"]) if len(snap.timeline) else None
+        newest_stored = snap.newest_stored
         info.update(
             shape=list(ring.layout.shape),
             dtype=ring.layout.dtype,
@@ -156,13 +154,13 @@ class CameraHandle:
         if self.reader is None:
             return info
         snap = self.reader.snapshot()
-        picked = snap.meta[[snap.slot(i) for i in range(len(snap.timeline))]]
+        rows = [snap.frame_meta(i) for i in range(len(snap.timeline))]
         info.update(
             period_ns=self.period_ns,
             delay_ns=max(0, self.reader.field("delay_ns")),
             slots=self.reader.slots,
             triggered=self.triggered,
-            frames=np.stack([picked[k].astype(np.int64) for k in FRAME_FIELDS], axis=1).tolist(),
+            frames=[[int(getattr(row, k)) for k in FRAME_FIELDS] for row in rows],
         )
         return info
 

@@ -136,9 +136,18 @@ class CopyOut:
             raise
         images.append(image)
         meta = snap.frame_meta(i)
-        return protocol.frame_meta(
-            cam, meta.frame_id, meta.t_capture, meta.t_stored, meta.generation, image, buffer, meta.t_available
+        layout = reader.layout  # what protocol.frame_meta reads of the image, known already
+        described = protocol.described(
+            cam,
+            meta.frame_id,
+            meta.t_capture,
+            meta.t_stored,
+            meta.generation,
+            layout.shape,
+            layout.dtype,
+            meta.t_available,
         )
+        return {**described, "buffer": buffer}
 
     def encode(self, meta: dict, image, encoding: str, quality: int | None) -> tuple[dict, bytes]:
         """A copied frame (checked whole) in ``encoding``, encoded once for every reply and stream."""

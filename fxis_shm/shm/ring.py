@@ -25,16 +25,17 @@ from __future__ import annotations
 
 import mmap
 import os
+import struct
 from dataclasses import dataclass
 
 import numpy as np
 import posix_ipc
 
 from fxis_shm.core import timebase
-from fxis_shm.core.snapshot import SLOT, Snapshot
+from fxis_shm.core.snapshot import SLOT, SlotMeta, Snapshot
 from fxis_shm.core.timesearch import Timeline
 from fxis_shm.errors import Overwritten, RingError
-from fxis_shm.shm import history, naming, ordering
+from fxis_shm.shm import history, naming, ordering, slotio
 
 MAGIC = b"FXISRNG1"
 LAYOUT_VERSION = 2
@@ -75,6 +76,13 @@ HEADER = np.dtype(
 )
 assert HEADER.itemsize <= HEADER_BYTES and SLOT.itemsize == 48
 WRITE_COUNT_AT = HEADER.fields["write_count"][1]  # byte offsets of the ordered words
+# the header's numbers, read in place (a numpy field read costs ten times as much)
+_STRUCTS = {"<u4": "<I", "<u8": "<Q", "<i8": "<q"}
+_NUMBERS = {
+    name: (struct.Struct(_STRUCTS[dtype.str]).unpack_from, offset)
+    for name, (dtype, offset) in HEADER.fields.items()
+    if dtype.str in _STRUCTS
+}
 
 
 def _seq_at(slot: int) -> int:
@@ -149,10 +157,11 @@ class _Mapping:
     def field(self, name: str) -> int:
         if name == "write_count":  # the word that publishes frames: read it ordered
             return ordering.load_acquire(self._mm, WRITE_COUNT_AT)
-        return int(self.header[name])
+        unpack, offset = _NUMBERS[name]
+        return unpack(self._mm, offset)[0]
 
     def _unmap(self) -> None:
-        for attr in ("header", "table", "seq", "data"):
+        for attr in ("header", "table", "seq", "data", "_views_ro"):
             self.__dict__.pop(attr, None)
         if getattr(self, "_mm", None) is not None:
             try:
@@ -325,6 +334,11 @@ class RingReader(_Mapping):
 
     def _open(self, name: str) -> None:
         self.name = name
+        self._seen = self._first = 0  # the writes read so far; the oldest still valid then
+        self._rows: list[SlotMeta | None] = []
+        self._times: list[int] = []
+        self._last: Snapshot | None = None
+        self._views_ro: list[np.ndarray] | None = None
         try:
             shm = posix_ipc.SharedMemory(self.name, read_only=True)
         except posix_ipc.ExistentialError:
@@ -337,40 +351,53 @@ class RingReader(_Mapping):
             self._map(shm.fd, shm.size, writable=False)
         finally:
             shm.close_fd()
+        self._rows, self._times = [None] * self.slots, [0] * self.slots
+        self._data_at, self._stride = self.field("data_offset"), self.field("slot_stride")
 
     @property
     def retired(self) -> bool:
-        return int(self.header["state"]) == STATE_RETIRED
+        return self.field("state") == STATE_RETIRED
 
     def snapshot(self) -> Snapshot:
-        """The frames that are complete now, oldest first."""
+        """The frames that are complete now, oldest first. Only the slot records written since
+        the last look are read (the others are known), and with nothing new since then the
+        last snapshot is the answer."""
+        n = self.slots
         for _ in range(4):
-            before = self.field("write_count")
-            table = self.table.copy()
-            ordering.fence_acquire()  # the copy is complete before the checks below read
-            after = self.field("write_count")
-            if before == after:
+            count = self.field("write_count")
+            start = max(self._seen, count - n)  # the writes not read yet
+            if start == count:
+                fresh = []
                 break
-        seq_now = self.seq.copy()  # a record the writer began to overwrite during the copy shows here
-        count = after
-        lo = max(0, count - self.slots)
-        writes = np.arange(lo, count, dtype=np.uint64)
-        slots = writes % np.uint64(self.slots)
-        copied = table["seq"][slots]
-        valid = (copied == 2 * writes + 2) & (seq_now[slots] == copied)
-        # Only the oldest end can be invalid (being overwritten); keep the newest valid run.
-        bad = np.flatnonzero(~valid)
-        first = lo + (int(bad[-1]) + 1 if bad.size else 0)
+            fresh = slotio.records(self._mm, HEADER_BYTES, n, start, count)
+            if self.field("write_count") == count:
+                break
+        first = max(self._first, count - n)
+        if len(fresh) != count - start:  # a record overwritten while read: the valid run starts after it
+            read = {rec[0] for rec in fresh}
+            first = max(first, max(w for w in range(start, count) if w not in read) + 1)
+        # the writer may have begun to overwrite the oldest frame (write count's slot)
+        while first < count and first == count - n and not slotio.holds(self._mm, _seq_at(first % n), 2 * first + 2):
+            first += 1
+        if not fresh and first == self._first and self._last is not None:
+            return self._last
+        rows, times = self._rows, self._times
+        if fresh:
+            rows, times = list(rows), list(times)  # snapshots handed out keep theirs
+            for w, *record in fresh:
+                rows[w % n] = SlotMeta(*record)
+                times[w % n] = record[1]
+            self._rows, self._times = rows, times
+        self._seen, self._first = count, first
         # Oldest first in a list: the searches read single elements, which a list serves far
         # faster than numpy, and a vector that does not wrap is searched by plain bisection.
-        times = table["t_capture"].tolist()
-        oldest = first % self.slots
-        timeline = Timeline(times[oldest:] + times[:oldest], 0, count - first)
-        return Snapshot(timeline, first, table)
+        oldest = first % n
+        self._last = Snapshot(Timeline(times[oldest:] + times[:oldest], 0, count - first), first, rows)
+        return self._last
 
     @property
     def instance(self) -> int:
-        return int(self.header["instance"])
+        return self.field("instance")
 
     def copy(self, snapshot: Snapshot, i: int, out: np.ndarray | None = None) -> np.ndarray:
         """Copy the frame of logical index ``i``; raises Overwritten if the slot changed."""
@@ -379,26 +406,31 @@ class RingReader(_Mapping):
     def copy_slot(self, slot: int, expected_seq: int, out: np.ndarray | None = None) -> np.ndarray:
         """Copy the frame in ``slot`` if it is the one ``expected_seq`` names and stays
         so to the end of the copy; raises Overwritten otherwise."""
-        self.check_slot(slot, expected_seq, "before")
+        if not 0 <= slot < self.slots:
+            raise Overwritten(f"{self.name} has no slot {slot}")
         if out is None:
             out = np.empty(self.layout.shape, dtype=self.layout.dtype)
-        np.copyto(out, self.slot_image(slot))
-        ordering.fence_acquire()  # every byte was read before the seq is read again
-        self.check_slot(slot, expected_seq, "during")
+        nbytes = self.layout.nbytes
+        torn = slotio.copy(self._mm, _seq_at(slot), expected_seq, self._data_at + slot * self._stride, nbytes, out)
+        if torn:
+            raise Overwritten(
+                f"slot {slot} of {self.name} was overwritten {'before' if torn == 1 else 'during'} the copy"
+            )
         return out
 
     def view_slot(self, slot: int, expected_seq: int) -> np.ndarray:
         """A read-only view of the frame in ``slot`` (no copy): valid only while
         ``slot_holds(slot, expected_seq)`` stays true; the writer may overwrite it any time."""
         self.check_slot(slot, expected_seq, "before")
-        view = self.slot_image(slot)
-        view.flags.writeable = False
-        return view
+        if self._views_ro is None:  # made once: a view of a view is cheaper than a new one
+            self._views_ro = [self.slot_image(s) for s in range(self.slots)]
+            for view in self._views_ro:
+                view.flags.writeable = False
+        return self._views_ro[slot].view()
 
     def slot_holds(self, slot: int, expected_seq: int) -> bool:
         """True while the slot still holds that frame; what was read of it before is valid."""
-        ordering.fence_acquire()
-        return ordering.load_acquire(self._mm, _seq_at(slot)) == expected_seq
+        return slotio.holds(self._mm, _seq_at(slot), expected_seq)
 
     def check_slot(self, slot: int, expected_seq: int, when: str) -> None:
         if not 0 <= slot < self.slots:

@@ -3,6 +3,7 @@ generations, permissions, and a concurrent writer process."""
 
 import multiprocessing
 import os
+import random
 import stat
 
 import numpy as np
@@ -151,3 +152,28 @@ def test_concurrent_writer_never_yields_a_torn_copy(service):
     writer.join(30)
     assert writer.exitcode == 0 and good > 0
     reader.close()
+
+
+def _frames_of(snap):
+    return [(snap.seq(i), snap.frame_meta(i), snap.timeline.at(i)) for i in range(len(snap.timeline))]
+
+
+def test_a_snapshot_kept_up_to_date_equals_one_read_whole(service):
+    """A reader reads only the slot records written since its last look: what it shows must be
+    what a reader reading the whole table for the first time shows, through wraps and laps."""
+    rng = random.Random(7)
+    writer = RingWriter(service, "c", LAYOUT, 5)
+    steady = RingReader(service, "c")
+    k = 0
+    for _ in range(80):
+        for _ in range(rng.choice([0, 0, 1, 1, 2, 4, 5, 9])):
+            writer.write(frame(k), k, 1000 * k + rng.randrange(500))
+            k += 1
+        fresh = RingReader(service, "c")
+        kept, whole = steady.snapshot(), fresh.snapshot()
+        fresh.close()
+        assert (kept.first_write, _frames_of(kept)) == (whole.first_write, _frames_of(whole))
+        if kept is not steady.snapshot():  # nothing new: the same snapshot again
+            raise AssertionError("a look with nothing new made a new snapshot")
+    steady.close()
+    writer.close()

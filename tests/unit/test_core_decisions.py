@@ -54,7 +54,7 @@ def snap(times, stored=None) -> Snapshot:
     meta = np.zeros(max(1, len(times)), dtype=SLOT)
     for w, (t, s) in enumerate(zip(times, stored)):
         meta[w] = (2 * w + 2, w, t, s, t, 1)
-    return Snapshot(Timeline(list(times), 0, len(times)), 0, meta)
+    return Snapshot.of_table(Timeline(list(times), 0, len(times)), 0, meta)
 
 
 def state(s: Snapshot, period: int = P) -> CameraState:

@@ -54,7 +54,7 @@ class TableCamera:
             t_capture, t_stored, generation = self.frames[w]
             meta[w % self.slots] = (2 * w + 2, w, t_capture, t_stored, t_capture, generation)
         times = [self.frames[w][0] for w in range(first, count)]  # oldest first, as RingReader gives
-        return Snapshot(Timeline(times, 0, len(times)), first, meta)
+        return Snapshot.of_table(Timeline(times, 0, len(times)), first, meta)
 
     def state(self, snap: Snapshot) -> CameraState:
         n = len(snap.timeline)

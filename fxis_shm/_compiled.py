@@ -1,0 +1,113 @@
+"""Which of the hot path's modules run compiled, and the switch that forces them all to Python.
+
+The install compiles the request engine's modules (``MODULES``, the pure core: mypyc builds
+each .py into an extension module beside it, setup.py) and the ring reader's seqlock reads
+(``fxis_shm.shm._slotio``, C). Python imports an extension module before the .py of the same
+name, so the compiled code is chosen at import when it is there; the .py files stay the one
+source of both. Without a C compiler at install time nothing is compiled, and everything
+runs as Python, the slow path (a warning says so once, at import).
+
+FXIS_PURE_PYTHON=1 in the environment forces the Python of every module here (the
+finder below puts each .py before its extension module), for tests and measurements. The
+same finder serves the .py files when the compiled group is missing or older than one of
+them (a module edited since the last build: `make setup` or `pip install -e .` rebuilds).
+``check()`` (``fxis_shm.compiled``) is True when every one of them runs compiled.
+"""
+
+from __future__ import annotations
+
+import importlib.abc
+import importlib.machinery
+import importlib.util
+import logging
+import os
+import sys
+from collections.abc import Sequence
+from types import ModuleType
+
+PURE = os.environ.get("FXIS_PURE_PYTHON") == "1"
+GROUP = "fxis_shm.core._hot__mypyc"  # mypyc's library of the compiled modules (setup.py)
+
+# compiled by mypyc (setup.py): the modules of one request's decision, leaves first
+MODULES = (
+    "fxis_shm.core.timesearch",
+    "fxis_shm.core.snapshot",
+    "fxis_shm.core.selection",
+    "fxis_shm.core.waitpolicy",
+    "fxis_shm.core.sequences",
+    "fxis_shm.core.decisions",
+    "fxis_shm.core.engine",
+)
+C_HELPER = "fxis_shm.shm._slotio"
+
+
+class SourceFirst(importlib.abc.MetaPathFinder):
+    """Finds the modules of ``MODULES`` as their .py files, never as extension modules."""
+
+    def find_spec(
+        self, fullname: str, path: Sequence[str] | None, target: ModuleType | None = None
+    ) -> importlib.machinery.ModuleSpec | None:
+        if fullname not in MODULES or not path:
+            return None
+        for folder in path:
+            source = os.path.join(folder, fullname.rpartition(".")[2] + ".py")
+            if os.path.isfile(source):
+                return importlib.util.spec_from_file_location(fullname, source)
+        return None
+
+
+def stale() -> str | None:
+    """Why the compiled modules cannot serve (None: they can): not built, or older than a .py."""
+    spec = importlib.util.find_spec(GROUP)
+    if spec is None or not spec.origin:
+        return "not built"
+    folder = os.path.dirname(spec.origin)
+    if not os.path.isfile(os.path.join(folder, "..", "..", "pyproject.toml")):
+        return None  # an install (a wheel's files carry no build times): only a checkout is edited
+    built = os.path.getmtime(spec.origin)
+    newer = [m for m in MODULES if os.path.getmtime(os.path.join(folder, m.rpartition(".")[2] + ".py")) > built]
+    return f"{', '.join(newer)} changed since the build" if newer else None
+
+
+def install() -> None:
+    global _why_source
+    if PURE:
+        _why_source = "FXIS_PURE_PYTHON=1"
+    else:
+        _why_source = stale()
+    if _why_source and not any(isinstance(f, SourceFirst) for f in sys.meta_path):
+        sys.meta_path.insert(0, SourceFirst())
+
+
+_why_source: str | None = None
+
+
+def is_compiled(module: ModuleType) -> bool:
+    return not (getattr(module, "__file__", None) or "").endswith(".py")
+
+
+def status() -> dict[str, bool]:
+    """Each module of the hot path (imported now): True if it runs compiled."""
+    import importlib
+
+    from fxis_shm.shm import slotio
+
+    modules = {name: is_compiled(importlib.import_module(name)) for name in MODULES}
+    return {**modules, C_HELPER: slotio.IMPL == "c"}
+
+
+def check() -> bool:
+    """True if the whole hot path runs compiled; else says, once, that it runs the slow path."""
+    state = status()
+    compiled = all(state.values())
+    if not compiled and not PURE:
+        logging.getLogger("fxis_shm").warning(
+            "fxis-shm runs its hot path as Python, the slow path (not compiled: %s%s): reinstall with a C "
+            "compiler present (pip install -e . builds it)",
+            ", ".join(name for name, done in state.items() if not done),
+            f"; {_why_source}" if _why_source else "",
+        )
+    return compiled
+
+
+install()  # on import, before any module it names is imported (fxis_shm/__init__.py imports it first)

@@ -1,0 +1,67 @@
+"""The ring reader's three seqlock reads, in C where built (``fxis_shm.shm._slotio``) and in
+Python otherwise; ``IMPL`` says which ("c" or "python"). Both do the same steps in the same
+order (tests/unit/test_slotio.py checks that they answer alike); FXIS_PURE_PYTHON=1 takes
+the Python ones (fxis_shm._compiled).
+
+- ``records(buffer, table, slots, lo, hi)``: the slot records of writes lo..hi-1 that were
+  whole while read, as (w, frame_id, t_capture, t_stored, t_available, generation), oldest first;
+- ``copy(buffer, seq_at, seq, src, nbytes, out)``: the slot's bytes into ``out`` if the slot
+  showed ``seq`` before and after: 0, else 1 (overwritten before) or 2 (during);
+- ``holds(buffer, seq_at, seq)``: after an acquire fence, does the slot still show ``seq``?
+"""
+
+from __future__ import annotations
+
+import os
+import struct
+
+import numpy as np
+
+from fxis_shm.shm import ordering
+
+_RECORD = struct.Struct("<QQqqqQ")  # the ring's slot record (fxis_shm.core.snapshot.SLOT)
+
+
+def py_records(buffer, table: int, slots: int, lo: int, hi: int) -> list[tuple[int, ...]]:
+    out = []
+    for w in range(lo, hi):
+        at = table + (w % slots) * _RECORD.size
+        expected = 2 * w + 2
+        if ordering.load_acquire(buffer, at) != expected:
+            continue
+        rec = _RECORD.unpack_from(buffer, at)
+        ordering.fence_acquire()  # the fields were read before seq is read again
+        if ordering.load_acquire(buffer, at) == expected:
+            out.append((w, *rec[1:]))
+    return out
+
+
+def py_copy(buffer, seq_at: int, seq: int, src: int, nbytes: int, out) -> int:
+    if ordering.load_acquire(buffer, seq_at) != seq:
+        return 1
+    target = np.frombuffer(out, dtype=np.uint8) if not isinstance(out, np.ndarray) else out.reshape(-1).view(np.uint8)
+    if target.nbytes != nbytes:
+        raise ValueError(f"copy: the target holds {target.nbytes} bytes, the frame {nbytes}")
+    np.copyto(target, np.frombuffer(buffer, dtype=np.uint8, count=nbytes, offset=src))
+    ordering.fence_acquire()  # every byte was read before seq is read again
+    return 0 if ordering.load_acquire(buffer, seq_at) == seq else 2
+
+
+def py_holds(buffer, seq_at: int, seq: int) -> bool:
+    ordering.fence_acquire()
+    return ordering.load_acquire(buffer, seq_at) == seq
+
+
+try:
+    if os.environ.get("FXIS_PURE_PYTHON") == "1":
+        raise ImportError("FXIS_PURE_PYTHON=1")
+    from fxis_shm.shm import _slotio
+except ImportError:
+    _slotio = None
+
+if _slotio is not None:
+    IMPL = "c"
+    records, copy, holds = _slotio.records, _slotio.copy, _slotio.holds
+else:  # not built (no C compiler at install time), or FXIS_PURE_PYTHON=1
+    IMPL = "python"
+    records, copy, holds = py_records, py_copy, py_holds

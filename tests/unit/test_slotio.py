@@ -1,0 +1,91 @@
+"""The ring reader's seqlock reads (fxis_shm.shm.slotio): the C helper and its Python twin
+answer alike on any slot table, whole, torn or half written (hypothesis draws them)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pytest
+from hypothesis import given, settings, strategies as st
+
+from fxis_shm.shm import slotio
+
+try:
+    from fxis_shm.shm import _slotio
+except ImportError:  # not built: only the Python twin runs (and the C side is skipped)
+    _slotio = None
+
+needs_c = pytest.mark.skipif(_slotio is None, reason="fxis_shm.shm._slotio is not built")
+TABLE = 64  # the table's offset in the test buffer (the ring's is 1024)
+DATA = 4096
+
+
+def buffer_with(slots: int, records: list[tuple[int, ...]], data: bytes = b"") -> np.ndarray:
+    """An 8-byte aligned buffer holding ``records`` (seq and five fields each) from TABLE on."""
+    words = np.zeros((DATA + len(data) + 7) // 8 + 1, dtype=np.uint64)
+    raw = words.view(np.uint8)
+    table = np.array(records, dtype=np.uint64).reshape(slots, 6) if records else np.zeros((slots, 6), np.uint64)
+    raw[TABLE : TABLE + slots * 48] = table.view(np.uint8).reshape(-1)
+    raw[DATA : DATA + len(data)] = np.frombuffer(data, dtype=np.uint8)
+    return raw
+
+
+@st.composite
+def tables(draw):
+    """A slot table as a ring shows it after ``count`` writes, each slot whole, being
+    written, or holding garbage; and a range of writes to read."""
+    slots = draw(st.integers(2, 8))
+    count = draw(st.integers(0, 40))
+    records = []
+    for s in range(slots):
+        w = max((v for v in range(count) if v % slots == s), default=s)
+        seq = draw(st.sampled_from([2 * w + 2, 2 * w + 1, 2 * w, 0, draw(st.integers(0, 2**64 - 1))]))
+        fields = draw(st.lists(st.integers(0, 2**63 - 1), min_size=5, max_size=5))
+        records.append((seq, *fields))
+    lo = draw(st.integers(0, count))
+    hi = draw(st.integers(lo, count + slots))
+    return slots, records, lo, hi
+
+
+@needs_c
+@settings(max_examples=300, deadline=None)
+@given(tables())
+def test_records_are_read_alike(table):
+    slots, records, lo, hi = table
+    buf = buffer_with(slots, records)
+    assert _slotio.records(buf, TABLE, slots, lo, hi) == slotio.py_records(buf, TABLE, slots, lo, hi)
+
+
+def test_records_keep_only_the_whole_ones():
+    slots = 4
+    records = [(2 * w + 2, w, 1000 * w, 1000 * w + 5, 1000 * w, 1) for w in range(4, 8)]
+    records[2] = (2 * 6 + 1, *records[2][1:])  # write 6 is being written
+    buf = buffer_with(slots, records)
+    assert [r[0] for r in slotio.records(buf, TABLE, slots, 4, 8)] == [4, 5, 7]
+    assert slotio.records(buf, TABLE, slots, 5, 6) == [(5, 5, 5000, 5005, 5000, 1)]
+
+
+@needs_c
+@settings(max_examples=200, deadline=None)
+@given(st.integers(0, 2**64 - 1), st.booleans(), st.binary(min_size=1, max_size=300))
+def test_copies_and_checks_agree(seq, matches, data):
+    buf = buffer_with(2, [(seq, 0, 0, 0, 0, 0), (0, 0, 0, 0, 0, 0)], data)
+    expected = seq if matches else (seq + 1) % 2**64
+    outs = [np.zeros(len(data), np.uint8) for _ in range(2)]
+    results = [f(buf, TABLE, expected, DATA, len(data), out) for f, out in zip((_slotio.copy, slotio.py_copy), outs)]
+    assert results[0] == results[1] == (0 if matches else 1)
+    if matches:
+        assert outs[0].tobytes() == outs[1].tobytes() == data
+    assert _slotio.holds(buf, TABLE, expected) == slotio.py_holds(buf, TABLE, expected) == matches
+
+
+@needs_c
+def test_the_helper_refuses_what_lies_outside_the_buffer():
+    buf = buffer_with(2, [])
+    with pytest.raises(ValueError):
+        _slotio.records(buf, len(buf) - 8, 2, 0, 1)
+    with pytest.raises(ValueError):
+        _slotio.copy(buf, TABLE, 2, len(buf) - 4, 8, np.zeros(8, np.uint8))
+    with pytest.raises(ValueError, match="target holds"):
+        _slotio.copy(buf, TABLE, 0, DATA, 8, np.zeros(4, np.uint8))
+    with pytest.raises(ValueError):
+        _slotio.holds(buf, TABLE + 3, 0)
