@@ -51,7 +51,7 @@ $(VENV)/.mutation-installed: $(VENV)/.installed pyproject.toml
 
 mutation: $(VENV)/.mutation-installed
 	rm -rf mutants
-	$(BIN)/mutmut run --max-children 2
+	FXIS_PURE_PYTHON=1 $(BIN)/mutmut run --max-children 2
 	$(BIN)/mutmut results
 	@$(BIN)/mutmut results 2>/dev/null | sed -n 's/^ *\([^: ]*\): \(survived\|no tests\|suspicious\|skipped\)$$/\1/p' > mutants/survivors.txt
 	@grep -o 'fxis_shm\.core\.[^` ]*__mutmut_[0-9]*' docs/mutation.md > mutants/explained.txt || true

@@ -10,7 +10,7 @@ import signal
 import sys
 import threading
 
-from fxis_shm.cli.options import client_keys_for
+from fxis_shm.cli.options import add_key_options, client_keys_for
 from fxis_shm.errors import ConfigError
 from fxis_shm.service.config import ViewerAccess, check_tls_files, http_address, new_token, read_token_file
 from fxis_shm.service.supervisor import link_host
@@ -79,11 +79,7 @@ def add_parser(sub) -> None:
         "--http", default=DEFAULT_HTTP, metavar="ADDR", help=f"where to serve the page (default {DEFAULT_HTTP})"
     )
     p.add_argument("--timeout", type=float, default=1.5, help="seconds a service may take to answer (default 1.5)")
-    p.add_argument("--server-key", metavar="FILE", help="the services' public key (CurveZMQ; default $FXIS_SERVER_KEY)")
-    p.add_argument(
-        "--client-key", metavar="FILE", help="this client's .key_secret (CurveZMQ; default $FXIS_CLIENT_KEY)"
-    )
-    p.add_argument("--config", metavar="FILE", help="a config file: server_key and client_key of its [client]")
+    add_key_options(p)
     p.add_argument("--viewer-token-file", metavar="FILE", help="the token the page requires (default: a new one)")
     p.add_argument("--viewer-tls-cert", metavar="FILE", help="serve https with this certificate (PEM)")
     p.add_argument("--viewer-tls-key", metavar="FILE", help="... and this key (PEM)")

@@ -24,6 +24,11 @@ ENV_SERVER_KEY, ENV_CLIENT_KEY = "FXIS_SERVER_KEY", "FXIS_CLIENT_KEY"
 def add_client_options(sp) -> None:
     sp.add_argument("--endpoint", help=f"service endpoint (default: the config file's, else {defaults.ENDPOINT})")
     sp.add_argument("--timeout", type=float, default=3.0, help="seconds to wait for the reply (default 3)")
+    add_key_options(sp)
+
+
+def add_key_options(sp) -> None:
+    """--server-key, --client-key and --config: the CurveZMQ keys of ``client_keys_for``."""
     sp.add_argument(
         "--server-key", metavar="FILE", help=f"the service's public key (CurveZMQ; default ${ENV_SERVER_KEY})"
     )
