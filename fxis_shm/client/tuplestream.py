@@ -4,10 +4,11 @@ moment the stream starts) a tuple at t*, chosen by the request engine and joint 
 exactly as ``Client([a, b]).tuple(at=t*)`` would choose it.
 
 Each tuple is asked for once its frames can all be stored (t* plus the slowest camera's
-period and delay), so the engine rarely waits and the rate is the schedule's. A stream that
-falls behind (a slow service, a stall) gives up the times it missed rather than send a
-burst; a tuple that cannot be made (a service down) is a message with its error, as
-``message.tuple`` raises it. The stream runs in a thread with clients of its own: the caller's
+period and delay), so the engine rarely waits and the rate is the schedule's. A stream a little
+behind (a busy host) catches up, so the long-run rate is the one asked; one further behind than
+a second (a stall, a host down) gives up the times it missed rather than send a burst. A
+tuple that cannot be made (a service down) is a message with its error, as ``message.tuple``
+raises it. The stream runs in a thread with clients of its own: the caller's
 sockets are not shared, and a subscriber slow to read holds up no one (its queue keeps the
 newest messages; ``seq`` gaps say what it missed).
 """
@@ -27,6 +28,7 @@ from fxis_shm.wire.protocol import StreamTopic
 
 LAG_MARGIN_NS = 2_000_000  # after t* + period + delay, the frames around t* are stored
 FIRST_PERIOD_NS = 100_000_000  # the schedule's interval until the cameras' periods are known
+GIVE_UP_NS = 1_000_000_000  # times further behind than this are given up; nearer ones are caught up
 
 
 class TupleStream:
@@ -91,7 +93,7 @@ class TupleStream:
             interval, lag = self._interval_ns(), self._lag_ns()
             t_star += interval
             late = self._clock() - lag - t_star
-            if late > interval:  # fell behind: give up the times missed, no burst
+            if late > max(interval, GIVE_UP_NS):  # a stall (a host down): give up the times missed
                 t_star += math.floor(late / interval) * interval
             self._stop.wait(max(0, t_star + lag - self._clock()) / 1e9)
 
