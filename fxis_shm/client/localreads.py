@@ -24,15 +24,18 @@ from collections.abc import Callable
 from fxis_shm.core import timebase
 from fxis_shm.core.engine import Failure, Reply, RequestEngine
 from fxis_shm.errors import RequestTimeout, service_error
+from fxis_shm.shm import slotio
 from fxis_shm.shm.bufferpool import BufferPool
 from fxis_shm.shm.cameras import CameraHandle
-from fxis_shm.shm.copyout import COPY, VIEWS, CopyOut
 from fxis_shm.shm.localpath import LocalUnavailable, boot_id, time_namespace
 from fxis_shm.shm.ring import Overwritten
 from fxis_shm.wire import protocol
 
 WAKE_MARGIN_NS = 1_500_000  # stop sleeping this long before a frame is due
 POLL_S = 0.0001  # then look at the write counters this often
+_TIMES = ("at", "t_call")  # checked on every call; the other fields once per form of request
+_UNCHECKED = (*_TIMES, "encoding", "quality")  # encoding, quality: the frames stay raw here
+_REQUEST_FORMS = 256  # validated forms kept
 
 
 def same_clock(status: dict, our_boot_id: str | None = None) -> str | None:
@@ -72,7 +75,9 @@ class LocalReads:
         self.now = timebase.reader(status.get("clock") or timebase.DEFAULT)  # the service's clock
         self.wire_clock = timebase.WIRE_NAMES[status.get("clock") or timebase.DEFAULT]
         self.engine = RequestEngine(self.cameras, status.get("settings"))
-        self.copyout = CopyOut(self.cameras, self.engine.settings, BufferPool(max_pooled_bytes))
+        self.buffers = BufferPool(max_pooled_bytes)
+        self._requests: dict[tuple, dict] = {}  # validated requests by form (protocol.request_of)
+        self.torn = 0  # copies found torn (and made again)
 
     def serves(self, op: str, fields: dict) -> bool:
         """False for requests only the coordinator can answer: those that fire software triggers."""
@@ -86,31 +91,108 @@ class LocalReads:
     ) -> tuple[dict, list, Callable[[], bool] | None]:
         """The reply header, images and (for views) a validity check, as the coordinator would
         send them. Raises the service's errors, or RequestTimeout at ``deadline_ns``."""
-        # the frames stay raw: nothing travels, so compressing would only cost
-        raw = {k: v for k, v in fields.items() if k not in ("encoding", "quality")}
-        request = protocol.request_of(op, id=None, **raw)
-        # Write counts read before every look the engine takes: a frame stored after a look
-        # shows as a changed count, however soon after the look it came.
-        seen = {c: h.reader.field("write_count") for c, h in self.cameras.items() if h.reader is not None}
-        actions = self.engine.submit(request, self.now(), ticket=op)
+        actions = self.engine.submit(self._request(op, fields), self.now(), ticket=op)
+        seen: dict[str, int] = {}
         while True:
             reply = settled(actions)
             if reply is not None:
                 try:
-                    body, images = self.copyout.reply(reply, COPY if copy else VIEWS)
+                    return self._reply(reply, copy)
                 except Overwritten:  # the ring came round during the copy: plan again
                     actions = self.engine.retry(reply, self.now())
                     continue
-                body["timing"]["sent"] = self.now()
-                header = {"ok": True, "clock": self.wire_clock, **body}
-                return header, images, None if copy else self._validity(reply)
             now = self.now()
             if now >= deadline_ns:
                 self.engine.cancel_all()
                 raise RequestTimeout(f"no answer to {op!r} from the rings within the client's timeout")
             waiting = {c for p in self.engine.pending for c in p.cameras}
+            for c in waiting:  # the write counts the engine's last look read, before it looked
+                reader = self.cameras[c].reader
+                if reader is not None:
+                    seen[c] = max(seen.get(c, -1), reader.seen_count)
             updated = self._wait_for_frames(waiting, min(deadline_ns, self.engine.next_wake() or now), seen)
             actions = self.engine.on_frames(updated, self.now())
+
+    def _request(self, op: str, fields: dict) -> dict:
+        """The request as the service would validate it (protocol.request_of), without its
+        encoding (nothing travels, so the frames stay raw). Validated once per form: only the
+        times, which change with every call, are checked each time."""
+        rest = {k: v for k, v in fields.items() if k not in _UNCHECKED}
+        # each value with its type: 1 and True are equal keys, but not equally valid
+        key = (op, *rest, *((type(v), tuple(v) if type(v) is list else v) for v in rest.values()))
+        try:
+            checked = self._requests.get(key)
+        except TypeError:  # a value that cannot be a key (so not a valid one): validation says why
+            return protocol.request_of(op, id=None, **fields)
+        if checked is None:
+            if len(self._requests) >= _REQUEST_FORMS:
+                self._requests.clear()
+            checked = self._requests[key] = protocol.request_of(op, id=None, **rest)
+        request = dict(checked)
+        schema = protocol.OPS[op]
+        for name in _TIMES:
+            value = fields.get(name)
+            if value is not None and name in schema:
+                request[name] = schema[name][0](name, value)
+        return request
+
+    def _reply(self, reply: Reply, copy: bool) -> tuple[dict, list, Callable[[], bool] | None]:
+        """The plan's frames: their metadata, then their pixels (copies, checked whole in one
+        call, or views), then the header. Raises Overwritten (counted as a torn read)."""
+        searched = self.now()
+        frames, images, jobs, held, position = [], [], [], [], {}
+        for pick in reply.plan.picks:
+            if pick in position:
+                continue
+            position[pick] = len(frames)
+            cam, i = pick
+            snap, reader = reply.snapshots[cam], self.cameras[cam].reader
+            slot, seq, meta = snap.slot(i), snap.seq(i), snap.frame_meta(i)
+            frames.append(
+                {
+                    "camera": cam,
+                    "frame_id": meta.frame_id,
+                    "t_capture": meta.t_capture,
+                    "t_stored": meta.t_stored,
+                    "generation": meta.generation,
+                    "t_available": meta.t_available,
+                }
+            )
+            held.append((cam, reader, slot, seq))
+            if copy:
+                out = self.buffers.take(reader.layout.shape, reader.layout.dtype)
+                jobs.append(reader.copy_job(slot, seq, out))
+                images.append(out)
+            else:
+                try:
+                    images.append(reader.view_slot(slot, seq))
+                except Overwritten:
+                    self.cameras[cam].torn_reads += 1
+                    self.torn += 1
+                    raise
+        torn = slotio.copies(jobs) if jobs else None
+        if torn is not None:
+            cam, reader, slot, _ = held[torn[0]]
+            self.cameras[cam].torn_reads += 1
+            self.torn += 1
+            raise reader.overwritten(slot, torn[1])
+        copied = self.now()
+        p = reply.pending
+        header = {"ok": True, "clock": self.wire_clock, **reply.plan.body, "frames": frames}
+        if reply.plan.groups is not None:
+            header["groups"] = [[position[pick] for pick in group] for group in reply.plan.groups]
+        header["timing"] = {
+            "searched": searched,
+            "received": p.t_received,
+            "waited": reply.t_decided,
+            "copied": copied,
+            "sent": copied,  # nothing is sent: the frames are the caller's once copied
+            "cameras": {c: {"waited": p.ready_at.get(c, reply.t_decided)} for c in p.cameras},
+        }
+        if copy:
+            return header, images, None
+        views = [(reader, slot, seq) for _, reader, slot, seq in held]
+        return header, images, lambda: all(reader.slot_holds(slot, seq) for reader, slot, seq in views)
 
     def _wait_for_frames(self, cameras: set[str], until_ns: int, seen: dict[str, int]) -> set[str]:
         """The cameras whose write count moved on from ``seen`` before ``until_ns`` (empty: none
@@ -129,12 +211,6 @@ class LocalReads:
                 seen.update(now_counts)
                 return updated
             time.sleep(POLL_S)
-
-    def _validity(self, reply: Reply) -> Callable[[], bool]:
-        slots = [
-            (self.cameras[c].reader, reply.snapshots[c].slot(i), reply.snapshots[c].seq(i)) for c, i in reply.plan.picks
-        ]
-        return lambda: all(reader.slot_holds(slot, seq) for reader, slot, seq in slots)
 
     def close(self) -> None:
         for handle in self.cameras.values():

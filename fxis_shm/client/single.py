@@ -416,11 +416,11 @@ class SingleClient(SocketOwner):
 
     def _answer_locally(self, op: str, fields: dict, deadline: int, copy: bool) -> tuple[dict, list, Callable | None]:
         reads = self._reads
-        torn = sum(h.torn_reads for h in reads.cameras.values())
+        torn = reads.torn
         try:
             return reads.answer(op, fields, deadline, copy)
         finally:  # the copies it found torn (and made again) count as those of the other local path
-            self.paths["torn"] += sum(h.torn_reads for h in reads.cameras.values()) - torn
+            self.paths["torn"] += reads.torn - torn
 
     def _local_reads(self) -> LocalReads | None:
         """The client's own reads of the rings, learnt from the service's status once."""

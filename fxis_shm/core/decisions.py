@@ -87,11 +87,16 @@ def decide(
     p: Request, now: int, snaps: Mapping[str, Snapshot], states: Mapping[str, CameraState], ctx: Context
 ) -> Wait | Plan:
     if p.op == "latest":
-        check_not_empty(snaps)
-        return Plan({"op": "latest"}, [(c, len(snaps[c].timeline) - 1) for c in p.cameras])
+        return newest_frames(p.cameras, snaps)
     if p.op == "sequence":
         return _sequence(p, now, snaps, states, ctx)
     return _near(p, now, snaps, states, ctx)
+
+
+def newest_frames(cameras: list[str], snaps: Mapping[str, Snapshot]) -> Plan:
+    """``latest``: the newest stored frame of each camera (it never waits)."""
+    check_not_empty(snaps)
+    return Plan({"op": "latest"}, [(c, len(snaps[c].timeline) - 1) for c in cameras])
 
 
 def _chooser(mode: str, ctx: Context) -> Callable[..., Selection]:

@@ -25,7 +25,7 @@ from dataclasses import dataclass, field
 from typing import Any, Protocol
 
 from fxis_shm.core import sequences
-from fxis_shm.core.decisions import Context, Plan, Reject, Wait, check_size, decide, sequence_spec
+from fxis_shm.core.decisions import Context, Plan, Reject, Wait, check_size, decide, newest_frames, sequence_spec
 from fxis_shm.core.snapshot import Snapshot
 from fxis_shm.core.waitpolicy import CameraState
 from fxis_shm.errors import Code
@@ -252,12 +252,15 @@ class RequestEngine:
         """Reply to ``p`` if it can be answered now (adding the action); True once it is done."""
         try:
             snaps = self._snapshots(p, now)
-            states = {c: self.cameras[c].state(snaps[c]) for c in p.cameras}
-            decision = decide(p, now, snaps, states, self._context(p))
-            for cam, state in states.items():
+            if p.op == "latest":  # never waits, chooses nothing: no camera state or settings needed
+                decision: Wait | Plan = newest_frames(p.cameras, snaps)
+            else:
+                states = {c: self.cameras[c].state(snaps[c]) for c in p.cameras}
+                decision = decide(p, now, snaps, states, self._context(p))
+            for cam in p.cameras:
                 if not isinstance(decision, Wait) or cam not in decision.until:
                     # ready now, or when a frame that raced the request landed
-                    p.ready_at.setdefault(cam, max(now, state.newest_stored or now))
+                    p.ready_at.setdefault(cam, max(now, snaps[cam].newest_stored or now))
             if isinstance(decision, Plan):
                 p.attempts += 1
                 actions.append(Reply(p, decision, snaps, now))

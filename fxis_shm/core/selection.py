@@ -12,7 +12,7 @@ Pure: timelines and numbers in, a Selection out.
 
 from __future__ import annotations
 
-from collections.abc import Iterator, Mapping
+from collections.abc import Mapping
 from dataclasses import dataclass
 
 from fxis_shm.core.timesearch import Timeline
@@ -56,18 +56,6 @@ def _candidates(tl: Timeline, t_star: int, radius: int) -> range:
     return range(min(near.start, nearest), max(near.stop, nearest + 1))
 
 
-def _times(tl: Timeline, indices: range) -> Iterator[tuple[int, int]]:
-    """(index, time) of a run of frames, read in one slice where the timeline does not wrap."""
-    if tl.contiguous:
-        return zip(indices, tl.times[tl.start + indices.start : tl.start + indices.stop])
-    return zip(indices, map(tl.at, indices))
-
-
-def _closest_in(tl: Timeline, indices: list[int], t_star: int) -> int:
-    # newest wins ties, as in Timeline.nearest
-    return min(reversed(indices), key=lambda i: abs(tl.at(i) - t_star))
-
-
 def select_joint(
     timelines: Mapping[str, Timeline],
     t_star: int,
@@ -82,38 +70,53 @@ def select_joint(
     """
     if len(timelines) == 1:
         return select_independent(timelines, t_star)
-    events = sorted(
-        (t, cam, i) for cam, tl in timelines.items() for i, t in _times(tl, _candidates(tl, t_star, radius_ns))
-    )
+    events: list[tuple[int, str, int]] = []  # (time, camera, index) of every candidate, in time order
+    for cam, tl in timelines.items():
+        run = _candidates(tl, t_star, radius_ns)
+        for i in range(run.start, run.stop):
+            events.append((tl.at(i), cam, i))
+    events.sort()
+    n_cams = len(timelines)
     # Two pointers: for every right end, the shortest window holding every camera.
-    windows = []
+    starts: list[int] = []
+    ends: list[int] = []
     inside: dict[str, int] = {}
     left = 0
-    for right, (_, cam, _) in enumerate(events):
+    for right in range(len(events)):
+        cam = events[right][1]
         inside[cam] = inside.get(cam, 0) + 1
-        while len(inside) == len(timelines):
+        while len(inside) == n_cams:
             left_cam = events[left][1]
             if inside[left_cam] == 1:
                 break
             inside[left_cam] -= 1
             left += 1
-        if len(inside) == len(timelines):
-            windows.append((left, right))
-    best_skew = min(events[end][0] - events[start][0] for start, end in windows)
-    best: tuple[tuple[int, int], Selection] | None = None
-    for start, end in windows:
+        if len(inside) == n_cams:
+            starts.append(left)
+            ends.append(right)
+    best_skew = min([events[ends[w]][0] - events[starts[w]][0] for w in range(len(starts))])
+    best: Selection | None = None
+    best_error = best_tuple_skew = 0
+    for w in range(len(starts)):
+        start, end = starts[w], ends[w]
         if events[end][0] - events[start][0] > best_skew + tolerance_ns:
             continue
-        per_cam: dict[str, list[int]] = {}
-        for _, cam, i in events[start : end + 1]:
-            per_cam.setdefault(cam, []).append(i)
-        index = {cam: _closest_in(timelines[cam], idx, t_star) for cam, idx in per_cam.items()}
-        sel = Selection(index, {cam: timelines[cam].at(i) for cam, i in index.items()}, best_skew)
-        key = (sel.max_abs_error_ns(t_star), sel.skew_ns)
-        if best is None or key <= best[0]:  # later windows are newer: newest wins ties
-            best = (key, sel)
+        # each camera's frame in the window closest to t*; the newest wins ties, as in Timeline.nearest
+        index: dict[str, int] = {}
+        times: dict[str, int] = {}
+        distance: dict[str, int] = {}
+        for k in range(start, end + 1):
+            t, cam, i = events[k]
+            d = abs(t - t_star)
+            if cam not in distance or d <= distance[cam]:
+                index[cam], times[cam], distance[cam] = i, t, d
+        error = max(distance.values())
+        skew = max(times.values()) - min(times.values())
+        # later windows are newer: newest wins ties
+        if best is None or error < best_error or (error == best_error and skew <= best_tuple_skew):
+            best, best_error, best_tuple_skew = Selection(index, times, best_skew), error, skew
     assert best is not None  # the tuple of least skew is always within tolerance
-    return best[1]
+    return best
 
 
 def select(

@@ -11,7 +11,6 @@ Pure: arrays and numbers in, indices out.
 from __future__ import annotations
 
 import bisect
-from collections.abc import Sequence
 from dataclasses import dataclass, field
 
 
@@ -19,7 +18,7 @@ from dataclasses import dataclass, field
 class Timeline:
     """``count`` valid timestamps in a circular vector, oldest at ``start``."""
 
-    times: Sequence[int]
+    times: list[int]
     start: int
     count: int
     # the valid frames do not wrap around the end of the vector: plain slices serve them

@@ -10,6 +10,9 @@
  *   copy(buffer, seq_at, seq, src, nbytes, out)  memcpy of a slot into `out` (the GIL let
  *                                          go) if `seq` held before and after: 0, else 1
  *                                          (overwritten before) or 2 (during)
+ *   copies([(buffer, seq_at, seq, src, nbytes, out), ...])  copy of each, in order, the GIL
+ *                                          let go once: None, or (index, 1 or 2) of the first
+ *                                          frame not whole (the later ones are left)
  *   holds(buffer, seq_at, seq)             an acquire fence, then: does the slot still show seq?
  *
  * The layout (offsets, the 48-byte record) is the ring's (fxis_shm/shm/ring.py); every
@@ -20,6 +23,9 @@
 #include <stdatomic.h>
 #include <stdint.h>
 #include <string.h>
+#if defined(__x86_64__)
+#include <emmintrin.h>
+#endif
 
 #define RECORD 48 /* seq, frame_id, t_capture, t_stored, t_available, generation: 8 bytes each */
 
@@ -81,44 +87,132 @@ done:
     return out;
 }
 
-static PyObject *copy(PyObject *self, PyObject *args) {
-    PyObject *buffer, *target;
+/* With ``stream``, a copy that goes to memory, not to this core's caches (SSE2 streaming
+ * stores, on every x86-64): a frame of megabytes would not stay cached anyway, and a cached
+ * copy first reads every destination line. Elsewhere (and below STREAM_MIN), memcpy. */
+#define STREAM_MIN (512 * 1024)
+static void copy_bytes(char *dst, const char *src, size_t n, int stream) {
+#if defined(__x86_64__)
+    if (stream && n >= STREAM_MIN) {
+        size_t head = (16 - ((uintptr_t)dst & 15)) & 15, i;
+        memcpy(dst, src, head);
+        for (i = head; i + 64 <= n; i += 64) {
+            __m128i a = _mm_loadu_si128((const __m128i *)(src + i));
+            __m128i b = _mm_loadu_si128((const __m128i *)(src + i + 16));
+            __m128i c = _mm_loadu_si128((const __m128i *)(src + i + 32));
+            __m128i d = _mm_loadu_si128((const __m128i *)(src + i + 48));
+            _mm_stream_si128((__m128i *)(dst + i), a);
+            _mm_stream_si128((__m128i *)(dst + i + 16), b);
+            _mm_stream_si128((__m128i *)(dst + i + 32), c);
+            _mm_stream_si128((__m128i *)(dst + i + 48), d);
+        }
+        _mm_sfence(); /* the streamed stores are visible before anything after the copy */
+        memcpy(dst + i, src + i, n - i);
+        return;
+    }
+#else
+    (void)stream;
+#endif
+    memcpy(dst, src, n);
+}
+
+/* One frame: its buffers and offsets, checked against each other (holding the GIL). */
+typedef struct {
+    Py_buffer view, out;
     Py_ssize_t seq_at, src, nbytes;
     unsigned long long expected;
-    Py_buffer view, out;
-    if (!PyArg_ParseTuple(args, "OnKnnO", &buffer, &seq_at, &expected, &src, &nbytes, &target))
-        return NULL;
-    if (PyObject_GetBuffer(buffer, &view, PyBUF_SIMPLE) < 0)
-        return NULL;
-    if (PyObject_GetBuffer(target, &out, PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) < 0) {
-        PyBuffer_Release(&view);
-        return NULL;
+} Job;
+
+static int job_open(Job *job, PyObject *buffer, PyObject *target) {
+    if (PyObject_GetBuffer(buffer, &job->view, PyBUF_SIMPLE) < 0)
+        return 0;
+    if (PyObject_GetBuffer(target, &job->out, PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) < 0) {
+        PyBuffer_Release(&job->view);
+        return 0;
     }
-    long result = -1;
-    if (!in_bounds(&view, seq_at, 8))
-        goto done;
-    if (src < 0 || nbytes < 0 || src > view.len - nbytes) {
-        PyErr_Format(PyExc_ValueError, "copy: no %zd bytes at offset %zd of a %zd-byte buffer", nbytes, src, view.len);
-        goto done;
+    Py_buffer *view = &job->view;
+    if (!in_bounds(view, job->seq_at, 8))
+        goto fail;
+    if (job->src < 0 || job->nbytes < 0 || job->src > view->len - job->nbytes) {
+        PyErr_Format(PyExc_ValueError, "copy: no %zd bytes at offset %zd of a %zd-byte buffer", job->nbytes, job->src,
+                     view->len);
+        goto fail;
     }
-    if (out.len != nbytes) {
-        PyErr_Format(PyExc_ValueError, "copy: the target holds %zd bytes, the frame %zd", out.len, nbytes);
-        goto done;
+    if (job->out.len != job->nbytes) {
+        PyErr_Format(PyExc_ValueError, "copy: the target holds %zd bytes, the frame %zd", job->out.len, job->nbytes);
+        goto fail;
     }
-    const char *seq = (const char *)view.buf + seq_at;
-    if (load_acquire(seq) != expected) {
-        result = 1;
-        goto done;
-    }
-    Py_BEGIN_ALLOW_THREADS
-    memcpy(out.buf, (const char *)view.buf + src, (size_t)nbytes);
+    return 1;
+fail:
+    PyBuffer_Release(&job->out);
+    PyBuffer_Release(&job->view);
+    return 0;
+}
+
+static void job_close(Job *job) {
+    PyBuffer_Release(&job->out);
+    PyBuffer_Release(&job->view);
+}
+
+/* The seqlock read of one frame (without the GIL): 0 whole, 1/2 overwritten before/during. */
+static int job_run(Job *job, int stream) {
+    const char *seq = (const char *)job->view.buf + job->seq_at;
+    if (load_acquire(seq) != job->expected)
+        return 1;
+    copy_bytes(job->out.buf, (const char *)job->view.buf + job->src, (size_t)job->nbytes, stream);
     atomic_thread_fence(memory_order_acquire); /* every byte was read before seq is read again */
+    return load_acquire(seq) == job->expected ? 0 : 2;
+}
+
+static PyObject *copy(PyObject *self, PyObject *args) {
+    PyObject *buffer, *target;
+    Job job;
+    if (!PyArg_ParseTuple(args, "OnKnnO", &buffer, &job.seq_at, &job.expected, &job.src, &job.nbytes, &target))
+        return NULL;
+    if (!job_open(&job, buffer, target))
+        return NULL;
+    int result;
+    Py_BEGIN_ALLOW_THREADS
+    result = job_run(&job, 0);
     Py_END_ALLOW_THREADS
-    result = load_acquire(seq) == expected ? 0 : 2;
-done:
-    PyBuffer_Release(&out);
-    PyBuffer_Release(&view);
-    return result < 0 ? NULL : PyLong_FromLong(result);
+    job_close(&job);
+    return PyLong_FromLong(result);
+}
+
+#define MAX_JOBS 64
+
+static PyObject *copies(PyObject *self, PyObject *args) {
+    PyObject *items;
+    if (!PyArg_ParseTuple(args, "O!", &PyList_Type, &items))
+        return NULL;
+    Py_ssize_t n = PyList_GET_SIZE(items), opened = 0, k;
+    if (n > MAX_JOBS) {
+        PyErr_Format(PyExc_ValueError, "copies: at most %d frames at once, got %zd", MAX_JOBS, n);
+        return NULL;
+    }
+    Job jobs[MAX_JOBS];
+    for (; opened < n; opened++) {
+        Job *job = &jobs[opened];
+        PyObject *buffer, *target;
+        if (!PyArg_ParseTuple(PyList_GET_ITEM(items, opened), "OnKnnO;copies: (buffer, seq_at, seq, src, nbytes, out)",
+                              &buffer, &job->seq_at, &job->expected, &job->src, &job->nbytes, &target) ||
+            !job_open(job, buffer, target))
+            break;
+    }
+    int result = 0;
+    if (opened == n) {
+        Py_BEGIN_ALLOW_THREADS
+        for (k = 0; k < n && (result = job_run(&jobs[k], 1)) == 0; k++)
+            ;
+        Py_END_ALLOW_THREADS
+    }
+    for (Py_ssize_t j = 0; j < opened; j++)
+        job_close(&jobs[j]);
+    if (opened < n)
+        return NULL;
+    if (result == 0)
+        Py_RETURN_NONE;
+    return Py_BuildValue("(ni)", k, result);
 }
 
 static PyObject *holds(PyObject *self, PyObject *args) {
@@ -143,6 +237,9 @@ static PyObject *holds(PyObject *self, PyObject *args) {
 static PyMethodDef methods[] = {
     {"records", records, METH_VARARGS, "records(buffer, table, slots, lo, hi): the whole records of writes lo..hi-1."},
     {"copy", copy, METH_VARARGS, "copy(buffer, seq_at, seq, src, nbytes, out): 0 copied whole, 1/2 overwritten before/during."},
+    {"copies", copies, METH_VARARGS,
+     "copies([(buffer, seq_at, seq, src, nbytes, out), ...]): each as copy(), in order, the GIL let go once; "
+     "None if all were whole, else (index, 1 or 2) of the first that was not (the later ones are not copied)."},
     {"holds", holds, METH_VARARGS, "holds(buffer, seq_at, seq): after an acquire fence, does the slot show seq?"},
     {NULL, NULL, 0, NULL},
 };

@@ -9,7 +9,7 @@ itself); a pooled one is already mapped.
 Ownership is explicit. Each array handed out is made over a lease object of its
 own (its ``base``), and every view of the array keeps that lease alive, as does
 ZeroMQ while it sends the array without copying. The buffer comes
-back to the pool when the lease is gone (a finalizer on it: the last array or view
+back to the pool when the lease is gone (a weak reference to it says so: the last array or view
 of it was dropped) or when the holder gives it back (``release``, behind
 ``Frame.release()`` and ``with frame:``), whichever is first. After ``release``
 the holder must not use the array: the pool may fill it with another frame.
@@ -27,28 +27,26 @@ import numpy as np
 @dataclass(eq=False)
 class _Buffer:
     memory: np.ndarray  # the pooled bytes
-    lease: weakref.finalize | None = field(default=None)  # set while handed out
+    address: int  # of its first byte
+    lease: weakref.ref | None = field(default=None)  # to the lease of the array handed out last
 
     @property
     def free(self) -> bool:
-        return self.lease is None or not self.lease.alive
+        lease = self.lease() if self.lease is not None else None
+        return lease is None or lease.ended
 
 
 class _Lease:
     """The owner of one array handed out: NumPy makes the array over it and keeps it as
-    the array's base, so it lives exactly as long as the array or any view of it."""
+    the array's base, so it lives exactly as long as the array or any view of it. A weak
+    reference to it (no callback: the pool looks when it needs a buffer) says whether it does."""
 
-    __slots__ = ("__weakref__", "memory", "__array_interface__", "end")
+    __slots__ = ("__weakref__", "__array_interface__", "ended", "memory")
 
-    def __init__(self, memory: np.ndarray, shape: tuple[int, ...], dtype: str):
-        self.memory = memory
-        self.end = weakref.finalize(self, _no_op)  # alive while the lease lasts; end() ends it
-        self.__array_interface__ = {
-            "data": (memory.ctypes.data, False),
-            "shape": tuple(shape),
-            "typestr": np.dtype(dtype).str,
-            "version": 3,
-        }
+    def __init__(self, memory: np.ndarray, interface: dict):
+        self.memory = memory  # the pool's bytes live as long as the array, even if the pool does not
+        self.__array_interface__ = interface
+        self.ended = False  # set by release(): the holder gave the buffer back early
 
 
 class BufferPool:
@@ -57,22 +55,34 @@ class BufferPool:
     def __init__(self, max_bytes: int = 256 << 20):
         self.max_bytes = max_bytes
         self._buffers: dict[int, list[_Buffer]] = {}
+        self._sizes: dict[tuple, tuple[int, str]] = {}  # (shape, dtype) -> (bytes, NumPy's typestr)
         self.kept_bytes = 0
 
     def take(self, shape: tuple[int, ...], dtype: str) -> np.ndarray:
         """An array of ``shape`` and ``dtype`` whose contents are undefined, leased to the caller."""
-        nbytes = math.prod(shape) * np.dtype(dtype).itemsize
-        same_size = self._buffers.setdefault(nbytes, [])
-        buffer = next((b for b in same_size if b.free), None)
-        if buffer is None:
-            buffer = _Buffer(np.empty(nbytes, np.uint8))
+        size = self._sizes.get((shape, dtype))
+        if size is None:
+            kind = np.dtype(dtype)
+            size = self._sizes[(tuple(shape), dtype)] = (math.prod(shape) * kind.itemsize, kind.str)
+        nbytes, typestr = size
+        same_size = self._buffers.get(nbytes)
+        if same_size is None:
+            same_size = self._buffers[nbytes] = []
+        for buffer in same_size:
+            if buffer.free:
+                break
+        else:
+            memory = np.empty(nbytes, np.uint8)
             if self.kept_bytes + nbytes > self.max_bytes:
-                return buffer.memory.view(dtype).reshape(shape)  # one-off: nothing to give back
-            buffer.memory.fill(0)  # fault every page in now, not during a copy someone waits for
+                return memory.view(dtype).reshape(shape)  # one-off: nothing to give back
+            memory.fill(0)  # fault every page in now, not during a copy someone waits for
+            buffer = _Buffer(memory, memory.__array_interface__["data"][0])
             same_size.append(buffer)
             self.kept_bytes += nbytes
-        lease = _Lease(buffer.memory, shape, dtype)
-        buffer.lease = lease.end  # ends when the lease goes (no array or view of it is left) or on release()
+        lease = _Lease(
+            buffer.memory, {"data": (buffer.address, False), "shape": tuple(shape), "typestr": typestr, "version": 3}
+        )
+        buffer.lease = weakref.ref(lease)  # dead when no array or view of it is left; or ended by release()
         return np.asarray(lease)
 
     @property
@@ -85,11 +95,7 @@ def release(array: np.ndarray) -> bool:
     """Give the buffer under ``array`` back to its pool now, whatever still refers to it
     (True); False if ``array`` is not a leased pool buffer (nothing to give back)."""
     lease = getattr(array, "base", None)
-    if isinstance(lease, _Lease) and lease.end.alive:
-        lease.end()
+    if isinstance(lease, _Lease) and not lease.ended:
+        lease.ended = True
         return True
     return False
-
-
-def _no_op() -> None:
-    """A lease's finalizer does nothing itself: that it is no longer alive frees the buffer."""

@@ -11,7 +11,7 @@ from fxis_shm.core.waitpolicy import CameraState
 from fxis_shm.errors import RingError
 from fxis_shm.shm import naming, procstat
 from fxis_shm.shm.history import held_seconds
-from fxis_shm.shm.ring import FLAG_TRIGGERED, RingReader
+from fxis_shm.shm.ring import FLAG_TRIGGERED, STATE_RETIRED, RingReader
 
 # The columns of the ``frames`` op's rows, one row per frame.
 FRAME_FIELDS = ("frame_id", "t_capture", "t_stored", "t_available", "generation")
@@ -53,13 +53,17 @@ class CameraHandle:
 
     def down_reason(self, now: int) -> str | None:
         """Why the camera cannot serve now, or None if its worker is alive."""
-        ring = self.ring()
-        if ring is None:
-            return f"camera {self.name!r} has no ring: {self.last_error}"
-        pid = ring.field("writer_pid")
-        if not self._alive(pid, ring.field("write_count")):
+        ring = self.reader
+        look = ring.liveness() if ring is not None else None
+        if look is None or look[0] == STATE_RETIRED:  # (re)open it
+            ring = self.ring()
+            if ring is None:
+                return f"camera {self.name!r} has no ring: {self.last_error}"
+            look = ring.liveness()
+        _, pid, write_count, heartbeat_ns = look
+        if not self._alive(pid, write_count):
             return f"camera {self.name!r} is down: its worker is not running"
-        if now - ring.field("heartbeat_ns") > STALE_HEARTBEAT_NS:
+        if now - heartbeat_ns > STALE_HEARTBEAT_NS:
             return f"camera {self.name!r} is down: its worker has not reported for over 2 s"
         return None
 
@@ -101,12 +105,9 @@ class CameraHandle:
         self._trigger.release()
 
     def state(self, snapshot: Snapshot) -> CameraState:
-        ring = self.reader
+        period_ns, delay_ns = self.reader.timing()
         return CameraState(
-            newest=snapshot.newest,
-            period_ns=ring.field("period_ns"),
-            delay_ns=max(0, ring.field("delay_ns")),
-            newest_stored=snapshot.newest_stored,
+            newest=snapshot.newest, period_ns=period_ns, delay_ns=max(0, delay_ns), newest_stored=snapshot.newest_stored
         )
 
     def status(self, now: int) -> dict:

@@ -85,6 +85,22 @@ _NUMBERS = {
 }
 
 
+def _gather(fields: list[str]):
+    """One unpack of header ``fields`` (in order of offset), in place, skipping the bytes between."""
+    start = at = HEADER.fields[fields[0]][1]
+    fmt = "<"
+    for name in fields:
+        dtype, offset = HEADER.fields[name]
+        fmt += f"{offset - at}x{_STRUCTS[dtype.str][1:]}"
+        at = offset + dtype.itemsize
+    unpack = struct.Struct(fmt).unpack_from
+    return lambda buffer: unpack(buffer, start)
+
+
+_LIVENESS = _gather(["state", "writer_pid", "write_count", "heartbeat_ns"])
+_TIMING = _gather(["period_ns", "delay_ns"])
+
+
 def _seq_at(slot: int) -> int:
     return HEADER_BYTES + slot * SLOT.itemsize  # seq is a slot record's first field
 
@@ -159,6 +175,15 @@ class _Mapping:
             return ordering.load_acquire(self._mm, WRITE_COUNT_AT)
         unpack, offset = _NUMBERS[name]
         return unpack(self._mm, offset)[0]
+
+    def liveness(self) -> tuple[int, int, int, int]:
+        """(state, writer_pid, write_count, heartbeat_ns) in one read: the signs of life (the
+        write count read plainly, as a sign of life, not to read the frames it publishes)."""
+        return _LIVENESS(self._mm)
+
+    def timing(self) -> tuple[int, int]:
+        """(period_ns, delay_ns) in one read."""
+        return _TIMING(self._mm)
 
     def _unmap(self) -> None:
         for attr in ("header", "table", "seq", "data", "_views_ro"):
@@ -406,17 +431,28 @@ class RingReader(_Mapping):
     def copy_slot(self, slot: int, expected_seq: int, out: np.ndarray | None = None) -> np.ndarray:
         """Copy the frame in ``slot`` if it is the one ``expected_seq`` names and stays
         so to the end of the copy; raises Overwritten otherwise."""
-        if not 0 <= slot < self.slots:
-            raise Overwritten(f"{self.name} has no slot {slot}")
         if out is None:
             out = np.empty(self.layout.shape, dtype=self.layout.dtype)
-        nbytes = self.layout.nbytes
-        torn = slotio.copy(self._mm, _seq_at(slot), expected_seq, self._data_at + slot * self._stride, nbytes, out)
+        torn = slotio.copy(*self.copy_job(slot, expected_seq, out))
         if torn:
-            raise Overwritten(
-                f"slot {slot} of {self.name} was overwritten {'before' if torn == 1 else 'during'} the copy"
-            )
+            raise self.overwritten(slot, torn)
         return out
+
+    def copy_job(self, slot: int, expected_seq: int, out) -> tuple:
+        """What ``slotio.copy`` and ``slotio.copies`` take to copy the frame in ``slot`` (the one
+        ``expected_seq`` names) into ``out``."""
+        if not 0 <= slot < self.slots:
+            raise Overwritten(f"{self.name} has no slot {slot}")
+        return self._mm, _seq_at(slot), expected_seq, self._data_at + slot * self._stride, self.layout.nbytes, out
+
+    def overwritten(self, slot: int, torn: int) -> Overwritten:
+        """The error of a copy ``slotio`` found torn (1: overwritten before it, 2: during it)."""
+        return Overwritten(f"slot {slot} of {self.name} was overwritten {'before' if torn == 1 else 'during'} the copy")
+
+    @property
+    def seen_count(self) -> int:
+        """The write count the last snapshot read (before reading the records it shows)."""
+        return self._seen
 
     def view_slot(self, slot: int, expected_seq: int) -> np.ndarray:
         """A read-only view of the frame in ``slot`` (no copy): valid only while

@@ -7,6 +7,9 @@ the Python ones (fxis_shm._compiled).
   whole while read, as (w, frame_id, t_capture, t_stored, t_available, generation), oldest first;
 - ``copy(buffer, seq_at, seq, src, nbytes, out)``: the slot's bytes into ``out`` if the slot
   showed ``seq`` before and after: 0, else 1 (overwritten before) or 2 (during);
+- ``copies(items)``: ``copy`` of each (buffer, seq_at, seq, src, nbytes, out) in order, up to
+  the first that was not whole: None if all were, else (its index, 1 or 2); the C one lets the
+  GIL go once and streams frames of 512 KiB and more past the caches (same bytes, same checks);
 - ``holds(buffer, seq_at, seq)``: after an acquire fence, does the slot still show ``seq``?
 """
 
@@ -47,6 +50,14 @@ def py_copy(buffer, seq_at: int, seq: int, src: int, nbytes: int, out) -> int:
     return 0 if ordering.load_acquire(buffer, seq_at) == seq else 2
 
 
+def py_copies(items: list[tuple]) -> tuple[int, int] | None:
+    for k, item in enumerate(items):
+        torn = py_copy(*item)
+        if torn:
+            return k, torn
+    return None
+
+
 def py_holds(buffer, seq_at: int, seq: int) -> bool:
     ordering.fence_acquire()
     return ordering.load_acquire(buffer, seq_at) == seq
@@ -61,7 +72,7 @@ except ImportError:
 
 if _slotio is not None:
     IMPL = "c"
-    records, copy, holds = _slotio.records, _slotio.copy, _slotio.holds
+    records, copy, copies, holds = _slotio.records, _slotio.copy, _slotio.copies, _slotio.holds
 else:  # not built (no C compiler at install time), or FXIS_PURE_PYTHON=1
     IMPL = "python"
-    records, copy, holds = py_records, py_copy, py_holds
+    records, copy, copies, holds = py_records, py_copy, py_copies, py_holds

@@ -13,6 +13,7 @@ import numpy as np
 import pytest
 
 from fxis_shm import Client, LocalPathUnavailable, read_stamp
+from fxis_shm.errors import FxisError
 
 from ..conftest import wait_until
 from .conftest import SMALL
@@ -47,6 +48,20 @@ def test_every_frame_op_takes_the_local_path(two_cameras):
     assert [f.path for f in seq] == ["local"] * 3
     assert [f.frame_id for f in seq] == list(range(seq[0].frame_id, seq[0].frame_id + 3))
     assert all(read_stamp(f.image) == f.frame_id for f in seq)
+
+
+def test_every_local_request_is_validated_like_the_services(two_cameras):
+    """The local path validates each form of request once, then only its times: a value equal
+    to an accepted one but of another type (1 for True) is still refused, as are bad times."""
+    with Client(two_cameras.endpoint, local="require") as client:
+        assert client.tuple(partial=True).path == "local"
+        with pytest.raises(FxisError, match="partial"):
+            client._read_locally("tuple", 0.0, True, {"partial": 1})
+        with pytest.raises(FxisError, match="at"):
+            client._read_locally("tuple", 0.0, True, {"at": "soon"})
+        with pytest.raises(FxisError, match="sync"):
+            client.tuple(sync="bogus")
+        assert client.tuple(at=client.time() - 50_000_000, partial=True).path == "local"
 
 
 def test_arrays_handed_out_are_never_reused_while_held(two_cameras):

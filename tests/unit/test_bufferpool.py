@@ -69,3 +69,11 @@ def test_arrays_held_across_many_takes_are_never_handed_out_twice():
             held.append((n, image))  # kept; the others are dropped and come back
     assert all(int(image[0, 0]) == n % 256 and (image == image[0, 0]).all() for n, image in held)
     assert len({image.ctypes.data for _, image in held}) == len(held)
+
+
+def test_an_array_outlives_its_pool():
+    pool = BufferPool()
+    image = pool.take((4, 8), "uint8")
+    image.fill(7)
+    del pool
+    assert (image == 7).all()

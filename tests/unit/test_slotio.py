@@ -89,3 +89,49 @@ def test_the_helper_refuses_what_lies_outside_the_buffer():
         _slotio.copy(buf, TABLE, 0, DATA, 8, np.zeros(4, np.uint8))
     with pytest.raises(ValueError):
         _slotio.holds(buf, TABLE + 3, 0)
+
+
+@st.composite
+def frames(draw):
+    """Several frames of one buffer, each whole or overwritten before its copy, of any length."""
+    n = draw(st.integers(1, 4))
+    seqs = [draw(st.integers(0, 2**63)) for _ in range(n)]
+    whole = [draw(st.booleans()) for _ in range(n)]
+    lengths = [draw(st.integers(0, 200)) for _ in range(n)]
+    return seqs, whole, lengths, draw(st.binary(min_size=sum(lengths), max_size=sum(lengths)))
+
+
+def jobs_of(buf: np.ndarray, seqs: list[int], whole: list[bool], lengths: list[int]) -> list[tuple]:
+    offsets = np.cumsum([0, *lengths])
+    return [
+        (buf, TABLE + 48 * k, seq if ok else seq + 1, DATA + int(offsets[k]), n, np.zeros(n, np.uint8))
+        for k, (seq, ok, n) in enumerate(zip(seqs, whole, lengths))
+    ]
+
+
+@needs_c
+@settings(max_examples=200, deadline=None)
+@given(frames())
+def test_several_copies_at_once_agree(drawn):
+    seqs, whole, lengths, data = drawn
+    buf = buffer_with(len(seqs), [(seq, 0, 0, 0, 0, 0) for seq in seqs], data)
+    jobs = [jobs_of(buf, seqs, whole, lengths) for _ in range(2)]
+    results = [_slotio.copies(jobs[0]), slotio.py_copies(jobs[1])]
+    first_torn = next((k for k, ok in enumerate(whole) if not ok), None)
+    assert results[0] == results[1] == (None if first_torn is None else (first_torn, 1))
+    for k in range(len(seqs) if first_torn is None else first_torn):  # copied up to the first torn one
+        assert jobs[0][k][5].tobytes() == jobs[1][k][5].tobytes() == buf[jobs[0][k][3] :][: lengths[k]].tobytes()
+
+
+@pytest.mark.parametrize("impl", ["c", "python"])
+@pytest.mark.parametrize("offset", [0, 3])
+def test_a_frame_of_megabytes_is_copied_whole_into_any_alignment(impl, offset):
+    """Frames from 512 KiB on are streamed past the caches (C): every byte still arrives."""
+    if impl == "c" and _slotio is None:
+        pytest.skip("fxis_shm.shm._slotio is not built")
+    copies = _slotio.copies if impl == "c" else slotio.py_copies
+    data = np.random.default_rng(5).integers(0, 256, (1 << 20) + 77, dtype=np.uint8).tobytes()
+    buf = buffer_with(1, [(10, 0, 0, 0, 0, 0)], data)
+    out = np.zeros(len(data) + offset, np.uint8)[offset:]  # a target not aligned to 16 bytes
+    assert copies([(buf, TABLE, 10, DATA, len(data), out)]) is None
+    assert out.tobytes() == data
