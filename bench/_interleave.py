@@ -1,5 +1,7 @@
 """Timing contenders interleaved: every round times one sample of each contender, in a random
 order, each after a random sleep, so a drift of the machine's speed hits all of them alike.
+Then the hot loop: each contender called back to back (no sleep, its caches and threads warm),
+in blocks, the contenders in a random order in every block.
 
 Not a public module; imported as ``_interleave`` (scripts) or ``bench._interleave`` (package).
 """
@@ -37,6 +39,7 @@ class Contender:
     errors: list = field(default_factory=list)  # (sample index, error)
     first_traceback: str | None = None
     warmup_failed: int = 0
+    hot: list = field(default_factory=list)  # ms of each back-to-back call; None for a failed one
 
 
 def minor_faults() -> int:
@@ -83,6 +86,19 @@ def time_contenders(
                 bar.update(1)
 
 
+def hot_loops(contenders: list[Contender], calls: int, rng: random.Random, desc: str, blocks: int = 10) -> None:
+    """``calls`` back-to-back calls of every contender, in ``blocks`` blocks (each contender's block
+    in a random order within a round): no sleep between calls, each call timed on its own, its
+    check run untimed after it."""
+    per_block = [calls // blocks + (b < calls % blocks) for b in range(blocks)]
+    with common.progress(calls * len(contenders), desc) as bar:
+        for n in per_block:
+            for c in rng.sample(contenders, len(contenders)):
+                for _ in range(n):
+                    c.hot.append(time_once(c)[0])
+                bar.update(n)
+
+
 def cycle(items: list) -> Callable[[], Any]:
     """Returns the next of ``items`` on every call, round and round."""
     state = {"i": -1}
@@ -106,12 +122,20 @@ def result_of(c: Contender) -> dict:
         "minor_faults_median": float(np.median(c.faults)) if c.faults else None,
         "samples_ms": c.samples,
         "minor_faults": c.faults,
+        HOT: common.summary(v for v in c.hot if v is not None),
+        "hot_failed": sum(v is None for v in c.hot),
+        "hot_samples_ms": c.hot,
     }
 
 
-def median(results: dict, name: str) -> float | None:
+HOT = "hot_ms"  # a result's summary of its hot loop
+
+
+def median(results: dict, name: str, key: str = "summary_ms") -> float | None:
+    """The median of contender ``name``'s samples (``key``: "summary_ms", interleaved with
+    sleeps; HOT, the hot loop); None if it was not measured."""
     r = results.get(name)
-    return r["summary_ms"]["median"] if r else None
+    return r[key]["median"] if r and key in r else None
 
 
 def ratio(a: float | None, b: float | None) -> float | None:

@@ -19,12 +19,12 @@ import numpy as np
 
 if __package__:
     from . import _common as common, compare_rivals as rivals
-    from ._interleave import Contender, time_contenders
+    from ._interleave import Contender, hot_loops, time_contenders
 else:  # run as a script, or loaded from its path
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     import _common as common
     import compare_rivals as rivals
-    from _interleave import Contender, time_contenders
+    from _interleave import Contender, hot_loops, time_contenders
 
 from fxis_shm import Client
 from fxis_shm.service.launch import ServiceProcess, free_tcp_port
@@ -117,6 +117,13 @@ def take_source(client: Client, cameras: list[str]) -> tuple[list[list[np.ndarra
 # ---- the phases ------------------------------------------------------------------------------
 
 
+def timed(contenders: list[Contender], args, rng, desc: str) -> None:
+    """The interleaved samples with sleeps, then (unless --hot-calls 0) the hot loop."""
+    time_contenders(contenders, args.samples, args.warmup, rng, args.sleep_max_ms, desc)
+    if args.hot_calls > 0:
+        hot_loops(contenders, args.hot_calls, rng, f"{desc}, hot loop")
+
+
 def tcp_phase(args, scenario: str, rng, out: str) -> tuple[list[Contender], dict, list]:
     """The service on tcp: every contender but ipc, interleaved. Returns the contenders, facts
     about the service and the source (for the ipc phase's control)."""
@@ -142,7 +149,7 @@ def tcp_phase(args, scenario: str, rng, out: str) -> tuple[list[Contender], dict
             rivals.queue_contender(rivals.QueueClient(requests, replies, args.timeout), source),
             *rivals.copy_contenders(source),
         ]
-        time_contenders(contenders, args.samples, args.warmup, rng, args.sleep_max_ms, f"{scenario} tcp phase")
+        timed(contenders, args, rng, f"{scenario} tcp phase")
         info = {
             "endpoint": svc.endpoint,
             "log": log,
@@ -169,7 +176,7 @@ def ipc_phase(args, scenario: str, rng, out: str, source) -> tuple[list[Contende
                 frames_contender(IPC, past_tuple(client), cameras, "network"),
                 rivals.copy_contenders(source, rivals.COPY_CONTROL)[0],
             ]
-            time_contenders(contenders, args.samples, args.warmup, rng, args.sleep_max_ms, f"{scenario} ipc phase")
+            timed(contenders, args, rng, f"{scenario} ipc phase")
             return contenders, {"endpoint": svc.endpoint, "log": log, "status": status}
     finally:
         with contextlib.suppress(FileNotFoundError):

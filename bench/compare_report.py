@@ -9,13 +9,13 @@ import numpy as np
 
 if __package__:
     from . import _common as common
-    from ._interleave import median, ratio
+    from ._interleave import HOT, median, ratio
     from .compare_fxis import IPC, LATEST, LATEST_VIEW, LOCAL, LOCAL_VIEW, SCENARIOS, TCP, TIME
     from .compare_rivals import COPY, IMZ, IMZ_1, IMZ_PER_IMAGE, MPQ, REUSED
 else:  # run as a script, or loaded from its path
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     import _common as common
-    from _interleave import median, ratio
+    from _interleave import HOT, median, ratio
     from compare_fxis import IPC, LATEST, LATEST_VIEW, LOCAL, LOCAL_VIEW, SCENARIOS, TCP, TIME
     from compare_rivals import COPY, IMZ, IMZ_1, IMZ_PER_IMAGE, MPQ, REUSED
 
@@ -23,14 +23,15 @@ ROWS = (TCP, IPC, LOCAL, LOCAL_VIEW, LATEST, LATEST_VIEW, TIME, IMZ, IMZ_PER_IMA
 PLOTTED = tuple(r for r in ROWS if r != IMZ_PER_IMAGE)
 TARGET_SCENARIO = "2x1360x1024"  # the targets are set for 2 cameras 1360x1024
 COPY_LIMIT = 1.3  # local copy / the plain copy of the same frames
-VIEW_LIMIT = 0.3  # local zero-copy / the `time` round trip
+VIEW_LIMIT = 0.3  # local zero-copy tuple / the `time` round trip
+LATEST_VIEW_LIMIT = 0.2  # local zero-copy latest / the `time` round trip
 TCP_LIMIT_1 = 2.0  # tuple over tcp / imagezmq for ONE image
 TCP_LIMIT_N = 1.2  # tuple over tcp / imagezmq carrying the same images
 TARGETS = (  # (contender, reference, limit): median(contender) <= limit x median(reference)
     (LOCAL, COPY, COPY_LIMIT),
     (LOCAL_VIEW, TIME, VIEW_LIMIT),
     (LATEST, COPY, COPY_LIMIT),
-    (LATEST_VIEW, TIME, VIEW_LIMIT),
+    (LATEST_VIEW, TIME, LATEST_VIEW_LIMIT),
     (TCP, IMZ_1, TCP_LIMIT_1),
     (TCP, IMZ, TCP_LIMIT_N),
 )
@@ -52,6 +53,7 @@ def scenario_table(scenario: str, results: dict, n_cams: int) -> str:
                 s["median"],
                 s["p99"],
                 "-" if faults is None else f"{faults:.0f}",
+                median(results, name, HOT),
                 *(ratio(m, median(results, ref)) for ref in refs),
             ]
         )
@@ -65,6 +67,7 @@ def scenario_table(scenario: str, results: dict, n_cams: int) -> str:
             "median ms",
             "p99 ms",
             "faults",
+            "hot ms",
             "x copy",
             "x reused",
             "x time",
@@ -74,7 +77,7 @@ def scenario_table(scenario: str, results: dict, n_cams: int) -> str:
         rows,
         title=f"{scenario}: {n_cams} cameras {w}x{h} mono8, {mb:.2f} MB per tuple",
         digits=3,
-        separators=(6,),
+        separators=(7,),
     )
 
 
@@ -85,7 +88,8 @@ def targets(all_results: dict) -> list[dict]:
     out = []
     for name, ref, limit in TARGETS:
         value, reference = median(res, name), median(res, ref)
-        r = ratio(value, reference)
+        hot_value, hot_reference = median(res, name, HOT), median(res, ref, HOT)
+        r, hot = ratio(value, reference), ratio(hot_value, hot_reference)
         out.append(
             {
                 "target": f"{name} <= {limit:g}x {ref}",
@@ -97,6 +101,10 @@ def targets(all_results: dict) -> list[dict]:
                 "ratio": r,
                 "limit": limit,
                 "pass": None if r is None else r <= limit,
+                "hot_median_ms": hot_value,
+                "hot_reference_ms": hot_reference,
+                "hot_ratio": hot,
+                "hot_pass": None if hot is None else hot <= limit,
             }
         )
     return out
@@ -112,15 +120,22 @@ def targets_table(tlist: list[dict]) -> str:
             t["ratio"],
             f"<= {t['limit']:g}",
             common.verdict(t["pass"]),
+            t.get("hot_median_ms"),
+            t.get("hot_reference_ms"),
+            t.get("hot_ratio"),
+            common.verdict(t.get("hot_pass")),
         ]
         for t in tlist
     ]
     return common.table(
-        ["target: median of", "ms", "over the median of", "ms", "ratio", "limit", "verdict"],
+        ["target: median of", "ms", "over the median of", "ms", "ratio", "limit", "verdict"]
+        + ["hot ms", "hot ref ms", "hot ratio", "hot verdict"],
         rows,
         digits=3,
+        separators=(7,),
         title=f"targets ({TARGET_SCENARIO}, same run, interleaved)"
-        + ("" if any(t["median_ms"] is not None for t in tlist) else f": scenario {TARGET_SCENARIO} not measured"),
+        + ("" if any(t["median_ms"] is not None for t in tlist) else f": scenario {TARGET_SCENARIO} not measured")
+        + "; verdict: the interleaved medians (cold), as the issue's goals are set; hot: the hot loop's",
     )
 
 

@@ -11,6 +11,7 @@ never delays other clients.
 
 from __future__ import annotations
 
+import ctypes
 import json
 import logging
 import threading
@@ -27,7 +28,7 @@ from fxis_shm.service.framewatch import FrameWatch
 from fxis_shm.service.streams import Streams
 from fxis_shm.shm import naming, ordering
 from fxis_shm.shm.cameras import FRAME_FIELDS, CameraHandle
-from fxis_shm.shm.copyout import CopyOut
+from fxis_shm.shm.copyout import MESSAGES, REFS, CopyOut
 from fxis_shm.shm.localpath import boot_id, time_namespace
 from fxis_shm.shm.ring import Overwritten
 from fxis_shm.wire import protocol
@@ -37,6 +38,34 @@ log = logging.getLogger("coordinator")
 
 _PUB_QUEUE = 16  # messages queued per subscriber; beyond, that subscriber loses messages
 MAX_MESSAGE_BYTES = 1 << 20  # a peer sending more is disconnected by ZeroMQ
+# The flags of a part sent without blocking, more to come or the last; plain ints, whose
+# arithmetic is far cheaper than that of pyzmq's enums.
+_MORE, _LAST = int(zmq.NOBLOCK | zmq.SNDMORE), int(zmq.NOBLOCK)
+_EVENTS, _POLLIN = int(zmq.EVENTS), int(zmq.POLLIN)
+# glibc's mallopt parameters, and what the coordinator sets them to (see keep_message_memory)
+_M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
+_MMAP_THRESHOLD = 32 << 20  # the largest glibc takes (64-bit): below, from the heap; larger frames: the pool
+_TRIM_THRESHOLD = 256 << 20  # freed memory kept for the next messages, as the buffer pool keeps
+
+
+def keep_message_memory() -> bool:
+    """Let malloc keep the memory of the messages sent for the next ones (True if it could be
+    told). A frame is copied out of its ring straight into the ZeroMQ message that carries it,
+    which libzmq allocates with malloc; glibc would serve each such block (above 128 KiB) with
+    fresh pages from the kernel and return them when the message is freed, so every copy would
+    page-fault on every page (a 1360x1024 frame: 340 faults, costing more than the copy). Told
+    not to, it reuses the memory of the messages already sent, already mapped, as the buffer pool
+    reuses its buffers. Elsewhere (another C library) nothing is changed."""
+    try:
+        mallopt = ctypes.CDLL(None).mallopt
+    except (OSError, AttributeError):
+        return False
+    return bool(mallopt(_M_MMAP_THRESHOLD, _MMAP_THRESHOLD)) and bool(mallopt(_M_TRIM_THRESHOLD, _TRIM_THRESHOLD))
+
+
+def as_message(data) -> zmq.Frame:
+    """A ZeroMQ message holding a copy of ``data`` (the copy out of a ring, made once)."""
+    return zmq.Frame(data, copy=True)
 
 
 class _Stopping:
@@ -58,12 +87,11 @@ def split_envelope(frames: list) -> tuple[list, list]:
 
 
 def send_parts(sock: zmq.Socket, parts: list) -> None:
-    """One multipart message, without blocking: image buffers handed to ZeroMQ
-    without a copy, small byte strings copied (cheaper than tracking them)."""
+    """One multipart message, without blocking: messages (zmq.Frame) and image buffers handed
+    to ZeroMQ without a copy, small byte strings copied (cheaper than tracking them)."""
     last = len(parts) - 1
     for i, part in enumerate(parts):
-        flags = zmq.NOBLOCK | (zmq.SNDMORE if i < last else 0)
-        sock.send(part, flags, copy=isinstance(part, (bytes, zmq.Frame)))
+        sock.send(part, _MORE if i < last else _LAST, copy=isinstance(part, (bytes, zmq.Frame)))
 
 
 def _readable_field(frame: bytes, name: str, kinds: tuple):
@@ -101,6 +129,10 @@ class Coordinator:
     def serve(self, stop: threading.Event, on_ready: Callable[[], None] = lambda: None) -> None:
         ctx = zmq.Context()
         closing = []
+        if keep_message_memory():  # frames are copied out of the rings straight into their messages
+            self.copyout.message, self.copyout.message_max = as_message, _MMAP_THRESHOLD
+        else:  # a copy into fresh memory would page-fault: into the pre-faulted buffers of the pool
+            log.info("malloc cannot be told to keep freed memory: frames are sent from pooled buffers")
         try:
             if self.curve is not None:  # only clients whose public keys are in the folder
                 auth = ThreadAuthenticator(ctx, log=logging.getLogger("auth"))
@@ -185,6 +217,8 @@ class Coordinator:
     @staticmethod
     def _drain(sock, handle, budget: int = 256) -> None:
         for _ in range(budget):
+            if not sock.getsockopt(_EVENTS) & _POLLIN:  # (cheaper than the exception of an empty recv)
+                return
             try:
                 frames = sock.recv_multipart(zmq.NOBLOCK)
             except zmq.Again:
@@ -253,7 +287,7 @@ class Coordinator:
 
     def _answer(self, reply: Reply) -> None:
         try:
-            body, images = self.copyout.reply(reply)
+            body, images = self.copyout.reply(reply, REFS if reply.pending.local else MESSAGES)
         except Overwritten:  # the ring came round during the copy: the engine plans again
             self._carry_out(self.engine.retry(reply, timebase.now()))
             return

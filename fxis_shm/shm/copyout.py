@@ -1,8 +1,12 @@
 """The coordinator's access to the rings: snapshots of the cameras that are up, and
-copies of chosen frames out of them, into pooled buffers handed to ZeroMQ (or, for a
-client on this kernel, where each frame is, so that it copies the frame itself)."""
+copies of chosen frames out of them: each straight into the ZeroMQ message that carries it
+(MESSAGES), into pooled buffers (COPY), or, for a client on this kernel, where each frame is,
+so that it copies the frame itself (REFS)."""
 
 from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
 
 from fxis_shm.core import timebase
 from fxis_shm.core.decisions import Reject, check_not_empty
@@ -11,22 +15,56 @@ from fxis_shm.core.selection import Selection, radius_for, select, tolerance_for
 from fxis_shm.core.snapshot import Snapshot
 from fxis_shm.core.timesearch import Timeline
 from fxis_shm.errors import Code
+from fxis_shm.shm import ordering
 from fxis_shm.shm.bufferpool import BufferPool
 from fxis_shm.shm.cameras import CameraHandle
-from fxis_shm.shm.ring import Overwritten
+from fxis_shm.shm.ring import Overwritten, RingReader
 from fxis_shm.wire import protocol
 from fxis_shm.wire.encodecache import EncodeCache
 from fxis_shm.wire.encoding import RAW
+from fxis_shm.wire.framemeta import CameraFrames, encoded_meta, ring_place
 
-COPY, REFS, VIEWS = "copy", "refs", "views"  # how a reply carries its frames
+COPY, REFS, VIEWS, MESSAGES = "copy", "refs", "views", "messages"  # how a reply carries its frames
+
+
+def copied_by(reader: RingReader, slot: int, seq: int, make: Callable[[Any], Any]) -> Any:
+    """``make(the slot's bytes)``: whatever copy of them it makes (a ZeroMQ message, say), kept
+    only if the slot held the frame of ``seq`` from before the copy to after it (the seqlock
+    check of ``RingReader.copy_slot``, with the copy made by ``make``); else Overwritten."""
+    reader.check_slot(slot, seq, "before")
+    copy = make(reader.data[slot])
+    ordering.fence_acquire()  # every byte was read before the seq is read again
+    reader.check_slot(slot, seq, "during")
+    return copy
 
 
 class CopyOut:
-    def __init__(self, cameras: dict[str, CameraHandle], settings: dict, buffers: BufferPool | None = None):
+    def __init__(
+        self,
+        cameras: dict[str, CameraHandle],
+        settings: dict,
+        buffers: BufferPool | None = None,
+        message: Callable[[Any], Any] | None = None,
+    ):
+        """``message(bytes)``: a copy of the bytes into a message of the transport (for
+        MESSAGES: the coordinator's zmq.Frame, copied once out of the ring, sent as it is), for
+        frames of up to ``message_max`` bytes; larger ones go in pooled buffers."""
         self.cameras = cameras
         self.settings = settings
         self.buffers = buffers or BufferPool()
+        self.message = message
+        self.message_max = 1 << 62
         self.encoded = EncodeCache()
+        self._headers: dict[str, tuple[RingReader, CameraFrames]] = {}
+
+    def header(self, cam: str) -> CameraFrames:
+        """What every frame of ``cam`` says alike in a reply, made again only when its ring is."""
+        reader = self.cameras[cam].reader
+        known = self._headers.get(cam)
+        if known is None or known[0] is not reader:
+            known = (reader, CameraFrames(cam, reader.layout.shape, reader.layout.dtype))
+            self._headers[cam] = known
+        return known[1]
 
     def period(self, cam: str) -> int:
         return self.cameras[cam].period_ns
@@ -51,8 +89,9 @@ class CopyOut:
     def reply(self, reply: Reply, how: str | None = None) -> tuple[dict, list]:
         """The body and images of the reply ``reply`` plans; raises Overwritten if a chosen
         slot was overwritten before its copy was complete. ``how``: COPY (pooled buffers),
-        REFS (where each frame is, for a client on this kernel) or VIEWS (read-only views
-        of the slots, for a reader in this process); default REFS for a local client."""
+        MESSAGES (the transport's messages, see ``message``), REFS (where each frame is, for
+        a client on this kernel) or VIEWS (read-only views of the slots, for a reader in this
+        process); default REFS for a local client."""
         p, plan = reply.pending, reply.plan
         searched = timebase.now()
         how = how or (REFS if p.local else COPY)
@@ -90,10 +129,10 @@ class CopyOut:
             position[(cam, i)] = len(frames)
             if how == REFS:
                 frames.append(self._reference(cam, snaps[cam], i))
-            elif encoding != RAW and how == COPY:
+            elif encoding != RAW and how in (COPY, MESSAGES):
                 frames.append(self._encoded(cam, snaps[cam], i, len(images), images, encoding, quality))
             else:
-                frames.append(self._copied(cam, snaps[cam], i, len(images), images, how == VIEWS))
+                frames.append(self._copied(cam, snaps[cam], i, len(images), images, how))
         return frames, images, position
 
     def _encoded(
@@ -105,73 +144,43 @@ class CopyOut:
 
         def pixels():
             copied: list = []
-            self._copied(cam, snap, i, buffer, copied, False)
+            self._copied(cam, snap, i, buffer, copied, COPY)
             return copied[0]
 
         data = self.encoded.get((cam, meta.generation, meta.frame_id), pixels, encoding, quality)
         images.append(data)
-        layout = self.cameras[cam].reader.layout
-        described = protocol.described(
-            cam,
-            meta.frame_id,
-            meta.t_capture,
-            meta.t_stored,
-            meta.generation,
-            layout.shape,
-            layout.dtype,
-            meta.t_available,
-        )
-        return protocol.encoded_meta({**described, "buffer": buffer}, encoding, len(data))
+        return encoded_meta(self._meta(cam, snap, i, buffer=buffer), encoding, len(data))
 
-    def _copied(self, cam: str, snap: Snapshot, i: int, buffer: int, images: list, view: bool) -> dict:
+    def _copied(self, cam: str, snap: Snapshot, i: int, buffer: int, images: list, how: str) -> dict:
         handle = self.cameras[cam]
         reader = handle.reader
+        slot, seq = snap.slot(i), snap.seq(i)
         try:
-            if view:
-                image = reader.view_slot(snap.slot(i), snap.seq(i))
+            if how == VIEWS:
+                image = reader.view_slot(slot, seq)
+            elif how == MESSAGES and self.message is not None and reader.layout.nbytes <= self.message_max:
+                image = copied_by(reader, slot, seq, self.message)
             else:
-                image = reader.copy(snap, i, self.buffers.take(reader.layout.shape, reader.layout.dtype))
+                image = reader.copy_slot(slot, seq, self.buffers.take(reader.layout.shape, reader.layout.dtype))
         except Overwritten:
             handle.torn_reads += 1
             raise
         images.append(image)
-        meta = snap.frame_meta(i)
-        layout = reader.layout  # what protocol.frame_meta reads of the image, known already
-        described = protocol.described(
-            cam,
-            meta.frame_id,
-            meta.t_capture,
-            meta.t_stored,
-            meta.generation,
-            layout.shape,
-            layout.dtype,
-            meta.t_available,
-        )
-        return {**described, "buffer": buffer}
+        return self._meta(cam, snap, i, buffer=buffer)
+
+    def _meta(self, cam: str, snap: Snapshot, i: int, **more) -> dict:
+        m = snap.frame_meta(i)
+        return self.header(cam).frame(m.frame_id, m.t_capture, m.t_stored, m.generation, m.t_available, **more)
 
     def encode(self, meta: dict, image, encoding: str, quality: int | None) -> tuple[dict, bytes]:
         """A copied frame (checked whole) in ``encoding``, encoded once for every reply and stream."""
         data = self.encoded.get(
             (meta["camera"], meta["generation"], meta["frame_id"]), lambda: image, encoding, quality
         )
-        return protocol.encoded_meta(meta, encoding, len(data)), data
+        return encoded_meta(meta, encoding, len(data)), data
 
     def _reference(self, cam: str, snap: Snapshot, i: int) -> dict:
         reader = self.cameras[cam].reader
         slot, seq = snap.slot(i), snap.seq(i)
         reader.check_slot(slot, seq, "before")  # already gone: choose again rather than send it
-        meta = snap.frame_meta(i)
-        return protocol.frame_ref(
-            cam,
-            meta.frame_id,
-            meta.t_capture,
-            meta.t_stored,
-            meta.generation,
-            reader.layout.shape,
-            reader.layout.dtype,
-            meta.t_available,
-            ring=reader.name,
-            instance=reader.instance,
-            slot=slot,
-            seq=seq,
-        )
+        return self._meta(cam, snap, i, **ring_place(reader.name, reader.instance, slot, seq))

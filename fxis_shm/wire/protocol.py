@@ -21,6 +21,7 @@ from fxis_shm.core.sequences import DIRECTIONS, KINDS as SEQUENCE_KINDS
 from fxis_shm.core.waitpolicy import WAIT_MODES
 from fxis_shm.errors import Code, ProtocolError
 from fxis_shm.wire import encoding as codec
+from fxis_shm.wire.framemeta import described, encoded_meta, frame_meta, frame_ref  # noqa: F401 (names of the codec)
 
 VERSION = 1
 CLOCK = "CLOCK_MONOTONIC"
@@ -203,6 +204,18 @@ EVENT_OPS = ("image", "tuple", "latest", "sequence", "time")
 EVENT_TOPIC = b"fxis.request"  # the topic of request events published to the service
 
 
+def _with_common(schemas: dict[str, dict[str, tuple[Check, Any]]]) -> dict[str, dict[str, tuple[Check, Any]]]:
+    """Each op's whole schema: the fields every request has, then its own."""
+    return {op: {**_COMMON, **fields} for op, fields in schemas.items()}
+
+
+_REQUESTS = _with_common(OPS)
+# Event answers go to many subscribers, so they always carry the pixels: no "local".
+_EVENTS = _with_common(
+    {op: {**{k: v for k, v in OPS[op].items() if k not in _LOCAL}, "reply_topic": (_topic, ...)} for op in EVENT_OPS}
+)
+
+
 def _check_sequence(req: dict) -> None:
     if req["camera"] is not None and req["cameras"] is not None:
         raise ProtocolError("give either 'camera' (a list of frames) or 'cameras' (a list of tuples), not both")
@@ -221,18 +234,14 @@ def decode_request(frames: Sequence[bytes], max_header_bytes: int = MAX_HEADER_B
     """Validate a request (the frames after the routing envelope) and fill in defaults."""
     if len(frames) != 1:
         raise ProtocolError(f"a request is exactly one frame (a JSON header), got {len(frames)}")
-    return _decode_header(frames[0], max_header_bytes, OPS)
+    return _decode_header(frames[0], max_header_bytes, _REQUESTS)
 
 
 def decode_event(frames: Sequence[bytes], max_header_bytes: int = MAX_HEADER_BYTES) -> dict:
     """Validate a request event ([EVENT_TOPIC, header]): a request plus its ``reply_topic``."""
     if len(frames) != 2 or bytes(frames[0]) != EVENT_TOPIC:
         raise ProtocolError(f"a request event is two frames: {EVENT_TOPIC!r} and a JSON header")
-    # Event answers go to many subscribers, so they always carry the pixels: no "local".
-    schemas = {
-        op: {**{k: v for k, v in OPS[op].items() if k not in _LOCAL}, "reply_topic": (_topic, ...)} for op in EVENT_OPS
-    }
-    return _decode_header(frames[1], max_header_bytes, schemas)
+    return _decode_header(frames[1], max_header_bytes, _EVENTS)
 
 
 def _decode_header(frame: bytes, max_header_bytes: int, schemas: dict) -> dict:
@@ -257,10 +266,11 @@ def request_of(op: str, **fields) -> dict:
     """The request a client would send, validated and with defaults filled in as the
     service does, without encoding it (for requests a client answers itself)."""
     header = {"v": VERSION, "op": op, **{k: v for k, v in fields.items() if v is not None}}
-    return _validate(header, OPS)
+    return _validate(header, _REQUESTS)
 
 
 def _validate(header: dict, schemas: dict) -> dict:
+    """``header`` checked against its op's whole schema in ``schemas`` (see ``_with_common``)."""
     if "v" not in header:
         raise ProtocolError("request header has no 'v' (protocol version)")
     if header["v"] != VERSION:
@@ -271,8 +281,8 @@ def _validate(header: dict, schemas: dict) -> dict:
     op = _name("op", header.get("op"))
     if op not in schemas:
         raise ProtocolError(f"unknown op {op!r}; known: {sorted(schemas)}", Code.UNKNOWN_OP)
-    schema = {**_COMMON, **schemas[op]}
-    unknown = sorted(set(header) - set(schema))
+    schema = schemas[op]
+    unknown = sorted(header.keys() - schema.keys())
     if unknown:
         raise ProtocolError(f"unknown field(s) {unknown} for op {op!r}")
     request = {}
@@ -351,69 +361,6 @@ def parse_stream_topic(topic: str) -> StreamTopic | None:
 
 
 # ---- replies ----
-
-
-def described(camera, frame_id, t_capture, t_stored, generation, shape, dtype: str, t_available) -> dict:
-    return {
-        "camera": camera,
-        "frame_id": int(frame_id),
-        "t_capture": int(t_capture),
-        "t_available": int(t_capture if t_available is None else t_available),
-        "t_stored": int(t_stored),
-        "generation": int(generation),
-        "shape": [int(n) for n in shape],
-        "dtype": dtype,
-    }
-
-
-def frame_meta(
-    camera: str,
-    frame_id: int,
-    t_capture: int,
-    t_stored: int,
-    generation: int,
-    image: np.ndarray,
-    buffer: int,
-    t_available: int | None = None,
-) -> dict:
-    """A frame whose pixels travel in buffer frame number ``buffer`` of the reply."""
-    return {
-        **described(camera, frame_id, t_capture, t_stored, generation, image.shape, image.dtype.name, t_available),
-        "buffer": buffer,
-    }
-
-
-def frame_ref(
-    camera: str,
-    frame_id: int,
-    t_capture: int,
-    t_stored: int,
-    generation: int,
-    shape,
-    dtype: str,
-    t_available: int | None,
-    *,
-    ring: str,
-    instance: int,
-    slot: int,
-    seq: int,
-) -> dict:
-    """A frame of a local reply: the client copies it out of ``slot`` of the ring
-    segment ``ring`` (whose header carries ``instance``) while the slot shows ``seq``.
-    ``instance`` is an unsigned 64-bit number, so it travels as a decimal string: a JSON
-    parser that reads numbers as doubles would lose its low bits."""
-    return {
-        **described(camera, frame_id, t_capture, t_stored, generation, shape, dtype, t_available),
-        "ring": ring,
-        "instance": str(int(instance)),
-        "slot": int(slot),
-        "seq": int(seq),
-    }
-
-
-def encoded_meta(meta: dict, encoding: str, nbytes: int) -> dict:
-    """A frame's metadata when its buffer holds the image in ``encoding`` (``nbytes`` long)."""
-    return meta if encoding == codec.RAW else {**meta, "encoding": encoding, "bytes": int(nbytes)}
 
 
 def encode_reply(request_id, body: dict, buffers: Sequence = ()) -> list:

@@ -65,6 +65,21 @@ def test_compare_targets_are_ratios_of_medians_against_their_limits(bench_module
     assert "n/a" in report.targets_table(list(got.values()))
 
 
+def test_compare_targets_judge_the_interleaved_medians_and_show_the_hot_loops_beside(bench_modules):
+    report, fx = bench_modules["compare_report"], sys.modules["compare_fxis"]
+    res = {
+        fx.LOCAL_VIEW: {**result(0.05), "hot_ms": {"median": 0.01}},
+        fx.LATEST_VIEW: {**result(0.05), "hot_ms": {"median": 0.01}},
+        fx.TIME: {**result(0.2), "hot_ms": {"median": 0.1}},
+    }
+    got = {t["contender"]: t for t in report.targets({report.TARGET_SCENARIO: res})}
+    # the same 0.25x: within the zero-copy tuple's 0.3x, not within the zero-copy latest's 0.2x
+    assert got[fx.LOCAL_VIEW]["pass"] is True and got[fx.LATEST_VIEW]["pass"] is False
+    assert got[fx.LATEST_VIEW]["hot_ratio"] == pytest.approx(0.1) and got[fx.LATEST_VIEW]["hot_pass"] is True
+    assert got[fx.TCP]["hot_pass"] is None  # not measured
+    assert "hot verdict" in report.targets_table(list(got.values()))
+
+
 def test_the_scaling_help_describes_every_section_from_its_module(bench_modules):
     scaling = bench_modules["scaling"]
     text = scaling.description()
