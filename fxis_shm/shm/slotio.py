@@ -70,9 +70,27 @@ try:
 except ImportError:
     _slotio = None
 
+COPIES_AT_ONCE = 64  # what one call of the C ``copies`` takes (MAX_JOBS in _slotio.c)
+
+
+def in_batches(copies_at_once):
+    """``copies`` over any number of items, in calls of at most COPIES_AT_ONCE (a sequence
+    request can copy hundreds of frames)."""
+
+    def copies(items: list[tuple]) -> tuple[int, int] | None:
+        for start in range(0, len(items), COPIES_AT_ONCE):
+            torn = copies_at_once(items[start : start + COPIES_AT_ONCE])
+            if torn is not None:
+                return start + torn[0], torn[1]
+        return None
+
+    return copies
+
+
 if _slotio is not None:
     IMPL = "c"
-    records, copy, copies, holds = _slotio.records, _slotio.copy, _slotio.copies, _slotio.holds
+    records, copy, holds = _slotio.records, _slotio.copy, _slotio.holds
+    copies = in_batches(_slotio.copies)
 else:  # not built (no C compiler at install time), or FXIS_PURE_PYTHON=1
     IMPL = "python"
     records, copy, copies, holds = py_records, py_copy, py_copies, py_holds

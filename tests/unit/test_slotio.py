@@ -123,6 +123,21 @@ def test_several_copies_at_once_agree(drawn):
         assert jobs[0][k][5].tobytes() == jobs[1][k][5].tobytes() == buf[jobs[0][k][3] :][: lengths[k]].tobytes()
 
 
+@pytest.mark.parametrize("torn_at", [None, 0, 63, 64, 83])
+def test_more_frames_than_one_c_call_takes_are_copied_in_batches(torn_at):
+    """A sequence copies hundreds of frames: the public ``copies`` takes any number (in batches
+    of COPIES_AT_ONCE for the C one) and answers as the Python one does."""
+    n = slotio.COPIES_AT_ONCE + 20  # the test buffer holds 84 slot records
+    seqs, lengths = [2 * k + 2 for k in range(n)], [8] * n
+    whole = [k != torn_at for k in range(n)]
+    data = bytes(range(256)) * 5
+    buf = buffer_with(n, [(seq, 0, 0, 0, 0, 0) for seq in seqs], data[: sum(lengths)])
+    jobs = [jobs_of(buf, seqs, whole, lengths) for _ in range(2)]
+    assert slotio.copies(jobs[0]) == slotio.py_copies(jobs[1]) == (None if torn_at is None else (torn_at, 1))
+    for k in range(n if torn_at is None else torn_at):
+        assert jobs[0][k][5].tobytes() == jobs[1][k][5].tobytes() == data[8 * k : 8 * k + 8]
+
+
 @pytest.mark.parametrize("impl", ["c", "python"])
 @pytest.mark.parametrize("offset", [0, 3])
 def test_a_frame_of_megabytes_is_copied_whole_into_any_alignment(impl, offset):
