@@ -9,6 +9,7 @@ is current. A service that stops answering leaves the last estimate in place.
 from __future__ import annotations
 
 import threading
+import time
 from collections.abc import Callable
 
 import zmq
@@ -19,6 +20,7 @@ from fxis_shm.wire import protocol
 
 BURST = 8  # exchanges per refresh: the shortest of them counts
 FIRST_BURST = 16
+STOP_CHECK_S = 0.1  # while waiting for a silent service, look this often whether the tracker closes
 
 
 class ClockTracker:
@@ -82,11 +84,11 @@ class ClockTracker:
         self._ids += 1
         request = [b""] + protocol.encode_request("time", id=f"clock-{self._ids}")
         sent = self.clock()
-        if not self._sock.poll(self.timeout * 1000, zmq.POLLOUT):
+        if not self._poll(zmq.POLLOUT):
             raise self._silent()
         self._sock.send_multipart(request, zmq.NOBLOCK)
         while True:
-            if not self._sock.poll(self.timeout * 1000, zmq.POLLIN):
+            if not self._poll(zmq.POLLIN):
                 self._sock.close()  # a late reply must not be taken for the next exchange's
                 self._sock = None
                 raise self._silent()
@@ -101,6 +103,18 @@ class ClockTracker:
             raise ProtocolError(
                 f"{self.endpoint} answered 'time' without its receive and send times (an older service?)"
             ) from None
+
+    def _poll(self, event: int) -> bool:
+        """Whether the socket is ready for ``event`` within the timeout; False at once when the
+        tracker is closing (closing a client of a silent service does not wait out a timeout)."""
+        assert self._sock is not None
+        deadline = time.monotonic() + self.timeout
+        while True:
+            left = deadline - time.monotonic()
+            if self._sock.poll(max(0.0, min(left, STOP_CHECK_S)) * 1000, event):
+                return True
+            if left <= 0 or self._stop.is_set():
+                return False
 
     def _silent(self) -> RequestTimeout:
         return RequestTimeout(
