@@ -351,6 +351,23 @@ _V4L2_CAP_DEVICE_CAPS = 0x80000000
 _V4L2_BUF_TYPE_VIDEO_CAPTURE = 1
 
 
+def capture_card(caps: bytes) -> str | None:
+    """The card name of a ``struct v4l2_capability``, None unless the node captures video
+    (the node's own capabilities where the driver gives them)."""
+    capabilities, device_caps = struct.unpack_from("<II", caps, 84)
+    if capabilities & _V4L2_CAP_DEVICE_CAPS:
+        capabilities = device_caps
+    if not capabilities & _V4L2_CAP_VIDEO_CAPTURE:
+        return None
+    return bytes(caps[16:48]).split(b"\0")[0].decode(errors="replace")
+
+
+def format_of(fmt: bytes) -> str:
+    """ "FOURCC WxH" of a ``struct v4l2_format`` of a capture buffer type."""
+    width, height, fourcc = struct.unpack_from("<III", fmt, 8)
+    return f"{fourcc.to_bytes(4, 'little').decode(errors='replace')} {width}x{height}"
+
+
 def _v4l2_info(path: str) -> tuple[str, str] | None:
     """(card name, current format) of a V4L2 video capture node, None if it is not one.
     QUERYCAP and G_FMT only read: they do not disturb a stream another process runs."""
@@ -361,18 +378,14 @@ def _v4l2_info(path: str) -> tuple[str, str] | None:
     try:
         caps = bytearray(104)
         fcntl.ioctl(fd, _VIDIOC_QUERYCAP, caps)
-        card = bytes(caps[16:48]).split(b"\0")[0].decode(errors="replace")
-        capabilities, device_caps = struct.unpack_from("<II", caps, 84)
-        if capabilities & _V4L2_CAP_DEVICE_CAPS:
-            capabilities = device_caps
-        if not capabilities & _V4L2_CAP_VIDEO_CAPTURE:
+        card = capture_card(caps)
+        if card is None:
             return None  # a metadata or output node
         fmt = bytearray(208)
         struct.pack_into("<I", fmt, 0, _V4L2_BUF_TYPE_VIDEO_CAPTURE)
         try:
             fcntl.ioctl(fd, _VIDIOC_G_FMT, fmt)
-            width, height, fourcc = struct.unpack_from("<III", fmt, 8)
-            form = f"{fourcc.to_bytes(4, 'little').decode(errors='replace')} {width}x{height}"
+            form = format_of(fmt)
         except OSError:
             form = "?"
         return card, form
