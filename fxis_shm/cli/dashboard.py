@@ -12,7 +12,7 @@ import threading
 
 from fxis_shm.cli.options import add_key_options, client_keys_for
 from fxis_shm.errors import ConfigError
-from fxis_shm.service.config import ViewerAccess, check_tls_files, http_address, new_token, read_token_file
+from fxis_shm.service.config import ViewerAccess, check_viewer_files, http_address, viewer_token
 from fxis_shm.service.supervisor import link_host
 from fxis_shm.viewers.dashboard import serve
 from fxis_shm.viewers.livefeed import LiveFeed
@@ -24,16 +24,10 @@ DEFAULT_HTTP = "127.0.0.1:8080"
 def access_for(args) -> ViewerAccess:
     """The token the page requires (a file's; a new one where other hosts reach it, unless
     --insecure-bind), and its TLS files; ConfigError for a bad one."""
+    check_viewer_files(args.viewer_token_file, args.viewer_tls_cert, args.viewer_tls_key)
     exposed = not is_loopback(f"tcp://{http_address(args.http)[0]}")
-    if bool(args.viewer_tls_cert) != bool(args.viewer_tls_key):
-        raise ConfigError("TLS needs both --viewer-tls-cert and --viewer-tls-key")
-    if args.viewer_tls_cert:
-        check_tls_files(args.viewer_tls_cert, args.viewer_tls_key)
-    token = None
-    if args.viewer_token_file:
-        token = read_token_file(args.viewer_token_file)
-    elif exposed and not args.insecure_bind:
-        token = new_token()
+    needs_token = bool(args.viewer_token_file) or (exposed and not args.insecure_bind)  # as ServiceConfig.token_viewers
+    token = viewer_token(args.viewer_token_file) if needs_token else None
     return ViewerAccess(token, args.viewer_tls_cert, args.viewer_tls_key)
 
 

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
+from typing import Any
 
 from fxis_shm.client import snapshot
 from fxis_shm.client.frames import Frame, FrameTuple, frames_of, sequence_of, tuple_of
@@ -86,7 +87,7 @@ class MultiClient:
         endpoint to its status (or ``{"ok": False, "error": ...}`` for one that does not
         answer; it is left out of the rest), ``cameras`` each camera's status with its
         ``service``, ``now`` the caller's clock. Raises only when no service answers."""
-        answers = dict(zip(self.endpoints, self._pool.map(_status_of, self.clients)))
+        answers = dict(zip(self.endpoints, self._pool.map(_or_error, [c.status for c in self.clients])))
         if all(isinstance(a, FxisError) for a in answers.values()):
             raise RequestTimeout(f"none of the services answers: {_errors(answers)}")
         cameras = {}
@@ -106,7 +107,7 @@ class MultiClient:
     def time(self) -> dict[str, int]:
         """Each service's clock now (int ns of the clock its status names), by endpoint;
         RequestTimeout naming a service that does not answer."""
-        return _each(dict(zip(self.endpoints, self._pool.map(_time_of, self.clients))))
+        return _each(dict(zip(self.endpoints, self._pool.map(_or_error, [c.time for c in self.clients]))))
 
     @property
     def clocks(self) -> dict[str, ClockEstimate]:
@@ -294,16 +295,10 @@ class MultiClient:
         return names
 
 
-def _status_of(client: SingleClient) -> dict | FxisError:
+def _or_error(call: Callable[[], Any]) -> Any:
+    """What ``call`` returns, or the FxisError it raises (one service's answer among several)."""
     try:
-        return client.status()
-    except FxisError as exc:
-        return exc
-
-
-def _time_of(client: SingleClient) -> int | FxisError:
-    try:
-        return client.time()
+        return call()
     except FxisError as exc:
         return exc
 

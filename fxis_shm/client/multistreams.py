@@ -67,7 +67,9 @@ class MultiSubscriber(Receiver):
         stream = stream_topic("tuples", None, rate_hz, encoding, quality)
         topic = str(stream)
         if topic not in self._streams:
-            self._streams[topic] = TupleStream(topic, stream, self._owner, self._options, self._ring, partial)
+            self._streams[topic] = TupleStream(
+                topic, stream, self._owner, self._options, self._keep, self._bell_address, partial
+            )
         return topic
 
     def topic(self, topic: str) -> str:
@@ -85,19 +87,11 @@ class MultiSubscriber(Receiver):
 
     # ---- receiving ----
 
-    def _ring(self, message: Message) -> None:
-        """From a tuple stream's thread: keep the message (the oldest goes when the queue is full)."""
+    def _keep(self, message: Message) -> None:
+        """From a tuple stream's thread (which then rings the bell): keep the message, the
+        oldest going when the queue is full."""
         with self._made_lock:
             self._made.append(message)
-        bell = zmq.Context.instance().socket(zmq.PUSH)
-        try:
-            bell.setsockopt(zmq.LINGER, 0)
-            bell.connect(self._bell_address)
-            bell.send(b"", zmq.NOBLOCK)
-        except zmq.ZMQError:
-            pass  # the subscriber is closing, or its bell already rings
-        finally:
-            bell.close()
 
     def receive(self, timeout: float | None = None, latest: bool = False) -> Message:
         """The next message of any service or tuple stream; with ``latest``, the newest queued."""

@@ -19,6 +19,8 @@ import math
 import threading
 from collections.abc import Callable
 
+import zmq
+
 from fxis_shm.client.jointrequests import JointRequests
 from fxis_shm.client.pubsub import Message
 from fxis_shm.client.single import SingleClient
@@ -42,9 +44,12 @@ class TupleStream:
         owner: dict[str, str],
         options: dict,
         deliver: Callable[[Message], None],
+        bell: str,
         partial: bool = False,
     ):
-        self.topic, self.stream, self.partial, self.deliver = topic, stream, partial, deliver
+        """``deliver`` keeps each message; a byte sent to ``bell`` (an inproc address) then
+        wakes the subscriber's poll."""
+        self.topic, self.stream, self.partial, self.deliver, self.bell = topic, stream, partial, deliver, bell
         self._clients = {e: SingleClient(e, **options) for e in dict.fromkeys(owner.values())}
         try:
             first = next(iter(self._clients.values()))
@@ -84,12 +89,26 @@ class TupleStream:
         return max((c.period_ns + c.state(c.snapshot()).delay_ns for c in cams), default=0) + LAG_MARGIN_NS
 
     def _run(self) -> None:
+        bell = zmq.Context.instance().socket(zmq.PUSH)  # used by this thread only
+        bell.setsockopt(zmq.LINGER, 0)
+        bell.setsockopt(zmq.SNDHWM, 1)  # one ring wakes the subscriber, however many messages wait
+        bell.connect(self.bell)
+        try:
+            self._schedule(bell)
+        finally:
+            bell.close()
+
+    def _schedule(self, bell: zmq.Socket) -> None:
         t_star = self._clock()
         while not self._stop.is_set():
             message = self._tuple_at(t_star)
             if self._stop.is_set():
                 return
             self.deliver(message)
+            try:
+                bell.send(b"", zmq.NOBLOCK)
+            except zmq.Again:
+                pass  # it rings already
             interval, lag = self._interval_ns(), self._lag_ns()
             t_star += interval
             late = self._clock() - lag - t_star

@@ -22,6 +22,7 @@ import time
 import zlib
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 from fxis_shm.client.single import SingleClient
 from fxis_shm.errors import FxisError
@@ -41,7 +42,28 @@ MATCH_WAIT_S = 2.0  # a new reply name: how long its first reply waits for the r
 REQUEST_TIMEOUT_S = 5.0
 
 
-class FramesAt:
+class HeaderRequests:
+    """Requests that arrive as std_msgs/Header on a topic (``_reader``), read by a thread of
+    their own until ``stop`` and each handed to ``_dispatch``; ``start`` starts ``threads``."""
+
+    stop: threading.Event
+    threads: list[threading.Thread]
+    _reader: Any
+
+    def start(self) -> None:
+        for thread in self.threads:
+            thread.start()
+
+    def _listen(self) -> None:
+        while not self.stop.is_set():
+            for request in self._reader.wait(0.1):
+                self._dispatch(request.header)
+
+    def _dispatch(self, header: cdr.Header) -> None:
+        raise NotImplementedError
+
+
+class FramesAt(HeaderRequests):
     def __init__(
         self,
         participant: RosParticipant,
@@ -66,17 +88,8 @@ class FramesAt:
             for i, q in enumerate(self._queues)
         ]
 
-    def start(self) -> None:
-        for thread in self.threads:
-            thread.start()
-
     def status(self) -> dict:
         return {**self.counts.as_dict(), "refused": self.refused}
-
-    def _listen(self) -> None:
-        while not self.stop.is_set():
-            for request in self._reader.wait(0.1):
-                self._dispatch(request.header)
 
     def _dispatch(self, header: cdr.Header) -> None:
         name = header.frame_id

@@ -21,7 +21,7 @@ from fxis_shm.errors import FxisError
 from fxis_shm.formats import cdr, rosnames
 from fxis_shm.ros2.dds import RosParticipant
 from fxis_shm.ros2.follow import Counts
-from fxis_shm.ros2.frames_at import STRING
+from fxis_shm.ros2.frames_at import STRING, HeaderRequests
 
 log = logging.getLogger("ros2")
 
@@ -29,7 +29,7 @@ BEFORE_S, AFTER_S = 2.0, 1.0
 MAX_AT_ONCE = 4
 
 
-class SnapshotRequests:
+class SnapshotRequests(HeaderRequests):
     def __init__(
         self,
         participant: RosParticipant,
@@ -44,15 +44,6 @@ class SnapshotRequests:
         self._result = participant.writer(rosnames.topic(namespace, "snapshot", "result"), STRING)
         self._slots = threading.BoundedSemaphore(MAX_AT_ONCE)
         self.threads = [threading.Thread(target=self._listen, name="ros2-snapshots", daemon=True)]
-
-    def start(self) -> None:
-        for thread in self.threads:
-            thread.start()
-
-    def _listen(self) -> None:
-        while not self.stop.is_set():
-            for request in self._reader.wait(0.1):
-                self._dispatch(request.header)
 
     def _dispatch(self, header: cdr.Header) -> None:
         name = header.frame_id

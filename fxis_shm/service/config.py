@@ -141,7 +141,7 @@ def viewer_accesses(config: ServiceConfig) -> dict[str, ViewerAccess]:
     else a new random one (secrets), made only if some viewer requires it."""
     needing, token = config.token_viewers, None
     if needing:
-        token = read_token_file(config.viewer_token_file) if config.viewer_token_file else new_token()
+        token = viewer_token(config.viewer_token_file)
     return {
         setting: ViewerAccess(token if setting in needing else None, config.viewer_tls_cert, config.viewer_tls_key)
         for setting in config.viewer_urls
@@ -448,10 +448,21 @@ def _viewer_access(config: ServiceConfig, values: dict) -> ServiceConfig:
     for setting, value in (("viewer_token_file", token_file), ("viewer_tls_cert", cert), ("viewer_tls_key", key)):
         if value is not None and not isinstance(value, str):
             raise ConfigError(f"{setting} must be the path of a file, got {value!r}")
+    check_viewer_files(token_file, cert, key)
+    return replace(config, viewer_token_file=token_file, viewer_tls_cert=cert, viewer_tls_key=key)
+
+
+def check_viewer_files(token_file: str | None, cert: str | None, key: str | None) -> None:
+    """ConfigError unless the token file holds a token and the TLS certificate and key come
+    together and load (``fxis run``'s viewers and ``fxis dashboard`` alike)."""
     if token_file:
         read_token_file(token_file)
     if bool(cert) != bool(key):
         raise ConfigError("viewer_tls_cert and viewer_tls_key go together: the certificate (PEM) and its key")
     if cert:
         check_tls_files(cert, key)
-    return replace(config, viewer_token_file=token_file, viewer_tls_cert=cert, viewer_tls_key=key)
+
+
+def viewer_token(token_file: str | None) -> str:
+    """The token viewers require: the token file's, else a new random one."""
+    return read_token_file(token_file) if token_file else new_token()
