@@ -1,0 +1,45 @@
+/* What the C readers of a ring share (_slotio.c, _fastpick.c): the seqlock's ordered loads
+ * and the copy of a slot's bytes. */
+#ifndef FXIS_SEQLOCK_H
+#define FXIS_SEQLOCK_H
+
+#include <stdint.h>
+#include <string.h>
+#if defined(__x86_64__)
+#include <emmintrin.h>
+#endif
+
+static inline uint64_t load_acquire(const char *at) { return __atomic_load_n((const uint64_t *)at, __ATOMIC_ACQUIRE); }
+
+static inline int64_t load_plain(const char *at) { return __atomic_load_n((const int64_t *)at, __ATOMIC_RELAXED); }
+
+/* With ``stream``, a copy that goes to memory, not to this core's caches (SSE2 streaming
+ * stores, on every x86-64): a frame of megabytes would not stay cached anyway, and a cached
+ * copy first reads every destination line. Elsewhere (and below STREAM_MIN), memcpy. */
+#define STREAM_MIN (512 * 1024)
+static inline void copy_bytes(char *dst, const char *src, size_t n, int stream) {
+#if defined(__x86_64__)
+    if (stream && n >= STREAM_MIN) {
+        size_t head = (16 - ((uintptr_t)dst & 15)) & 15, i;
+        memcpy(dst, src, head);
+        for (i = head; i + 64 <= n; i += 64) {
+            __m128i a = _mm_loadu_si128((const __m128i *)(src + i));
+            __m128i b = _mm_loadu_si128((const __m128i *)(src + i + 16));
+            __m128i c = _mm_loadu_si128((const __m128i *)(src + i + 32));
+            __m128i d = _mm_loadu_si128((const __m128i *)(src + i + 48));
+            _mm_stream_si128((__m128i *)(dst + i), a);
+            _mm_stream_si128((__m128i *)(dst + i + 16), b);
+            _mm_stream_si128((__m128i *)(dst + i + 32), c);
+            _mm_stream_si128((__m128i *)(dst + i + 48), d);
+        }
+        _mm_sfence(); /* the streamed stores are visible before anything after the copy */
+        memcpy(dst + i, src + i, n - i);
+        return;
+    }
+#else
+    (void)stream;
+#endif
+    memcpy(dst, src, n);
+}
+
+#endif
