@@ -4,6 +4,9 @@ compiler (or without mypy) the install goes on, and that part runs as Python, th
 
 - fxis_shm/shm/_ordered.c: the ring's memory-ordering helper (without it, rings work on x86-64 only);
 - fxis_shm/shm/_slotio.c: the ring reader's seqlock reads (snapshot records, copy, check);
+- fxis_shm/shm/_fastpick.c with fxis_shm/core/pickcore.c: the same-host read of the common requests
+  (image, tuple with `at`, latest) in one call: look, decide (pickcore, the C twin of the engine's
+  decision), copy;
 - the request engine's modules (fxis_shm/_compiled.py, MODULES), compiled by mypyc from the very
   .py files mypy --strict checks, into one group library fxis_shm/core/_hot__mypyc.
 """
@@ -43,7 +46,15 @@ def compiled_core() -> list:
 setup(
     ext_modules=[
         Extension("fxis_shm.shm._ordered", ["fxis_shm/shm/_ordered.c"], optional=True),
-        Extension("fxis_shm.shm._slotio", ["fxis_shm/shm/_slotio.c"], optional=True),
+        Extension(
+            "fxis_shm.shm._slotio", ["fxis_shm/shm/_slotio.c"], depends=["fxis_shm/shm/seqlock.h"], optional=True
+        ),
+        Extension(
+            "fxis_shm.shm._fastpick",
+            ["fxis_shm/shm/_fastpick.c", "fxis_shm/core/pickcore.c"],
+            depends=["fxis_shm/shm/seqlock.h", "fxis_shm/core/pickcore.h"],
+            optional=True,
+        ),
         *compiled_core(),
     ]
 )

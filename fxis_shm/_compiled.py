@@ -38,7 +38,7 @@ MODULES = (
     "fxis_shm.core.decisions",
     "fxis_shm.core.engine",
 )
-C_HELPER = "fxis_shm.shm._slotio"
+C_HELPERS = ("fxis_shm.shm._slotio", "fxis_shm.shm._fastpick")  # the C readers of the rings
 
 
 class SourceFirst(importlib.abc.MetaPathFinder):
@@ -90,10 +90,10 @@ def status() -> dict[str, bool]:
     """Each module of the hot path (imported now): True if it runs compiled."""
     import importlib
 
-    from fxis_shm.shm import slotio
+    from fxis_shm.shm import fastpick, slotio
 
     modules = {name: is_compiled(importlib.import_module(name)) for name in MODULES}
-    return {**modules, C_HELPER: slotio.IMPL == "c"}
+    return {**modules, C_HELPERS[0]: slotio.IMPL == "c", C_HELPERS[1]: fastpick.AVAILABLE}
 
 
 def check() -> bool:

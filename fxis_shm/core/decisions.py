@@ -162,7 +162,7 @@ def _near(
                 f"the best tuple near t* has a skew of {sel.best_skew_ns / 1e6:.3f} ms, "
                 f"more than max_skew_ms={ctx.max_skew_ms}",
             )
-    picks = [(c, first[c] + i) for c, i in sel.index.items()]  # back to snapshot indices
+    picks = [(c, first[c] + sel.index[c]) for c in p.cameras]  # in the order asked; back to snapshot indices
     body: dict[str, Any] = {"op": p.op, "t_request": p.t_star}
     if p.op == "tuple":
         body.update(skew_ns=sel.skew_ns, sync=mode)

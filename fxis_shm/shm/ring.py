@@ -458,11 +458,21 @@ class RingReader(_Mapping):
         """A read-only view of the frame in ``slot`` (no copy): valid only while
         ``slot_holds(slot, expected_seq)`` stays true; the writer may overwrite it any time."""
         self.check_slot(slot, expected_seq, "before")
-        if self._views_ro is None:  # made once: a view of a view is cheaper than a new one
+        return self.slot_views()[slot].view()
+
+    def slot_views(self) -> list[np.ndarray]:
+        """A read-only array over each slot's frame, made once: a view of one of them is cheaper
+        than a new one (hand out views, never these)."""
+        if self._views_ro is None:
             self._views_ro = [self.slot_image(s) for s in range(self.slots)]
             for view in self._views_ro:
                 view.flags.writeable = False
-        return self._views_ro[slot].view()
+        return self._views_ro
+
+    def geometry(self) -> tuple:
+        """(mapping, slots, slot table offset, data offset, slot stride, frame bytes): where a C
+        reader finds the slots (fxis_shm.shm._fastpick.Rings)."""
+        return self._mm, self.slots, HEADER_BYTES, self._data_at, self._stride, self.layout.nbytes
 
     def slot_holds(self, slot: int, expected_seq: int) -> bool:
         """True while the slot still holds that frame; what was read of it before is valid."""
