@@ -12,7 +12,7 @@ BIN    := $(VENV)/bin
 setup: $(VENV)/.installed
 
 # the compiled parts (setup.py): the C helpers and the request engine's modules mypyc compiles
-COMPILED_SOURCES := fxis_shm/shm/_ordered.c fxis_shm/shm/_slotio.c fxis_shm/shm/_fastpick.c fxis_shm/shm/seqlock.h \
+COMPILED_SOURCES := fxis_shm/shm/_ordered.c fxis_shm/shm/_slotio.c fxis_shm/shm/_fastpick.c fxis_shm/shm/plainpick.c fxis_shm/shm/plainpick.h fxis_shm/shm/seqlock.h \
                     fxis_shm/core/pickcore.c fxis_shm/core/pickcore.h $(addprefix fxis_shm/core/,$(addsuffix .py,\
                     timesearch snapshot selection waitpolicy sequences decisions engine))
 

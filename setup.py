@@ -51,8 +51,8 @@ setup(
         ),
         Extension(
             "fxis_shm.shm._fastpick",
-            ["fxis_shm/shm/_fastpick.c", "fxis_shm/core/pickcore.c"],
-            depends=["fxis_shm/shm/seqlock.h", "fxis_shm/core/pickcore.h"],
+            ["fxis_shm/shm/_fastpick.c", "fxis_shm/shm/plainpick.c", "fxis_shm/core/pickcore.c"],
+            depends=["fxis_shm/shm/seqlock.h", "fxis_shm/shm/plainpick.h", "fxis_shm/core/pickcore.h"],
             optional=True,
         ),
         *compiled_core(),

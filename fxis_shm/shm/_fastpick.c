@@ -17,7 +17,7 @@
  *       t_available, generation, ready_at, array or None), or an int: why the Python
  *       engine must answer instead (FALLBACK_*, a camera down, a wait, an error to word).
  *       `now`: when the request arrived, in the service's clock (0: read the clock).
- *   decide_near(cams, t_star, now, tuple, joint, wait_auto, check_history, tolerance_ns,
+ *   decide_near(cams, t_star, now, tuple, joint, wait_auto, check_history, tolerance_ns,   (plainpick.c)
  *       max_skew_ns)  pickcore over plain timelines, for the differential tests: cams are
  *       (times, rank, period_ns, delay_ns); returns (PLAN, indices, skew_ns), (WAIT, waited
  *       camera positions), (REJECT, code) or (UNSUPPORTED, None).
@@ -36,6 +36,7 @@
 #include <unistd.h>
 
 #include "../core/pickcore.h"
+#include "plainpick.h"
 #include "seqlock.h"
 
 #define RECORD 48 /* seq, frame_id, t_capture, t_stored, t_available, generation: 8 bytes each */
@@ -229,7 +230,9 @@ static int rings_init(Rings *self, PyObject *args, PyObject *kwds) {
                                 self->delay_at};
         Py_ssize_t header_end = 0;
         for (int j = 0; j < 6; j++)
-            header_end = offsets[j] < 0 || offsets[j] % 4 ? PY_SSIZE_T_MAX - 8 : offsets[j] > header_end ? offsets[j] : header_end;
+            header_end = offsets[j] < 0 || offsets[j] % 4   ? PY_SSIZE_T_MAX - 8
+                         : offsets[j] > header_end ? offsets[j]
+                                                   : header_end;
         if (r->slots < 1 || r->nbytes < 0 || r->stride < r->nbytes || header_end + 8 > r->table_at ||
             r->table_at > r->view.len - r->slots * RECORD || r->data_at < 0 ||
             r->data_at > r->view.len - r->nbytes - (r->slots - 1) * r->stride || (uintptr_t)r->view.buf % 8 ||
@@ -270,7 +273,8 @@ static int copy_out(Ring **rings, const int64_t *writes, PyObject *outs, int n) 
     Py_buffer targets[PICK_MAX_CAMS];
     int opened = 0, status = 0;
     for (; opened < n; opened++) {
-        if (PyObject_GetBuffer(PyList_GET_ITEM(outs, opened), &targets[opened], PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) < 0)
+        PyObject *out = PyList_GET_ITEM(outs, opened);
+        if (PyObject_GetBuffer(out, &targets[opened], PyBUF_WRITABLE | PyBUF_C_CONTIGUOUS) < 0)
             break;
         if (targets[opened].len != rings[opened]->nbytes) {
             PyErr_Format(PyExc_ValueError, "pick: out %d holds %zd bytes, the frame %zd", opened, targets[opened].len,
@@ -285,7 +289,8 @@ static int copy_out(Ring **rings, const int64_t *writes, PyObject *outs, int n) 
             const Ring *r = rings[k];
             const char *seq = record_of(r, writes[k]);
             uint64_t expected = 2 * (uint64_t)writes[k] + 2;
-            const char *src = base_of(r) + r->data_at + (Py_ssize_t)((uint64_t)writes[k] % (uint64_t)r->slots) * r->stride;
+            Py_ssize_t slot = (Py_ssize_t)((uint64_t)writes[k] % (uint64_t)r->slots);
+            const char *src = base_of(r) + r->data_at + slot * r->stride;
             if (load_acquire(seq) != expected) {
                 status = FALLBACK_TORN;
                 break;
@@ -423,76 +428,6 @@ static PyTypeObject RingsType = {
     .tp_dealloc = (destructor)rings_dealloc,
     .tp_methods = rings_methods,
 };
-
-/* ---- pickcore over plain timelines ---- */
-
-static int64_t array_time(PickCam *cam, int64_t i) { return ((const int64_t *)cam->source)[i]; }
-
-static PyObject *decide_near(PyObject *module, PyObject *args) {
-    PyObject *cams_arg;
-    PickRequest r;
-    if (!PyArg_ParseTuple(args, "O!LLiiiiLd", &PyList_Type, &cams_arg, &r.t_star, &r.now, &r.tuple, &r.joint,
-                          &r.wait_auto, &r.check_history, &r.tolerance_setting_ns, &r.max_skew_ns))
-        return NULL;
-    Py_ssize_t n = PyList_GET_SIZE(cams_arg);
-    if (n < 1 || n > PICK_MAX_CAMS) {
-        PyErr_Format(PyExc_ValueError, "decide_near: 1 to %d cameras", PICK_MAX_CAMS);
-        return NULL;
-    }
-    PickCam cams[PICK_MAX_CAMS];
-    int64_t *times[PICK_MAX_CAMS] = {NULL};
-    PyObject *out = NULL;
-    int k;
-    for (k = 0; k < n; k++) {
-        PyObject *list;
-        if (!PyArg_ParseTuple(PyList_GET_ITEM(cams_arg, k), "O!iLL;decide_near: (times, rank, period_ns, delay_ns)",
-                              &PyList_Type, &list, &cams[k].rank, &cams[k].period_ns, &cams[k].delay_ns))
-            goto done;
-        Py_ssize_t count = PyList_GET_SIZE(list);
-        times[k] = PyMem_Malloc(sizeof(int64_t) * (size_t)(count ? count : 1));
-        if (times[k] == NULL) {
-            PyErr_NoMemory();
-            goto done;
-        }
-        for (Py_ssize_t i = 0; i < count; i++) {
-            times[k][i] = PyLong_AsLongLong(PyList_GET_ITEM(list, i));
-            if (PyErr_Occurred())
-                goto done;
-        }
-        cams[k].read = array_time;
-        cams[k].source = times[k];
-        cams[k].base = 0;
-        cams[k].stored = count;
-    }
-    PickResult result;
-    int status = pick_near(cams, (int)n, &r, &result);
-    if (status == PICK_PLAN) {
-        PyObject *indices = PyTuple_New(n);
-        if (indices == NULL)
-            goto done;
-        for (int j = 0; j < n; j++)
-            PyTuple_SET_ITEM(indices, j, PyLong_FromLongLong(cams[j].index));
-        out = Py_BuildValue("(iNL)", status, indices, (long long)result.skew_ns);
-    } else if (status == PICK_WAIT) {
-        PyObject *waited = PyList_New(0);
-        for (int j = 0; waited != NULL && j < n; j++) {
-            PyObject *position = cams[j].waits ? PyLong_FromLong(j) : NULL;
-            if (position != NULL && PyList_Append(waited, position) < 0)
-                Py_CLEAR(waited);
-            Py_XDECREF(position);
-        }
-        out = waited == NULL ? NULL : Py_BuildValue("(iN)", status, PyList_AsTuple(waited));
-        Py_XDECREF(waited);
-    } else if (status == PICK_REJECT) {
-        out = Py_BuildValue("(is)", status, result.reject);
-    } else {
-        out = Py_BuildValue("(iO)", status, Py_None);
-    }
-done:
-    for (int j = 0; j < n; j++)
-        PyMem_Free(times[j]);
-    return out;
-}
 
 static PyMethodDef methods[] = {
     {"decide_near", decide_near, METH_VARARGS,
