@@ -21,10 +21,11 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
+from fxis_shm.client.fastreads import FastReads
 from fxis_shm.core import timebase
 from fxis_shm.core.engine import Failure, Reply, RequestEngine
 from fxis_shm.errors import RequestTimeout, service_error
-from fxis_shm.shm import slotio
+from fxis_shm.shm import fastpick, slotio
 from fxis_shm.shm.bufferpool import BufferPool
 from fxis_shm.shm.cameras import CameraHandle
 from fxis_shm.shm.localpath import LocalUnavailable, boot_id, time_namespace
@@ -72,12 +73,20 @@ class LocalReads:
         except BaseException:
             self.close()
             raise
-        self.now = timebase.reader(status.get("clock") or timebase.DEFAULT)  # the service's clock
-        self.wire_clock = timebase.WIRE_NAMES[status.get("clock") or timebase.DEFAULT]
+        self.clock = status.get("clock") or timebase.DEFAULT  # the service's clock
+        self.now = timebase.reader(self.clock)
+        self.wire_clock = timebase.WIRE_NAMES[self.clock]
         self.engine = RequestEngine(self.cameras, status.get("settings"))
         self.buffers = BufferPool(max_pooled_bytes)
         self._requests: dict[tuple, dict] = {}  # validated requests by form (protocol.request_of)
         self.torn = 0  # copies found torn (and made again)
+
+    def fast_reads(self) -> FastReads | None:
+        """The compiled read of these rings (None: not built, or a ring is not open now)."""
+        readers = [handle.reader for handle in self.cameras.values()]
+        if not fastpick.AVAILABLE or any(r is None for r in readers):
+            return None
+        return FastReads(list(self.cameras), readers, self.engine.settings, self.clock)
 
     def serves(self, op: str, fields: dict) -> bool:
         """False for requests only the coordinator can answer: those that fire software triggers."""

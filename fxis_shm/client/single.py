@@ -27,35 +27,29 @@ import zmq
 
 from fxis_shm.client import snapshot
 from fxis_shm.client.clocktracker import ClockTracker
+from fxis_shm.client.fastreads import FastReads
 from fxis_shm.client.frames import LOCAL, NETWORK, Frame, FrameTuple, frames_of, in_caller_clock, sequence_of, tuple_of
 from fxis_shm.client.handshake import HandshakeWatch
 from fxis_shm.client.localreads import LocalReads
 from fxis_shm.client.pubsub import EventPublisher, Subscriber
-from fxis_shm.client.requesttimes import fixed_mapping, last_needed, same_moment
+from fxis_shm.client.requestpaths import RequestPaths
+from fxis_shm.client.requesttimes import fixed_mapping, last_needed
 from fxis_shm.client.sockets import SocketOwner, checked_encoding, connected_socket, reachable, wire_timeout_ms
 from fxis_shm.core import timebase
 from fxis_shm.core.clockmap import ClockEstimate
-from fxis_shm.errors import (
-    CameraDown,
-    InvalidArgument,
-    LocalPathUnavailable,
-    Overwritten,
-    RequestTimeout,
-    UnknownCamera,
-    service_error,
-)
-from fxis_shm.shm.localpath import LocalRings, LocalUnavailable, boot_id
+from fxis_shm.errors import InvalidArgument, RequestTimeout, service_error
+from fxis_shm.shm.localpath import LocalRings, boot_id
 from fxis_shm.wire import defaults, encoding as codec, protocol
 from fxis_shm.wire.security import ClientKeys
 
 DEFAULT_ENDPOINT = defaults.ENDPOINT
 LOCAL_MODES = ("auto", "off", "require")
-_LOCAL_ATTEMPTS = 3  # requests re-asked after a torn local copy before giving up
-_LOCAL_RETRY_S = 10.0  # after the rings could not be opened, the network path this long
 _PERIODS_VALID_S = 10.0  # the cameras' periods learnt from the status, for sequences that wait
+# plain ints: their arithmetic is far cheaper than that of pyzmq's enums
+_EVENTS, _POLLIN, _POLLOUT, _NOBLOCK = int(zmq.EVENTS), int(zmq.POLLIN), int(zmq.POLLOUT), int(zmq.NOBLOCK)
 
 
-class SingleClient(SocketOwner):
+class SingleClient(RequestPaths, SocketOwner):
     """A client of one service (what ``Client(endpoint)`` makes): every call raises
     RequestTimeout after ``timeout`` seconds."""
 
@@ -108,9 +102,11 @@ class SingleClient(SocketOwner):
         self._boot_id = boot_id()
         self._rings = LocalRings()
         self._reads: LocalReads | None = None  # answers from the rings without the coordinator
+        self._fast: FastReads | None = None  # the compiled read of the common requests (over _reads)
         self._reads_off: tuple[str, float] | None = None  # why not, since when
         self._local_off: tuple[str, float] | None = None  # why the local path is not used, since when
-        self.paths = {LOCAL: 0, NETWORK: 0, "torn": 0}  # replies by path; local copies found torn
+        self.paths = {LOCAL: 0, NETWORK: 0, "torn": 0, "compiled": 0}  # replies by path; local copies found torn;
+        # "compiled": the local replies the compiled read made (fxis_shm.client.fastreads)
 
     def close(self) -> None:
         if self._tracker is not None:
@@ -146,6 +142,12 @@ class SingleClient(SocketOwner):
         ``copy=False`` (local path only): the image is a read-only view of the ring slot,
         with no copy at all; check ``frame.still_valid()`` after using it.
         ``encoding``/``quality``: as the client's, for this request."""
+        if self._fast is not None and encoding is quality is timeout is timeout_ms is None:
+            frame = self._fast.image(camera, at, wait, copy)
+            if frame is not None:
+                self._count_compiled()
+                return frame
+            self._fast_missed()
         return frames_of(
             *self._request("image", timeout, timeout_ms, copy, encoding, quality, camera=camera, at=at, wait=wait)
         )[0]
@@ -169,6 +171,12 @@ class SingleClient(SocketOwner):
         default: the moment of this call) and to each other. With ``partial``, cameras
         that are down are left out (``.missing`` names them) instead of failing the request
         with CameraDown."""
+        if self._fast is not None and encoding is quality is timeout is timeout_ms is max_skew_ms is None:
+            tuple_ = self._fast.tuple(cameras, at, sync, wait, copy)
+            if tuple_ is not None:
+                self._count_compiled()
+                return tuple_
+            self._fast_missed()
         return tuple_of(
             *self._request(
                 "tuple",
@@ -195,6 +203,12 @@ class SingleClient(SocketOwner):
         quality: int | None = None,
     ) -> FrameTuple:
         """The newest stored frame of each camera, without waiting."""
+        if self._fast is not None and encoding is quality is None:
+            tuple_ = self._fast.latest(cameras, copy)
+            if tuple_ is not None:
+                self._count_compiled()
+                return tuple_
+            self._fast_missed()
         return tuple_of(*self._request("latest", None, None, copy, encoding, quality, cameras=cameras))
 
     def sequence(
@@ -360,136 +374,30 @@ class SingleClient(SocketOwner):
         per valid frame with the fields named in ``columns``, times in the service's clock."""
         return self._call("frames", 0.0, cameras=cameras)[0]
 
-    # ---- the two paths ----
-
-    def _fetch(self, op: str, extra_wait: float, copy: bool, **fields) -> tuple[dict, list, Callable | None]:
-        """A request for frames, over the local path if it can be used: the reply header,
-        the images (the header's ``path`` set) and a validity check for zero-copy views.
-        Where the rings can be read with the service's own clock, the client answers
-        itself (fxis_shm.client.localreads); otherwise the coordinator chooses the frames."""
-        reads = self._local_reads()
-        if reads is not None and reads.serves(op, fields):
-            return self._read_locally(op, extra_wait, copy, fields)
-        if self._local_usable():
-            for _ in range(_LOCAL_ATTEMPTS):
-                header, images = self._call(op, extra_wait, local=self._boot_id, **fields)
-                if header.get("delivery") != protocol.LOCAL:  # the service is on another kernel
-                    self._give_up_local("the service runs on another kernel")
-                    return self._network_reply(header, images)
-                try:
-                    images = self._rings.images(header["frames"], copy)
-                except Overwritten:  # we were too slow: the ring came round; ask again
-                    self.paths["torn"] += 1
-                    continue
-                except LocalUnavailable as exc:  # the frames are there, just not here: same t*
-                    self._give_up_local(str(exc))
-                    fields = same_moment(op, fields, header)
-                    break
-                self.paths[LOCAL] += 1
-                self._local_off = None  # (again) usable
-                header["path"] = LOCAL
-                check = None if copy else (lambda metas=header["frames"]: all(map(self._rings.still_valid, metas)))
-                return header, images, check
-            else:
-                raise Overwritten(
-                    f"the frames of {op!r} were overwritten in the rings {_LOCAL_ATTEMPTS} "
-                    "times before this client could copy them (is it starved of CPU, "
-                    "or are the rings too short?)"
-                )
-        if self.local == "require":
-            raise LocalPathUnavailable(f"the local fast path cannot be used: {self.local_unavailable}")
-        return self._network_reply(*self._call(op, extra_wait, **fields))
-
-    def _read_locally(self, op: str, extra_wait: float, copy: bool, fields: dict) -> tuple[dict, list, Callable | None]:
-        deadline = self._reads.now() + int((self.timeout + extra_wait) * 1e9)
-        try:
-            header, images, check = self._answer_locally(op, fields, deadline, copy)
-        except (CameraDown, UnknownCamera):
-            # The service may have been restarted with new rings or other cameras: learn them again, once.
-            self._drop_reads()
-            if self._local_reads() is None:
-                raise
-            header, images, check = self._answer_locally(op, fields, deadline, copy)
-        self.paths[LOCAL] += 1
-        header["path"] = LOCAL
-        return header, images, check
-
-    def _answer_locally(self, op: str, fields: dict, deadline: int, copy: bool) -> tuple[dict, list, Callable | None]:
-        reads = self._reads
-        torn = reads.torn
-        try:
-            return reads.answer(op, fields, deadline, copy)
-        finally:  # the copies it found torn (and made again) count as those of the other local path
-            self.paths["torn"] += reads.torn - torn
-
-    def _local_reads(self) -> LocalReads | None:
-        """The client's own reads of the rings, learnt from the service's status once."""
-        if self.local == "off":
-            return None
-        if self._reads is not None:
-            return self._reads
-        if self._reads_off is not None and time.monotonic() - self._reads_off[1] < _LOCAL_RETRY_S:
-            return None
-        try:
-            self._reads = LocalReads(self.status(), self._boot_id)
-            self._reads_off = None
-        except LocalUnavailable as exc:
-            self._reads_off = (str(exc), time.monotonic())
-        return self._reads
-
-    def _drop_reads(self) -> None:
-        if self._reads is not None:
-            self._reads.close()
-            self._reads = None
-
-    def _network_reply(self, header: dict, images: list) -> tuple[dict, list, None]:
-        self.paths[NETWORK] += 1
-        header["path"] = NETWORK
-        return header, images, None
-
-    def _local_usable(self) -> bool:
-        if self.local == "off":
-            return False
-        if self._boot_id is None:
-            self._local_off = ("this kernel has no boot id to compare", time.monotonic())
-            return False
-        if self._local_off is not None and time.monotonic() - self._local_off[1] < _LOCAL_RETRY_S:
-            return False
-        return True
-
-    def _give_up_local(self, reason: str) -> None:
-        """Take the network path for a while: the rings cannot be read here now."""
-        self._local_off = (reason, time.monotonic())
-        if self.local == "require":
-            raise LocalPathUnavailable(f"the local fast path cannot be used: {reason}")
-
     # ---- plumbing ----
 
     def _call(self, op: str, extra_wait: float, **fields) -> tuple[dict, list[np.ndarray]]:
         request_id = next(self._ids)
         deadline = time.monotonic() + self.timeout + extra_wait
+        sock = self._sock
         # A DEALER with no connected peer (service down, or our keys refused) would
         # block in send: wait for it to become writable within our own deadline.
-        unsendable = RequestTimeout(
-            f"could not send {op!r} to {self.endpoint} within "
-            f"{self.timeout:.3g} s (is the service running, and are our keys accepted?)"
-        )
-        if not self._sock.poll(self.timeout * 1000, zmq.POLLOUT):
-            raise RequestTimeout(self._handshake.problem(self.endpoint, self._keys is not None) or str(unsendable))
+        if not sock.getsockopt(_EVENTS) & _POLLOUT and not sock.poll(self.timeout * 1000, zmq.POLLOUT):
+            raise RequestTimeout(self._handshake.problem(self.endpoint, self._keys is not None) or self._unsendable(op))
         try:
-            self._sock.send_multipart([b""] + protocol.encode_request(op, id=request_id, **fields), flags=zmq.NOBLOCK)
+            sock.send_multipart([b"", *protocol.encode_request(op, id=request_id, **fields)], flags=_NOBLOCK)
         except zmq.Again:  # the peer went away between the poll and the send
-            raise unsendable from None
+            raise RequestTimeout(self._unsendable(op)) from None
         while True:
             remaining = deadline - time.monotonic()
-            if remaining <= 0 or not self._sock.poll(remaining * 1000, zmq.POLLIN):
+            if remaining <= 0 or not (sock.getsockopt(_EVENTS) & _POLLIN or sock.poll(remaining * 1000, zmq.POLLIN)):
                 raise RequestTimeout(
                     self._handshake.problem(self.endpoint, self._keys is not None)
                     or f"no reply to {op!r} from {self.endpoint} within {self.timeout + extra_wait:.3g} s "
                     "(is the service running?)"
                 )
-            frames = self._sock.recv_multipart(copy=False)
-            if frames and len(frames[0].bytes) == 0:
+            frames = sock.recv_multipart(copy=False)
+            if frames and len(frames[0]) == 0:
                 frames = frames[1:]
             header, images = protocol.decode_reply([f.buffer for f in frames])
             if header.get("id") != request_id:
@@ -498,3 +406,9 @@ class SingleClient(SocketOwner):
                 err = header.get("error") or {}
                 raise service_error(err.get("code", "UNKNOWN"), err.get("message", ""))
             return header, images
+
+    def _unsendable(self, op: str) -> str:
+        return (
+            f"could not send {op!r} to {self.endpoint} within "
+            f"{self.timeout:.3g} s (is the service running, and are our keys accepted?)"
+        )

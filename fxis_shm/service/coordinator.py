@@ -24,9 +24,10 @@ from fxis_shm.core import timebase
 from fxis_shm.core.engine import FRAME_OPS, Action, Failure, Reply, RequestEngine, Trigger
 from fxis_shm.errors import Code, ConfigError, ProtocolError
 from fxis_shm.service.childspec import CoordinatorSpec
+from fxis_shm.service.fastanswers import FastAnswers
 from fxis_shm.service.framewatch import FrameWatch
 from fxis_shm.service.streams import Streams
-from fxis_shm.shm import naming, ordering
+from fxis_shm.shm import fastpick, naming, ordering
 from fxis_shm.shm.cameras import FRAME_FIELDS, CameraHandle
 from fxis_shm.shm.copyout import MESSAGES, REFS, CopyOut
 from fxis_shm.shm.localpath import boot_id, time_namespace
@@ -118,6 +119,7 @@ class Coordinator:
         self.engine = RequestEngine(self.cameras, spec.settings)
         self.settings = self.engine.settings
         self.copyout = CopyOut(self.cameras, self.settings)
+        self.fast: FastAnswers | None = None
         self.started_ns = timebase.now()
         self.requests_served = 0
         self.events_dropped = 0
@@ -131,6 +133,8 @@ class Coordinator:
         closing = []
         if keep_message_memory():  # frames are copied out of the rings straight into their messages
             self.copyout.message, self.copyout.message_max = as_message, _MMAP_THRESHOLD
+            if fastpick.AVAILABLE:  # the common requests answered by the compiled reader
+                self.fast = FastAnswers(self.cameras, self.engine, self.copyout, as_message, _MMAP_THRESHOLD)
         else:  # a copy into fresh memory would page-fault: into the pre-faulted buffers of the pool
             log.info("malloc cannot be told to keep freed memory: frames are sent from pooled buffers")
         try:
@@ -267,6 +271,10 @@ class Coordinator:
                 self._reply(respond, request, getattr(self, f"_op_{op}")(request, t_received))
                 return
             local = self.boot_id is not None and request.get("local") == self.boot_id
+            answer = self.fast.answer(request, t_received) if self.fast is not None and not local else None
+            if answer is not None:
+                self._reply(respond, request, *answer)
+                return
             self._carry_out(self.engine.submit(request, t_received, respond, client=client, local=local))
         except ProtocolError as exc:  # a request that cannot be answered as asked
             respond(protocol.encode_error(request["id"], exc.code, exc.message))
@@ -310,6 +318,7 @@ class Coordinator:
             "events": self.events_endpoint,
             "pending": len(self.engine.pending),
             "requests_served": self.requests_served,
+            "requests_compiled": self.fast.answered if self.fast is not None else 0,
             "events_dropped": self.events_dropped,
             "streams": self.streams.status(),
             "supervisor": self._state_of("supervisor"),

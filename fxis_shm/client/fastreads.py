@@ -1,0 +1,94 @@
+"""The same-host client's compiled read: ``image``, ``tuple`` at a given t* and ``latest``
+answered by one C call (fxis_shm.shm.fastpick) that looks at the rings, decides as the engine
+would and copies the frames, with little Python around it.
+
+The request must be one the C twin of the engine's decision takes (``at`` given as int ns of the
+service's clock, wait "auto" or "none", sync "joint" or "independent", no skew limit, no
+encoding); anything else, and whatever the C call does not settle (a wait, an error to word,
+a camera down, a ring replaced, a torn copy), returns None: the caller asks the engine
+(fxis_shm.client.localreads), which answers as before.
+
+A copy lands in an array of the C reader's pool, reused once nothing refers to it any more
+(``Frame.release()`` drops the frame's reference): never while anyone can still read it.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Sequence
+from functools import partial
+from typing import Any
+
+from fxis_shm.client.frames import LOCAL, Frame, FrameTuple
+from fxis_shm.shm import fastpick, slotio
+from fxis_shm.shm.ring import HEADER_BYTES, RingReader
+
+_RECORD_BYTES = 48  # a slot record (fxis_shm.core.snapshot.SLOT); its first word is seq
+POOLED_BYTES = 128 << 20  # the copies' arrays kept for reuse, at most (over all cameras)
+
+
+class FastReads:
+    """The rings of one service as the C reader sees them, with the engine's settings."""
+
+    def __init__(self, names: Sequence[str], readers: Sequence[RingReader], settings: dict, clock: str):
+        self.picker = fastpick.Picker(names, readers, settings, clock, POOLED_BYTES)
+        self.views = [r.slot_views() for r in readers]
+        self.mappings = [r.geometry()[0] for r in readers]
+
+    @property
+    def retired(self) -> bool:
+        """A ring was replaced: make a new FastReads."""
+        return self.picker.retired
+
+    def image(self, camera: Any, at: Any, wait: Any, copy: bool) -> Frame | None:
+        got = self._frames((camera,), fastpick.IMAGE, at, None, wait, copy)
+        return None if got is None else next(iter(got[0].values()))
+
+    def tuple(self, cameras: Any, at: Any, sync: Any, wait: Any, copy: bool) -> FrameTuple | None:
+        got = self._frames(cameras, fastpick.TUPLE, at, sync, wait, copy)
+        return None if got is None else FrameTuple(got[0], at, got[1])
+
+    def latest(self, cameras: Any, copy: bool) -> FrameTuple | None:
+        got = self._frames(cameras, fastpick.LATEST, 0, None, None, copy)
+        return None if got is None else FrameTuple(got[0], None, got[1])
+
+    def _frames(self, cameras: Any, op: int, at: Any, sync: Any, wait: Any, copy: bool) -> tuple[dict, dict] | None:
+        """The frames by camera and the timing they share, or None: the engine must answer."""
+        got = self.picker.pick(cameras, op, at, sync, wait, copy)
+        if got is None:
+            return None
+        t_received, t_decided, t_copied, _, picked, indices, names = got
+        ready: dict[str, dict] = {}
+        timing = {
+            "received": t_received,
+            "waited": t_received,
+            "searched": t_decided,
+            "copied": t_copied,
+            "sent": t_copied,  # nothing is sent: the frames are the caller's once copied
+            "cameras": ready,
+        }
+        frames = {}
+        for k, name, (slot, seq, frame_id, t_capture, t_stored, t_available, generation, ready_at, image) in zip(
+            indices, names, picked
+        ):
+            ready[name] = {"waited": ready_at}
+            still_valid = None
+            if not copy:
+                image = self.views[k][slot].view()
+                still_valid = partial(slotio.holds, self.mappings[k], HEADER_BYTES + slot * _RECORD_BYTES, seq)
+            frames[name] = Frame(
+                image,
+                name,
+                frame_id,
+                t_capture,
+                t_stored,
+                generation,
+                timing,
+                t_available,
+                LOCAL,
+                still_valid,
+                "raw",
+                t_capture,
+                t_stored,
+                t_available,
+            )
+        return frames, timing

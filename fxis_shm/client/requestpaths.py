@@ -1,0 +1,149 @@
+"""How a frame request of the client travels (``SingleClient`` takes these methods): answered
+here by the compiled read of the rings (fxis_shm.client.fastreads), or here by the client's own
+run of the engine over the rings (fxis_shm.client.localreads), or by the service with where the
+frames are in the rings (the client copies them: fxis_shm.shm.localpath), or over the network.
+The path a reply took is counted in ``paths`` and named by ``Frame.path``."""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable
+
+from fxis_shm.client.fastreads import FastReads
+from fxis_shm.client.frames import LOCAL, NETWORK
+from fxis_shm.client.localreads import LocalReads
+from fxis_shm.client.requesttimes import same_moment
+from fxis_shm.errors import CameraDown, LocalPathUnavailable, Overwritten, UnknownCamera
+from fxis_shm.shm.localpath import LocalUnavailable
+from fxis_shm.wire import protocol
+
+_LOCAL_ATTEMPTS = 3  # requests re-asked after a torn local copy before giving up
+_LOCAL_RETRY_S = 10.0  # after the rings could not be opened, the network path this long
+
+
+class RequestPaths:
+    """The paths of a frame request, for a client of one service (its state is the client's)."""
+
+    def _fetch(self, op: str, extra_wait: float, copy: bool, **fields) -> tuple[dict, list, Callable | None]:
+        """A request for frames, over the local path if it can be used: the reply header,
+        the images (the header's ``path`` set) and a validity check for zero-copy views.
+        Where the rings can be read with the service's own clock, the client answers
+        itself (fxis_shm.client.localreads); otherwise the coordinator chooses the frames."""
+        reads = self._local_reads()
+        if reads is not None and reads.serves(op, fields):
+            return self._read_locally(op, extra_wait, copy, fields)
+        if self._local_usable():
+            for _ in range(_LOCAL_ATTEMPTS):
+                header, images = self._call(op, extra_wait, local=self._boot_id, **fields)
+                if header.get("delivery") != protocol.LOCAL:  # the service is on another kernel
+                    self._give_up_local("the service runs on another kernel")
+                    return self._network_reply(header, images)
+                try:
+                    images = self._rings.images(header["frames"], copy)
+                except Overwritten:  # we were too slow: the ring came round; ask again
+                    self.paths["torn"] += 1
+                    continue
+                except LocalUnavailable as exc:  # the frames are there, just not here: same t*
+                    self._give_up_local(str(exc))
+                    fields = same_moment(op, fields, header)
+                    break
+                self.paths[LOCAL] += 1
+                self._local_off = None  # (again) usable
+                header["path"] = LOCAL
+                check = None if copy else (lambda metas=header["frames"]: all(map(self._rings.still_valid, metas)))
+                return header, images, check
+            else:
+                raise Overwritten(
+                    f"the frames of {op!r} were overwritten in the rings {_LOCAL_ATTEMPTS} "
+                    "times before this client could copy them (is it starved of CPU, "
+                    "or are the rings too short?)"
+                )
+        if self.local == "require":
+            raise LocalPathUnavailable(f"the local fast path cannot be used: {self.local_unavailable}")
+        return self._network_reply(*self._call(op, extra_wait, **fields))
+
+    def _read_locally(self, op: str, extra_wait: float, copy: bool, fields: dict) -> tuple[dict, list, Callable | None]:
+        deadline = self._reads.now() + int((self.timeout + extra_wait) * 1e9)
+        try:
+            header, images, check = self._answer_locally(op, fields, deadline, copy)
+        except (CameraDown, UnknownCamera):
+            # The service may have been restarted with new rings or other cameras: learn them again, once.
+            self._drop_reads()
+            if self._local_reads() is None:
+                raise
+            header, images, check = self._answer_locally(op, fields, deadline, copy)
+        self.paths[LOCAL] += 1
+        header["path"] = LOCAL
+        if self._fast is None:  # the rings (re)opened: the compiled read can serve again
+            self._fast = self._fast_reads()
+        return header, images, check
+
+    def _answer_locally(self, op: str, fields: dict, deadline: int, copy: bool) -> tuple[dict, list, Callable | None]:
+        reads = self._reads
+        torn = reads.torn
+        try:
+            return reads.answer(op, fields, deadline, copy)
+        finally:  # the copies it found torn (and made again) count as those of the other local path
+            self.paths["torn"] += reads.torn - torn
+
+    def _local_reads(self) -> LocalReads | None:
+        """The client's own reads of the rings, learnt from the service's status once."""
+        if self.local == "off":
+            return None
+        if self._reads is not None:
+            return self._reads
+        if self._reads_off is not None and time.monotonic() - self._reads_off[1] < _LOCAL_RETRY_S:
+            return None
+        try:
+            self._reads = LocalReads(self.status(), self._boot_id)
+            self._reads_off = None
+        except LocalUnavailable as exc:
+            self._reads_off = (str(exc), time.monotonic())
+        self._fast = self._fast_reads()
+        return self._reads
+
+    def _fast_reads(self) -> FastReads | None:
+        """The compiled read over the rings read here, if built and the caller's clock is the
+        service's (it takes and returns the service's times as they are)."""
+        if self._reads is None:
+            return None
+        mapping = self.clock_estimate()
+        if self._mapping is None or mapping.offset_ns != 0 or mapping.drift_ppm != 0:
+            return None
+        return self._reads.fast_reads()
+
+    def _count_compiled(self) -> None:
+        self.paths[LOCAL] += 1
+        self.paths["compiled"] += 1
+
+    def _fast_missed(self) -> None:
+        """The compiled read left a request to the engine; a replaced ring needs it made again."""
+        if self._fast is not None and self._fast.retired:
+            self._fast = None
+
+    def _drop_reads(self) -> None:
+        self._fast = None  # before the rings close: it holds their mappings
+        if self._reads is not None:
+            self._reads.close()
+            self._reads = None
+
+    def _network_reply(self, header: dict, images: list) -> tuple[dict, list, None]:
+        self.paths[NETWORK] += 1
+        header["path"] = NETWORK
+        return header, images, None
+
+    def _local_usable(self) -> bool:
+        if self.local == "off":
+            return False
+        if self._boot_id is None:
+            self._local_off = ("this kernel has no boot id to compare", time.monotonic())
+            return False
+        if self._local_off is not None and time.monotonic() - self._local_off[1] < _LOCAL_RETRY_S:
+            return False
+        return True
+
+    def _give_up_local(self, reason: str) -> None:
+        """Take the network path for a while: the rings cannot be read here now."""
+        self._local_off = (reason, time.monotonic())
+        if self.local == "require":
+            raise LocalPathUnavailable(f"the local fast path cannot be used: {reason}")

@@ -1,0 +1,100 @@
+"""The coordinator's compiled answer to the common requests: an image or a tuple at a given t*,
+or the latest frames, raw. The C reader of the rings (fxis_shm.shm.fastpick) looks and decides
+as the engine would; each chosen frame is copied once, straight into the message that carries
+it, under the seqlock (as the engine's replies are, fxis_shm.shm.copyout). Anything else, and
+whatever the C reader does not settle, is the engine's (``answer`` returns None).
+
+A request is answered here only while no other waits in the engine, so that the engine's limits
+on waiting requests hold as they did.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+from typing import Any
+
+from fxis_shm.core import timebase
+from fxis_shm.core.engine import RequestEngine
+from fxis_shm.shm import fastpick
+from fxis_shm.shm.cameras import CameraHandle
+from fxis_shm.shm.copyout import CopyOut, copied_by
+from fxis_shm.shm.ring import Overwritten
+from fxis_shm.wire.encoding import RAW
+
+_OPS = {"image": fastpick.IMAGE, "tuple": fastpick.TUPLE, "latest": fastpick.LATEST}
+
+
+class FastAnswers:
+    """``message(bytes)`` copies a frame into the transport's message (the coordinator's
+    zmq.Frame); frames of more than ``message_max`` bytes are the engine's."""
+
+    def __init__(
+        self,
+        cameras: dict[str, CameraHandle],
+        engine: RequestEngine,
+        copyout: CopyOut,
+        message: Callable[[Any], Any],
+        message_max: int,
+    ):
+        self.cameras, self.engine, self.copyout = cameras, engine, copyout
+        self.message, self.message_max = message, message_max
+        self.picker: fastpick.Picker | None = None
+        self.answered = 0  # requests answered here
+
+    def answer(self, request: dict, t_received: int) -> tuple[dict, list] | None:
+        """The reply's body and images, or None: the engine answers."""
+        op = _OPS.get(request["op"])
+        if op is None or self.engine.pending or request.get("encoding") not in (None, RAW):
+            return None
+        if request.get("max_skew_ms") is not None:
+            return None
+        picker = self._picker()
+        if picker is None:
+            return None
+        cameras = request.get("cameras") if request.get("camera") is None else (request["camera"],)
+        at = 0 if op == fastpick.LATEST else request.get("at")
+        got = picker.pick(cameras, op, at, request.get("sync"), request.get("wait"), False, t_received)
+        if got is None:
+            return None
+        _, t_decided, _, skew_ns, picked, indices, names = got
+        frames, images = [], []
+        for k, name, (slot, seq, frame_id, t_capture, t_stored, t_available, generation, _, _) in zip(
+            indices, names, picked
+        ):
+            reader = picker.readers[k]
+            if reader.layout.nbytes > self.message_max:
+                return None
+            try:
+                images.append(copied_by(reader, slot, seq, self.message))
+            except Overwritten:
+                self.cameras[name].torn_reads += 1
+                return None
+            header = self.copyout.header(name)
+            frames.append(header.frame(frame_id, t_capture, t_stored, generation, t_available, buffer=len(frames)))
+        body: dict[str, Any] = {"op": request["op"]}
+        if op != fastpick.LATEST:
+            body["t_request"] = at
+        if op == fastpick.TUPLE:
+            body.update(skew_ns=skew_ns, sync=request.get("sync") or self.engine.settings["sync"])
+        body["frames"] = frames
+        body["timing"] = {
+            "searched": t_decided,
+            "received": t_received,
+            "waited": t_received,
+            "copied": timebase.now(),
+            "cameras": {name: {"waited": frame[7]} for name, frame in zip(names, picked)},
+        }
+        self.answered += 1
+        return body, images
+
+    def _picker(self) -> fastpick.Picker | None:
+        """The C reader of the rings open now (made again once a ring was replaced)."""
+        if self.picker is None or self.picker.retired:
+            self.picker = None
+            readers = [handle.reader for handle in self.cameras.values()]
+            if any(r is None for r in readers):
+                return None
+            self.picker = fastpick.Picker(
+                list(self.cameras), readers, self.engine.settings, timebase.service_clock(), 0
+            )
+        return self.picker

@@ -1,0 +1,237 @@
+"""The compiled read (fxis_shm/shm/_fastpick.c): the same-host client's and the coordinator's
+answers to the common requests, made by one C call over the real rings, are the engine's answers;
+whatever it does not settle goes to the engine, which answers or fails as it always did.
+
+The C decision itself is checked against the Python one by tests/unit/test_pickcore.py.
+"""
+
+import os
+import signal
+import time
+
+import numpy as np
+import pytest
+
+from fxis_shm import Client, read_stamp
+from fxis_shm.core.snapshot import SLOT
+from fxis_shm.errors import CameraDown, ServiceError, UnknownCamera
+from fxis_shm.shm import fastpick, naming
+from fxis_shm.shm.ring import HEADER_BYTES, FrameLayout, RingReader, RingWriter
+
+from ..conftest import wait_until
+from .conftest import SMALL, child_pids
+
+pytestmark = [
+    pytest.mark.integration,
+    pytest.mark.skipif(os.environ.get("FXIS_PURE_PYTHON") == "1", reason="FXIS_PURE_PYTHON=1 turns it off"),
+]
+SETTINGS = {"sync": "joint", "wait": "auto", "sync_tolerance_ms": 2.0, "horizon_ms": 10_000.0}
+PAST_NS = 60_000_000  # t* this far back: its frames are stored
+
+
+def ids(tuple_):
+    return {cam: frame.frame_id for cam, frame in tuple_.items()}
+
+
+def engine_answer(client, op, **fields):
+    """The same request answered by the engine over the same rings (the client's own LocalReads)."""
+    header, images, _ = client._reads.answer(op, fields, time.monotonic_ns() + 2_000_000_000)
+    return {m["camera"]: m["frame_id"] for m in header["frames"]}, header
+
+
+@pytest.fixture(scope="module")
+def three_cameras():
+    from .conftest import module_service
+
+    yield from module_service(
+        [
+            "--camera",
+            f"a=synthetic:fps=50,{SMALL}",
+            "--camera",
+            f"b=synthetic:fps=30,phase_ms=7,{SMALL}",
+            "--camera",
+            f"c=synthetic:fps=50,phase_ms=3,{SMALL}",
+        ]
+    )
+
+
+def test_the_built_module_is_what_the_install_reports():
+    assert fastpick.AVAILABLE, "the compiled read is not built: `make setup` builds it"
+
+
+def test_the_compiled_read_answers_as_the_engine_does(three_cameras):
+    """Many requests, each answered by the compiled read and by the engine over the same rings
+    at the same moment (the rings hold every frame involved): the same frames, the same skew."""
+    with Client(three_cameras.endpoint, local="require") as client:
+        wait_until(lambda: client.status()["cameras"]["b"].get("frames_stored", 0) > 10)
+        client.latest()  # opens the rings
+        asks = [
+            dict(),
+            dict(sync="independent"),
+            dict(wait="none"),
+            dict(cameras=["c", "a"]),
+            dict(cameras=["b", "c", "a"], sync="joint"),
+            dict(cameras=["b"]),
+        ]
+        compared = 0
+        for step in range(60):
+            fields = asks[step % len(asks)]
+            at = time.monotonic_ns() - PAST_NS - step * 1_700_000  # every phase against the frames
+            fast = client.tuple(at=at, **fields)
+            by_engine, header = engine_answer(client, "tuple", at=at, **fields)
+            assert list(fast) == list(fields.get("cameras") or ["a", "b", "c"])  # in the order asked
+            assert ids(fast) == by_engine, fields
+            assert fast.skew_ns == header["skew_ns"]
+            assert all(read_stamp(f.image) == f.frame_id for f in fast.values())
+            compared += 1
+        image = client.image("b", at=at)
+        assert image.frame_id == engine_answer(client, "image", camera="b", at=at)[0]["b"]
+    assert client.paths["compiled"] == compared + 1  # not the first latest(): it opened the rings
+    assert client.paths["local"] == client.paths["compiled"] + 1
+
+
+def test_zero_copy_views_are_the_slots_and_say_when_they_are_overwritten(three_cameras):
+    with Client(three_cameras.endpoint, local="require") as client:
+        wait_until(lambda: client.status()["cameras"]["a"].get("frames_stored", 0) > 5)
+        client.latest()
+        views = client.tuple(at=time.monotonic_ns() - PAST_NS, copy=False)
+        copies = client.tuple(at=views.t_request)
+        assert client.paths["compiled"] == 2
+        for cam in views:
+            assert not views[cam].image.flags.writeable
+            np.testing.assert_array_equal(views[cam].image, copies[cam].image)
+        assert views.still_valid()
+        slots = client.status()["cameras"]["a"]["ring_slots"]
+        wait_until(lambda: not views["a"].still_valid(), timeout=slots / 50 * 3, what="the slot to be overwritten")
+        assert copies.still_valid()  # a copy stays valid
+
+
+def test_a_copy_lands_in_an_array_nobody_else_holds(three_cameras):
+    """The pool hands an array out again only once nothing refers to it: a frame kept, or a view
+    of it kept, is never overwritten by a later request."""
+    with Client(three_cameras.endpoint, local="require") as client:
+        wait_until(lambda: client.status()["cameras"]["a"].get("frames_stored", 0) > 5)
+        client.latest()
+        kept = client.latest(["a"])["a"]
+        kept_id, view = kept.frame_id, kept.image[2:, :]
+        pixels = kept.image.copy()
+        for _ in range(8):
+            wait_until(lambda: client.latest(["a"])["a"].frame_id != kept_id, what="a newer frame")
+        np.testing.assert_array_equal(kept.image, pixels)
+        kept.release()
+        np.testing.assert_array_equal(view, pixels[2:, :])  # the view still holds the array
+        address = client.latest(["a"])["a"].image.__array_interface__["data"][0]
+        # that array went back to the pool when the tuple holding it went: the next copy reuses it
+        assert client.latest(["a"])["a"].image.__array_interface__["data"][0] == address
+
+
+def test_what_the_compiled_read_does_not_settle_gets_the_engines_answer(three_cameras):
+    with Client(three_cameras.endpoint, local="require") as client:
+        wait_until(lambda: client.status()["cameras"]["a"].get("frames_stored", 0) > 5)
+        client.latest()
+        served = client.paths["compiled"]
+        now = time.monotonic_ns()
+        with pytest.raises(ServiceError, match="older than the oldest") as too_old:
+            client.tuple(at=now - 3_600_000_000_000)
+        with pytest.raises(ServiceError, match="horizon") as too_late:
+            client.tuple(at=now + 3_600_000_000_000)
+        assert too_old.value.code == too_late.value.code == "OUT_OF_RANGE"
+        with pytest.raises(UnknownCamera):
+            client.tuple(["a", "nope"], at=now - PAST_NS)
+        waited = client.tuple(at=time.monotonic_ns() + 30_000_000)  # a future t*: the engine waits
+        assert waited.path == "local"
+        assert client.tuple(at=now - PAST_NS, max_skew_ms=50.0).path == "local"  # a skew limit
+        assert client.paths["compiled"] == served
+
+
+def test_a_stopped_camera_is_the_engines_to_report(start_service):
+    svc = start_service("--camera", f"a=synthetic:fps=50,{SMALL}", "--camera", f"b=synthetic:fps=50,{SMALL}")
+    with Client(svc.endpoint, local="require", timeout=5.0) as client:
+        wait_until(lambda: client.status()["cameras"]["b"].get("frames_stored", 0) > 5)
+        client.latest()  # opens the rings
+        client.latest()
+        assert client.paths["compiled"] == 1
+        b_pid = client.status()["cameras"]["b"]["writer_pid"]
+        assert b_pid in child_pids(svc, "camera")
+        os.kill(b_pid, signal.SIGSTOP)
+        try:
+            wait_until(lambda: _down(client), timeout=10.0, what="the stopped camera to count as down")
+            partial = client.tuple(at=time.monotonic_ns() - PAST_NS, partial=True)
+            assert partial.missing == ["b"] and list(partial) == ["a"]
+        finally:
+            os.kill(b_pid, signal.SIGCONT)
+        wait_until(lambda: not _down(client), timeout=10.0, what="the camera to be back")
+        assert client.tuple(at=time.monotonic_ns() - PAST_NS).path == "local"
+
+
+def _down(client) -> bool:
+    try:
+        client.tuple(at=time.monotonic_ns() - PAST_NS)
+    except CameraDown:
+        return True
+    return False
+
+
+def test_the_coordinator_answers_the_common_requests_compiled(three_cameras):
+    """A client elsewhere (local="off") gets from the coordinator's compiled answer the frames
+    and reply fields the engine gives, and the coordinator counts them."""
+    with Client(three_cameras.endpoint, local="off") as remote, Client(three_cameras.endpoint) as local:
+        wait_until(lambda: remote.status()["cameras"]["b"].get("frames_stored", 0) > 10)
+        before = remote.status()["requests_compiled"]
+        at = time.monotonic_ns() - PAST_NS
+        by_wire = remote.tuple(["c", "b"], at=at)
+        local.latest()
+        by_engine, header = engine_answer(local, "tuple", cameras=["c", "b"], at=at)
+        assert ids(by_wire) == by_engine and list(by_wire) == ["c", "b"]
+        assert by_wire.skew_ns == header["skew_ns"] and by_wire.t_request == at
+        timing = by_wire.timing
+        order = [timing[k] for k in ("received", "waited", "searched", "copied", "sent")]
+        assert order == sorted(order) and set(timing["cameras"]) == {"b", "c"}
+        assert all(read_stamp(f.image) == f.frame_id for f in by_wire.values())
+        assert remote.latest().path == "network"
+        assert remote.image("a", at=at).frame_id == engine_answer(local, "image", camera="a", at=at)[0]["a"]
+        remote.tuple(at=at, max_skew_ms=50.0)  # the engine's
+        assert remote.status()["requests_compiled"] == before + 3
+
+
+# ---- the C reader over rings made here (real shared memory, no service) ----
+
+
+@pytest.fixture
+def ring(request):
+    service = f"fast{os.getpid()}-{request.node.name[-12:]}"
+    writer = RingWriter(service, "cam", FrameLayout(4, 8), slots=4, nominal_period_ns=10_000_000)
+    reader = RingReader(service, "cam", with_semaphore=False)
+    yield service, writer, reader
+    reader.close()
+    writer.close()
+    naming.remove_leftovers(service)
+
+
+def stored(writer, count: int) -> int:
+    """``count`` frames written 10 ms apart, the last captured now; returns its capture time."""
+    t = time.monotonic_ns() - (count - 1) * 10_000_000
+    for k in range(count):
+        writer.write(np.full((4, 8), k, np.uint8), frame_id=k, t_capture=t + k * 10_000_000)
+    return t + (count - 1) * 10_000_000
+
+
+def test_a_record_being_rewritten_is_left_to_the_engine(ring):
+    _, writer, reader = ring
+    newest = stored(writer, 4)
+    picker = fastpick.Picker(["cam"], [reader], SETTINGS, "monotonic", 1 << 20)
+    assert picker.pick(None, fastpick.TUPLE, newest, None, None, True)[4][0][2] == 3
+    seq = np.ndarray((4,), dtype="<u8", buffer=writer._mm, offset=HEADER_BYTES, strides=(SLOT.itemsize,))
+    seq[3] += 1  # write 3 (slot 3) shows as being written again
+    assert picker.pick(None, fastpick.TUPLE, newest, None, None, True) is None
+    seq[3] -= 1
+    assert picker.pick(None, fastpick.LATEST, 0, None, None, False)[4][0][2] == 3
+
+
+def test_a_replaced_ring_says_so(ring):
+    service, writer, reader = ring
+    newest = stored(writer, 2)
+    picker = fastpick.Picker(["cam"], [reader], SETTINGS, "monotonic", 1 << 20)
+    assert picker.pick(None, fastpick.TUPLE, newest, None, None, False) is not None and not picker.retired
+    RingWriter(service, "cam", FrameLayout(8, 8), slots=4).close()  # another layout: the old ring retires
+    assert picker.pick(None, fastpick.TUPLE, newest, None, None, False) is None and picker.retired
