@@ -21,10 +21,9 @@ from fxis_shm.shm.ring import HEADER_BYTES, FrameLayout, RingReader, RingWriter
 from ..conftest import wait_until
 from .conftest import SMALL, child_pids
 
-pytestmark = [
-    pytest.mark.integration,
-    pytest.mark.skipif(os.environ.get("FXIS_PURE_PYTHON") == "1", reason="FXIS_PURE_PYTHON=1 turns it off"),
-]
+pytestmark = pytest.mark.integration
+PURE = os.environ.get("FXIS_PURE_PYTHON") == "1"
+compiled = pytest.mark.skipif(PURE, reason="FXIS_PURE_PYTHON=1 turns the compiled read off (the first test checks)")
 SETTINGS = {"sync": "joint", "wait": "auto", "sync_tolerance_ms": 2.0, "horizon_ms": 10_000.0}
 PAST_NS = 60_000_000  # t* this far back: its frames are stored
 
@@ -55,10 +54,17 @@ def three_cameras():
     )
 
 
-def test_the_built_module_is_what_the_install_reports():
-    assert fastpick.AVAILABLE, "the compiled read is not built: `make setup` builds it"
+def test_the_compiled_read_is_on_unless_fxis_pure_python_turns_it_off(three_cameras):
+    """Built (`make setup`), it answers; with FXIS_PURE_PYTHON=1 the engine answers everything."""
+    assert fastpick.AVAILABLE != PURE, "the compiled read is not built: `make setup` builds it"
+    with Client(three_cameras.endpoint, local="require") as client:
+        wait_until(lambda: client.status()["cameras"]["a"].get("frames_stored", 0) > 5)
+        client.latest()  # opens the rings
+        frames = client.tuple(at=time.monotonic_ns() - PAST_NS)
+    assert frames.path == "local" and client.paths["compiled"] == (0 if PURE else 1)
 
 
+@compiled
 def test_the_compiled_read_answers_as_the_engine_does(three_cameras):
     """Many requests, each answered by the compiled read and by the engine over the same rings
     at the same moment (the rings hold every frame involved): the same frames, the same skew."""
@@ -90,6 +96,7 @@ def test_the_compiled_read_answers_as_the_engine_does(three_cameras):
     assert client.paths["local"] == client.paths["compiled"] + 1
 
 
+@compiled
 def test_zero_copy_views_are_the_slots_and_say_when_they_are_overwritten(three_cameras):
     with Client(three_cameras.endpoint, local="require") as client:
         wait_until(lambda: client.status()["cameras"]["a"].get("frames_stored", 0) > 5)
@@ -106,6 +113,7 @@ def test_zero_copy_views_are_the_slots_and_say_when_they_are_overwritten(three_c
         assert copies.still_valid()  # a copy stays valid
 
 
+@compiled
 def test_a_copy_lands_in_an_array_nobody_else_holds(three_cameras):
     """The pool hands an array out again only once nothing refers to it: a frame kept, or a view
     of it kept, is never overwritten by a later request."""
@@ -125,6 +133,7 @@ def test_a_copy_lands_in_an_array_nobody_else_holds(three_cameras):
         assert client.latest(["a"])["a"].image.__array_interface__["data"][0] == address
 
 
+@compiled
 def test_what_the_compiled_read_does_not_settle_gets_the_engines_answer(three_cameras):
     with Client(three_cameras.endpoint, local="require") as client:
         wait_until(lambda: client.status()["cameras"]["a"].get("frames_stored", 0) > 5)
@@ -144,6 +153,7 @@ def test_what_the_compiled_read_does_not_settle_gets_the_engines_answer(three_ca
         assert client.paths["compiled"] == served
 
 
+@compiled
 def test_a_stopped_camera_is_the_engines_to_report(start_service):
     svc = start_service("--camera", f"a=synthetic:fps=50,{SMALL}", "--camera", f"b=synthetic:fps=50,{SMALL}")
     with Client(svc.endpoint, local="require", timeout=5.0) as client:
@@ -172,6 +182,7 @@ def _down(client) -> bool:
     return False
 
 
+@compiled
 def test_the_coordinator_answers_the_common_requests_compiled(three_cameras):
     """A client elsewhere (local="off") gets from the coordinator's compiled answer the frames
     and reply fields the engine gives, and the coordinator counts them."""
@@ -216,6 +227,7 @@ def stored(writer, count: int) -> int:
     return t + (count - 1) * 10_000_000
 
 
+@compiled
 def test_a_record_being_rewritten_is_left_to_the_engine(ring):
     _, writer, reader = ring
     newest = stored(writer, 4)
@@ -228,6 +240,7 @@ def test_a_record_being_rewritten_is_left_to_the_engine(ring):
     assert picker.pick(None, fastpick.LATEST, 0, None, None, False)[4][0][2] == 3
 
 
+@compiled
 def test_a_replaced_ring_says_so(ring):
     service, writer, reader = ring
     newest = stored(writer, 2)
