@@ -1,11 +1,13 @@
 """Which of the hot path's modules run compiled, and the switch that forces them all to Python.
 
 The install compiles the request engine's modules (``MODULES``, the pure core: mypyc builds
-each .py into an extension module beside it, setup.py) and the ring reader's seqlock reads
-(``fxis_shm.shm._slotio``, C). Python imports an extension module before the .py of the same
-name, so the compiled code is chosen at import when it is there; the .py files stay the one
-source of both. Without a C compiler at install time nothing is compiled, and everything
-runs as Python, the slow path (a warning says so once, at import).
+each .py into an extension module beside it, setup.py), the ring reader's seqlock reads
+(``fxis_shm.shm._slotio``, C) and the compiled read of the common requests
+(``fxis_shm.shm._fastpick``, C, with its decision's C twin; fxis_shm.shm.fastpick). Python
+imports an extension module before the .py of the same name, so the compiled code is chosen at
+import when it is there; the .py files stay the one source of the engine. Without a C compiler
+at install time nothing is compiled, and everything runs as Python, the slow path (a warning
+says so once, at import); FXIS_PURE_PYTHON=1 turns the C readers off too.
 
 FXIS_PURE_PYTHON=1 in the environment forces the Python of every module here (the
 finder below puts each .py before its extension module), for tests and measurements. The
