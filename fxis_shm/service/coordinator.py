@@ -271,7 +271,7 @@ class Coordinator:
                 self._reply(respond, request, getattr(self, f"_op_{op}")(request, t_received))
                 return
             local = self.boot_id is not None and request.get("local") == self.boot_id
-            answer = self.fast.answer(request, t_received) if self.fast is not None and not local else None
+            answer = self.fast.answer(request, t_received, client) if self.fast is not None and not local else None
             if answer is not None:
                 self._reply(respond, request, *answer)
                 return

@@ -4,8 +4,8 @@ as the engine would; each chosen frame is copied once, straight into the message
 it, under the seqlock (as the engine's replies are, fxis_shm.shm.copyout). Anything else, and
 whatever the C reader does not settle, is the engine's (``answer`` returns None).
 
-A request is answered here only while no other waits in the engine, so that the engine's limits
-on waiting requests hold as they did.
+A request is answered here only where the engine would admit it: its limits on the requests
+waiting in it (in all, and per client) hold as they did.
 """
 
 from __future__ import annotations
@@ -41,10 +41,10 @@ class FastAnswers:
         self.picker: fastpick.Picker | None = None
         self.answered = 0  # requests answered here
 
-    def answer(self, request: dict, t_received: int) -> tuple[dict, list] | None:
-        """The reply's body and images, or None: the engine answers."""
+    def answer(self, request: dict, t_received: int, client: Any = None) -> tuple[dict, list] | None:
+        """The reply's body and images, or None: the engine answers (or refuses: BUSY)."""
         op = _OPS.get(request["op"])
-        if op is None or self.engine.pending or request.get("encoding") not in (None, RAW):
+        if op is None or request.get("encoding") not in (None, RAW) or self._busy(client):
             return None
         if request.get("max_skew_ms") is not None:
             return None
@@ -86,6 +86,16 @@ class FastAnswers:
         }
         self.answered += 1
         return body, images
+
+    def _busy(self, client: Any) -> bool:
+        """Would the engine refuse another request now (RequestEngine._admit's limits)?"""
+        pending, settings = self.engine.pending, self.engine.settings
+        if not pending:
+            return False
+        if len(pending) >= settings["max_pending"]:
+            return True
+        mine = sum(p.client == client for p in pending) if client is not None else 0
+        return mine >= settings["max_pending_per_client"]
 
     def _picker(self) -> fastpick.Picker | None:
         """The C reader of the rings open now (made again once a ring was replaced)."""

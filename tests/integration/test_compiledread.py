@@ -11,12 +11,14 @@ import time
 
 import numpy as np
 import pytest
+import zmq
 
 from fxis_shm import Client, read_stamp
 from fxis_shm.core.snapshot import SLOT
 from fxis_shm.errors import CameraDown, ServiceError, UnknownCamera
 from fxis_shm.shm import fastpick, naming
 from fxis_shm.shm.ring import HEADER_BYTES, FrameLayout, RingReader, RingWriter
+from fxis_shm.wire.protocol import encode_request
 
 from ..conftest import wait_until
 from .conftest import SMALL, child_pids
@@ -203,6 +205,37 @@ def test_the_coordinator_answers_the_common_requests_compiled(three_cameras):
         assert remote.image("a", at=at).frame_id == engine_answer(local, "image", camera="a", at=at)[0]["a"]
         remote.tuple(at=at, max_skew_ms=50.0)  # the engine's
         assert remote.status()["requests_compiled"] == before + 3
+
+
+@compiled
+def test_the_coordinators_compiled_answer_keeps_the_engines_limits(start_service, tmp_path):
+    """With another client's request waiting, a stored t* is still answered compiled; once
+    max_pending requests wait, it is refused BUSY as the engine refuses any other."""
+    config = tmp_path / "limits.toml"
+    config.write_text("max_pending = 2\n")
+    svc = start_service("--camera", f"a=synthetic:fps=50,{SMALL}", "--config", str(config))
+    waiting = []
+    try:
+        with Client(svc.endpoint, local="off", timeout=5.0) as remote:
+            wait_until(lambda: remote.status()["cameras"]["a"].get("frames_stored", 0) > 5)
+            future = remote.time() + 3_000_000_000
+            for n in (1, 2):
+                waiting.append(zmq.Context.instance().socket(zmq.DEALER))
+                waiting[-1].setsockopt(zmq.LINGER, 0)
+                waiting[-1].connect(svc.endpoint)
+                waiting[-1].send_multipart([b"", *encode_request("tuple", id=n, at=future)])
+                wait_until(lambda n=n: remote.status()["pending"] == n, what=f"{n} requests waiting")
+                compiled_before = remote.status()["requests_compiled"]
+                if n == 1:
+                    assert remote.tuple(at=time.monotonic_ns() - PAST_NS).path == "network"
+                    assert remote.status()["requests_compiled"] == compiled_before + 1
+            with pytest.raises(ServiceError, match="2 requests are waiting already") as refused:
+                remote.tuple(at=time.monotonic_ns() - PAST_NS)
+            assert refused.value.code == "BUSY"
+            assert remote.status()["requests_compiled"] == compiled_before
+    finally:
+        for sock in waiting:
+            sock.close()
 
 
 # ---- the C reader over rings made here (real shared memory, no service) ----
