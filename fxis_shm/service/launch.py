@@ -9,6 +9,7 @@ and scripts: ready when it answers ``status``, stopped with SIGTERM on exit.
 from __future__ import annotations
 
 import os
+import random
 import signal
 import socket
 import subprocess
@@ -21,9 +22,34 @@ from fxis_shm.service.tether import die_with_parent
 
 
 def free_tcp_port() -> int:
-    with socket.socket() as s:
+    """A TCP port free on every interface now, drawn below the kernel's ephemeral range: the
+    ports the kernel gives outgoing connections (ZeroMQ's, a browser's) are drawn from that
+    range, so none of them can take this one before the caller binds it (a port the kernel
+    chose for a bind to port 0 could be)."""
+    below = _ephemeral_start()
+    for _ in range(500):
+        port = _DRAW.randrange(max(1024, below - _SPAN), below)
+        with socket.socket() as s:
+            try:
+                s.bind(("", port))
+            except OSError:  # in use (or in TIME_WAIT): another
+                continue
+            return port
+    with socket.socket() as s:  # that part of the range is taken: let the kernel choose
         s.bind(("127.0.0.1", 0))
         return s.getsockname()[1]
+
+
+_SPAN = 12_000  # ports drawn from, just below the ephemeral range
+_DRAW = random.Random()  # its own: a test that seeds the module's generator must not make ports repeat
+
+
+def _ephemeral_start() -> int:
+    try:
+        with open("/proc/sys/net/ipv4/ip_local_port_range") as f:
+            return int(f.read().split()[0])
+    except (OSError, ValueError, IndexError):
+        return 32768  # Linux's default
 
 
 class ServiceProcess:
