@@ -25,6 +25,10 @@ hits all of them alike.
                      the ImageSender sending the N frames of a source tuple (N sequential
                      send_image round trips, tcp loopback). Also shown per image (sample / N).
   imagezmq 1 image   the same with one image per sample (cycling through every source frame).
+  ZeroMQ reply,      the floor of fxis's own network design: a ROUTER in a child process answers
+  frames copied      each request with a small header and the N frames of a source tuple, each
+  once               copied once into its message, as the coordinator copies out of a ring (and
+                     nothing else); one sample = the request and the reply's frames as arrays.
   mp.Queue           a child process that, for each request put on one multiprocessing.Queue,
                      puts the N frames of a source tuple (a list of arrays) on a reply queue;
                      one sample = request + get of the N frames.

@@ -3,7 +3,8 @@
 tcp phase: one service on tcp loopback; timed interleaved: its tuples over the network path
 (local="off"), the same-host client's answers from the rings (local="require": tuple and
 latest, each copied or as zero-copy views), the `time` round trip to the coordinator, and
-imagezmq, mp.Queue and the two copy floors carrying frames taken from the service once.
+imagezmq, the ZeroMQ floor, mp.Queue and the two copy floors carrying frames taken from the
+service once.
 ipc phase: the same cameras served on an ipc endpoint: fxis tuple ipc and a plain copy.
 """
 
@@ -141,11 +142,14 @@ def tcp_phase(args, scenario: str, rng, out: str) -> tuple[list[Contender], dict
         stack.enter_context(rivals.child(ctx, rivals.queue_server_main, source, requests, replies))
         sender = rivals.TimedSender(hub_address, args.timeout)
         stack.callback(sender.close)
+        floor_address = f"tcp://127.0.0.1:{free_tcp_port()}"
+        stack.enter_context(rivals.child(ctx, rivals.floor_main, floor_address, source))
         contenders = [
             frames_contender(TCP, past_tuple(net), cameras, "network"),
             time_contender(net),
             *local_contenders(loc, cameras),
             *rivals.imagezmq_contenders(sender, source),
+            rivals.floor_contender(floor_address, source, args.timeout),
             rivals.queue_contender(rivals.QueueClient(requests, replies, args.timeout), source),
             *rivals.copy_contenders(source),
         ]

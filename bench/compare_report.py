@@ -11,15 +11,15 @@ if __package__:
     from . import _common as common
     from ._interleave import HOT, median, ratio
     from .compare_fxis import IPC, LATEST, LATEST_VIEW, LOCAL, LOCAL_VIEW, SCENARIOS, TCP, TIME
-    from .compare_rivals import COPY, IMZ, IMZ_1, IMZ_PER_IMAGE, MPQ, REUSED
+    from .compare_rivals import COPY, IMZ, IMZ_1, IMZ_PER_IMAGE, MPQ, REUSED, ZMQ_FLOOR
 else:  # run as a script, or loaded from its path
     sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
     import _common as common
     from _interleave import HOT, median, ratio
     from compare_fxis import IPC, LATEST, LATEST_VIEW, LOCAL, LOCAL_VIEW, SCENARIOS, TCP, TIME
-    from compare_rivals import COPY, IMZ, IMZ_1, IMZ_PER_IMAGE, MPQ, REUSED
+    from compare_rivals import COPY, IMZ, IMZ_1, IMZ_PER_IMAGE, MPQ, REUSED, ZMQ_FLOOR
 
-ROWS = (TCP, IPC, LOCAL, LOCAL_VIEW, LATEST, LATEST_VIEW, TIME, IMZ, IMZ_PER_IMAGE, IMZ_1, MPQ, COPY, REUSED)
+ROWS = (TCP, IPC, LOCAL, LOCAL_VIEW, LATEST, LATEST_VIEW, TIME, IMZ, IMZ_PER_IMAGE, IMZ_1, ZMQ_FLOOR, MPQ, COPY, REUSED)
 PLOTTED = tuple(r for r in ROWS if r != IMZ_PER_IMAGE)
 TARGET_SCENARIO = "2x1360x1024"  # the targets are set for 2 cameras 1360x1024
 COPY_LIMIT = 1.3  # local copy / the plain copy of the same frames

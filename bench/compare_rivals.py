@@ -1,5 +1,6 @@
 """The contenders bench/compare.py times fxis against: imagezmq (a hub in a child process),
-a multiprocessing.Queue server, and the two floors, a plain copy and a copy into reused buffers.
+a multiprocessing.Queue server, the two floors, a plain copy and a copy into reused buffers,
+and the floor of fxis's own network design: a bare ZeroMQ reply carrying the frames copied once.
 
 Each contender moves the frames of a "source" tuple (copies taken from the service once).
 """
@@ -25,10 +26,11 @@ else:  # run as a script, or loaded from its path
 IMZ, IMZ_PER_IMAGE, IMZ_1 = "imagezmq", "imagezmq per image (sample / N)", "imagezmq 1 image"
 MPQ, COPY, REUSED = "mp.Queue", "plain copy (fresh arrays)", "copy into reused buffers"
 COPY_CONTROL = "plain copy, ipc phase (control)"
+ZMQ_FLOOR = "ZeroMQ reply, frames copied once"
 CHILD_START_S = 30.0
 
 
-# ---- child processes: the imagezmq hub and the multiprocessing.Queue server -------------------
+# ---- child processes: the imagezmq hub, the multiprocessing.Queue server, the ZeroMQ floor ----
 
 
 def hub_main(address: str, ready) -> None:
@@ -51,6 +53,23 @@ def queue_server_main(source: list[list[np.ndarray]], requests, replies, ready) 
             return
         req_id, k = req
         replies.put((req_id, source[k % len(source)]))
+
+
+def floor_main(address: str, source: list[list[np.ndarray]], ready) -> None:
+    """A ROUTER that answers every request with the next source tuple as the coordinator sends a
+    reply: a small header, then each frame copied once into its message (nothing else: no
+    request decoding, no choosing, no seqlock), over the same transport."""
+    import zmq
+
+    sock = zmq.Context.instance().socket(zmq.ROUTER)
+    sock.bind(address)
+    ready.set()
+    k = 0
+    while True:
+        envelope = sock.recv_multipart()[:-1]
+        frames = source[k % len(source)]
+        k += 1
+        sock.send_multipart([*envelope, b"{}", *(zmq.Frame(f, copy=True) for f in frames)])
 
 
 @contextlib.contextmanager
@@ -168,6 +187,26 @@ def imagezmq_contenders(sender: TimedSender, source: list[list[np.ndarray]]) -> 
     tuples_next = cycle(source)
     images_next = cycle([f for tup in source for f in tup])
     return [Contender(IMZ, lambda: sender.send(tuples_next())), Contender(IMZ_1, lambda: sender.send([images_next()]))]
+
+
+def floor_contender(address: str, source: list[list[np.ndarray]], timeout: float) -> Contender:
+    """One sample: a request to floor_main, and the reply's frames as arrays (views of the
+    received buffers, as a network reply's images are)."""
+    import zmq
+
+    sock = zmq.Context.instance().socket(zmq.DEALER)
+    sock.setsockopt(zmq.LINGER, 0)
+    sock.connect(address)
+    shape, dtype = source[0][0].shape, source[0][0].dtype
+
+    def ask() -> list[np.ndarray]:
+        sock.send_multipart([b"", b"{}"])
+        if not sock.poll(timeout * 1000):
+            raise TimeoutError(f"the ZeroMQ floor gave no reply within {timeout:g} s")
+        reply = sock.recv_multipart(copy=False)
+        return [np.frombuffer(f.buffer, dtype).reshape(shape) for f in reply[2:]]
+
+    return Contender(ZMQ_FLOOR, ask, frames_check(len(source[0]), shape))
 
 
 def queue_contender(qc: QueueClient, source: list[list[np.ndarray]]) -> Contender:
