@@ -57,11 +57,15 @@ def queue_server_main(source: list[list[np.ndarray]], requests, replies, ready) 
 
 def floor_main(address: str, source: list[list[np.ndarray]], ready) -> None:
     """A ROUTER that answers every request with the next source tuple as the coordinator sends a
-    reply: a small header, then each frame copied once into its message (nothing else: no
-    request decoding, no choosing, no seqlock), over the same transport."""
+    reply: a small header, then each frame copied once into its message with the coordinator's
+    own copy and malloc setting (nothing else: no request decoding, no choosing, no seqlock),
+    over the same transport."""
     import zmq
 
-    sock = zmq.Context.instance().socket(zmq.ROUTER)
+    from fxis_shm.service.coordinator import as_message, keep_message_memory
+
+    keep_message_memory()  # as the coordinator: a copy lands in memory malloc kept, not fresh pages
+    sock = zmq.Context().socket(zmq.ROUTER)
     sock.bind(address)
     ready.set()
     k = 0
@@ -69,7 +73,7 @@ def floor_main(address: str, source: list[list[np.ndarray]], ready) -> None:
         envelope = sock.recv_multipart()[:-1]
         frames = source[k % len(source)]
         k += 1
-        sock.send_multipart([*envelope, b"{}", *(zmq.Frame(f, copy=True) for f in frames)])
+        sock.send_multipart(envelope + [b"{}"] + [as_message(f) for f in frames])
 
 
 @contextlib.contextmanager
