@@ -19,10 +19,9 @@ from functools import partial
 from typing import Any
 
 from fxis_shm.client.frames import LOCAL, Frame, FrameTuple
-from fxis_shm.shm import fastpick, slotio
-from fxis_shm.shm.ring import HEADER_BYTES, RingReader
+from fxis_shm.shm import fastpick
+from fxis_shm.shm.ring import RingReader
 
-_RECORD_BYTES = 48  # a slot record (fxis_shm.core.snapshot.SLOT); its first word is seq
 POOLED_BYTES = 128 << 20  # the copies' arrays kept for reuse, at most (over all cameras)
 
 
@@ -32,7 +31,6 @@ class FastReads:
     def __init__(self, names: Sequence[str], readers: Sequence[RingReader], settings: dict, clock: str):
         self.picker = fastpick.Picker(names, readers, settings, clock, POOLED_BYTES)
         self.views = [r.slot_views() for r in readers]
-        self.mappings = [r.geometry()[0] for r in readers]
 
     @property
     def retired(self) -> bool:
@@ -74,7 +72,7 @@ class FastReads:
             still_valid = None
             if not copy:
                 image = self.views[k][slot].view()
-                still_valid = partial(slotio.holds, self.mappings[k], HEADER_BYTES + slot * _RECORD_BYTES, seq)
+                still_valid = partial(self.picker.readers[k].slot_holds, slot, seq)
             frames[name] = Frame(
                 image,
                 name,

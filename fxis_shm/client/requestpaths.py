@@ -112,14 +112,16 @@ class RequestPaths:
             return None
         return self._reads.fast_reads()
 
-    def _count_compiled(self) -> None:
-        self.paths[LOCAL] += 1
-        self.paths["compiled"] += 1
-
-    def _fast_missed(self) -> None:
-        """The compiled read left a request to the engine; a replaced ring needs it made again."""
-        if self._fast is not None and self._fast.retired:
-            self._fast = None
+    def _compiled(self, answer):
+        """``answer`` of the compiled read, counted; None (it left the request to the engine) as it
+        is, dropping the read once a ring was replaced (made again when the engine reopened it)."""
+        if answer is None:
+            if self._fast.retired:
+                self._fast = None
+        else:
+            self.paths[LOCAL] += 1
+            self.paths["compiled"] += 1
+        return answer
 
     def _drop_reads(self) -> None:
         self._fast = None  # before the rings close: it holds their mappings

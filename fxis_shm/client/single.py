@@ -143,11 +143,9 @@ class SingleClient(RequestPaths, SocketOwner):
         with no copy at all; check ``frame.still_valid()`` after using it.
         ``encoding``/``quality``: as the client's, for this request."""
         if self._fast is not None and encoding is quality is timeout is timeout_ms is None:
-            frame = self._fast.image(camera, at, wait, copy)
+            frame = self._compiled(self._fast.image(camera, at, wait, copy))
             if frame is not None:
-                self._count_compiled()
                 return frame
-            self._fast_missed()
         return frames_of(
             *self._request("image", timeout, timeout_ms, copy, encoding, quality, camera=camera, at=at, wait=wait)
         )[0]
@@ -172,11 +170,9 @@ class SingleClient(RequestPaths, SocketOwner):
         that are down are left out (``.missing`` names them) instead of failing the request
         with CameraDown."""
         if self._fast is not None and encoding is quality is timeout is timeout_ms is max_skew_ms is None:
-            tuple_ = self._fast.tuple(cameras, at, sync, wait, copy)
+            tuple_ = self._compiled(self._fast.tuple(cameras, at, sync, wait, copy))
             if tuple_ is not None:
-                self._count_compiled()
                 return tuple_
-            self._fast_missed()
         return tuple_of(
             *self._request(
                 "tuple",
@@ -204,11 +200,9 @@ class SingleClient(RequestPaths, SocketOwner):
     ) -> FrameTuple:
         """The newest stored frame of each camera, without waiting."""
         if self._fast is not None and encoding is quality is None:
-            tuple_ = self._fast.latest(cameras, copy)
+            tuple_ = self._compiled(self._fast.latest(cameras, copy))
             if tuple_ is not None:
-                self._count_compiled()
                 return tuple_
-            self._fast_missed()
         return tuple_of(*self._request("latest", None, None, copy, encoding, quality, cameras=cameras))
 
     def sequence(

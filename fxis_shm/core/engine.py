@@ -176,6 +176,16 @@ class RequestEngine:
         """The earliest moment a waiting request wants to be evaluated again."""
         return min((p.wake_at for p in self.pending), default=None)
 
+    def busy(self, client: Any = None) -> str | None:
+        """Why a request of ``client`` would be refused now (BUSY: the limits on waiting
+        requests, in all and per client); None if it would be admitted."""
+        if len(self.pending) >= self.settings["max_pending"]:
+            return f"{len(self.pending)} requests are waiting already; try again"
+        limit = self.settings["max_pending_per_client"]
+        if client is not None and sum(q.client == client for q in self.pending) >= limit:
+            return f"this client has {limit} requests waiting already (the limit)"
+        return None
+
     def setting(self, request: dict[str, Any], key: str) -> Any:
         value = request.get(key)
         return self.settings[key] if value is None else value
@@ -185,11 +195,9 @@ class RequestEngine:
     def _admit(self, p: Pending, now: int, actions: list[Action]) -> None:
         request = p.request
         p.cameras = self._cameras_of(request)
-        if len(self.pending) >= self.settings["max_pending"]:
-            raise Reject(Code.BUSY, f"{len(self.pending)} requests are waiting already; try again")
-        limit = self.settings["max_pending_per_client"]
-        if p.client is not None and sum(q.client == p.client for q in self.pending) >= limit:
-            raise Reject(Code.BUSY, f"this client has {limit} requests waiting already (the limit)")
+        busy = self.busy(p.client)
+        if busy:
+            raise Reject(Code.BUSY, busy)
         if request.get("partial"):  # leave out the cameras that are down, and say which
             p.missing = [c for c in p.cameras if self.cameras[c].down_reason(now)]
             p.cameras = [c for c in p.cameras if c not in p.missing]

@@ -44,7 +44,7 @@ class FastAnswers:
     def answer(self, request: dict, t_received: int, client: Any = None) -> tuple[dict, list] | None:
         """The reply's body and images, or None: the engine answers (or refuses: BUSY)."""
         op = _OPS.get(request["op"])
-        if op is None or request.get("encoding") not in (None, RAW) or self._busy(client):
+        if op is None or request.get("encoding") not in (None, RAW) or self.engine.busy(client):
             return None
         if request.get("max_skew_ms") is not None:
             return None
@@ -86,16 +86,6 @@ class FastAnswers:
         }
         self.answered += 1
         return body, images
-
-    def _busy(self, client: Any) -> bool:
-        """Would the engine refuse another request now (RequestEngine._admit's limits)?"""
-        pending, settings = self.engine.pending, self.engine.settings
-        if not pending:
-            return False
-        if len(pending) >= settings["max_pending"]:
-            return True
-        mine = sum(p.client == client for p in pending) if client is not None else 0
-        return mine >= settings["max_pending_per_client"]
 
     def _picker(self) -> fastpick.Picker | None:
         """The C reader of the rings open now (made again once a ring was replaced)."""

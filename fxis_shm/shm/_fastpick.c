@@ -78,36 +78,19 @@ static const char *record_of(const Ring *r, int64_t w) {
     return base_of(r) + r->table_at + (Py_ssize_t)((uint64_t)w % (uint64_t)r->slots) * RECORD;
 }
 
-/* pickcore's read: t_capture of write base + i, if its record was whole while read. */
-static int64_t ring_time(PickCam *cam, int64_t i) {
-    int64_t w = cam->base + i;
-    const char *rec = record_of((const Ring *)cam->source, w);
-    uint64_t expected = 2 * (uint64_t)w + 2;
-    int64_t t = load_acquire(rec) == expected ? load_plain(rec + 16) : 0;
-    atomic_thread_fence(memory_order_acquire);
-    if (load_acquire(rec) != expected)
-        cam->failed = 1;
-    return t;
+/* The record of write w, if whole while read (0), else 1. */
+static int record_of_write(const Ring *r, int64_t w, Record *out) {
+    return read_record(record_of(r, w), 2 * (uint64_t)w + 2, out);
 }
 
-typedef struct {
-    uint64_t frame_id, generation;
-    int64_t t_capture, t_stored, t_available;
-} Record;
-
-/* The record of write w, if whole while read (0), else 1. */
-static int read_record(const Ring *r, int64_t w, Record *out) {
-    const char *rec = record_of(r, w);
-    uint64_t expected = 2 * (uint64_t)w + 2;
-    if (load_acquire(rec) != expected)
-        return 1;
-    out->frame_id = (uint64_t)load_plain(rec + 8);
-    out->t_capture = load_plain(rec + 16);
-    out->t_stored = load_plain(rec + 24);
-    out->t_available = load_plain(rec + 32);
-    out->generation = (uint64_t)load_plain(rec + 40);
-    atomic_thread_fence(memory_order_acquire);
-    return load_acquire(rec) != expected;
+/* pickcore's read: t_capture of write base + i, if its record was whole while read. */
+static int64_t ring_time(PickCam *cam, int64_t i) {
+    Record rec;
+    if (record_of_write((const Ring *)cam->source, cam->base + i, &rec)) {
+        cam->failed = 1;
+        return 0;
+    }
+    return rec.t_capture;
 }
 
 /* procstat.read(pid).running: the process exists and is not a zombie (or dead). */
@@ -287,18 +270,11 @@ static int copy_out(Ring **rings, const int64_t *writes, PyObject *outs, int n) 
         Py_BEGIN_ALLOW_THREADS
         for (int k = 0; k < n && status == 0; k++) {
             const Ring *r = rings[k];
-            const char *seq = record_of(r, writes[k]);
-            uint64_t expected = 2 * (uint64_t)writes[k] + 2;
             Py_ssize_t slot = (Py_ssize_t)((uint64_t)writes[k] % (uint64_t)r->slots);
             const char *src = base_of(r) + r->data_at + slot * r->stride;
-            if (load_acquire(seq) != expected) {
-                status = FALLBACK_TORN;
-                break;
-            }
             /* cached stores: the caller reads the frame next (timed: as fast cold as streamed, faster warm) */
-            copy_bytes(targets[k].buf, src, (size_t)r->nbytes, 0);
-            atomic_thread_fence(memory_order_acquire); /* every byte was read before seq is read again */
-            if (load_acquire(seq) != expected)
+            if (copy_whole(record_of(r, writes[k]), 2 * (uint64_t)writes[k] + 2, targets[k].buf, src,
+                           (size_t)r->nbytes, 0))
                 status = FALLBACK_TORN;
         }
         Py_END_ALLOW_THREADS
@@ -360,8 +336,8 @@ static PyObject *rings_pick(Rings *self, PyObject *args) {
     for (int k = 0; k < n; k++) {
         Record newest;
         writes[k] = cams[k].base + cams[k].index;
-        if (read_record(rings[k], writes[k], &records[k]) ||
-            read_record(rings[k], cams[k].base + cams[k].stored - 1, &newest))
+        if (record_of_write(rings[k], writes[k], &records[k]) ||
+            record_of_write(rings[k], cams[k].base + cams[k].stored - 1, &newest))
             return PyLong_FromLong(PICK_UNREAD);
         newest_stored[k] = newest.t_stored;
     }

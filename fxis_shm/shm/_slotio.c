@@ -57,18 +57,12 @@ static PyObject *records(PyObject *self, PyObject *args) {
         goto done;
     for (unsigned long long w = lo; w < hi; w++) {
         const char *rec = (const char *)view.buf + table + (Py_ssize_t)(w % (unsigned long long)slots) * RECORD;
-        uint64_t expected = 2 * w + 2;
-        if (load_acquire(rec) != expected)
+        Record r;
+        if (read_record(rec, 2 * w + 2, &r))
             continue;
-        uint64_t frame_id = (uint64_t)load_plain(rec + 8);
-        int64_t t_capture = load_plain(rec + 16), t_stored = load_plain(rec + 24);
-        int64_t t_available = load_plain(rec + 32);
-        uint64_t generation = (uint64_t)load_plain(rec + 40);
-        atomic_thread_fence(memory_order_acquire); /* the fields were read before seq is read again */
-        if (load_acquire(rec) != expected)
-            continue;
-        PyObject *item = Py_BuildValue("(KKLLLK)", w, frame_id, (long long)t_capture, (long long)t_stored,
-                                       (long long)t_available, generation);
+        PyObject *item = Py_BuildValue("(KKLLLK)", w, (unsigned long long)r.frame_id, (long long)r.t_capture,
+                                       (long long)r.t_stored, (long long)r.t_available,
+                                       (unsigned long long)r.generation);
         if (item == NULL || PyList_Append(out, item) < 0) {
             Py_XDECREF(item);
             Py_CLEAR(out);
@@ -121,12 +115,8 @@ static void job_close(Job *job) {
 
 /* The seqlock read of one frame (without the GIL): 0 whole, 1/2 overwritten before/during. */
 static int job_run(Job *job, int stream) {
-    const char *seq = (const char *)job->view.buf + job->seq_at;
-    if (load_acquire(seq) != job->expected)
-        return 1;
-    copy_bytes(job->out.buf, (const char *)job->view.buf + job->src, (size_t)job->nbytes, stream);
-    atomic_thread_fence(memory_order_acquire); /* every byte was read before seq is read again */
-    return load_acquire(seq) == job->expected ? 0 : 2;
+    const char *base = (const char *)job->view.buf;
+    return copy_whole(base + job->seq_at, job->expected, job->out.buf, base + job->src, (size_t)job->nbytes, stream);
 }
 
 static PyObject *copy(PyObject *self, PyObject *args) {

@@ -1,8 +1,9 @@
-/* What the C readers of a ring share (_slotio.c, _fastpick.c): the seqlock's ordered loads
- * and the copy of a slot's bytes. */
+/* What the C readers of a ring share (_slotio.c, _fastpick.c): the seqlock's ordered loads,
+ * the read of a slot record, and the copy of a slot's bytes, each checked whole. */
 #ifndef FXIS_SEQLOCK_H
 #define FXIS_SEQLOCK_H
 
+#include <stdatomic.h>
 #include <stdint.h>
 #include <string.h>
 #if defined(__x86_64__)
@@ -40,6 +41,36 @@ static inline void copy_bytes(char *dst, const char *src, size_t n, int stream) 
     (void)stream;
 #endif
     memcpy(dst, src, n);
+}
+
+/* A slot record (48 bytes: seq, then these), as a reader takes it. */
+typedef struct {
+    uint64_t frame_id, generation;
+    int64_t t_capture, t_stored, t_available;
+} Record;
+
+/* The record at `rec` if it showed `expected` (2w+2: write w, whole) before and after the read:
+ * 0, else 1 (the fields are then not to be used). */
+static inline int read_record(const char *rec, uint64_t expected, Record *out) {
+    if (load_acquire(rec) != expected)
+        return 1;
+    out->frame_id = (uint64_t)load_plain(rec + 8);
+    out->t_capture = load_plain(rec + 16);
+    out->t_stored = load_plain(rec + 24);
+    out->t_available = load_plain(rec + 32);
+    out->generation = (uint64_t)load_plain(rec + 40);
+    atomic_thread_fence(memory_order_acquire); /* the fields were read before seq is read again */
+    return load_acquire(rec) != expected;
+}
+
+/* The seqlock read of a slot's `n` bytes into `dst`, `seq` its record's first word: 0 whole,
+ * 1 overwritten before, 2 during (then `dst` holds nothing to use). */
+static inline int copy_whole(const char *seq, uint64_t expected, char *dst, const char *src, size_t n, int stream) {
+    if (load_acquire(seq) != expected)
+        return 1;
+    copy_bytes(dst, src, n, stream);
+    atomic_thread_fence(memory_order_acquire); /* every byte was read before seq is read again */
+    return load_acquire(seq) == expected ? 0 : 2;
 }
 
 #endif
