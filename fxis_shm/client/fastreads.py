@@ -31,6 +31,12 @@ class FastReads:
     def __init__(self, names: Sequence[str], readers: Sequence[RingReader], settings: dict, clock: str):
         self.picker = fastpick.Picker(names, readers, settings, clock, POOLED_BYTES)
         self.views = [r.slot_views() for r in readers]
+        self._torn_told = 0
+
+    def torn_since(self) -> int:
+        """The copies found torn since the last call (the engine answered those requests)."""
+        torn, self._torn_told = self.picker.torn - self._torn_told, self.picker.torn
+        return torn
 
     @property
     def retired(self) -> bool:

@@ -116,6 +116,7 @@ class RequestPaths:
         """``answer`` of the compiled read, counted; None (it left the request to the engine) as it
         is, dropping the read once a ring was replaced (made again when the engine reopened it)."""
         if answer is None:
+            self.paths["torn"] += self._fast.torn_since()
             if self._fast.retired:
                 self._fast = None
         else:

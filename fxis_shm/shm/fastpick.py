@@ -75,6 +75,7 @@ class Picker:
         self.tolerance_ns = int(settings["sync_tolerance_ms"] * 1e6)
         self.horizon_ns = int(settings["horizon_ms"] * 1e6)
         self.retired = False  # a ring was replaced: make a new Picker
+        self.torn = 0  # copies found torn (the engine answered those requests)
         self._forms: dict[Any, tuple | None] = {}
 
     def pick(self, cameras: Any, op: int, at: Any, sync: Any, wait: Any, copy: bool, now: int = 0) -> tuple | None:
@@ -92,6 +93,7 @@ class Picker:
         got = self.rings.pick(form[0], form[1], op, at, joint, auto, self.tolerance_ns, self.horizon_ns, copy, now)
         if type(got) is int:
             self.retired = self.retired or got == RETIRED
+            self.torn += got == TORN
             return None
         return (*got, form[0], form[2])
 

@@ -135,12 +135,15 @@ def test_the_service_holds_at_most_max_pending_waiting_requests(start_service, t
 
 
 OVERWRITTEN = "overwritten 3 times"  # the refusal after three torn copies of one request's frames
+OLDER_NS = 1_800_000  # 0.9 periods at 500 fps: the frame before the newest, or the newest once that is gone
 
 
 @pytest.mark.parametrize("local", ["off", "require"])
 def test_torn_reads_never_reach_a_client(start_service, local):
     """Rings of 2 slots at 500 fps: the writer laps readers constantly. The service copies the
-    frames (local="off") or the clients copy them from the rings themselves. Readers go on until
+    frames (local="off") or the clients copy them from the rings themselves. Besides the next and
+    the newest frame, each reader asks for the frame before the newest it saw: the one the writer
+    overwrites next, so that copies are torn however fast they are made. Readers go on until
     copies were found torn and made again (the service's count, or the clients' ``paths["torn"]``)
     and enough frames were served: not one served frame is torn, and a request whose frames were
     overwritten three times is refused saying so (``Overwritten``, or ``INTERNAL`` with that
@@ -149,13 +152,23 @@ def test_torn_reads_never_reach_a_client(start_service, local):
     errors, served, refused, clients, paths = [], [0], [0], [], set()
     stop = threading.Event()
 
+    def older(client, at):
+        """The frame at ``at``, or the newest again if the writer has already gone two frames on."""
+        try:
+            return client.image("fast", at=at)
+        except ServiceError as exc:
+            if exc.code != "OUT_OF_RANGE":
+                raise
+            return client.latest()["fast"]
+
     def reader():
         try:
             with Client(svc.endpoint, timeout=5.0, local=local) as client:
                 clients.append(client)
                 while not stop.is_set():
                     try:
-                        frames = (client.image("fast"), client.latest()["fast"])
+                        newest = client.latest()["fast"]
+                        frames = (newest, older(client, newest.t_capture - OLDER_NS), client.image("fast"))
                     except Overwritten as exc:
                         assert OVERWRITTEN in str(exc), exc
                         refused[0] += 1
