@@ -31,11 +31,16 @@ demo: setup
 # (docs/design.md, "The compiled hot path"). `FXIS_PURE_PYTHON=1 make test`: all of it on the fallback.
 PURE_TESTS := tests/unit tests/integration/test_ring.py tests/integration/test_localpath.py \
               tests/integration/test_localwaits.py
+# Tests run on this many pytest-xdist workers, each test's services, hosts and DDS domain its own;
+# most of a test's time is waiting on its processes, so 2 workers use a 2-core machine well.
+# TEST_WORKERS=0: one process, in order.
+TEST_WORKERS ?= 2
+XDIST := $(if $(filter 0,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist worksteal)
 
 test: setup lint
 	$(BIN)/python -c "import fxis_shm, os, sys; sys.exit(not (fxis_shm.compiled or os.environ.get('FXIS_PURE_PYTHON') == '1'))"
-	$(BIN)/python -m pytest
-	FXIS_PURE_PYTHON=1 $(BIN)/python -m pytest -q $(PURE_TESTS)
+	$(BIN)/python -m pytest $(XDIST)
+	FXIS_PURE_PYTHON=1 $(BIN)/python -m pytest -q $(XDIST) $(PURE_TESTS)
 
 lint: setup
 	$(BIN)/ruff check .
