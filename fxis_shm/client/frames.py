@@ -21,7 +21,7 @@ LOCAL, NETWORK = "local", "network"
 _TIMES = ("t_capture", "t_stored", "t_available")
 
 
-@dataclass
+@dataclass(slots=True)
 class Frame:
     """One image and what the service knows of it. Times (``t_*``) are int ns of the caller's
     clock; ``service_t_*`` are the same moments in the service's clock."""
