@@ -15,6 +15,7 @@ from typing import TypeVar
 from fxis_shm.core import timebase
 from fxis_shm.errors import SpecError
 from fxis_shm.service.childspec import ChildSpec
+from fxis_shm.service.stopsignals import stop_on
 from fxis_shm.service.tether import die_with_parent
 
 S = TypeVar("S", bound=ChildSpec)
@@ -62,7 +63,7 @@ def child_main(spec_class: type[S], run: Callable[[S, Ready, threading.Event], N
     timebase.use(spec.clock)  # before any frame or request is stamped
     stop = threading.Event()
     parent = os.getppid()
-    signal.signal(signal.SIGTERM, lambda *_: stop.set())
+    stop_on((signal.SIGTERM,), stop)
     signal.signal(signal.SIGINT, signal.SIG_IGN)  # Ctrl-C is the supervisor's to handle
     die_with_parent()  # even after kill -9 of the supervisor
     if os.getppid() != parent:

@@ -13,6 +13,7 @@ import threading
 from fxis_shm.cli.options import add_key_options, client_keys_for
 from fxis_shm.errors import ConfigError
 from fxis_shm.service.config import ViewerAccess, check_viewer_files, http_address, viewer_token
+from fxis_shm.service.stopsignals import stop_on
 from fxis_shm.service.supervisor import link_host
 from fxis_shm.viewers.dashboard import serve
 from fxis_shm.viewers.livefeed import LiveFeed
@@ -38,8 +39,7 @@ def dashboard_command(args) -> int:
     host, port = http_address(args.http)
     feed = LiveFeed(list(args.endpoints), keys=client_keys_for(args), timeout=args.timeout)
     stop = threading.Event()
-    for sig in (signal.SIGINT, signal.SIGTERM):
-        signal.signal(sig, lambda *_: stop.set())
+    stop_on((signal.SIGINT, signal.SIGTERM), stop)
 
     def ready() -> None:
         scheme = "https" if access.tls_cert else "http"

@@ -32,6 +32,7 @@ from fxis_shm.service.childspec import (
 )
 from fxis_shm.service.config import ServiceConfig, ViewerAccess, http_address, viewer_accesses
 from fxis_shm.service.memory import ring_lines
+from fxis_shm.service.stopsignals import stop_on
 from fxis_shm.shm import naming
 
 log = logging.getLogger("supervisor")
@@ -272,8 +273,7 @@ class Supervisor:
 
     def run(self) -> int:
         """Serve until SIGINT/SIGTERM; returns the process exit code."""
-        for sig in (signal.SIGINT, signal.SIGTERM):
-            signal.signal(sig, lambda *_: self.stop.set())
+        stop_on((signal.SIGINT, signal.SIGTERM), self.stop)
         lock = ServiceLock(self.config.name)
         try:
             removed = naming.remove_leftovers(self.config.name)
