@@ -7,7 +7,6 @@ message that says what is wrong.
 
 from __future__ import annotations
 
-import json
 import math
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass
@@ -20,7 +19,7 @@ from fxis_shm.core.selection import SYNC_MODES
 from fxis_shm.core.sequences import DIRECTIONS, KINDS as SEQUENCE_KINDS
 from fxis_shm.core.waitpolicy import WAIT_MODES
 from fxis_shm.errors import Code, ProtocolError
-from fxis_shm.wire import encoding as codec
+from fxis_shm.wire import encoding as codec, fastjson
 from fxis_shm.wire.framemeta import described, encoded_meta, frame_meta, frame_ref  # noqa: F401 (names of the codec)
 
 VERSION = 1
@@ -252,7 +251,7 @@ def _decode_header(frame: bytes, max_header_bytes: int, schemas: dict) -> dict:
             Code.TOO_LARGE,
         )
     try:
-        header = json.loads(raw)
+        header = fastjson.loads(raw)
     except (UnicodeDecodeError, ValueError) as exc:
         raise ProtocolError(f"request header is not valid JSON: {exc}") from None
     except RecursionError:
@@ -300,7 +299,7 @@ def _validate(header: dict, schemas: dict) -> dict:
 
 def encode_request(op: str, **fields) -> list[bytes]:
     header = {"v": VERSION, "op": op, **{k: v for k, v in fields.items() if v is not None}}
-    return [json.dumps(header).encode()]
+    return [fastjson.dumps(header)]
 
 
 def encode_event(op: str, reply_topic: str, **fields) -> list[bytes]:
@@ -366,12 +365,12 @@ def parse_stream_topic(topic: str) -> StreamTopic | None:
 def encode_reply(request_id, body: dict, buffers: Sequence = ()) -> list:
     """A success reply: the header frame, then one frame per buffer (sent as is, not copied)."""
     header = {"v": VERSION, "id": request_id, "ok": True, "clock": timebase.wire_name(), **body}
-    return [json.dumps(header).encode(), *buffers]
+    return [fastjson.dumps(header), *buffers]
 
 
 def encode_error(request_id, code: str, message: str) -> list[bytes]:
     header = {"v": VERSION, "id": request_id, "ok": False, "error": {"code": code, "message": message}}
-    return [json.dumps(header).encode()]
+    return [fastjson.dumps(header)]
 
 
 def decode_reply(frames: Sequence) -> tuple[dict, list[np.ndarray]]:
@@ -379,7 +378,7 @@ def decode_reply(frames: Sequence) -> tuple[dict, list[np.ndarray]]:
     if not frames:
         raise ProtocolError("empty reply")
     try:
-        header = json.loads(bytes(frames[0]))
+        header = fastjson.loads(bytes(frames[0]))
     except (UnicodeDecodeError, ValueError, RecursionError) as exc:
         raise ProtocolError(f"reply header is not valid JSON: {exc!r}") from None
     if not isinstance(header, dict) or header.get("v") != VERSION or "ok" not in header:
