@@ -33,9 +33,10 @@ PURE_TESTS := tests/unit tests/integration/test_ring.py tests/integration/test_l
               tests/integration/test_localwaits.py
 # Tests run on this many pytest-xdist workers, each test's services, hosts and DDS domain its own;
 # most of a test's time is waiting on its processes, so 2 workers use a 2-core machine well.
+# A module's tests stay on one worker, in order: its shared services start once.
 # TEST_WORKERS=0: one process, in order.
 TEST_WORKERS ?= 2
-XDIST := $(if $(filter 0,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist worksteal)
+XDIST := $(if $(filter 0,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist loadscope)
 
 test: setup lint
 	$(BIN)/python -c "import fxis_shm, os, sys; sys.exit(not (fxis_shm.compiled or os.environ.get('FXIS_PURE_PYTHON') == '1'))"

@@ -266,6 +266,8 @@ def test_settings_ros_cannot_carry_stop_the_start_with_a_clear_message(args, mes
 
 def test_a_snapshot_asked_for_on_the_snapshot_topic_keeps_the_window_in_ros_time(bridge):
     result = f"{NS}/snapshot/result"
+    with bridge.svc.client() as client:  # the window starts 3 s back: the service must have run that long
+        wait_until(lambda: client.status()["cameras"]["cam0"]["frames_stored"] > 60, what="3 s of frames stored")
     with Peer(bridge.domain, [(result, STRING)], publish_headers=[f"{NS}/snapshot"]) as peer:
         t = timebase.reader("realtime")() - 1_000_000_000  # an event a second ago, in ROS time
         peer.publish_header(f"{NS}/snapshot", *divmod(t, 1_000_000_000), "grasp_17")
@@ -274,7 +276,10 @@ def test_a_snapshot_asked_for_on_the_snapshot_topic_keeps_the_window_in_ros_time
     by_name = {a["name"]: a for a in answers}
     assert "error" in by_name["bad name"] and "frame_id must name the bag" in by_name["bad name"]["error"]
     kept = by_name["grasp_17"]
-    assert kept["bag"] == str(bridge.snapshots / "grasp_17") and all(not c["missing"] for c in kept["cameras"].values())
+    assert kept["bag"] == str(bridge.snapshots / "grasp_17")
+    with bridge.svc.client() as client:  # frames missing only where the camera itself fell behind
+        dropped = {name: s["frames_dropped"] for name, s in client.status()["cameras"].items()}
+    assert all(len(c["missing"]) <= dropped[name] for name, c in kept["cameras"].items()), (kept, dropped)
     bag = read_bag(bridge.snapshots / "grasp_17")
     stamps = [m.stamp for m in bag.messages["/cam0/image_raw"]]
     assert len(stamps) >= 55 and t - 2_000_000_000 <= stamps[0] and stamps[-1] <= t + 1_000_000_000
