@@ -137,9 +137,11 @@ def test_two_emulated_cameras_answer_a_tuple(emulator, second_address, start_ser
     assert frames["left"].image.shape == (48, 64) and is_frame(frames["left"])
     assert frames["right"].image.shape == (48, 64, 3)  # demosaiced to BGR
     # the least skewed pair near t* (a loaded machine may stamp a frame late: a speed, not a
-    # behaviour, so the pair is compared with the frames the rings held, not with a bound)
+    # behaviour, so the pair is compared with the frames the rings held when the tuple was
+    # chosen, not with a bound; frames stored later could not be chosen)
+    capture, stored = times["columns"].index("t_capture"), times["columns"].index("t_stored")
     near = {
-        cam: [row[times["columns"].index("t_capture")] for row in info["frames"]]
+        cam: [row[capture] for row in info["frames"] if row[stored] <= frames.timing["searched"]]
         for cam, info in times["cameras"].items()
     }
     near = {cam: [t for t in ts if abs(t - frames.t_request) <= 50_000_000] for cam, ts in near.items()}
