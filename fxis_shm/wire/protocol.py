@@ -27,6 +27,7 @@ CLOCK = "CLOCK_MONOTONIC"
 MAX_HEADER_BYTES = 64 * 1024
 RESERVED_TOPICS = ("frames/", "tuples", "fxis.")  # stream topics the service publishes itself
 DTYPES = ("uint8", "uint16", "float32")
+_DTYPE_OF = {name: np.dtype(name) for name in DTYPES}  # (np.dtype(name) parses the name on every call)
 LOCAL = "local"  # the delivery of a reply whose frames the client copies from the rings itself
 
 
@@ -203,9 +204,19 @@ EVENT_OPS = ("image", "tuple", "latest", "sequence", "time")
 EVENT_TOPIC = b"fxis.request"  # the topic of request events published to the service
 
 
-def _with_common(schemas: dict[str, dict[str, tuple[Check, Any]]]) -> dict[str, dict[str, tuple[Check, Any]]]:
+class _Schema(dict[str, tuple[Check, Any]]):
+    """An op's whole schema (field: (check, default); ``...``: required), with the request
+    its defaults make written once: a request checks only the fields it has."""
+
+    def __init__(self, fields: dict[str, tuple[Check, Any]]):
+        super().__init__(fields)
+        self.defaults = {field: default for field, (_, default) in fields.items()}
+        self.required = [field for field, (_, default) in fields.items() if default is ...]
+
+
+def _with_common(schemas: dict[str, dict[str, tuple[Check, Any]]]) -> dict[str, _Schema]:
     """Each op's whole schema: the fields every request has, then its own."""
-    return {op: {**_COMMON, **fields} for op, fields in schemas.items()}
+    return {op: _Schema({**_COMMON, **fields}) for op, fields in schemas.items()}
 
 
 _REQUESTS = _with_common(OPS)
@@ -268,7 +279,7 @@ def request_of(op: str, **fields) -> dict:
     return _validate(header, _REQUESTS)
 
 
-def _validate(header: dict, schemas: dict) -> dict:
+def _validate(header: dict, schemas: dict[str, _Schema]) -> dict:
     """``header`` checked against its op's whole schema in ``schemas`` (see ``_with_common``)."""
     if "v" not in header:
         raise ProtocolError("request header has no 'v' (protocol version)")
@@ -281,9 +292,23 @@ def _validate(header: dict, schemas: dict) -> dict:
     if op not in schemas:
         raise ProtocolError(f"unknown op {op!r}; known: {sorted(schemas)}", Code.UNKNOWN_OP)
     schema = schemas[op]
-    unknown = sorted(header.keys() - schema.keys())
-    if unknown:
-        raise ProtocolError(f"unknown field(s) {unknown} for op {op!r}")
+    if not header.keys() <= schema.keys():
+        raise ProtocolError(f"unknown field(s) {sorted(header.keys() - schema.keys())} for op {op!r}")
+    request = dict(schema.defaults)  # in the schema's order, as the loop below makes it
+    try:
+        if any(field not in header for field in schema.required):
+            raise ProtocolError("a field is missing")
+        for field, value in header.items():
+            request[field] = schema[field][0](field, value)
+    except ProtocolError:  # the first problem in the schema's order is the one to report
+        request = _checked_in_order(header, schema, op)
+    if op in CROSS_CHECKS:
+        CROSS_CHECKS[op](request)
+    return request
+
+
+def _checked_in_order(header: dict, schema: _Schema, op: str) -> dict:
+    """``header`` checked field by field in the schema's order: raises at the first problem."""
     request = {}
     for field, (check, default) in schema.items():
         if field in header:
@@ -292,8 +317,6 @@ def _validate(header: dict, schemas: dict) -> dict:
             raise ProtocolError(f"op {op!r} needs field {field!r}")
         else:
             request[field] = default
-    if op in CROSS_CHECKS:
-        CROSS_CHECKS[op](request)
     return request
 
 
@@ -402,11 +425,11 @@ def _image(meta: dict, buffers: Sequence) -> np.ndarray:
         if not isinstance(shape, list) or any(type(s) is not int or s < 0 for s in shape):
             raise ValueError(f"shape {shape!r}")
         buf = buffers[index]
-        dtype = np.dtype(meta["dtype"])
+        dtype = _DTYPE_OF.get(meta["dtype"]) or np.dtype(meta["dtype"])  # (raises for a name numpy lacks)
         shape = tuple(shape)
     except (KeyError, IndexError, TypeError, ValueError) as exc:
         raise ProtocolError(f"frame metadata does not match the buffers: {exc!r}") from None
-    if meta["dtype"] not in DTYPES:
+    if meta["dtype"] not in _DTYPE_OF:
         raise ProtocolError(f"unsupported dtype {meta['dtype']!r}")
     encoding = meta.get("encoding", codec.RAW)
     if encoding != codec.RAW:
