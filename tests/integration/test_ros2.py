@@ -68,7 +68,7 @@ def bridge(tmp_path_factory):
         "--ros2-snapshots",
         str(snapshots),
         "--history",
-        "3",
+        "5",  # the snapshot test's window reaches 3 s back: 2 s to spare when a loaded copy lags
     ]
     with ServiceProcess(args, env={**os.environ, "CYCLONEDDS_URI": loopback_config()}) as svc:
         yield SimpleNamespace(svc=svc, domain=domain, snapshots=snapshots)
