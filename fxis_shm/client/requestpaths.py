@@ -14,6 +14,7 @@ from fxis_shm.client.frames import LOCAL, NETWORK
 from fxis_shm.client.localreads import LocalReads
 from fxis_shm.client.requesttimes import same_moment
 from fxis_shm.errors import CameraDown, LocalPathUnavailable, Overwritten, UnknownCamera
+from fxis_shm.shm import fastpick
 from fxis_shm.shm.localpath import LocalUnavailable
 from fxis_shm.wire import protocol
 
@@ -104,9 +105,10 @@ class RequestPaths:
 
     def _fast_reads(self) -> FastReads | None:
         """The compiled read over the rings read here, if built and the caller's clock is the
-        service's (it takes and returns the service's times as they are)."""
-        if self._reads is None:
-            return None
+        service's (it takes and returns the service's times as they are). Asked again after
+        every local read while there is none, so the cheap refusals come first."""
+        if self._reads is None or not fastpick.AVAILABLE or self._tracker is not None:
+            return None  # (a tracked caller's clock is never the service's as it is)
         mapping = self.clock_estimate()
         if self._mapping is None or mapping.offset_ns != 0 or mapping.drift_ppm != 0:
             return None

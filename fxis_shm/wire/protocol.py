@@ -294,13 +294,14 @@ def _validate(header: dict, schemas: dict[str, _Schema]) -> dict:
     schema = schemas[op]
     if not header.keys() <= schema.keys():
         raise ProtocolError(f"unknown field(s) {sorted(header.keys() - schema.keys())} for op {op!r}")
-    request = dict(schema.defaults)  # in the schema's order, as the loop below makes it
+    request = dict(schema.defaults)  # in the schema's order, as _checked_in_order makes it
     try:
-        if any(field not in header for field in schema.required):
-            raise ProtocolError("a field is missing")
         for field, value in header.items():
             request[field] = schema[field][0](field, value)
-    except ProtocolError:  # the first problem in the schema's order is the one to report
+        complete = all(field in header for field in schema.required)
+    except ProtocolError:
+        complete = False
+    if not complete:  # the first problem in the schema's order is the one to report
         request = _checked_in_order(header, schema, op)
     if op in CROSS_CHECKS:
         CROSS_CHECKS[op](request)
