@@ -81,6 +81,8 @@ class ReleasedImage:
 class FrameTuple(Mapping):
     """One frame per camera, chosen together for the request time ``t_request``."""
 
+    __slots__ = ("_frames", "t_request", "service_t_request", "timing", "missing")
+
     def __init__(
         self,
         frames: dict[str, Frame],
@@ -138,29 +140,32 @@ class FrameTuple(Mapping):
 
 
 def frames_of(header: dict, images: list[np.ndarray], still_valid: Callable | None = None) -> list[Frame]:
-    timing, path = header.get("timing", {}), header.get("path", NETWORK)
-    try:
-        return [
-            Frame(
-                img,
-                m["camera"],
-                m["frame_id"],
-                m["t_capture"],
-                m["t_stored"],
-                m["generation"],
-                timing,
-                m.get("t_available"),
-                path,
-                still_valid,
-                m.get("encoding", "raw"),
-                m.get("service_t_capture", m["t_capture"]),
-                m.get("service_t_stored", m["t_stored"]),
-                m.get("service_t_available", m.get("t_available")),
+    timing, path = header.get("timing") or {}, header.get("path", NETWORK)
+    frames = []
+    try:  # (a loop, not a comprehension: cold, each comprehension is a function call more)
+        for meta, image in zip(header["frames"], images):
+            t_capture, t_stored, t_available = meta["t_capture"], meta["t_stored"], meta.get("t_available")
+            frames.append(
+                Frame(
+                    image,
+                    meta["camera"],
+                    meta["frame_id"],
+                    t_capture,
+                    t_stored,
+                    meta["generation"],
+                    timing,
+                    t_available,
+                    path,
+                    still_valid,
+                    meta.get("encoding", "raw"),
+                    meta.get("service_t_capture", t_capture),
+                    meta.get("service_t_stored", t_stored),
+                    meta.get("service_t_available", t_available),
+                )
             )
-            for m, img in zip(header["frames"], images)
-        ]
     except KeyError as exc:
         raise ProtocolError(f"frame metadata lacks {exc}") from None
+    return frames
 
 
 def in_caller_clock(header: dict, clock: ClockEstimate) -> dict:
@@ -182,9 +187,11 @@ def in_caller_clock(header: dict, clock: ClockEstimate) -> dict:
 
 
 def tuple_of(header: dict, images: list[np.ndarray], still_valid: Callable | None = None) -> FrameTuple:
-    frames = frames_of(header, images, still_valid)
+    by_camera = {}
+    for frame in frames_of(header, images, still_valid):
+        by_camera[frame.camera] = frame
     return FrameTuple(
-        {f.camera: f for f in frames},
+        by_camera,
         header.get("t_request"),
         header.get("timing", {}),
         header.get("missing", ()),
