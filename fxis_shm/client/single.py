@@ -34,7 +34,15 @@ from fxis_shm.client.localreads import LocalReads
 from fxis_shm.client.pubsub import EventPublisher, Subscriber
 from fxis_shm.client.requestpaths import RequestPaths
 from fxis_shm.client.requesttimes import fixed_mapping, last_needed
-from fxis_shm.client.sockets import SocketOwner, checked_encoding, connected_socket, reachable, wire_timeout_ms
+from fxis_shm.client.sockets import (
+    SocketOwner,
+    checked_encoding,
+    connected_socket,
+    reachable,
+    recv_parts,
+    send_parts,
+    wire_timeout_ms,
+)
 from fxis_shm.core import timebase
 from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.errors import InvalidArgument, RequestTimeout, service_error
@@ -46,7 +54,7 @@ DEFAULT_ENDPOINT = defaults.ENDPOINT
 LOCAL_MODES = ("auto", "off", "require")
 _PERIODS_VALID_S = 10.0  # the cameras' periods learnt from the status, for sequences that wait
 # plain ints: their arithmetic is far cheaper than that of pyzmq's enums
-_EVENTS, _POLLIN, _POLLOUT, _NOBLOCK = int(zmq.EVENTS), int(zmq.POLLIN), int(zmq.POLLOUT), int(zmq.NOBLOCK)
+_EVENTS, _POLLOUT, _NOBLOCK = int(zmq.EVENTS), int(zmq.POLLOUT), int(zmq.NOBLOCK)
 
 
 class SingleClient(RequestPaths, SocketOwner):
@@ -379,18 +387,18 @@ class SingleClient(RequestPaths, SocketOwner):
         if not sock.getsockopt(_EVENTS) & _POLLOUT and not sock.poll(self.timeout * 1000, zmq.POLLOUT):
             raise RequestTimeout(self._handshake.problem(self.endpoint, self._keys is not None) or self._unsendable(op))
         try:
-            sock.send_multipart([b"", *protocol.encode_request(op, id=request_id, **fields)], flags=_NOBLOCK)
+            send_parts(sock, [b"", *protocol.encode_request(op, id=request_id, **fields)], _NOBLOCK)
         except zmq.Again:  # the peer went away between the poll and the send
             raise RequestTimeout(self._unsendable(op)) from None
         while True:
             remaining = deadline - time.monotonic()
-            if remaining <= 0 or not (sock.getsockopt(_EVENTS) & _POLLIN or sock.poll(remaining * 1000, zmq.POLLIN)):
+            frames = recv_parts(sock, remaining) if remaining > 0 else None
+            if frames is None:
                 raise RequestTimeout(
                     self._handshake.problem(self.endpoint, self._keys is not None)
                     or f"no reply to {op!r} from {self.endpoint} within {self.timeout + extra_wait:.3g} s "
                     "(is the service running?)"
                 )
-            frames = sock.recv_multipart(copy=False)
             if frames and len(frames[0]) == 0:
                 frames = frames[1:]
             header, images = protocol.decode_reply([f.buffer for f in frames])

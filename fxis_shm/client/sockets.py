@@ -1,11 +1,13 @@
 """What every socket of the client side shares: the frame encoding checked before a request
-leaves, a connected socket that never blocks on close, closing as a context manager, and a
-request's own timeout as the wire carries it."""
+leaves, a connected socket that never blocks on close, closing as a context manager, a
+request's own timeout as the wire carries it, and a message sent and received by pyzmq's
+direct calls."""
 
 from __future__ import annotations
 
+import math
 import warnings
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 
 import zmq
 
@@ -21,6 +23,34 @@ def checked_encoding(encoding: str, quality: int | None) -> tuple[str, int | Non
     except ProtocolError as exc:
         raise InvalidArgument(exc.message) from None
     return encoding, quality
+
+
+# plain ints: their arithmetic is far cheaper than that of pyzmq's enums
+_SNDMORE, _RCVTIMEO = int(zmq.SNDMORE), int(zmq.RCVTIMEO)
+
+
+def send_parts(sock: zmq.Socket, parts: Sequence, flags: int = 0) -> None:
+    """``parts`` as one message. (pyzmq's send_multipart checks each part's type in Python
+    first; cold, as a request is when it comes long after the last, that costs more than the
+    sends themselves.)"""
+    last = len(parts) - 1
+    for k in range(last):
+        sock.send(parts[k], flags | _SNDMORE)
+    sock.send(parts[last], flags)
+
+
+def recv_parts(sock: zmq.Socket, timeout_s: float) -> list[zmq.Frame] | None:
+    """The next message's parts (uncopied), waiting at most ``timeout_s``; None if none came.
+    (A receive with a timeout of its own: pyzmq's poll makes a Poller in Python every call,
+    a quarter of the cold cost of a small round trip's client side.)"""
+    sock.setsockopt(_RCVTIMEO, max(1, math.ceil(timeout_s * 1000)))
+    try:
+        parts = [sock.recv(copy=False)]
+    except zmq.Again:
+        return None
+    while parts[-1].more:  # ZeroMQ delivers a message whole: the rest is there
+        parts.append(sock.recv(copy=False))
+    return parts
 
 
 def connected_socket(
