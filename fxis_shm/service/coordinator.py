@@ -272,8 +272,9 @@ class Coordinator:
                 return
             local = self.boot_id is not None and request.get("local") == self.boot_id
             answer = self.fast.answer(request, t_received, client) if self.fast is not None and not local else None
-            if answer is not None:
-                self._reply(respond, request, *answer)
+            if answer is not None:  # (already encoded, "sent" stamped)
+                self.requests_served += 1
+                respond(answer)
                 return
             self._carry_out(self.engine.submit(request, t_received, respond, client=client, local=local))
         except ProtocolError as exc:  # a request that cannot be answered as asked

@@ -2,7 +2,8 @@
 or the latest frames, raw. The C reader of the rings (fxis_shm.shm.fastpick) looks and decides
 as the engine would; each chosen frame is copied once, straight into the message that carries
 it, under the seqlock (as the engine's replies are, fxis_shm.shm.copyout). Anything else, and
-whatever the C reader does not settle, is the engine's (``answer`` returns None).
+whatever the C reader does not settle, is the engine's (``answer`` returns None). The reply's
+header is written from templates (fxis_shm.wire.replytext), the bytes the codec would write.
 
 A request is answered here only where the engine would admit it: its limits on the requests
 waiting in it (in all, and per client) hold as they did.
@@ -19,6 +20,7 @@ from fxis_shm.shm import fastpick
 from fxis_shm.shm.cameras import CameraHandle
 from fxis_shm.shm.copyout import CopyOut, copied_by
 from fxis_shm.shm.ring import Overwritten
+from fxis_shm.wire import replytext
 from fxis_shm.wire.encoding import RAW
 
 _OPS = {"image": fastpick.IMAGE, "tuple": fastpick.TUPLE, "latest": fastpick.LATEST}
@@ -41,8 +43,9 @@ class FastAnswers:
         self.picker: fastpick.Picker | None = None
         self.answered = 0  # requests answered here
 
-    def answer(self, request: dict, t_received: int, client: Any = None) -> tuple[dict, list] | None:
-        """The reply's body and images, or None: the engine answers (or refuses: BUSY)."""
+    def answer(self, request: dict, t_received: int, client: Any = None) -> list | None:
+        """The reply (its header, written from templates, and its images), or None: the engine
+        answers (or refuses: BUSY)."""
         op = _OPS.get(request["op"])
         if op is None or request.get("encoding") not in (None, RAW) or self.engine.busy(client):
             return None
@@ -57,8 +60,8 @@ class FastAnswers:
         if got is None:
             return None
         _, t_decided, _, skew_ns, picked, indices, names = got
-        frames, images = [], []
-        for k, name, (slot, seq, frame_id, t_capture, t_stored, t_available, generation, _, _) in zip(
+        frames, images, waited = [], [], []
+        for k, name, (slot, seq, frame_id, t_capture, t_stored, t_available, generation, ready_at, _) in zip(
             indices, names, picked
         ):
             reader = picker.readers[k]
@@ -70,22 +73,22 @@ class FastAnswers:
                 self.cameras[name].torn_reads += 1
                 return None
             header = self.copyout.header(name)
-            frames.append(header.frame(frame_id, t_capture, t_stored, generation, t_available, buffer=len(frames)))
-        body: dict[str, Any] = {"op": request["op"]}
-        if op != fastpick.LATEST:
-            body["t_request"] = at
-        if op == fastpick.TUPLE:
-            body.update(skew_ns=skew_ns, sync=request.get("sync") or self.engine.settings["sync"])
-        body["frames"] = frames
-        body["timing"] = {
-            "searched": t_decided,
-            "received": t_received,
-            "waited": t_received,
-            "copied": timebase.now(),
-            "cameras": {name: {"waited": frame[7]} for name, frame in zip(names, picked)},
-        }
+            frames.append(header.frame_json(frame_id, t_capture, t_stored, generation, t_available, len(frames)))
+            waited.append((header.name_json, ready_at))
+        t_copied = timebase.now()
+        tuple_ = op == fastpick.TUPLE
+        text = replytext.frames_reply(
+            request["id"],
+            request["op"],
+            frames,
+            (t_decided, t_received, t_received, t_copied, timebase.now()),
+            waited,
+            None if op == fastpick.LATEST else at,
+            skew_ns if tuple_ else None,
+            (request.get("sync") or self.engine.settings["sync"]) if tuple_ else None,
+        )
         self.answered += 1
-        return body, images
+        return [text, *images]
 
     def _picker(self) -> fastpick.Picker | None:
         """The C reader of the rings open now (made again once a ring was replaced)."""

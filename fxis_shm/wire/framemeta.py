@@ -4,19 +4,43 @@ fast path). Pure, like the rest of the codec (fxis_shm.wire.protocol names these
 
 from __future__ import annotations
 
+import json
+
 import numpy as np
 
 from fxis_shm.wire import encoding as codec
 
 
+def _literal(value) -> str:
+    """``value`` as JSON text, to stand as it is in a %-template."""
+    return json.dumps(value).replace("%", "%%")
+
+
 class CameraFrames:
     """What every frame of one camera says alike in a reply's header (its name, shape and
-    dtype), checked once per camera rather than once per frame."""
+    dtype), checked once per camera rather than once per frame, and written as JSON once."""
 
-    __slots__ = ("camera", "shape", "dtype")
+    __slots__ = ("camera", "shape", "dtype", "name_json", "_frame_json")
 
     def __init__(self, camera: str, shape, dtype: str):
         self.camera, self.shape, self.dtype = camera, tuple(int(n) for n in shape), str(dtype)
+        self.name_json = json.dumps(camera)  # the name as JSON text
+        self._frame_json = (
+            '{"camera": ' + _literal(camera) + ', "frame_id": %d, "t_capture": %d, "t_available": %d, "t_stored": %d, '
+            '"generation": %d, "shape": '
+            + _literal(list(self.shape))
+            + ', "dtype": '
+            + _literal(self.dtype)
+            + ', "buffer": %d}'
+        )
+
+    def frame_json(
+        self, frame_id: int, t_capture: int, t_stored: int, generation: int, t_available, buffer: int
+    ) -> str:
+        """``frame(..., buffer=buffer)`` as the JSON text the codec writes of it, without making
+        the dict (see fxis_shm.wire.replytext)."""
+        t_available = t_capture if t_available is None else t_available
+        return self._frame_json % (frame_id, t_capture, t_available, t_stored, generation, buffer)
 
     def frame(self, frame_id: int, t_capture: int, t_stored: int, generation: int, t_available, **more) -> dict:
         """One frame's metadata (ints as they are), then ``more`` (its buffer, or where it is)."""
