@@ -54,7 +54,7 @@ DEFAULT_ENDPOINT = defaults.ENDPOINT
 LOCAL_MODES = ("auto", "off", "require")
 _PERIODS_VALID_S = 10.0  # the cameras' periods learnt from the status, for sequences that wait
 # plain ints: their arithmetic is far cheaper than that of pyzmq's enums
-_EVENTS, _POLLOUT, _NOBLOCK = int(zmq.EVENTS), int(zmq.POLLOUT), int(zmq.NOBLOCK)
+_EVENTS, _POLLOUT = int(zmq.EVENTS), int(zmq.POLLOUT)
 
 
 class SingleClient(RequestPaths, SocketOwner):
@@ -387,7 +387,7 @@ class SingleClient(RequestPaths, SocketOwner):
         if not sock.getsockopt(_EVENTS) & _POLLOUT and not sock.poll(self.timeout * 1000, zmq.POLLOUT):
             raise RequestTimeout(self._handshake.problem(self.endpoint, self._keys is not None) or self._unsendable(op))
         try:
-            send_parts(sock, [b"", *protocol.encode_request(op, id=request_id, **fields)], _NOBLOCK)
+            send_parts(sock, [b"", *protocol.encode_request(op, id=request_id, **fields)])
         except zmq.Again:  # the peer went away between the poll and the send
             raise RequestTimeout(self._unsendable(op)) from None
         while True:

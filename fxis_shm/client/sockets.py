@@ -26,17 +26,18 @@ def checked_encoding(encoding: str, quality: int | None) -> tuple[str, int | Non
 
 
 # plain ints: their arithmetic is far cheaper than that of pyzmq's enums
-_SNDMORE, _RCVTIMEO = int(zmq.SNDMORE), int(zmq.RCVTIMEO)
+_MORE, _LAST, _RCVTIMEO = int(zmq.NOBLOCK | zmq.SNDMORE), int(zmq.NOBLOCK), int(zmq.RCVTIMEO)
 
 
-def send_parts(sock: zmq.Socket, parts: Sequence, flags: int = 0) -> None:
-    """``parts`` as one message. (pyzmq's send_multipart checks each part's type in Python
+def send_parts(sock: zmq.Socket, parts: Sequence) -> None:
+    """``parts`` as one message, without blocking (zmq.Again if it cannot go now): messages
+    (zmq.Frame) and image buffers handed to ZeroMQ without a copy, small byte strings copied
+    (cheaper than tracking them). (pyzmq's send_multipart checks each part's type in Python
     first; cold, as a request is when it comes long after the last, that costs more than the
     sends themselves.)"""
     last = len(parts) - 1
-    for k in range(last):
-        sock.send(parts[k], flags | _SNDMORE)
-    sock.send(parts[last], flags)
+    for i, part in enumerate(parts):
+        sock.send(part, _MORE if i < last else _LAST, copy=isinstance(part, (bytes, zmq.Frame)))
 
 
 def recv_parts(sock: zmq.Socket, timeout_s: float) -> list[zmq.Frame] | None:

@@ -20,6 +20,7 @@ from collections.abc import Callable
 import zmq
 from zmq.auth.thread import ThreadAuthenticator
 
+from fxis_shm.client.sockets import send_parts
 from fxis_shm.core import timebase
 from fxis_shm.core.engine import FRAME_OPS, Action, Failure, Reply, RequestEngine, Trigger
 from fxis_shm.errors import Code, ConfigError, ProtocolError
@@ -39,9 +40,7 @@ log = logging.getLogger("coordinator")
 
 _PUB_QUEUE = 16  # messages queued per subscriber; beyond, that subscriber loses messages
 MAX_MESSAGE_BYTES = 1 << 20  # a peer sending more is disconnected by ZeroMQ
-# The flags of a part sent without blocking, more to come or the last; plain ints, whose
-# arithmetic is far cheaper than that of pyzmq's enums.
-_MORE, _LAST = int(zmq.NOBLOCK | zmq.SNDMORE), int(zmq.NOBLOCK)
+# plain ints: their arithmetic is far cheaper than that of pyzmq's enums
 _EVENTS, _POLLIN = int(zmq.EVENTS), int(zmq.POLLIN)
 # glibc's mallopt parameters, and what the coordinator sets them to (see keep_message_memory)
 _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
@@ -85,14 +84,6 @@ def split_envelope(frames: list) -> tuple[list, list]:
         if len(frames[i]) == 0:
             return frames[: i + 1], frames[i + 1 :]
     return frames[:1], frames[1:]
-
-
-def send_parts(sock: zmq.Socket, parts: list) -> None:
-    """One multipart message, without blocking: messages (zmq.Frame) and image buffers handed
-    to ZeroMQ without a copy, small byte strings copied (cheaper than tracking them)."""
-    last = len(parts) - 1
-    for i, part in enumerate(parts):
-        sock.send(part, _MORE if i < last else _LAST, copy=isinstance(part, (bytes, zmq.Frame)))
 
 
 def _readable_field(frame: bytes, name: str, kinds: tuple):

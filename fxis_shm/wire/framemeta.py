@@ -26,7 +26,9 @@ class CameraFrames:
         self.camera, self.shape, self.dtype = camera, tuple(int(n) for n in shape), str(dtype)
         self.name_json = json.dumps(camera)  # the name as JSON text
         self._frame_json = (
-            '{"camera": ' + _literal(camera) + ', "frame_id": %d, "t_capture": %d, "t_available": %d, "t_stored": %d, '
+            '{"camera": '
+            + self.name_json.replace("%", "%%")
+            + ', "frame_id": %d, "t_capture": %d, "t_available": %d, "t_stored": %d, '
             '"generation": %d, "shape": '
             + _literal(list(self.shape))
             + ', "dtype": '
