@@ -11,13 +11,14 @@ from __future__ import annotations
 
 import os
 
+from fxis_shm.cli import exitcodes
 from fxis_shm.client.client import Client
 from fxis_shm.errors import ConfigError
 from fxis_shm.service.config import load_toml
 from fxis_shm.wire import defaults
 from fxis_shm.wire.security import ClientKeys
 
-EXIT_USAGE = 2
+EXIT_USAGE = exitcodes.USAGE
 ENV_SERVER_KEY, ENV_CLIENT_KEY = "FXIS_SERVER_KEY", "FXIS_CLIENT_KEY"
 
 
