@@ -47,6 +47,8 @@ def run_command(args) -> int:
                 "ros2_namespace": args.ros2_namespace,
                 "ros2_tuples": args.ros2_tuples,
                 "ros2_snapshots": args.ros2_snapshots,
+                "ros2_via": args.ros2_via,
+                "ros2_python": args.ros2_python,
                 "port_base": args.port_base,
                 "history": args.history,
             },
@@ -189,5 +191,16 @@ def add_parser(sub) -> None:
         metavar="DIR",
         help="answer std_msgs/Header requests on NS/snapshot (stamp t, frame_id a bag name) with a snapshot of "
         "[t - 2 s, t + 1 s] into DIR/NAME (docs/ros2.md)",
+    )
+    run.add_argument(
+        "--ros2-via",
+        choices=("auto", "rclpy", "cyclone"),
+        help="how the bridge publishes: rclpy (a ROS 2 node on the host's RMW: Fast DDS's shared memory for "
+        "nodes on this host), cyclone (plain Cyclone DDS, no ROS install), auto (default): rclpy where it imports",
+    )
+    run.add_argument(
+        "--ros2-python",
+        metavar="PYTHON",
+        help="run the bridge in this interpreter, one that imports rclpy and fxis_shm (a ROS 2 venv; docs/ros2.md)",
     )
     run.set_defaults(func=run_command)

@@ -27,9 +27,9 @@ from collections.abc import Callable
 from fxis_shm.client.client import Client
 from fxis_shm.formats import rosnames
 from fxis_shm.formats.calibration import read_calibration
-from fxis_shm.ros2.dds import RosParticipant
 from fxis_shm.ros2.follow import CameraFollower
 from fxis_shm.ros2.frames_at import FramesAt
+from fxis_shm.ros2.participants import open_participant
 from fxis_shm.ros2.rostime import RosTime
 from fxis_shm.ros2.snapshots import SnapshotRequests
 from fxis_shm.ros2.topics import CameraTopics
@@ -59,7 +59,8 @@ class Bridge:
             name: read_calibration(info["calibration"]) if info.get("calibration") else None
             for name, info in spec.cameras.items()
         }
-        self.participant = RosParticipant(spec.domain)  # Cyclone's own settings: $CYCLONEDDS_URI
+        self.participant = open_participant(spec.via, spec.domain, spec.namespace, spec.service)
+        log.info("ROS 2 through %s", type(self.participant).__name__)
         ns = spec.namespace
         cameras = {
             name: CameraTopics(
@@ -135,6 +136,8 @@ class Bridge:
             "tuples": self.tuples.counts.as_dict() if self.tuples else None,
             "frames_at": self.frames_at.status(),
             "snapshots": self.snapshots.counts.as_dict() if self.snapshots else None,
+            "via": self.participant.VIA,
+            "topics": self.participant.matches.status(),
         }
 
     def report(self) -> None:

@@ -56,10 +56,26 @@ from cyclonedds.util import duration
 
 from fxis_shm.formats import cdr
 from fxis_shm.formats.rosnames import dds_topic_name, dds_type_name
+from fxis_shm.ros2.endpoints import CAMERA_PUBLISHER, DEFAULT_SUBSCRIBER, QosProfile, ReceivedHeader
+from fxis_shm.ros2.matching import MatchTable, TopicMatches
 
 # Cyclone's dds_qos_policy_id_t, as *_incompatible_qos statuses report the policy that failed.
 RELIABILITY_QOS_POLICY_ID = 11
 DATA_REPRESENTATION_QOS_POLICY_ID = 25
+QOS_POLICY_NAMES = {
+    2: "DURABILITY",
+    3: "PRESENTATION",
+    4: "DEADLINE",
+    5: "LATENCY_BUDGET",
+    6: "OWNERSHIP",
+    8: "LIVELINESS",
+    10: "PARTITION",
+    RELIABILITY_QOS_POLICY_ID: "RELIABILITY",
+    12: "DESTINATION_ORDER",
+    13: "HISTORY",
+    24: "TYPE_CONSISTENCY",
+    DATA_REPRESENTATION_QOS_POLICY_ID: "DATA_REPRESENTATION",
+}
 
 # RIHS01 type hashes (REP-2011), the same in Iron, Jazzy and Kilted for these types; Humble has
 # none and ignores USER_DATA. tests/unit/test_cdr.py checks them against rosbags' hash_rihs01.
@@ -167,43 +183,25 @@ def _check_ros_compatible(idl: type[IdlStruct], ros_type: str) -> None:
         raise TypeError(f"{idl} has key fields; ROS topics are key-less")
 
 
-@dataclass(frozen=True)
-class QosProfile:
-    """The part of an rmw QoS profile that decides matching, and a writer's blocking bound."""
-
-    reliable: bool = True
-    depth: int = 10
-    transient_local: bool = False
-    # RELIABILITY.max_blocking_time (not part of matching); None: infinite, as rmw has it.
-    max_blocking_ms: float | None = None
-
-    def to_qos(self, user_data: bytes | None = None) -> Qos:
-        """The Cyclone QoS rmw_cyclonedds' ``create_readwrite_qos`` makes of this profile."""
-        if not self.reliable:
-            reliability: Any = Policy.Reliability.BestEffort
-        elif self.max_blocking_ms is None:
-            reliability = Policy.Reliability.Reliable(max_blocking_time=duration(infinite=True))
-        else:
-            reliability = Policy.Reliability.Reliable(max_blocking_time=duration(milliseconds=self.max_blocking_ms))
-        policies: list[Any] = [
-            reliability,
-            Policy.History.KeepLast(self.depth),
-            Policy.Durability.TransientLocal if self.transient_local else Policy.Durability.Volatile,
-            Policy.WriterDataLifecycle(autodispose=False),
-            Policy.Liveliness.Automatic(lease_duration=duration(infinite=True)),
-            Policy.DataRepresentation(use_cdrv0_representation=True),  # XCDR1 only, as rmw
-        ]
-        if user_data is not None:
-            policies.append(Policy.Userdata(user_data))
-        return Qos(*policies)
-
-
-# rclcpp's SensorDataQoS: best effort, keep last 5, volatile.
-SENSOR_DATA = QosProfile(reliable=False, depth=5)
-# rclcpp's default, QoS(10): reliable, keep last 10, volatile.
-DEFAULT_SUBSCRIBER = QosProfile(reliable=True, depth=10)
-# A camera's publisher: reliable, so that both kinds of subscriber above match; a short history.
-CAMERA_PUBLISHER = QosProfile(reliable=True, depth=2, max_blocking_ms=100)
+def cyclone_qos(profile: QosProfile, user_data: bytes | None = None) -> Qos:
+    """The Cyclone QoS rmw_cyclonedds' ``create_readwrite_qos`` makes of ``profile``."""
+    if not profile.reliable:
+        reliability: Any = Policy.Reliability.BestEffort
+    elif profile.max_blocking_ms is None:
+        reliability = Policy.Reliability.Reliable(max_blocking_time=duration(infinite=True))
+    else:
+        reliability = Policy.Reliability.Reliable(max_blocking_time=duration(milliseconds=profile.max_blocking_ms))
+    policies: list[Any] = [
+        reliability,
+        Policy.History.KeepLast(profile.depth),
+        Policy.Durability.TransientLocal if profile.transient_local else Policy.Durability.Volatile,
+        Policy.WriterDataLifecycle(autodispose=False),
+        Policy.Liveliness.Automatic(lease_duration=duration(infinite=True)),
+        Policy.DataRepresentation(use_cdrv0_representation=True),  # XCDR1 only, as rmw
+    ]
+    if user_data is not None:
+        policies.append(Policy.Userdata(user_data))
+    return Qos(*policies)
 
 
 def _delete_now(entity: Entity) -> None:
@@ -227,11 +225,14 @@ class RosParticipant:
     deletes the participant, its readers and writers, and that domain.
     """
 
+    VIA = "cyclone"
+
     def __init__(self, domain_id: int, config: str | None = None, enclave: str = "/") -> None:
         self.domain_id = domain_id
         self.domain: Domain | None = Domain(domain_id, config) if config is not None else None
         self.participant = DomainParticipant(domain_id, qos=Qos(Policy.Userdata(f"enclave={enclave};".encode())))
         self._topics: dict[tuple[str, str], Topic] = {}
+        self.matches = MatchTable()  # per topic: who matched, who could not and why
         self._closed = False
 
     def topic(self, ros_topic: str, ros_type: str) -> Topic:
@@ -281,13 +282,23 @@ class RawWriter:
 
     def __init__(self, node: RosParticipant, ros_topic: str, ros_type: str, profile: QosProfile) -> None:
         self.ros_topic, self.ros_type = ros_topic, ros_type
-        qos = profile.to_qos(_typehash_user_data(ros_type))
+        qos = cyclone_qos(profile, _typehash_user_data(ros_type))
         self._writer = DataWriter(node.participant, node.topic(ros_topic, ros_type), qos=qos)
         self._ref: int = self._writer._ref
         # A change of the matched readers wakes wait_for_readers (reading the status re-arms it).
         self._writer.set_status_mask(DDSStatus.PublicationMatched)
-        self._matches = WaitSet(node.participant)
-        self._matches.attach(self._writer)
+        self._match_changes = WaitSet(node.participant)
+        self._match_changes.attach(self._writer)
+        matches = node.matches.of(ros_topic)
+        matches.counter = self.matched_count
+        matches.poll = self._poll_refusals
+
+    def _poll_refusals(self, matches: TopicMatches) -> None:
+        total, policy_id = self.incompatible_qos()
+        if total:
+            policy = QOS_POLICY_NAMES.get(policy_id, f"policy {policy_id}")
+            others = sum(count for name, count in matches.qos_refusals.items() if name != policy)
+            matches.qos_refusals[policy] = total - others
 
     def write(self, payload: bytes | bytearray | memoryview, timestamp_ns: int | None = None) -> None:
         """Publish one serialized message (encapsulation header included); DDSException if
@@ -322,21 +333,13 @@ class RawWriter:
             left = deadline - time.monotonic()
             if left <= 0:
                 return False
-            self._matches.wait(duration(seconds=left))
+            self._match_changes.wait(duration(seconds=left))
         return True
 
     def wait_for_acks(self, timeout: float = 5.0) -> bool:
         """Block until the reliable readers acknowledged everything written (at most ``timeout``
         s); True at once for best effort."""
         return bool(self._writer.wait_for_acks(duration(seconds=timeout)))
-
-
-@dataclass(frozen=True)
-class ReceivedHeader:
-    """A request: the Header, and the DDS source timestamp its publisher gave it (ns)."""
-
-    header: cdr.Header
-    source_timestamp_ns: int
 
 
 class RawReader:
@@ -347,10 +350,11 @@ class RawReader:
 
     def __init__(self, node: RosParticipant, ros_topic: str, ros_type: str, profile: QosProfile) -> None:
         self.ros_topic = ros_topic
-        qos = profile.to_qos(_typehash_user_data(ros_type))
+        qos = cyclone_qos(profile, _typehash_user_data(ros_type))
         self._reader = DataReader(node.participant, node.topic(ros_topic, ros_type), qos=qos)
         self._waitset = WaitSet(node.participant)
         self._waitset.attach(ReadCondition(self._reader, self._ANY))
+        node.matches.of(ros_topic).counter = self.matched_count
 
     def take_raw(self, max_samples: int = 64) -> list[tuple[bytes, int]]:
         """Without blocking: what has arrived, as (CDR bytes, source timestamp ns)."""

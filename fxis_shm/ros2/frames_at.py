@@ -27,7 +27,7 @@ from typing import Any
 from fxis_shm.client.single import SingleClient
 from fxis_shm.errors import FxisError
 from fxis_shm.formats import cdr, rosnames
-from fxis_shm.ros2.dds import RawWriter, RosParticipant
+from fxis_shm.ros2.endpoints import Participant, Writer
 from fxis_shm.ros2.follow import Counts
 from fxis_shm.ros2.rostime import RosTime
 from fxis_shm.ros2.topics import CameraTopics
@@ -66,7 +66,7 @@ class HeaderRequests:
 class FramesAt(HeaderRequests):
     def __init__(
         self,
-        participant: RosParticipant,
+        participant: Participant,
         namespace: str,
         make_topics: Callable[[str], dict[str, CameraTopics]],
         make_client: Callable[[], SingleClient],
@@ -159,10 +159,10 @@ class ReplyTopics:
     """The writers of one reply name: an image and camera_info per camera, and the error."""
 
     cameras: dict[str, CameraTopics]
-    error: RawWriter
+    error: Writer
     waited: set[int] = field(default_factory=set)  # ids of the writers already waited for
 
-    def wait_for_readers(self, writers: list[RawWriter], stop: threading.Event) -> None:
+    def wait_for_readers(self, writers: list[Writer], stop: threading.Event) -> None:
         """Once per writer, before its first message: a volatile reader receives only what is
         written after it matched our new writer, which takes a discovery round."""
         fresh = [w for w in writers if id(w) not in self.waited]

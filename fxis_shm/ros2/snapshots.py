@@ -19,7 +19,7 @@ from collections.abc import Callable
 
 from fxis_shm.errors import FxisError
 from fxis_shm.formats import cdr, rosnames
-from fxis_shm.ros2.dds import RosParticipant
+from fxis_shm.ros2.endpoints import Participant
 from fxis_shm.ros2.follow import Counts
 from fxis_shm.ros2.frames_at import STRING, HeaderRequests
 
@@ -32,7 +32,7 @@ MAX_AT_ONCE = 4
 class SnapshotRequests(HeaderRequests):
     def __init__(
         self,
-        participant: RosParticipant,
+        participant: Participant,
         namespace: str,
         folder: str,
         make_client: Callable,

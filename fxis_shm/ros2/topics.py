@@ -22,7 +22,7 @@ from fxis_shm.errors import FxisError
 from fxis_shm.formats import cdr, rosnames
 from fxis_shm.formats.calibration import Calibration
 from fxis_shm.formats.rosmsgs import COMPRESSED, IMAGE, ros_encoding
-from fxis_shm.ros2.dds import RosParticipant
+from fxis_shm.ros2.endpoints import Participant
 from fxis_shm.wire import encoding as codec
 from fxis_shm.wire.encodecache import EncodeCache
 
@@ -41,7 +41,7 @@ class Messages:
 class CameraTopics:
     def __init__(
         self,
-        participant: RosParticipant,
+        participant: Participant,
         base: str,
         frame_id: str,
         calibration: Calibration | None,

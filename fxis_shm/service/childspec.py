@@ -167,12 +167,17 @@ class Ros2Spec(ViewerSpec):
 
     ROLE = "ros2"
     MODULE = "fxis_shm.workers.ros2_bridge"
-    VERSION = 1
+    VERSION = 2
 
     domain: int
     namespace: str  # "" or "/a/b"
     tuples_hz: float | None = None
     snapshots: str | None = None  # where NS/snapshot requests write their bags (None: no such topic)
+    via: str = "auto"  # "rclpy", "cyclone", or "auto": rclpy where it imports (fxis_shm.ros2.participants)
+    python: str | None = None  # the interpreter the bridge runs in (a ROS 2 one), None: the supervisor's
+
+    def command(self, ready_fd: int) -> list[str]:
+        return [self.python or sys.executable, *super().command(ready_fd)[1:]]
 
 
 ROLES: dict[str, type[ChildSpec]] = {

@@ -15,7 +15,8 @@ from typing import Any
 from fxis_shm.errors import ConfigError
 from fxis_shm.formats import rosnames
 
-KEYS = ("ros2", "ros2_domain", "ros2_namespace", "ros2_tuples", "ros2_snapshots")
+KEYS = ("ros2", "ros2_domain", "ros2_namespace", "ros2_tuples", "ros2_snapshots", "ros2_via", "ros2_python")
+VIAS = ("auto", "rclpy", "cyclone")  # how the bridge publishes (docs/ros2.md, "Two ways onto the graph")
 DOMAIN_ENV = "ROS_DOMAIN_ID"  # what every ROS 2 node reads
 MAX_DOMAIN = 232  # the highest id DDS's port mapping allows (ROS's own advice: 0-101)
 MAX_TUPLES_HZ = 120.0
@@ -27,6 +28,8 @@ class Ros2Settings:
     namespace: str = ""  # "" or "/a/b"
     tuples_hz: float | None = None  # joint tuples on NS/tuple/NAME/..., None: no tuple topics
     snapshots: str | None = None  # the folder NS/snapshot requests write their bags into, None: no topic
+    via: str = "auto"  # rclpy (a real ROS 2 node), cyclone (no ROS install), auto: rclpy where it imports
+    python: str | None = None  # the bridge's interpreter (one that imports rclpy), None: fxis's own
 
 
 def ros2_settings(values: Mapping[str, Any], cameras: Iterable[str], environ=os.environ) -> Ros2Settings | None:
@@ -39,8 +42,13 @@ def ros2_settings(values: Mapping[str, Any], cameras: Iterable[str], environ=os.
         if given:
             raise ConfigError(f"{', '.join(given)} set without ros2: turn the bridge on (--ros2, ros2 = true)")
         return None
-    _check_cyclonedds()
-    settings = Ros2Settings(_domain(values.get("ros2_domain"), environ), _namespace(values.get("ros2_namespace")))
+    via = _via(values.get("ros2_via"))
+    python = _python(values.get("ros2_python"))
+    if via == "cyclone" or (via == "auto" and python is None):
+        _check_cyclonedds()
+    settings = Ros2Settings(
+        _domain(values.get("ros2_domain"), environ), _namespace(values.get("ros2_namespace")), via=via, python=python
+    )
     tuples = values.get("ros2_tuples")
     if tuples is not None:
         settings = replace(settings, tuples_hz=_rate(tuples))
@@ -88,6 +96,25 @@ def _folder(value: Any) -> str:
     if not os.path.isdir(folder) or not os.access(folder, os.W_OK):
         raise ConfigError(f"ros2_snapshots {value!r}: not a folder this user can write snapshots into")
     return folder
+
+
+def _via(value: Any) -> str:
+    if value is None:
+        return "auto"
+    if value not in VIAS:
+        raise ConfigError(f"ros2_via must be one of {', '.join(VIAS)}, got {value!r}")
+    return str(value)
+
+
+def _python(value: Any) -> str | None:
+    """An interpreter for the bridge: a file this user can run (that it imports rclpy and fxis_shm
+    is checked by the bridge itself at start, which reports what failed)."""
+    if value is None or value == "":
+        return None
+    path = os.path.abspath(os.path.expanduser(str(value)))
+    if not os.path.isfile(path) or not os.access(path, os.X_OK):
+        raise ConfigError(f"ros2_python {value!r}: not a Python interpreter this user can run")
+    return path
 
 
 def _check_cyclonedds() -> None:

@@ -191,6 +191,8 @@ def viewer_children(config: ServiceConfig, common: dict, access: dict[str, Viewe
             namespace=ros2.namespace,
             tuples_hz=ros2.tuples_hz,
             snapshots=ros2.snapshots,
+            via=ros2.via,
+            python=ros2.python,
         )
         children.append(Child(spec, "ros2", key="ros2"))
     return children

@@ -1,0 +1,70 @@
+"""What the bridge's topic modules ask of a participant, whichever way it joins the graph
+(fxis_shm.ros2.participants: a Cyclone participant or an rclpy node): the QoS profiles of its
+endpoints and the requests it reads. Imports no DDS library.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Protocol
+
+from fxis_shm.formats import cdr
+from fxis_shm.ros2.matching import MatchTable
+
+
+@dataclass(frozen=True)
+class QosProfile:
+    """The part of an rmw QoS profile that decides matching, and a writer's blocking bound."""
+
+    reliable: bool = True
+    depth: int = 10
+    transient_local: bool = False
+    # RELIABILITY.max_blocking_time (not part of matching); None: infinite, as rmw has it.
+    max_blocking_ms: float | None = None
+
+
+# rclcpp's SensorDataQoS: best effort, keep last 5, volatile.
+SENSOR_DATA = QosProfile(reliable=False, depth=5)
+# rclcpp's default, QoS(10): reliable, keep last 10, volatile.
+DEFAULT_SUBSCRIBER = QosProfile(reliable=True, depth=10)
+# A camera's publisher: reliable, so that both kinds of subscriber above match; a short history.
+CAMERA_PUBLISHER = QosProfile(reliable=True, depth=2, max_blocking_ms=100)
+
+
+@dataclass(frozen=True)
+class ReceivedHeader:
+    """A request: the Header, and the DDS source timestamp its publisher gave it (ns)."""
+
+    header: cdr.Header
+    source_timestamp_ns: int
+
+
+class Writer(Protocol):
+    """Publishes pre-built CDR messages (encapsulation header included) of one topic and type."""
+
+    ros_topic: str
+
+    def write(self, payload: bytes | bytearray | memoryview, timestamp_ns: int | None = None) -> None: ...
+
+    def matched_count(self) -> int: ...
+
+
+class HeaderReader(Protocol):
+    """Reads ``std_msgs/msg/Header`` requests of one topic."""
+
+    def wait(self, timeout: float) -> list[ReceivedHeader]: ...
+
+    def matched_count(self) -> int: ...
+
+
+class Participant(Protocol):
+    """A way onto the ROS 2 graph: ``dds.RosParticipant`` or ``rclpynode.RclpyNode``."""
+
+    VIA: str
+    matches: MatchTable
+
+    def writer(self, ros_topic: str, ros_type: str, profile: QosProfile | None = None) -> Writer: ...
+
+    def header_reader(self, ros_topic: str, profile: QosProfile | None = None) -> HeaderReader: ...
+
+    def close(self) -> None: ...
