@@ -23,6 +23,32 @@ $(VENV)/.installed: pyproject.toml setup.py $(COMPILED_SOURCES) scripts/install-
 	$(BIN)/python -m pip install --quiet -e ".[test,bench,aravis,genicam,record,foxglove,ros2]"
 	touch $@
 
+# Real ROS 2 nodes for the bridge's tests (tests/rclpy_peer.py), each distribution from its wheels in
+# a venv of its own (the wheels re-run Python to set their library path): Kilted also runs the bridge
+# itself on rclpy (fxis run --ros2-python .venv-ros/bin/python), so it holds fxis-shm too (its
+# compiled parts are the checkout's own, built by setup: FXIS_PURE_PYTHON=1 skips building them again).
+ROS_KILTED := 'ros-kilted-rclpy[fastrtps]==9.1.2' ros-kilted-rmw-fastrtps-cpp==9.3.3 ros-kilted-sensor-msgs==5.5.1 \
+              ros-kilted-std-msgs==5.5.1 ros-kilted-diagnostic-msgs==5.5.1
+ROS_JAZZY  := 'ros-jazzy-rclpy[fastrtps]==7.1.6' ros-jazzy-rmw-fastrtps-cpp ros-jazzy-sensor-msgs ros-jazzy-std-msgs \
+              ros-jazzy-diagnostic-msgs
+ROS_VENVS  := .venv-ros/.installed .venv-ros-jazzy/.installed
+
+.PHONY: ros-venvs
+ros-venvs: $(ROS_VENVS)
+
+.venv-ros/.installed: $(VENV)/.installed
+	$(PYTHON) -m venv .venv-ros
+	.venv-ros/bin/python -m pip install --quiet --upgrade pip
+	.venv-ros/bin/python -m pip install --quiet $(ROS_KILTED)
+	FXIS_PURE_PYTHON=1 .venv-ros/bin/python -m pip install --quiet -e ".[ros2,record]"
+	touch $@
+
+.venv-ros-jazzy/.installed:
+	$(PYTHON) -m venv .venv-ros-jazzy
+	.venv-ros-jazzy/bin/python -m pip install --quiet --upgrade pip
+	.venv-ros-jazzy/bin/python -m pip install --quiet $(ROS_JAZZY)
+	touch $@
+
 demo: setup
 	$(BIN)/python bench/latency.py
 
@@ -38,7 +64,7 @@ PURE_TESTS := tests/unit tests/integration/test_ring.py tests/integration/test_l
 TEST_WORKERS ?= 2
 XDIST := $(if $(filter 0,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist loadscope)
 
-test: setup lint
+test: setup lint $(ROS_VENVS)
 	$(BIN)/python -c "import fxis_shm, os, sys; sys.exit(not (fxis_shm.compiled or os.environ.get('FXIS_PURE_PYTHON') == '1'))"
 	$(BIN)/python -m pytest $(XDIST)
 	FXIS_PURE_PYTHON=1 $(BIN)/python -m pytest -q $(XDIST) $(PURE_TESTS)
@@ -68,4 +94,4 @@ mutation: $(VENV)/.mutation-installed
 	@echo "make mutation: $$(wc -l < mutants/survivors.txt) surviving mutants, each explained in docs/mutation.md"
 
 clean:
-	rm -rf $(VENV) build *.egg-info bench/results
+	rm -rf $(VENV) .venv-ros .venv-ros-jazzy build *.egg-info bench/results

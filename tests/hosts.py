@@ -330,6 +330,39 @@ class EmulatedHost:
         )
 
 
+class LoopbackNamespace:
+    """This host as seen by programs that multicast in their default configuration (Fast DDS's
+    discovery does): a network namespace holding only ``lo``, with multicast on and routed, so
+    their traffic can reach nothing but each other. Same clock and /dev/shm as ours, so programs
+    in it are on one host (Fast DDS's shared memory transport included). A context manager;
+    ``wrapper`` runs a program in it. Named like an emulated host, so leftovers are cleaned alike."""
+
+    def __init__(self) -> None:
+        check_support()
+        remove_leftovers()
+        self.netns = f"{PREFIX}{os.getpid()}h{next(_numbers)}"
+        try:
+            _run("ip", "netns", "add", self.netns)
+            inside = ("ip", "netns", "exec", self.netns)
+            _run(*inside, "ip", "link", "set", "lo", "up", "multicast", "on")
+            _run(*inside, "ip", "route", "add", "224.0.0.0/4", "dev", "lo")
+        except BaseException:
+            self.close()
+            raise
+
+    def wrapper(self) -> list[str]:
+        return ["ip", "netns", "exec", self.netns]
+
+    def close(self) -> None:
+        _remove(self.netns, None)
+
+    def __enter__(self) -> LoopbackNamespace:
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
 class Lab:
     """Emulated hosts, their CurveZMQ keys, and their teardown. A context manager."""
 

@@ -27,8 +27,11 @@ class QosProfile:
 SENSOR_DATA = QosProfile(reliable=False, depth=5)
 # rclcpp's default, QoS(10): reliable, keep last 10, volatile.
 DEFAULT_SUBSCRIBER = QosProfile(reliable=True, depth=10)
-# A camera's publisher: reliable, so that both kinds of subscriber above match; a short history.
-CAMERA_PUBLISHER = QosProfile(reliable=True, depth=2, max_blocking_ms=100)
+# A camera's publisher: reliable, so that both kinds of subscriber above match. Keep last 10, as
+# QoS(10): a reliable reader whose datagrams were dropped (a full receive buffer) gets them resent
+# only while they are still in the writer's history; with 2, a repair slower than 2 frame periods
+# left gaps in a Fast DDS node's ids.
+CAMERA_PUBLISHER = QosProfile(reliable=True, depth=10, max_blocking_ms=100)
 
 
 @dataclass(frozen=True)

@@ -25,6 +25,7 @@ from typing import Any
 from fxis_shm.formats import cdr
 from fxis_shm.ros2.endpoints import CAMERA_PUBLISHER, DEFAULT_SUBSCRIBER, QosProfile, ReceivedHeader
 from fxis_shm.ros2.matching import MatchTable
+from fxis_shm.ros2.vendors import use_fastdds_transports
 
 log = logging.getLogger("ros2")
 
@@ -59,6 +60,7 @@ class RclpyNode:
         from rclpy.signals import SignalHandlerOptions
 
         self.domain_id = domain_id
+        use_fastdds_transports()
         self._context = Context()
         # the bridge's process handles its own signals (fxis_shm.service.stopsignals)
         rclpy.init(context=self._context, domain_id=domain_id, signal_handler_options=SignalHandlerOptions.NO)

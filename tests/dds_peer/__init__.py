@@ -29,6 +29,7 @@ import json
 import os
 import subprocess
 import sys
+import tempfile
 import threading
 import time
 from collections.abc import Callable, Iterable, Mapping
@@ -40,6 +41,11 @@ import numpy as np
 from .config import domain_id as domain_id, loopback_config as loopback_config
 
 ROOT = Path(__file__).resolve().parents[2]  # where `python -m tests.dds_peer` finds the package
+# Real ROS 2 nodes (tests/rclpy_peer.py): each distribution's wheels in a virtualenv of their own,
+# made by the Makefile (ROS 2's wheels set their library path by re-running Python, so they live
+# apart from the project's own venv).
+ROS_VENVS = {"kilted": ROOT / ".venv-ros", "jazzy": ROOT / ".venv-ros-jazzy"}
+KINDS = ("cyclone", *ROS_VENVS)
 READY_TIMEOUT = 30.0  # s from spawn to "ready": an interpreter, cyclonedds, a participant
 DEADLINE = 15.0  # s; generous for a loaded box, conditions hold in well under a second here
 
@@ -51,6 +57,29 @@ def stamp_rows(sample: Event) -> np.ndarray:
     """An Image sample's first 16 bytes (at most) of its first and of its last row, as a (2, 16)
     array: ``fxis_shm.formats.stamp.read_stamp(stamp_rows(sample))`` is the frame id stamped in it."""
     return np.array([np.frombuffer(bytes.fromhex(row), np.uint8) for row in sample["rows"]])
+
+
+def ros_environment(venv: Path) -> dict[str, str]:
+    """What a ROS 2 node from ``venv``'s wheels runs with: ROS 2's default RMW (Fast DDS), the
+    venv as its ament prefix, and nothing of ours (no CYCLONEDDS_URI, no library paths)."""
+    return {
+        "PATH": "/usr/bin:/bin",
+        "HOME": os.environ.get("HOME", "/root"),
+        "RMW_IMPLEMENTATION": "rmw_fastrtps_cpp",
+        "AMENT_PREFIX_PATH": str(venv),
+        "ROS_LOG_DIR": os.path.join(tempfile.gettempdir(), "fxis-ros-logs"),
+    }
+
+
+def peer_command(kind: str, wrapper: list[str]) -> tuple[list[str], dict[str, str]]:
+    """The command line and environment of a peer of ``kind``."""
+    if kind == "cyclone":
+        env = {key: value for key, value in os.environ.items() if key != "CYCLONEDDS_URI"}
+        return [*wrapper, sys.executable, "-m", "tests.dds_peer"], env
+    venv = ROS_VENVS[kind]
+    if not (venv / "bin" / "python").exists():
+        raise AssertionError(f"no ROS 2 {kind} venv at {venv}: make test makes it (make ros-venvs)")
+    return [*wrapper, str(venv / "bin" / "python"), str(ROOT / "tests" / "rclpy_peer.py")], ros_environment(venv)
 
 
 class Peer:
@@ -67,15 +96,20 @@ class Peer:
         publish_headers: Iterable[str] = (),
         with_data: bool = False,
         lifetime: float = 300.0,
+        kind: str = "cyclone",
+        wrapper: Iterable[str] = (),
     ) -> None:
+        """``kind``: "cyclone" (tests/dds_peer, our own Cyclone participant on loopback) or a ROS 2
+        distribution ("kilted", "jazzy": a real rclpy node on Fast DDS, in its default
+        configuration, so it must run in a network namespace of the test's: ``wrapper``)."""
         pairs = subscribe.items() if isinstance(subscribe, Mapping) else subscribe
-        command = [sys.executable, "-m", "tests.dds_peer", "--domain", str(domain), "--timeout", str(lifetime)]
+        command, env = peer_command(kind, list(wrapper))
+        command += ["--domain", str(domain), "--timeout", str(lifetime)]
         for topic, ros_type, *named in pairs:
             command += ["--sub", f"{topic}:{ros_type}:{named[0] if named else profile}"]
         for topic in publish_headers:
             command += ["--pub-header", topic]
         command += ["--data"] if with_data else []
-        env = {key: value for key, value in os.environ.items() if key != "CYCLONEDDS_URI"}
         self.proc = subprocess.Popen(
             command, cwd=ROOT, env=env, text=True, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE
         )
@@ -193,6 +227,18 @@ class Peer:
         answer = answers()[0]
         assert answer["event"] == "published", answer["message"]
         return answer
+
+    def nodes(self, timeout: float = DEADLINE) -> list[tuple[str, str]]:
+        """The ROS graph's nodes as this peer sees them, (name, namespace) (rclpy peers only)."""
+        self._last_id += 1
+        ident = self._last_id
+        assert self.proc.stdin is not None
+        self.proc.stdin.write(json.dumps({"cmd": "nodes", "id": ident}) + "\n")
+        self.proc.stdin.flush()
+        events = self.wait_for(lambda events: any(e.get("id") == ident for e in events), timeout, "the node list")
+        (answer,) = [e for e in events if e.get("id") == ident]
+        assert answer["event"] == "nodes", answer
+        return [(name, namespace) for name, namespace in answer["nodes"]]
 
     def _summary(self) -> str:
         last = [(e["event"], e.get("topic"), e.get("profile"), e.get("stamp")) for e in self._events[-30:]]
