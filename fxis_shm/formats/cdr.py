@@ -3,8 +3,9 @@
 Encoders and decoders of XCDR1 (classic CDR, ``fxis_shm.formats.cdrstream``) for
 ``std_msgs/msg/Header``, ``std_msgs/msg/String``, ``sensor_msgs/msg/Image``,
 ``sensor_msgs/msg/CompressedImage`` and ``sensor_msgs/msg/CameraInfo`` (with
-``sensor_msgs/msg/RegionOfInterest``). Their bytes are exactly what rmw puts on the wire and
-what rosbags' ``Typestore.serialize_cdr`` makes (tests/unit/test_cdr.py compares them, for
+``sensor_msgs/msg/RegionOfInterest``), ``diagnostic_msgs/msg/DiagnosticArray`` and
+``rmw_dds_common/msg/ParticipantEntitiesInfo``. Their bytes are exactly what rmw puts on the
+wire and what rosbags' ``Typestore.serialize_cdr`` makes (tests/unit/test_cdr.py compares them, for
 Humble and Jazzy). Every struct is ``final``: no DHEADER or EMHEADER, no padding after the
 last member.
 
@@ -117,6 +118,17 @@ class CameraInfo:
     roi: RegionOfInterest = field(default_factory=RegionOfInterest)
 
 
+@dataclass(frozen=True)
+class DiagnosticStatus:
+    """``diagnostic_msgs/msg/DiagnosticStatus``: level OK 0, WARN 1, ERROR 2, STALE 3."""
+
+    level: int
+    name: str
+    message: str = ""
+    hardware_id: str = ""
+    values: Sequence[tuple[str, str]] = ()  # diagnostic_msgs/msg/KeyValue
+
+
 # ------------------------------------------------------------------------------------ encoding
 
 
@@ -219,6 +231,60 @@ def encode_camera_info(msg: CameraInfo, *, pad: bool = False) -> bytes:
     roi = msg.roi
     writer.pack("<4I", 16, 4, roi.x_offset, roi.y_offset, roi.height, roi.width)
     writer.u8(1 if roi.do_rectify else 0)
+    return writer.finish(pad=pad)
+
+
+def encode_diagnostic_array(header: Header, statuses: Sequence[DiagnosticStatus], *, pad: bool = False) -> bytes:
+    """``diagnostic_msgs/msg/DiagnosticArray``."""
+    writer = CdrWriter()
+    _write_header(writer, header)
+    writer.u32(len(statuses))
+    for status in statuses:
+        writer.u8(status.level)
+        for text in (status.name, status.message, status.hardware_id):
+            writer.string(text)
+        writer.u32(len(status.values))
+        for key, value in status.values:
+            writer.string(key)
+            writer.string(value)
+    return writer.finish(pad=pad)
+
+
+GID_SIZE = 16  # rmw_dds_common/msg/Gid: char[16] since Iron (Humble's was 24 bytes)
+
+
+@dataclass(frozen=True)
+class NodeEntities:
+    """``rmw_dds_common/msg/NodeEntitiesInfo``: a node and the GUIDs (16 bytes) of its endpoints."""
+
+    namespace: str
+    name: str
+    readers: Sequence[bytes] = ()
+    writers: Sequence[bytes] = ()
+
+
+def encode_participant_entities_info(gid: bytes, nodes: Sequence[NodeEntities], *, pad: bool = False) -> bytes:
+    """``rmw_dds_common/msg/ParticipantEntitiesInfo`` (Iron and later), what every rmw publishes on
+    ``ros_discovery_info`` so that other nodes know which endpoints belong to which node."""
+    writer = CdrWriter()
+
+    def gid_of(value: bytes) -> None:
+        if len(value) != GID_SIZE:
+            raise CdrError(f"a gid is {GID_SIZE} bytes, got {len(value)}")
+        writer.raw(bytes(value))
+
+    def gids(values: Sequence[bytes]) -> None:
+        writer.u32(len(values))
+        for value in values:
+            gid_of(value)
+
+    gid_of(gid)
+    writer.u32(len(nodes))
+    for node in nodes:
+        writer.string(node.namespace)
+        writer.string(node.name)
+        gids(node.readers)
+        gids(node.writers)
     return writer.finish(pad=pad)
 
 

@@ -25,8 +25,10 @@ import time
 from collections.abc import Callable
 
 from fxis_shm.client.client import Client
+from fxis_shm.core import timebase
 from fxis_shm.formats import rosnames
 from fxis_shm.formats.calibration import read_calibration
+from fxis_shm.ros2.diagnostics_topic import Diagnostics
 from fxis_shm.ros2.follow import CameraFollower
 from fxis_shm.ros2.frames_at import FramesAt
 from fxis_shm.ros2.participants import open_participant
@@ -61,6 +63,7 @@ class Bridge:
         }
         self.participant = open_participant(spec.via, spec.domain, spec.namespace, spec.service)
         log.info("ROS 2 through %s", type(self.participant).__name__)
+        self.diagnostics = Diagnostics(self.participant, spec.service, list(spec.cameras), self.make_client())
         ns = spec.namespace
         cameras = {
             name: CameraTopics(
@@ -119,7 +122,9 @@ class Bridge:
         try:
             while not self.stop.wait(STATUS_PERIOD_S):
                 self.report()
+                self.diagnostics.publish(timebase.reader("realtime")())  # ROS time
         finally:
+            self.diagnostics.close()
             self.stop.set()
             deadline = time.monotonic() + STOP_S
             for thread in [*threads, *self.frames_at.threads]:  # a request may still be waiting

@@ -31,7 +31,7 @@ it up to RELIABILITY.max_blocking_time when its readers lag: hence ``CAMERA_PUBL
 # annotations ("t.uint32") by importing a module of that name, and fails.
 
 import time
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from typing import Any
 
 from cyclonedds._clayer import ddspy_take, ddspy_write, ddspy_write_ts
@@ -85,6 +85,10 @@ TYPE_HASHES: dict[str, str] = {
     "sensor_msgs/msg/Image": "RIHS01_d31d41a9a4c4bc8eae9be757b0beed306564f7526c88ea6a4588fb9582527d47",
     "sensor_msgs/msg/CompressedImage": "RIHS01_15640771531571185e2efc8a100baf923961a4d15d5569652e6cb6691e8e371a",
     "sensor_msgs/msg/CameraInfo": "RIHS01_b3dfd68ff46c9d56c80fd3bd4ed22c7a4ddce8c8348f2f59c299e73118e7e275",
+    "diagnostic_msgs/msg/DiagnosticArray": "RIHS01_5a8a36efb05fb25070fa0fb3810290c0e6cd4862b54a8fb975a1ee8dc55a333e",
+    "rmw_dds_common/msg/ParticipantEntitiesInfo": (
+        "RIHS01_e725f4a506958c79f95dd693b965722c57b19cd18e7eff984f49561b93dc985d"
+    ),
 }
 
 
@@ -160,12 +164,60 @@ class _CameraInfo(IdlStruct, typename="sensor_msgs.msg.dds_.CameraInfo_"):
     roi: _RegionOfInterest
 
 
+@dataclass
+@final
+class _KeyValue(IdlStruct, typename="diagnostic_msgs.msg.dds_.KeyValue_"):
+    key: str
+    value: str
+
+
+@dataclass
+@final
+class _DiagnosticStatus(IdlStruct, typename="diagnostic_msgs.msg.dds_.DiagnosticStatus_"):
+    level: t.byte
+    name: str
+    message: str
+    hardware_id: str
+    values: t.sequence[_KeyValue]
+
+
+@dataclass
+@final
+class _DiagnosticArray(IdlStruct, typename="diagnostic_msgs.msg.dds_.DiagnosticArray_"):
+    header: _Header
+    status: t.sequence[_DiagnosticStatus]
+
+
+@dataclass
+@final
+class _Gid(IdlStruct, typename="rmw_dds_common.msg.dds_.Gid_"):
+    data: t.array[t.uint8, 16]
+
+
+@dataclass
+@final
+class _NodeEntitiesInfo(IdlStruct, typename="rmw_dds_common.msg.dds_.NodeEntitiesInfo_"):
+    node_namespace: t.bounded_str[256]
+    node_name: t.bounded_str[256]
+    reader_gid_seq: t.sequence[_Gid]
+    writer_gid_seq: t.sequence[_Gid]
+
+
+@dataclass
+@final
+class _ParticipantEntitiesInfo(IdlStruct, typename="rmw_dds_common.msg.dds_.ParticipantEntitiesInfo_"):
+    gid: _Gid
+    node_entities_info_seq: t.sequence[_NodeEntitiesInfo]
+
+
 IDL_TYPES: dict[str, type[IdlStruct]] = {
     "std_msgs/msg/Header": _Header,
     "std_msgs/msg/String": _String,
     "sensor_msgs/msg/Image": _Image,
     "sensor_msgs/msg/CompressedImage": _CompressedImage,
     "sensor_msgs/msg/CameraInfo": _CameraInfo,
+    "diagnostic_msgs/msg/DiagnosticArray": _DiagnosticArray,
+    "rmw_dds_common/msg/ParticipantEntitiesInfo": _ParticipantEntitiesInfo,
 }
 
 
@@ -204,6 +256,11 @@ def cyclone_qos(profile: QosProfile, user_data: bytes | None = None) -> Qos:
     return Qos(*policies)
 
 
+# What every rmw publishes its nodes' endpoints on (rmw_dds_common's graph cache reads it).
+GRAPH_TOPIC, GRAPH_TYPE = "ros_discovery_info", "rmw_dds_common/msg/ParticipantEntitiesInfo"
+GRAPH_PUBLISHER = QosProfile(reliable=True, depth=1, transient_local=True)
+
+
 def _delete_now(entity: Entity) -> None:
     """Delete a cyclonedds entity and its children now (sockets freed), not whenever GC runs."""
     if Entity._entities.get(entity._ref) is entity:
@@ -234,15 +291,40 @@ class RosParticipant:
         self._topics: dict[tuple[str, str], Topic] = {}
         self.matches = MatchTable()  # per topic: who matched, who could not and why
         self._closed = False
+        self._node: cdr.NodeEntities | None = None
+        self._graph: RawWriter | None = None
 
-    def topic(self, ros_topic: str, ros_type: str) -> Topic:
-        """The DDS topic of (ROS topic, ROS type), made once per participant."""
+    def topic(self, ros_topic: str, ros_type: str, *, dds_name: str | None = None) -> Topic:
+        """The DDS topic of (ROS topic, ROS type), made once per participant; ``dds_name`` for a
+        topic outside ROS's naming (``ros_discovery_info``)."""
         key = (ros_topic, ros_type)
         if key not in self._topics:
             idl = IDL_TYPES[ros_type]
             _check_ros_compatible(idl, ros_type)
-            self._topics[key] = Topic(self.participant, dds_topic_name(ros_topic), idl)
+            self._topics[key] = Topic(self.participant, dds_name or dds_topic_name(ros_topic), idl)
         return self._topics[key]
+
+    def announce_node(self, name: str, namespace: str) -> None:
+        """Be node ``namespace/name`` on the ROS graph (``ros2 node list``, ``rqt_graph``): publish
+        on ``ros_discovery_info`` which of this participant's endpoints belong to it, as every
+        rmw does, again each time an endpoint is added."""
+        self._node = cdr.NodeEntities(namespace or "/", name)
+        self._graph = RawWriter(self, GRAPH_TOPIC, GRAPH_TYPE, GRAPH_PUBLISHER, dds_name=GRAPH_TOPIC)
+        self._announce()
+
+    def _added(self, endpoint: str, guid: bytes) -> None:
+        """An endpoint of the node was made: say so on the graph topic."""
+        if self._node is None:
+            return
+        readers, writers = list(self._node.readers), list(self._node.writers)
+        (readers if endpoint == "reader" else writers).append(guid)
+        self._node = replace(self._node, readers=readers, writers=writers)
+        self._announce()
+
+    def _announce(self) -> None:
+        if self._graph is not None and self._node is not None:
+            gid = self.participant.guid.bytes
+            self._graph.write(cdr.encode_participant_entities_info(gid, [self._node], pad=True))
 
     def writer(self, ros_topic: str, ros_type: str, profile: QosProfile | None = None) -> "RawWriter":
         """A :class:`RawWriter`, with :data:`CAMERA_PUBLISHER` unless told otherwise."""
@@ -280,10 +362,12 @@ class RawWriter:
     the transport.
     """
 
-    def __init__(self, node: RosParticipant, ros_topic: str, ros_type: str, profile: QosProfile) -> None:
+    def __init__(
+        self, node: RosParticipant, ros_topic: str, ros_type: str, profile: QosProfile, *, dds_name: str | None = None
+    ) -> None:
         self.ros_topic, self.ros_type = ros_topic, ros_type
         qos = cyclone_qos(profile, _typehash_user_data(ros_type))
-        self._writer = DataWriter(node.participant, node.topic(ros_topic, ros_type), qos=qos)
+        self._writer = DataWriter(node.participant, node.topic(ros_topic, ros_type, dds_name=dds_name), qos=qos)
         self._ref: int = self._writer._ref
         # A change of the matched readers wakes wait_for_readers (reading the status re-arms it).
         self._writer.set_status_mask(DDSStatus.PublicationMatched)
@@ -292,6 +376,8 @@ class RawWriter:
         matches = node.matches.of(ros_topic)
         matches.counter = self.matched_count
         matches.poll = self._poll_refusals
+        if dds_name is None:  # the graph topic is not one of the node's own
+            node._added("writer", self._writer.guid.bytes)
 
     def _poll_refusals(self, matches: TopicMatches) -> None:
         total, policy_id = self.incompatible_qos()
@@ -355,6 +441,7 @@ class RawReader:
         self._waitset = WaitSet(node.participant)
         self._waitset.attach(ReadCondition(self._reader, self._ANY))
         node.matches.of(ros_topic).counter = self.matched_count
+        node._added("reader", self._reader.guid.bytes)
 
     def take_raw(self, max_samples: int = 64) -> list[tuple[bytes, int]]:
         """Without blocking: what has arrived, as (CDR bytes, source timestamp ns)."""

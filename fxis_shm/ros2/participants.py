@@ -48,4 +48,6 @@ def open_participant(via: str, domain: int, namespace: str, service: str):
     from fxis_shm.ros2.dds import RosParticipant
     from fxis_shm.ros2.vendors import bridge_config
 
-    return RosParticipant(domain, bridge_config())
+    participant = RosParticipant(domain, bridge_config())
+    participant.announce_node(node_name(service), namespace)
+    return participant

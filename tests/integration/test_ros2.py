@@ -342,3 +342,26 @@ def test_a_snapshot_asked_for_on_the_snapshot_topic_keeps_the_window_in_ros_time
     bag = read_bag(bridge.snapshots / "grasp_17")
     stamps = [m.stamp for m in bag.messages["/cam0/image_raw"]]
     assert len(stamps) >= 55 and t - 2_000_000_000 <= stamps[0] and stamps[-1] <= t + 1_000_000_000
+
+
+@pytest.mark.parametrize(
+    "bridge",
+    ["fastdds-kilted-node,cyclone-bridge", "fastdds-kilted-node,rclpy-bridge", "fastdds-jazzy-node,cyclone-bridge"],
+    indirect=True,
+)
+def test_the_bridge_is_a_ros_node_and_publishes_each_cameras_diagnostics(bridge):
+    node = ("fxis_" + bridge.svc.name.replace("-", "_"), NS)
+    with bridge.peer([("/diagnostics", "diagnostic_msgs/msg/DiagnosticArray")]) as peer:
+        wait_until(lambda: node in peer.nodes(), what=f"the bridge's node {node} in the node list")
+        peer.wait_for_samples("/diagnostics", 7, timeout=20)  # once a second; the window fills in 5 s
+        last = peer.samples("/diagnostics")[-1]
+    by_name = {s["name"]: s for s in last["status"]}
+    assert set(by_name) == {f"fxis {bridge.svc.name}: cam0", f"fxis {bridge.svc.name}: cam1"}
+    for status in by_name.values():
+        values = status["values"]
+        assert status["hardware_id"] == "synthetic" and values["worker"] == "running"
+        assert values["rate_configured_hz"] == "20" and values["restarts"] == "0"
+        # measured over its window, not the configured rate copied: the camera stores 20 a second
+        assert 15.0 <= float(values["rate_measured_hz"]) <= 25.0, values
+        assert float(values["newest_frame_age_ms"]) < 1000.0
+        assert status["level"] in (0, 1) and (status["level"] == 0) == (status["message"] == "streaming")

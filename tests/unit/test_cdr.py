@@ -298,6 +298,74 @@ def test_camera_info(store, header, size, model, d, k, r, p, binning, roi):
     check_camera_info(STORES[store], info)
 
 
+diagnostic_statuses = st.builds(
+    cdr.DiagnosticStatus,
+    level=st.integers(0, 3),
+    name=ros_text,
+    message=ros_text,
+    hardware_id=ros_text,
+    values=st.lists(st.tuples(ros_text, ros_text), max_size=4),
+)
+
+
+@pytest.mark.parametrize("store", STORES)
+@EXAMPLES
+@given(header=headers, statuses=st.lists(diagnostic_statuses, max_size=4))
+def test_diagnostic_array(store, header, statuses):
+    types = STORES[store].types
+    theirs = types["diagnostic_msgs/msg/DiagnosticArray"](
+        header=theirs_header(STORES[store], header),
+        status=[
+            types["diagnostic_msgs/msg/DiagnosticStatus"](
+                level=s.level,
+                name=s.name,
+                message=s.message,
+                hardware_id=s.hardware_id,
+                values=[types["diagnostic_msgs/msg/KeyValue"](key=k, value=v) for k, v in s.values],
+            )
+            for s in statuses
+        ],
+    )
+    ours = cdr.encode_diagnostic_array(header, statuses)
+    assert ours == serialize(STORES[store], theirs, "diagnostic_msgs/msg/DiagnosticArray")
+    assert_padded(ours, cdr.encode_diagnostic_array(header, statuses, pad=True))
+
+
+gid = st.binary(min_size=16, max_size=16)
+node_entities = st.builds(
+    cdr.NodeEntities,
+    namespace=ros_text,
+    name=ros_text,
+    readers=st.lists(gid, max_size=3),
+    writers=st.lists(gid, max_size=3),
+)
+
+
+@EXAMPLES
+@given(participant=gid, nodes=st.lists(node_entities, max_size=3))
+def test_participant_entities_info(participant, nodes):
+    store = get_typestore(Stores.ROS2_JAZZY)  # Gid is char[16] since Iron (Humble: 24)
+    types = store.types
+
+    def theirs_gid(value):
+        return types["rmw_dds_common/msg/Gid"](data=np.frombuffer(value, np.uint8))
+
+    theirs = types["rmw_dds_common/msg/ParticipantEntitiesInfo"](
+        gid=theirs_gid(participant),
+        node_entities_info_seq=[
+            types["rmw_dds_common/msg/NodeEntitiesInfo"](
+                node_namespace=n.namespace,
+                node_name=n.name,
+                reader_gid_seq=[theirs_gid(g) for g in n.readers],
+                writer_gid_seq=[theirs_gid(g) for g in n.writers],
+            )
+            for n in nodes
+        ],
+    )
+    ours = cdr.encode_participant_entities_info(participant, nodes)
+    assert ours == serialize(store, theirs, "rmw_dds_common/msg/ParticipantEntitiesInfo")
+
+
 # ------------------------------------------------------------------------------------ type hashes
 
 
