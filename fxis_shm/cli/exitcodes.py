@@ -38,6 +38,8 @@ def message(exc: BaseException) -> str:
     """The error's one line: what is wrong (the message says what to change)."""
     if isinstance(exc, KeyboardInterrupt):
         return "interrupted"
-    if isinstance(exc, OSError) and not isinstance(exc, FxisError) and exc.filename:
-        return f"{exc.filename}: {exc.strerror or exc}"
+    if isinstance(exc, OSError) and not isinstance(exc, FxisError):
+        where = f"{exc.filename}: " if exc.filename else ""
+        room = "; free some room there, or write elsewhere" if exc.errno in _DISK_FULL else ""
+        return f"{where}{exc.strerror or exc}{room}"
     return " ".join(str(exc).split()) or type(exc).__name__

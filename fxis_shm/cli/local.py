@@ -64,6 +64,10 @@ def cameras_command(args) -> int:
 def clean_command(args) -> int:
     from fxis_shm.service.supervisor import service_running
 
+    try:
+        naming.check_name("service", args.name)
+    except ValueError as exc:
+        raise ConfigError(f"--name: {exc}") from None
     if service_running(args.name):
         raise ConfigError(f"service {args.name!r} is running: stop it first (its shared memory is in use)")
     removed = naming.remove_leftovers(args.name)

@@ -101,6 +101,7 @@ def write_files(folder: str, files: dict[str, bytes]) -> None:
     this call wrote, the folder too if it made it, and raises the OSError."""
     made = not os.path.isdir(folder)
     written: list[str] = []
+    path = folder
     try:
         os.makedirs(folder, exist_ok=True)
         for name, data in files.items():
@@ -108,14 +109,14 @@ def write_files(folder: str, files: dict[str, bytes]) -> None:
             written.append(path)
             with open(path, "wb") as f:
                 f.write(data)
-    except OSError:
-        for path in written:
+    except OSError as exc:
+        for done in written:
             with contextlib.suppress(OSError):
-                os.remove(path)
+                os.remove(done)
         if made:
             with contextlib.suppress(OSError):
                 os.rmdir(folder)
-        raise
+        raise OSError(exc.errno, f"{exc.strerror} (nothing was saved)", exc.filename or path) from None
 
 
 def add_parsers(sub) -> None:

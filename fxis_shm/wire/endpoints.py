@@ -16,7 +16,7 @@ def check_endpoint(endpoint: object, setting: str = "endpoint", *, bind: bool = 
     """``endpoint`` if it is ``tcp://HOST:PORT`` (a port 1-65535; 0 too where it is bound: any
     free port) or ``ipc://PATH``; else BadEndpoint naming ``setting`` and the form."""
     if not isinstance(endpoint, str) or not endpoint.startswith(("tcp://", "ipc://")):
-        hint = f" (e.g. tcp://{endpoint})" if isinstance(endpoint, str) and "://" not in endpoint else ""
+        hint = f" (e.g. tcp://{endpoint})" if isinstance(endpoint, str) and endpoint and "://" not in endpoint else ""
         raise BadEndpoint(f"{setting} {endpoint!r}: expected {FORM}{hint}")
     tcp_host_port(endpoint, setting, bind=bind)
     return endpoint
@@ -36,7 +36,8 @@ def tcp_host_port(endpoint: str, setting: str, *, bind: bool = True) -> tuple[st
         raise BadEndpoint(f"{setting} {endpoint!r}: expected tcp://HOST:PORT with a port from {lowest} to 65535")
     if not bind and host in ("*", "0.0.0.0", "::"):
         raise BadEndpoint(
-            f"{setting} {endpoint!r}: {host} is where a service listens; connect to a host's name or address"
+            f"{setting} {endpoint!r}: {host} is where a service listens; connect to tcp://HOST:PORT, HOST its "
+            "name or address"
         )
     return ("0.0.0.0" if host == "*" else host), int(port)
 
