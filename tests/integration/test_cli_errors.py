@@ -10,7 +10,6 @@ from __future__ import annotations
 
 import argparse
 import contextlib
-import json
 import math
 import os
 import re
@@ -18,7 +17,6 @@ import signal
 import socket
 import subprocess
 import sys
-import urllib.request
 
 import pytest
 
@@ -26,10 +24,9 @@ from fxis_shm import BadEndpoint, Client, FxisError, InvalidArgument, Overrun, O
 from fxis_shm.cli import exitcodes
 from fxis_shm.cli.main import main, parser
 from fxis_shm.errors import Code, service_error
-from fxis_shm.service.launch import free_tcp_port
 from fxis_shm.shm import naming
 
-from .conftest import SMALL, client_keys
+from .conftest import SMALL, mounted_tmpfs
 
 pytestmark = pytest.mark.integration
 
@@ -46,29 +43,16 @@ def commands() -> set[str]:
     return set(sub.choices)
 
 
-@contextlib.contextmanager
-def mounted(path, options: str):
-    """A tmpfs mounted at ``path`` for the test (root), unmounted whatever happened."""
-    path.mkdir()
-    done = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(path)], capture_output=True)
-    if done.returncode != 0:
-        pytest.fail(f"mounting a tmpfs needs root: {done.stderr.decode().strip()}", pytrace=False)
-    try:
-        yield path
-    finally:
-        subprocess.run(["umount", str(path)], check=True)
-
-
 @pytest.fixture
 def read_only(tmp_path):
-    with mounted(tmp_path / "ro", "ro,size=1m") as path:
+    with mounted_tmpfs(tmp_path / "ro", "ro,size=1m") as path:
         yield path
 
 
 @pytest.fixture
 def full_disk(tmp_path):
     """A 256 KiB tmpfs with no byte free."""
-    with mounted(tmp_path / "full", "size=256k") as path:
+    with mounted_tmpfs(tmp_path / "full", "size=256k") as path:
         with open(path / "filler", "wb", buffering=0) as f, contextlib.suppress(OSError):
             while True:
                 f.write(b"\0" * 4096)
@@ -287,7 +271,7 @@ def test_ctrl_c_is_code_130_with_one_line(tmp_path):
 def service():
     from .conftest import module_service
 
-    yield from module_service(["--camera", f"a=synthetic:fps=50,{SMALL}"])
+    yield from module_service(["--camera", "a=synthetic:fps=50,width=320,height=240"])  # 3.8 MB/s raw
 
 
 def test_grab_on_a_full_disk_is_code_4_and_removes_what_it_wrote(service, full_disk, capsys):
@@ -354,40 +338,6 @@ def test_an_overrun_reply_is_its_own_error_with_a_hint_and_the_dashboard_says_50
     assert exitcodes.for_error(exc) == FAILED
 
 
-# ---- finding 12: the service's own dashboard under CurveZMQ ----
-
-
-def test_the_services_own_dashboard_connects_under_curvezmq(start_service, keys, wait):
-    """The allowed clients' folder holds alice's key only: the dashboard connects with the
-    service's own pair, which the coordinator lets in; a stranger's key is still refused."""
-    folder, allowed = keys
-    port = free_tcp_port()
-    svc = start_service(
-        "--camera",
-        f"a=synthetic:fps=50,{SMALL}",
-        "--curve-secret",
-        str(folder / "server.key_secret"),
-        "--curve-clients",
-        str(allowed),
-        client_keys=client_keys(folder, "alice"),
-        http=f"127.0.0.1:{port}",
-    )
-
-    def status() -> dict | None:
-        try:
-            with urllib.request.urlopen(f"http://127.0.0.1:{port}/status.json", timeout=5) as answer:
-                return json.loads(answer.read())
-        except OSError:
-            return None
-
-    wait(lambda: status() is not None, timeout=20, what="the dashboard's first status")
-    reply = status()
-    assert reply["service"] == svc.name and set(reply["cameras"]) == {"a"}, reply
-    with Client(svc.endpoint, timeout=1.0, keys=client_keys(folder, "mallory")) as mallory:
-        with pytest.raises(RequestTimeout):
-            mallory.status()
-
-
 # ---- finding 18: the words of fxis run ----
 
 
@@ -410,3 +360,59 @@ def test_the_dev_shm_refusal_suggests_the_size_needed(capsys, tmp_path):
     assert (gib - 1) * 1024 < needed_mib + used_mib <= gib * 1024 + 1
     assert ("more than this host's" in line) == (gib * 2**30 > memory)
     assert naming.leftovers(name) == []
+
+
+def test_record_refuses_a_disk_that_cannot_hold_a_few_seconds(service, tmp_path, capsys):
+    """Finding 18: 4 MiB free holds the bag's reserve but about a second of this camera; the
+    recording used to start, and stop with what fitted. Nothing is made there."""
+    with mounted_tmpfs(tmp_path / "small", "size=4m") as small:
+        code, out, err = run_fxis(capsys, ["record", "--endpoint", service.endpoint, "--out", str(small / "bag")])
+        assert code == USAGE
+        assert_one_line(err, "record", f"--out {small / 'bag'}", "MB free there holds", "record elsewhere")
+        assert os.listdir(small) == [] and out == ""
+
+
+def test_the_run_banner_shows_each_cameras_history(start_service, tmp_path, wait):
+    """Finding 18: ``--history 5`` is every camera's unless its own history= says otherwise;
+    the banner said ``history=None``."""
+    from .test_viewer_access import printing_to
+
+    out = tmp_path / "banner.txt"
+    start_service(
+        "--camera",
+        f"a=synthetic:fps=20,{SMALL}",
+        "--camera",
+        f"b=synthetic:fps=20,history=2,{SMALL}",
+        "--history",
+        "5",
+        wrapper=printing_to(out),
+    )
+    banner = wait(
+        lambda: "Ctrl-C stops" in (text := out.read_text() if out.exists() else "") and text,
+        timeout=30,
+        what="the banner",
+    )
+    lines = {
+        line.split()[0]: line for line in banner.splitlines() if line.startswith("  a ") or line.startswith("  b ")
+    }
+    assert "None" not in banner
+    assert re.search(r"history=5(\.0)?\b", lines["a"]) and re.search(r"history=2(\.0)?\b", lines["b"]), banner
+
+
+def test_the_slow_path_is_said_only_where_the_hot_path_runs(monkeypatch, caplog, capsys):
+    """Finding 18: without a compiled hot path, importing fxis_shm (every command, ``fxis
+    status`` included) said so; now ``fxis run`` and a client reading the rings on the
+    service's host say it, once."""
+    from fxis_shm import _compiled
+
+    monkeypatch.setattr(_compiled, "status", lambda: {"fxis_shm.core.engine": False})
+    monkeypatch.setattr(_compiled, "PURE", False)
+    monkeypatch.setattr(_compiled, "_warned", False)
+    with caplog.at_level("WARNING", logger="fxis_shm"):
+        assert _compiled.check() is False
+        assert run_fxis(capsys, ["status", "--endpoint", NOWHERE, "--timeout", "0.1"])[0] == NO_SERVICE
+        assert caplog.records == [] and "slow path" not in capsys.readouterr().err
+        _compiled.warn_slow_path()
+        _compiled.warn_slow_path()
+    assert [r.getMessage() for r in caplog.records] == [_compiled.slow_path_line()]
+    assert "fxis_shm.core.engine" in _compiled.slow_path_line()
