@@ -296,7 +296,7 @@ def test_a_camera_the_service_does_not_have_is_code_2(service, tmp_path, capsys)
 @pytest.mark.parametrize("endpoint", [*NO_SCHEME, *BAD_PORTS, "udp://127.0.0.1:5", "", "tcp://*:5555"])
 def test_client_refuses_an_endpoint_of_another_form(endpoint):
     """Finding 4: an FxisError naming the form, not zmq.error.ZMQError."""
-    for make in (lambda: Client(endpoint), lambda: Client([endpoint])):
+    for make in (lambda: Client(endpoint), lambda: Client([NOWHERE, endpoint])):
         with pytest.raises(BadEndpoint) as info:
             make()
         assert isinstance(info.value, InvalidArgument) and "tcp://HOST:PORT" in str(info.value)
