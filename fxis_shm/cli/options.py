@@ -46,16 +46,6 @@ def positive_seconds(text: str) -> float:
     return _number(text, float, 0, "seconds > 0", above=True)
 
 
-def positive(text: str) -> float:
-    """A flag's rate or amount, finite and > 0."""
-    return _number(text, float, 0, "a number > 0", above=True)
-
-
-def count(text: str) -> int:
-    """A flag's number of things, >= 1."""
-    return int(_number(text, int, 1, "a whole number >= 1"))
-
-
 def nanoseconds(text: str) -> int:
     """A time in ns of a clock such as CLOCK_MONOTONIC (its count since boot), >= 0."""
     return int(_number(text, int, 0, "a whole number of ns >= 0"))
@@ -84,7 +74,7 @@ def client_for(args) -> Client:
     """A client as the command's options, the environment and the config file say."""
     file_values = load_toml(args.config) if args.config else {}
     endpoint = args.endpoint or file_values.get("endpoint") or defaults.ENDPOINT
-    setting = "--endpoint" if args.endpoint else f"--config {args.config}: endpoint"
+    setting = "--endpoint" if args.endpoint else f"--config {args.config}: endpoint" if args.config else "endpoint"
     check_host_known(check_endpoint(endpoint, setting), setting)  # a mistyped one: a line now, not a time-out
     return Client(endpoint, timeout=args.timeout, keys=client_keys_for(args, file_values))
 
