@@ -10,6 +10,7 @@ Message layout, clock and topics: docs/recording.md.
 
 from __future__ import annotations
 
+import errno
 import math
 import os
 import shutil
@@ -162,14 +163,17 @@ class Recorder:
         return shutil.disk_usage(os.path.dirname(os.path.abspath(self.s.out))).free
 
     def _check_room(self, status: dict) -> None:
-        """ConfigError, before the bag is made, if its disk cannot hold even a few seconds of a
-        raw recording (issue 33: it would start, and stop with nothing)."""
+        """DiskFull, before the bag is made, if its disk cannot hold even a few seconds of a raw
+        recording (issue 33: it would start, and stop with nothing), as a snapshot's bag says
+        when there is no room to start it."""
         rate, free = self._pixel_rate(status), self._free()
         if self.s.encoding == codec.RAW and rate and free < _MIN_SECONDS * rate:
-            raise ConfigError(
+            raise DiskFull(
                 f"--out {self.s.out}: {_size(free)} free there holds {free / rate:.1f} s of this recording "
-                f"({rate / 1e6:.0f} MB/s raw); free some room, record elsewhere, or record less "
-                "(--cameras, --rate, --encoding jpeg)"
+                f"({_size(rate)}/s raw): nothing was recorded; free some room, record elsewhere, or record "
+                "less (--cameras, --rate, --encoding jpeg)",
+                folder=self.s.out,
+                reason=os.strerror(errno.ENOSPC),
             )
 
     def _data_rate_line(self) -> str:
