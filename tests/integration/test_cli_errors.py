@@ -20,7 +20,17 @@ import sys
 
 import pytest
 
-from fxis_shm import BadEndpoint, Client, FxisError, InvalidArgument, Overrun, Overwritten, RequestTimeout
+from fxis_shm import (
+    BadEndpoint,
+    Client,
+    EventPublisher,
+    FxisError,
+    InvalidArgument,
+    Overrun,
+    Overwritten,
+    RequestTimeout,
+    Subscriber,
+)
 from fxis_shm.cli import exitcodes
 from fxis_shm.cli.main import main, parser
 from fxis_shm.errors import Code, service_error
@@ -295,10 +305,11 @@ def test_a_camera_the_service_does_not_have_is_code_2(service, tmp_path, capsys)
 
 @pytest.mark.parametrize("endpoint", [*NO_SCHEME, *BAD_PORTS, "udp://127.0.0.1:5", "", "tcp://*:5555"])
 def test_client_refuses_an_endpoint_of_another_form(endpoint):
-    """Finding 4: an FxisError naming the form, not zmq.error.ZMQError."""
-    for make in (lambda: Client(endpoint), lambda: Client([NOWHERE, endpoint])):
+    """Finding 4: an FxisError naming the form, not zmq.error.ZMQError; the streams' sockets too."""
+    makers = (Client, lambda e: Client([NOWHERE, e]), Subscriber, EventPublisher)
+    for make in makers:
         with pytest.raises(BadEndpoint) as info:
-            make()
+            make(endpoint)
         assert isinstance(info.value, InvalidArgument) and "tcp://HOST:PORT" in str(info.value)
 
 
