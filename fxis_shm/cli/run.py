@@ -61,7 +61,7 @@ def run_command(args) -> int:
     if _compiled.slow_unasked():  # here, where the hot path runs: no other command says it
         print(f"fxis run: {_compiled.slow_path_line()}", file=sys.stderr)
     logging.basicConfig(level=config.log_level, format="%(asctime)s supervisor %(levelname)s %(message)s")
-    # a StartError (a camera did not open) is one line and code 4, after all was stopped and removed
+    # a StartError is one line, after all was stopped and removed: code 2 if a camera refused its settings, else 4
     return exitcodes.DONE if Supervisor(config).run() == 0 else exitcodes.FAILED
 
 

@@ -22,7 +22,7 @@ import threading
 import time
 
 from fxis_shm.core import timebase
-from fxis_shm.errors import FxisError
+from fxis_shm.errors import ConfigError, FxisError
 from fxis_shm.service.childspec import (
     CameraWorkerSpec,
     ChildSpec,
@@ -46,6 +46,11 @@ STABLE_AFTER_S = 30.0  # a child that ran this long has its backoff reset
 
 class StartError(FxisError):
     """A child could not start; the message says which and why."""
+
+
+class StartRefused(StartError, ConfigError):
+    """A child said what it could not use of what it was given (a setting the camera refuses, a
+    file or device that is not there, a hook that does not load): a setting to change."""
 
 
 def lock_path(service: str) -> str:
@@ -129,7 +134,7 @@ class Child:
         if line == "ok":
             return
         if line.startswith("error "):
-            raise StartError(f"{self.label}: {line[len('error ') :]}")
+            raise StartRefused(f"{self.label}: {line[len('error ') :]}")
         if not ready:
             raise StartError(f"{self.label} did not become ready within {timeout:.0f} s")
         raise StartError(f"{self.label} exited during start-up (exit code {self.proc.wait(1)})")
