@@ -7,7 +7,9 @@ from __future__ import annotations
 
 import argparse
 import os
+import signal
 import sys
+import threading
 import traceback
 from typing import NoReturn
 
@@ -40,8 +42,16 @@ def parser() -> argparse.ArgumentParser:
     return p
 
 
+def _interrupted(signum, frame) -> NoReturn:
+    raise KeyboardInterrupt
+
+
 def main(argv: list[str] | None = None) -> int:
     args = parser().parse_args(argv)
+    # SIGTERM ends a command as Ctrl-C does (code 130); a command with handlers of its own
+    # (fxis run, record) sets them over this one
+    in_main = threading.current_thread() is threading.main_thread()  # where Python handles signals
+    previous = signal.signal(signal.SIGTERM, _interrupted) if in_main else None
     try:
         return args.func(args)
     except SystemExit:
@@ -56,3 +66,6 @@ def main(argv: list[str] | None = None) -> int:
             traceback.print_exc()
         print(f"fxis {args.command}: {exitcodes.message(exc)}", file=sys.stderr)
         return code
+    finally:
+        if in_main:
+            signal.signal(signal.SIGTERM, previous)

@@ -240,8 +240,9 @@ def test_a_service_that_does_not_answer_is_code_3(capsys):
     assert_one_line(err, "status", "no reply", "is the service running?")
 
 
-def test_ctrl_c_is_code_130_with_one_line(tmp_path):
-    """A real SIGINT while ``fxis status`` waits for a reply from a listener that never answers
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_ctrl_c_or_sigterm_is_code_130_with_one_line(sig):
+    """A real signal while ``fxis status`` waits for a reply from a listener that never answers
     (it accepted the connection: the command is past its start, in its request)."""
     with socket.socket() as listener:
         listener.bind(("127.0.0.1", 0))
@@ -264,7 +265,7 @@ def test_ctrl_c_is_code_130_with_one_line(tmp_path):
         try:
             listener.settimeout(30)
             peer, _ = listener.accept()  # the client is connected: in the command, past its imports
-            proc.send_signal(signal.SIGINT)
+            proc.send_signal(sig)
             _, err = proc.communicate(timeout=30)
             peer.close()
         finally:
