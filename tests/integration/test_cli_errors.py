@@ -69,12 +69,6 @@ def full_disk(tmp_path):
         yield path
 
 
-def not_a_key(tmp_path) -> str:
-    path = tmp_path / "notakey.key"
-    path.write_text("this is not a key file\n")
-    return str(path)
-
-
 def run_fxis(capsys, argv: list[str]) -> tuple[int, str, str]:
     code = main(argv)
     out, err = capsys.readouterr()
@@ -106,44 +100,47 @@ def with_out(command: str, out: str) -> list[str]:
     return [command, "--out", out] if command in OUT_COMMANDS else [command]
 
 
-def cases(tmp_path) -> list[tuple[list[str], int, tuple[str, ...]]]:
+TMP = "{tmp}"  # the test's own folder, put in when a case runs
+NEW = f"{TMP}/new"  # a good --out: the mistake is elsewhere, and the folder must not appear
+KEY = f"{TMP}/notakey.key"  # a file that is not a key file
+
+
+def table() -> list[tuple[list[str], int, tuple[str, ...]]]:
     """(argv, exit code, what the line must say) of each bad input of each command."""
-    new = str(tmp_path / "new")  # a good --out: the mistake is elsewhere, and it must not appear
-    key = not_a_key(tmp_path)
-    table = []
+    rows = []
     for command in CLIENT_COMMANDS:
-        base = with_out(command, new)
+        base = with_out(command, NEW)
         for endpoint in NO_SCHEME:
-            table.append(([*base, "--endpoint", endpoint], USAGE, ("expected tcp://HOST:PORT", f"tcp://{endpoint}")))
+            rows.append(([*base, "--endpoint", endpoint], USAGE, ("expected tcp://HOST:PORT", f"tcp://{endpoint}")))
         for endpoint in BAD_PORTS:
-            table.append(([*base, "--endpoint", endpoint], USAGE, (endpoint, "port from 1 to 65535")))
-        table.append(([*base, "--endpoint", UNKNOWN_HOST], USAGE, ("not known here",)))
+            rows.append(([*base, "--endpoint", endpoint], USAGE, (endpoint, "port from 1 to 65535")))
+        rows.append(([*base, "--endpoint", UNKNOWN_HOST], USAGE, ("not known here",)))
         for timeout in ("-1", "nan", "0", "inf"):
-            table.append(([*base, "--timeout", timeout], USAGE, ("--timeout", "seconds > 0")))
-        table.append(([*base, "--server-key", key, "--client-key", key], USAGE, ("cannot read the key file", key)))
-        table.append(([*base, "--server-key", key], USAGE, ("--client-key",)))
+            rows.append(([*base, "--timeout", timeout], USAGE, ("--timeout", "seconds > 0")))
+        rows.append(([*base, "--server-key", KEY, "--client-key", KEY], USAGE, ("cannot read the key file", KEY)))
+        rows.append(([*base, "--server-key", KEY], USAGE, ("--client-key",)))
     for command in OUT_COMMANDS:
-        table += [
+        rows += [
             ([command, "--out", "/proc/x", "--endpoint", NOWHERE], USAGE, ("--out /proc/x", "cannot write there")),
-            ([command, "--out", str(tmp_path / "no" / "x"), "--endpoint", NOWHERE], USAGE, ("does not exist",)),
+            ([command, "--out", f"{TMP}/no/x", "--endpoint", NOWHERE], USAGE, ("does not exist",)),
         ]
-    table += [
-        (["grab", "--out", new, "--at", "-5"], USAGE, ("--at", ">= 0")),
-        (["snapshot", "--out", new, "--before", "-1"], USAGE, ("--before", "seconds >= 0")),
-        (["snapshot", "--out", new, "--after", "nan"], USAGE, ("--after", "seconds >= 0")),
-        (["snapshot", "--out", new, "--at", "-5"], USAGE, ("--at", ">= 0")),
-        (["record", "--out", new, "--seconds", "-1"], USAGE, ("--seconds", "> 0")),
-        (["record", "--out", new, "--seconds", "nan"], USAGE, ("--seconds", "> 0")),
-        (["record", "--out", new, "--frames", "-1"], USAGE, ("--frames", "> 0")),
-        (["record", "--out", new, "--rate", "nan"], USAGE, ("--rate", "> 0")),
-        (["record", "--out", new, "--encoding", "jpeg", "--quality", "0"], USAGE, ("--quality",)),
-        (["record", "--recover", str(tmp_path / "nobag")], USAGE, ("nobag",)),
+    rows += [
+        (["grab", "--out", NEW, "--at", "-5"], USAGE, ("--at", ">= 0")),
+        (["snapshot", "--out", NEW, "--before", "-1"], USAGE, ("--before", "seconds >= 0")),
+        (["snapshot", "--out", NEW, "--after", "nan"], USAGE, ("--after", "seconds >= 0")),
+        (["snapshot", "--out", NEW, "--at", "-5"], USAGE, ("--at", ">= 0")),
+        (["record", "--out", NEW, "--seconds", "-1"], USAGE, ("--seconds", "> 0")),
+        (["record", "--out", NEW, "--seconds", "nan"], USAGE, ("--seconds", "> 0")),
+        (["record", "--out", NEW, "--frames", "-1"], USAGE, ("--frames", "> 0")),
+        (["record", "--out", NEW, "--rate", "nan"], USAGE, ("--rate", "> 0")),
+        (["record", "--out", NEW, "--encoding", "jpeg", "--quality", "0"], USAGE, ("--quality",)),
+        (["record", "--recover", f"{TMP}/nobag"], USAGE, ("nobag",)),
         (["keys", "--out", "/proc/x"], USAGE, ("/proc/x", "give a folder")),
         (["cameras", "--timeout", "-1"], USAGE, ("--timeout", "seconds > 0")),
         (["cameras", "--timeout", "nan"], USAGE, ("--timeout", "seconds > 0")),
         (["clean", "--name", "a/b"], USAGE, ("--name", "invalid")),
         (["dashboard", "tcp://127.0.0.1:6500", "--timeout", "nan"], USAGE, ("--timeout", "seconds > 0")),
-        (["dashboard", NOWHERE, "--server-key", key, "--client-key", key], USAGE, ("cannot read the key file",)),
+        (["dashboard", NOWHERE, "--server-key", KEY, "--client-key", KEY], USAGE, ("cannot read the key file",)),
         (["dashboard", NOWHERE, NOWHERE], USAGE, ("given twice",)),
         (["dashboard", UNKNOWN_HOST], USAGE, ("not known here",)),
         (["run", "--slots", "-1"], USAGE, ("slots",)),
@@ -152,40 +149,46 @@ def cases(tmp_path) -> list[tuple[list[str], int, tuple[str, ...]]]:
         (["run", "--restart-limit", "-1"], USAGE, ("restart_limit",)),
         (["run", "--port-base", "-5"], USAGE, ("port_base",)),
         (["run", "--camera", "a=synthetic:fps=nan"], USAGE, ("fps",)),
-        (["run", "--curve-secret", key, "--curve-clients", str(tmp_path)], USAGE, ("cannot read the key file",)),
+        (["run", "--curve-secret", KEY, "--curve-clients", TMP], USAGE, ("cannot read the key file",)),
         (["run", "--endpoint", "127.0.0.1:6500"], USAGE, ("expected tcp://HOST:PORT",)),
         (["run", "--endpoint", "tcp://127.0.0.1:99999"], USAGE, ("port from 0 to 65535",)),
         (["no-such-command"], USAGE, ("invalid choice",)),
     ]
-    table += [(["dashboard", endpoint], USAGE, ("expected tcp://HOST:PORT",)) for endpoint in NO_SCHEME]
-    table += [(["dashboard", endpoint], USAGE, ("port from 1 to 65535",)) for endpoint in BAD_PORTS]
-    return table
+    rows += [(["dashboard", endpoint], USAGE, ("expected tcp://HOST:PORT",)) for endpoint in NO_SCHEME]
+    rows += [(["dashboard", endpoint], USAGE, ("port from 1 to 65535",)) for endpoint in BAD_PORTS]
+    return rows
 
 
-def test_the_table_covers_every_command(tmp_path):
-    covered = {argv[0] for argv, _, _ in cases(tmp_path)}
+TABLE = table()
+
+
+def test_the_table_covers_every_command():
+    covered = {argv[0] for argv, _, _ in TABLE}
     assert commands() <= covered, commands() - covered
 
 
-def test_every_bad_input_of_every_command_is_one_line_with_its_code_and_leaves_nothing(tmp_path, capsys):
-    """The whole table, in this process: none of these reaches a service or starts anything."""
+@pytest.mark.parametrize(("argv", "code", "fragments"), TABLE, ids=[" ".join(argv) for argv, _, _ in TABLE])
+def test_a_bad_input_is_one_line_with_its_code_and_leaves_nothing(argv, code, fragments, tmp_path, capsys):
+    """In this process: none of these reaches a service or starts anything."""
+    (tmp_path / "notakey.key").write_text("this is not a key file\n")
+    argv = [a.replace(TMP, str(tmp_path)) for a in argv]
+    fragments = [f.replace(TMP, str(tmp_path)) for f in fragments]
     name = f"errs{os.getpid()}"
-    for argv, code, fragments in cases(tmp_path):
-        before = files_under(tmp_path)
-        if argv[0] == "run":
-            argv = [*argv, "--name", name, "--http", "off"]
-        try:
-            got, out, err = run_fxis(capsys, argv)
-        except SystemExit as exc:  # argparse's usage errors end in SystemExit(2)
-            got, (out, err) = exc.code, capsys.readouterr()
-        assert got == code, (argv, got, err)
-        if argv[0] in commands():
-            assert_one_line(err, argv[0], *fragments)
-        else:  # no command: the line is the parser's own
-            assert err.startswith("fxis: ") and len(err.strip().splitlines()) == 1, err
-        assert out == "", (argv, out)
-        assert files_under(tmp_path) == before, argv  # no --out, no partial, no probe left
-        assert naming.leftovers(name) == []
+    if argv[0] == "run":
+        argv = [*argv, "--name", name, "--http", "off"]
+    before = files_under(tmp_path)
+    try:
+        got, out, err = run_fxis(capsys, argv)
+    except SystemExit as exc:  # argparse's usage errors end in SystemExit(2)
+        got, (out, err) = exc.code, capsys.readouterr()
+    assert got == code, err
+    if argv[0] in commands():
+        assert_one_line(err, argv[0], *fragments)
+    else:  # no command: the line is the parser's own
+        assert err.startswith("fxis: ") and len(err.strip().splitlines()) == 1, err
+    assert out == ""
+    assert files_under(tmp_path) == before  # no --out, no partial, no probe left
+    assert naming.leftovers(name) == []
 
 
 def test_an_existing_folder_that_is_not_empty_is_code_2_for_every_command_that_writes_one(tmp_path, capsys):
