@@ -9,12 +9,14 @@ from fxis_shm.client.multiclient import MultiClient
 from fxis_shm.client.pubsub import EventPublisher, Message, Subscriber, handshake
 from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.errors import (
+    BadEndpoint,
     CameraDown,
     ConfigError,
     FrameTimeout,
     FxisError,
     InvalidArgument,
     LocalPathUnavailable,
+    Overrun,
     Overwritten,
     ProtocolError,
     RequestTimeout,
@@ -52,8 +54,10 @@ __all__ = [
     "RingError",
     "Overwritten",
     "InvalidArgument",
+    "BadEndpoint",
+    "Overrun",
 ]
 __version__ = "0.1.0"
 
 _sourcetree.install(__path__[0])  # fxis_shm.workers from a source checkout, too
-compiled = _compiled.check()  # the hot path runs compiled (False: the slow path, or FXIS_PURE_PYTHON=1)
+compiled = _compiled.check()  # the hot path runs compiled (False: the slow path; said where it runs)

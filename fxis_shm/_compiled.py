@@ -6,8 +6,8 @@ each .py into an extension module beside it, setup.py), the ring reader's seqloc
 (``fxis_shm.shm._fastpick``, C, with its decision's C twin; fxis_shm.shm.fastpick). Python
 imports an extension module before the .py of the same name, so the compiled code is chosen at
 import when it is there; the .py files stay the one source of the engine. Without a C compiler
-at install time nothing is compiled, and everything runs as Python, the slow path (a warning
-says so once, at import); FXIS_PURE_PYTHON=1 turns the C readers off too.
+at install time nothing is compiled, and everything runs as Python, the slow path (``fxis run``
+says so, and a client on the service's host, once); FXIS_PURE_PYTHON=1 turns the C readers off too.
 
 FXIS_PURE_PYTHON=1 in the environment forces the Python of every module here (the
 finder below puts each .py before its extension module), for tests and measurements. The
@@ -99,17 +99,35 @@ def status() -> dict[str, bool]:
 
 
 def check() -> bool:
-    """True if the whole hot path runs compiled; else says, once, that it runs the slow path."""
+    """True if the whole hot path runs compiled."""
+    return all(status().values())
+
+
+def slow_path_line() -> str:
+    """What running the slow path means and how to leave it, said by ``fxis run`` and once by a
+    client on the service's host (``warn_slow_path``): where the hot path runs, not everywhere."""
     state = status()
-    compiled = all(state.values())
-    if not compiled and not PURE:
-        logging.getLogger("fxis_shm").warning(
-            "fxis-shm runs its hot path as Python, the slow path (not compiled: %s%s): reinstall with a C "
-            "compiler present (pip install -e . builds it)",
-            ", ".join(name for name, done in state.items() if not done),
-            f"; {_why_source}" if _why_source else "",
-        )
-    return compiled
+    return (
+        f"fxis-shm runs its hot path as Python, the slow path (not compiled: "
+        f"{', '.join(name for name, done in state.items() if not done)}{f'; {_why_source}' if _why_source else ''}): "
+        "reinstall with a C compiler present (pip install -e . builds it)"
+    )
+
+
+def slow_unasked() -> bool:
+    """True if the hot path runs as Python though FXIS_PURE_PYTHON=1 did not ask for it."""
+    return not PURE and not check()
+
+
+_warned = False
+
+
+def warn_slow_path() -> None:
+    """Logs ``slow_path_line`` once per process on the slow path not asked for."""
+    global _warned
+    if not _warned and slow_unasked():
+        _warned = True
+        logging.getLogger("fxis_shm").warning("%s", slow_path_line())
 
 
 install()  # on import, before any module it names is imported (fxis_shm/__init__.py imports it first)

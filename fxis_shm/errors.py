@@ -22,6 +22,7 @@ class Code:
     OUT_OF_RANGE = "OUT_OF_RANGE"  # t* too far in the future, or history not held
     TOO_LARGE = "TOO_LARGE"  # a configured limit was exceeded
     BUSY = "BUSY"  # too many pending requests
+    OVERRUN = "OVERRUN"  # the ring came round during every copy attempt: a ring too small, a reader too slow
     INTERNAL = "INTERNAL"
 
     ALL = frozenset(v for k, v in vars().items() if k.isupper() and isinstance(v, str))
@@ -63,6 +64,11 @@ class SpecError(FxisError):
 
 class InvalidArgument(FxisError, ValueError):
     """A function was called with a value it cannot take; the message says which."""
+
+
+class BadEndpoint(ConfigError, InvalidArgument):
+    """An endpoint that is not ``tcp://HOST:PORT`` or ``ipc://PATH``, or whose host is not
+    known here; the message names it and the form."""
 
 
 class ServiceNotStarted(FxisError, RuntimeError):
@@ -120,11 +126,17 @@ class FrameTimeout(ServiceError, TimeoutError):
     pass
 
 
+class Overrun(ServiceError, Overwritten):
+    """The service's ring came round while the frames were copied, at every attempt (code
+    OVERRUN): the ring holds too little history for the request, or the reader is too slow."""
+
+
 _BY_CODE = {
     Code.CAMERA_DOWN: CameraDown,
     Code.UNKNOWN_CAMERA: UnknownCamera,
     Code.SKEW_EXCEEDED: SkewExceeded,
     Code.TIMEOUT: FrameTimeout,
+    Code.OVERRUN: Overrun,
 }
 
 

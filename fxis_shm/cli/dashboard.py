@@ -10,13 +10,14 @@ import signal
 import sys
 import threading
 
-from fxis_shm.cli.options import add_key_options, client_keys_for
+from fxis_shm.cli.options import add_key_options, client_keys_for, positive_seconds
 from fxis_shm.errors import ConfigError
 from fxis_shm.service.config import ViewerAccess, check_viewer_files, http_address, viewer_token
 from fxis_shm.service.stopsignals import stop_on
 from fxis_shm.service.supervisor import link_host
 from fxis_shm.viewers.dashboard import serve
 from fxis_shm.viewers.livefeed import LiveFeed
+from fxis_shm.wire.endpoints import check_endpoint, check_host_known
 from fxis_shm.wire.security import is_loopback
 
 DEFAULT_HTTP = "127.0.0.1:8080"
@@ -35,6 +36,8 @@ def access_for(args) -> ViewerAccess:
 def dashboard_command(args) -> int:
     if len(set(args.endpoints)) != len(args.endpoints):
         raise ConfigError(f"an endpoint is given twice: {args.endpoints}")
+    for endpoint in args.endpoints:  # a mistyped one: a line now, not a service that never answers
+        check_host_known(check_endpoint(endpoint, "ENDPOINT"), "ENDPOINT")
     access = access_for(args)
     host, port = http_address(args.http)
     feed = LiveFeed(list(args.endpoints), keys=client_keys_for(args), timeout=args.timeout)
@@ -72,7 +75,9 @@ def add_parser(sub) -> None:
     p.add_argument(
         "--http", default=DEFAULT_HTTP, metavar="ADDR", help=f"where to serve the page (default {DEFAULT_HTTP})"
     )
-    p.add_argument("--timeout", type=float, default=1.5, help="seconds a service may take to answer (default 1.5)")
+    p.add_argument(
+        "--timeout", type=positive_seconds, default=1.5, help="seconds a service may take to answer (default 1.5)"
+    )
     add_key_options(p)
     p.add_argument("--viewer-token-file", metavar="FILE", help="the token the page requires (default: a new one)")
     p.add_argument("--viewer-tls-cert", metavar="FILE", help="serve https with this certificate (PEM)")

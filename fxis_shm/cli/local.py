@@ -6,14 +6,20 @@ import json
 import subprocess
 import sys
 
+from fxis_shm.cli.options import positive_seconds
+from fxis_shm.errors import ConfigError, FxisError
 from fxis_shm.shm import naming
 from fxis_shm.wire import defaults
+
+
+class LookFailed(FxisError):
+    """The backends' look for cameras failed or took too long (exit code 4)."""
 
 
 def keys_command(args) -> int:
     from fxis_shm.wire.security import create_keys
 
-    public, secret = create_keys(args.out, args.name)
+    public, secret = create_keys(args.out, args.name, force=args.force)
     print(f"wrote {public} (public: give it to the other side) and {secret} (secret: keep it)")
     return 0
 
@@ -30,16 +36,12 @@ def cameras_command(args) -> int:
             timeout=args.timeout,
         )
     except subprocess.TimeoutExpired:
-        print(
-            f"fxis cameras: the backends did not finish looking within {args.timeout:g} s (--timeout)", file=sys.stderr
-        )
-        return 1
+        raise LookFailed(
+            f"the backends did not finish looking within {args.timeout:g} s (give a longer --timeout)"
+        ) from None
     if child.returncode != 0:
-        print(
-            f"fxis cameras: looking for cameras failed (exit code {child.returncode}):\n{child.stderr.strip()}",
-            file=sys.stderr,
-        )
-        return 1
+        last = (child.stderr.strip().splitlines() or ["no message"])[-1]
+        raise LookFailed(f"looking for cameras failed (exit code {child.returncode}): {last}")
     listing = json.loads(child.stdout)
     found, unavailable = listing["cameras"], listing["unavailable"]
     if args.json:
@@ -62,9 +64,12 @@ def cameras_command(args) -> int:
 def clean_command(args) -> int:
     from fxis_shm.service.supervisor import service_running
 
+    try:
+        naming.check_name("service", args.name)
+    except ValueError as exc:
+        raise ConfigError(f"--name: {exc}") from None
     if service_running(args.name):
-        print(f"fxis clean: service {args.name!r} is running; stop it first", file=sys.stderr)
-        return 1
+        raise ConfigError(f"service {args.name!r} is running: stop it first (its shared memory is in use)")
     removed = naming.remove_leftovers(args.name)
     for path in removed:
         print(f"removed {path}")
@@ -77,12 +82,15 @@ def add_parsers(sub) -> None:
     keys = sub.add_parser("keys", help="make a CurveZMQ key pair (for a service or a client)")
     keys.add_argument("--out", required=True, metavar="DIR", help="folder to write NAME.key and NAME.key_secret into")
     keys.add_argument("--name", default=defaults.SERVICE, help=f"file name of the pair (default {defaults.SERVICE})")
+    keys.add_argument(
+        "--force", action="store_true", help="replace a pair of that name already there (its holders are locked out)"
+    )
     keys.set_defaults(func=keys_command)
 
     cameras = sub.add_parser("cameras", help="list the cameras the installed backends can reach")
     cameras.add_argument("--json", action="store_true", help="print the list as JSON")
     cameras.add_argument(
-        "--timeout", type=float, default=30.0, help="seconds the backends may take to look (default 30)"
+        "--timeout", type=positive_seconds, default=30.0, help="seconds the backends may take to look (default 30)"
     )
     cameras.set_defaults(func=cameras_command)
 

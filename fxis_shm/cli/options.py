@@ -9,6 +9,8 @@ CurveZMQ keys of a service that requires them, from flags, the environment or a 
 
 from __future__ import annotations
 
+import argparse
+import math
 import os
 
 from fxis_shm.cli import exitcodes
@@ -16,15 +18,42 @@ from fxis_shm.client.client import Client
 from fxis_shm.errors import ConfigError
 from fxis_shm.service.config import load_toml
 from fxis_shm.wire import defaults
+from fxis_shm.wire.endpoints import check_endpoint, check_host_known
 from fxis_shm.wire.security import ClientKeys
 
 EXIT_USAGE = exitcodes.USAGE
 ENV_SERVER_KEY, ENV_CLIENT_KEY = "FXIS_SERVER_KEY", "FXIS_CLIENT_KEY"
 
 
+def _number(text: str, kind: type, lowest: float, words: str, *, above: bool = False) -> float:
+    """``text`` as ``kind`` if finite and >= ``lowest`` (> with ``above``); else argparse's
+    ArgumentTypeError, which makes it a usage error (exit code 2) naming the flag."""
+    try:
+        value = kind(text)
+    except ValueError:
+        value = None
+    if value is None or not math.isfinite(value) or value < lowest or (above and value == lowest):
+        raise argparse.ArgumentTypeError(f"must be {words}, got {text!r}")
+    return value
+
+
+def seconds(text: str) -> float:
+    """A flag's seconds, finite and >= 0 (argparse's ``type``)."""
+    return _number(text, float, 0, "seconds >= 0")
+
+
+def positive_seconds(text: str) -> float:
+    return _number(text, float, 0, "seconds > 0", above=True)
+
+
+def nanoseconds(text: str) -> int:
+    """A time in ns of a clock such as CLOCK_MONOTONIC (its count since boot), >= 0."""
+    return int(_number(text, int, 0, "a whole number of ns >= 0"))
+
+
 def add_client_options(sp) -> None:
     sp.add_argument("--endpoint", help=f"service endpoint (default: the config file's, else {defaults.ENDPOINT})")
-    sp.add_argument("--timeout", type=float, default=3.0, help="seconds to wait for the reply (default 3)")
+    sp.add_argument("--timeout", type=positive_seconds, default=3.0, help="seconds to wait for the reply (default 3)")
     add_key_options(sp)
 
 
@@ -45,6 +74,8 @@ def client_for(args) -> Client:
     """A client as the command's options, the environment and the config file say."""
     file_values = load_toml(args.config) if args.config else {}
     endpoint = args.endpoint or file_values.get("endpoint") or defaults.ENDPOINT
+    setting = "--endpoint" if args.endpoint else f"--config {args.config}: endpoint" if args.config else "endpoint"
+    check_host_known(check_endpoint(endpoint, setting), setting)  # a mistyped one: a line now, not a time-out
     return Client(endpoint, timeout=args.timeout, keys=client_keys_for(args, file_values))
 
 

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
+import contextlib
 import json
 import os
-import sys
 
-from fxis_shm.cli.options import add_client_options, client_for
+from fxis_shm.cli.options import add_client_options, client_for, nanoseconds
 
 
 def status_command(args) -> int:
@@ -84,23 +84,39 @@ def _ros2_line(ros2: dict) -> str:
 
 
 def grab_command(args) -> int:
+    from fxis_shm.formats.outfolder import check_out_folder
     from fxis_shm.formats.tuplefiles import tuple_files
 
+    check_out_folder(args.out, "--out")
     cameras = args.cameras.split(",") if args.cameras else None
     with client_for(args) as client:
         frames = client.tuple(cameras=cameras, at=args.at)
-    files = tuple_files(frames)
-    os.makedirs(args.out, exist_ok=True)
-    for name, data in files.items():
-        path = os.path.join(args.out, name)
-        try:
-            with open(path, "wb") as f:
-                f.write(data)
-        except OSError as exc:
-            print(f"fxis grab: could not write {path}: {exc.strerror}", file=sys.stderr)
-            return 1
+    write_files(args.out, tuple_files(frames))
     print(f"saved {len(frames)} image(s) and tuple.json to {args.out} (skew {frames.skew_ns / 1e6:.3f} ms)")
     return 0
+
+
+def write_files(folder: str, files: dict[str, bytes]) -> None:
+    """``files`` into ``folder``, all or none: a write that fails (a full disk) removes what
+    this call wrote, the folder too if it made it, and raises the OSError."""
+    made = not os.path.isdir(folder)
+    written: list[str] = []
+    path = folder
+    try:
+        os.makedirs(folder, exist_ok=True)
+        for name, data in files.items():
+            path = os.path.join(folder, name)
+            written.append(path)
+            with open(path, "wb") as f:
+                f.write(data)
+    except OSError as exc:
+        for done in written:
+            with contextlib.suppress(OSError):
+                os.remove(done)
+        if made:
+            with contextlib.suppress(OSError):
+                os.rmdir(folder)
+        raise OSError(exc.errno, f"{exc.strerror} (nothing was saved)", exc.filename or path) from None
 
 
 def add_parsers(sub) -> None:
@@ -114,6 +130,8 @@ def add_parsers(sub) -> None:
     grab.add_argument("--out", required=True, metavar="DIR", help="folder to write into")
     grab.add_argument("--cameras", help="comma-separated cameras (default all)")
     grab.add_argument(
-        "--at", type=int, help="t* in ns of this host's CLOCK_MONOTONIC, mapped to the service's clock (default now)"
+        "--at",
+        type=nanoseconds,
+        help="t* in ns of this host's CLOCK_MONOTONIC, mapped to the service's clock (default now)",
     )
     grab.set_defaults(func=grab_command)

@@ -6,6 +6,7 @@ import sys
 
 from fxis_shm.cli.options import EXIT_USAGE, add_client_options, client_for
 from fxis_shm.errors import ConfigError
+from fxis_shm.formats.outfolder import check_out_folder
 
 
 def record_command(args) -> int:
@@ -34,6 +35,7 @@ def record_command(args) -> int:
     cameras = [c.strip() for c in args.cameras.split(",") if c.strip()] if args.cameras else None
     if args.cameras is not None and not cameras:
         return usage("--cameras names no camera")
+    check_out_folder(args.out, "--out")  # before a service is asked (issue 33)
     settings = RecordSettings(
         out=args.out,
         endpoint=args.endpoint,
@@ -90,7 +92,7 @@ def add_parser(sub) -> None:
         "(sensor_msgs/msg/Image) or /NAME/image_raw/compressed (JPEG), stamps in the "
         "service's clock (CLOCK_MONOTONIC unless fxis run --clock says otherwise). "
         "Ctrl-C ends the recording with a valid bag; so does a full disk, with a one-line "
-        "error saying what the bag kept and exit code 1. "
+        "error saying what the bag kept and exit code 4. "
         "Replay it with a camera of kind bag (docs/recording.md).",
     )
     add_client_options(record)

@@ -7,7 +7,8 @@ import logging
 import sys
 import textwrap
 
-from fxis_shm.cli.options import EXIT_USAGE
+from fxis_shm import _compiled
+from fxis_shm.cli import exitcodes
 from fxis_shm.errors import ConfigError
 from fxis_shm.service.camerakinds import COMMON_OPTIONS, KINDS
 from fxis_shm.service.config import DEFAULT_FOXGLOVE_RATE_HZ, MAX_FOXGLOVE_RATE_HZ, build_config, load_toml
@@ -17,58 +18,53 @@ from fxis_shm.wire import defaults
 def run_command(args) -> int:
     from fxis_shm.service.addresses import check_free
     from fxis_shm.service.memory import check_room
-    from fxis_shm.service.supervisor import StartError, Supervisor, service_running
+    from fxis_shm.service.supervisor import Supervisor, service_running
 
-    try:
-        file_values = load_toml(args.config) if args.config else {}
-        config = build_config(
-            file_values,
-            {
-                "name": args.name,
-                "endpoint": args.endpoint,
-                "pub": args.pub,
-                "events": args.events,
-                "slots": args.slots,
-                "cameras": args.camera,
-                "restart_limit": args.restart_limit,
-                "log_level": args.log_level,
-                "curve_secret": args.curve_secret,
-                "curve_clients": args.curve_clients,
-                "insecure_bind": args.insecure_bind or None,
-                "clock": args.clock,
-                "http": args.http,
-                "foxglove": args.foxglove,
-                "foxglove_rate": args.foxglove_rate,
-                "viewer_token_file": args.viewer_token_file,
-                "viewer_tls_cert": args.viewer_tls_cert,
-                "viewer_tls_key": args.viewer_tls_key,
-                "ros2": args.ros2 or None,
-                "ros2_domain": args.ros2_domain,
-                "ros2_namespace": args.ros2_namespace,
-                "ros2_tuples": args.ros2_tuples,
-                "ros2_snapshots": args.ros2_snapshots,
-                "ros2_via": args.ros2_via,
-                "ros2_python": args.ros2_python,
-                "port_base": args.port_base,
-                "history": args.history,
-            },
-        )
-        if service_running(config.name):  # its ports are in use too: say the more useful thing
-            print(f"fxis run: service {config.name!r} is already running (give --name another)", file=sys.stderr)
-            return 1
-        config, warnings = check_free(config)  # before anything starts: a port in use is one line
-        check_room(config)  # and rings /dev/shm cannot hold
-    except ConfigError as exc:
-        print(f"fxis run: {exc}", file=sys.stderr)
-        return EXIT_USAGE
+    # every error below is one line and code 2 (fxis_shm.cli.main), before anything starts
+    file_values = load_toml(args.config) if args.config else {}
+    config = build_config(
+        file_values,
+        {
+            "name": args.name,
+            "endpoint": args.endpoint,
+            "pub": args.pub,
+            "events": args.events,
+            "slots": args.slots,
+            "cameras": args.camera,
+            "restart_limit": args.restart_limit,
+            "log_level": args.log_level,
+            "curve_secret": args.curve_secret,
+            "curve_clients": args.curve_clients,
+            "insecure_bind": args.insecure_bind or None,
+            "clock": args.clock,
+            "http": args.http,
+            "foxglove": args.foxglove,
+            "foxglove_rate": args.foxglove_rate,
+            "viewer_token_file": args.viewer_token_file,
+            "viewer_tls_cert": args.viewer_tls_cert,
+            "viewer_tls_key": args.viewer_tls_key,
+            "ros2": args.ros2 or None,
+            "ros2_domain": args.ros2_domain,
+            "ros2_namespace": args.ros2_namespace,
+            "ros2_tuples": args.ros2_tuples,
+            "ros2_snapshots": args.ros2_snapshots,
+            "ros2_via": args.ros2_via,
+            "ros2_python": args.ros2_python,
+            "port_base": args.port_base,
+            "history": args.history,
+        },
+    )
+    if service_running(config.name):  # its ports are in use too: say the more useful thing
+        raise ConfigError(f"service {config.name!r} is already running (give --name another)")
+    config, warnings = check_free(config)  # before anything starts: a port in use is one line
+    check_room(config)  # and rings /dev/shm cannot hold
     for warning in warnings:
         print(f"fxis run: {warning}", file=sys.stderr)
+    if _compiled.slow_unasked():  # here, where the hot path runs: no other command says it
+        print(f"fxis run: {_compiled.slow_path_line()}", file=sys.stderr)
     logging.basicConfig(level=config.log_level, format="%(asctime)s supervisor %(levelname)s %(message)s")
-    try:
-        return Supervisor(config).run()
-    except (StartError, ConfigError) as exc:  # ConfigError: the viewers' token file went since it was checked
-        print(f"fxis run: {exc}", file=sys.stderr)
-        return 1
+    # a StartError is one line, after all was stopped and removed: code 2 if a camera refused its settings, else 4
+    return exitcodes.DONE if Supervisor(config).run() == 0 else exitcodes.FAILED
 
 
 def _kinds_help() -> str:

@@ -3,10 +3,12 @@
 
 from __future__ import annotations
 
-from fxis_shm.cli.options import add_client_options, client_for
+from fxis_shm.cli.options import add_client_options, client_for, nanoseconds, seconds
+from fxis_shm.formats.outfolder import check_out_folder
 
 
 def snapshot_command(args) -> int:
+    check_out_folder(args.out, "--out")  # before a service is asked (issue 33)
     cameras = [c.strip() for c in args.cameras.split(",") if c.strip()] if args.cameras else None
     with client_for(args) as client:
         result = client.snapshot(args.at, args.before, args.after, args.out, cameras, args.encoding)
@@ -36,9 +38,11 @@ def add_parser(sub) -> None:
     )
     add_client_options(snapshot)
     snapshot.add_argument("--out", required=True, metavar="DIR", help="the bag folder to create (new, or empty)")
-    snapshot.add_argument("--before", type=float, default=2.0, metavar="S", help="seconds before t (default 2)")
-    snapshot.add_argument("--after", type=float, default=1.0, metavar="S", help="seconds after t (default 1)")
-    snapshot.add_argument("--at", type=int, metavar="NS", help="t in ns of this host's CLOCK_MONOTONIC (default now)")
+    snapshot.add_argument("--before", type=seconds, default=2.0, metavar="S", help="seconds before t (default 2)")
+    snapshot.add_argument("--after", type=seconds, default=1.0, metavar="S", help="seconds after t (default 1)")
+    snapshot.add_argument(
+        "--at", type=nanoseconds, metavar="NS", help="t in ns of this host's CLOCK_MONOTONIC (default now)"
+    )
     snapshot.add_argument("--cameras", metavar="A,B", help="comma-separated cameras (default all)")
     snapshot.add_argument("--encoding", choices=("raw", "jpeg"), default="raw", help="raw Image or JPEG (default raw)")
     snapshot.set_defaults(func=snapshot_command)

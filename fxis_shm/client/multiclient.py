@@ -20,6 +20,7 @@ from fxis_shm.client.single import SingleClient
 from fxis_shm.client.sockets import wire_timeout_ms
 from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.errors import ConfigError, FxisError, InvalidArgument, RequestTimeout
+from fxis_shm.wire.endpoints import check_endpoint
 
 
 class MultiClient:
@@ -38,6 +39,8 @@ class MultiClient:
     ):
         if not endpoints:
             raise ConfigError("a client over several services needs at least one endpoint")
+        for endpoint in endpoints:  # all checked before any socket is made
+            check_endpoint(endpoint)
         self.endpoints = list(endpoints)
         self.timeout = timeout
         self._options = {"timeout": timeout, "clock": clock, **client_options}

@@ -32,6 +32,7 @@ from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.errors import InvalidArgument, ProtocolError, RequestTimeout, service_error
 from fxis_shm.wire import defaults, protocol
 from fxis_shm.wire.encoding import JPEG, RAW
+from fxis_shm.wire.endpoints import check_endpoint
 from fxis_shm.wire.protocol import StreamTopic
 from fxis_shm.wire.security import ClientKeys
 
@@ -163,7 +164,7 @@ class Subscriber(Receiver, SocketOwner):
         service: str | None = None,
         estimate: Estimate | None = None,
     ):
-        self.endpoint = endpoint
+        self.endpoint = check_endpoint(endpoint)
         self.timeout = timeout
         self._clock = CallerClock(clock, service, keys, estimate)
         self._sock = (context or zmq.Context.instance()).socket(zmq.SUB)

@@ -9,6 +9,7 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 
+from fxis_shm import _compiled
 from fxis_shm.client.fastreads import FastReads
 from fxis_shm.client.frames import LOCAL, NETWORK
 from fxis_shm.client.localreads import LocalReads
@@ -98,6 +99,7 @@ class RequestPaths:
         try:
             self._reads = LocalReads(self.status(), self._boot_id)
             self._reads_off = None
+            _compiled.warn_slow_path()  # the request engine runs here too, not only in the service
         except LocalUnavailable as exc:
             self._reads_off = (str(exc), time.monotonic())
         self._fast = self._fast_reads()

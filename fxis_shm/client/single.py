@@ -19,6 +19,7 @@ reads the same clock.
 from __future__ import annotations
 
 import itertools
+import math
 import time
 from collections.abc import Callable
 
@@ -48,6 +49,7 @@ from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.errors import InvalidArgument, RequestTimeout, service_error
 from fxis_shm.shm.localpath import LocalRings, boot_id
 from fxis_shm.wire import defaults, encoding as codec, protocol
+from fxis_shm.wire.endpoints import check_endpoint, unknown_host
 from fxis_shm.wire.security import ClientKeys
 
 DEFAULT_ENDPOINT = defaults.ENDPOINT
@@ -92,7 +94,9 @@ class SingleClient(RequestPaths, SocketOwner):
             raise InvalidArgument(f"local must be one of {LOCAL_MODES}, got {local!r}")
         if not (callable(clock) or clock is None or isinstance(clock, str)):
             raise InvalidArgument(f"clock must be a clock's name or a function returning int ns, got {clock!r}")
-        self.endpoint = endpoint
+        self.endpoint = check_endpoint(endpoint)
+        if isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not 0 < timeout < math.inf:
+            raise InvalidArgument(f"timeout must be seconds > 0, got {timeout!r}")
         self.timeout = timeout
         self.local = local
         self.encoding, self.quality = checked_encoding(encoding, quality)
@@ -396,6 +400,7 @@ class SingleClient(RequestPaths, SocketOwner):
             if frames is None:
                 raise RequestTimeout(
                     self._handshake.problem(self.endpoint, self._keys is not None)
+                    or unknown_host(self.endpoint)
                     or f"no reply to {op!r} from {self.endpoint} within {self.timeout + extra_wait:.3g} s "
                     "(is the service running?)"
                 )
@@ -410,7 +415,7 @@ class SingleClient(RequestPaths, SocketOwner):
             return header, images
 
     def _unsendable(self, op: str) -> str:
-        return (
+        return unknown_host(self.endpoint) or (
             f"could not send {op!r} to {self.endpoint} within "
             f"{self.timeout:.3g} s (is the service running, and are our keys accepted?)"
         )

@@ -31,6 +31,7 @@ from typing import Any
 from fxis_shm.errors import CameraDown, DiskFull, InvalidArgument, Overwritten, ServiceError
 from fxis_shm.formats import rosmsgs
 from fxis_shm.formats.bagfile import BagWriter
+from fxis_shm.formats.outfolder import check_out_folder
 from fxis_shm.wire import encoding as codec
 
 ID, T_CAPTURE, GENERATION = 0, 1, 4  # columns of a ``frames`` row
@@ -140,8 +141,7 @@ def _check(at, before, after, out, encoding) -> None:
         raise InvalidArgument(f"at must be int ns of the caller's clock, got {at!r}")
     if encoding not in (codec.RAW, codec.JPEG):
         raise InvalidArgument(f"encoding must be raw or jpeg, got {encoding!r}")
-    if os.path.exists(out) and (not os.path.isdir(out) or os.listdir(out)):
-        raise InvalidArgument(f"out {out}: exists and is not an empty folder")
+    check_out_folder(out)
 
 
 def _poll_s(cameras: dict[str, _Camera]) -> float:

@@ -13,6 +13,7 @@ import zmq
 
 from fxis_shm.errors import InvalidArgument, ProtocolError
 from fxis_shm.wire import encoding as codec
+from fxis_shm.wire.endpoints import check_endpoint
 from fxis_shm.wire.security import ClientKeys
 
 
@@ -61,7 +62,9 @@ def connected_socket(
     keys: ClientKeys | None = None,
     before_connect: Callable[[zmq.Socket], object] | None = None,
 ) -> zmq.Socket:
-    """A client socket: LINGER 0 (closing never blocks), CURVE if keys are given."""
+    """A client socket: LINGER 0 (closing never blocks), CURVE if keys are given; BadEndpoint
+    for an endpoint ZeroMQ would refuse only as "Invalid argument", or never."""
+    check_endpoint(endpoint)
     sock = (context or zmq.Context.instance()).socket(kind)
     sock.setsockopt(zmq.LINGER, 0)
     if keys is not None:

@@ -45,6 +45,10 @@ REQUEST_DEFAULTS: dict[str, Any] = {
 }
 LIVENESS_CHECK_NS = 100_000_000  # waiting requests notice a dead camera this fast
 COPY_ATTEMPTS = 3  # plans made again after a chosen slot was overwritten during the copy
+OVERRUN_MESSAGE = (
+    f"frames were overwritten {COPY_ATTEMPTS} times while being copied: the ring came round faster than "
+    "this reader copies (give the camera more slots or a longer --history, or ask for newer frames)"
+)
 FRAME_OPS = ("image", "tuple", "latest", "sequence")
 
 
@@ -162,7 +166,7 @@ class RequestEngine:
         """A chosen slot was overwritten while ``reply`` was being copied: plan again."""
         p = reply.pending
         if p.attempts >= COPY_ATTEMPTS:
-            return [Failure(p, Code.INTERNAL, f"frames were overwritten {COPY_ATTEMPTS} times while being copied")]
+            return [Failure(p, Code.OVERRUN, OVERRUN_MESSAGE)]
         actions: list[Action] = []
         if not self._evaluate(p, now, actions):
             self.pending.append(p)

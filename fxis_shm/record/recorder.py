@@ -10,6 +10,7 @@ Message layout, clock and topics: docs/recording.md.
 
 from __future__ import annotations
 
+import errno
 import math
 import os
 import shutil
@@ -31,6 +32,11 @@ from fxis_shm.wire import encoding as codec
 
 _MAX_TUPLES_PER_REQUEST = 16  # bounds a reply's size (and the service's sequence limit)
 _POLL_MIN_S, _POLL_MAX_S = 0.005, 0.1
+_MIN_SECONDS = 3  # a disk that cannot hold this much of a raw recording refuses it at start
+
+
+def _size(n: float) -> str:
+    return f"{n / 1e9:.1f} GB" if n >= 1e9 else f"{n / 1e6:.1f} MB"
 
 
 @dataclass
@@ -74,6 +80,7 @@ class Recorder:
             self.steps = Steps(self.t_start, rate)
         else:
             self.followers = {c: Follower(self.t_start, settings.rate_hz) for c in self.cameras}
+        self._check_room(status["cameras"])
         self.bag = BagWriter(settings.out, self._custom_data())
         self.poll_s = min(_POLL_MAX_S, max(_POLL_MIN_S, min((p for p in periods.values() if p), default=1e8) / 2e9))
 
@@ -141,21 +148,44 @@ class Recorder:
             **{k: getattr(exc, k) for k in ("folder", "reason", "kept", "seconds", "file_bytes", "valid")},
         )
 
-    def _data_rate_line(self) -> str:
-        """What the recording will write a second, and how long the disk lasts at that rate
-        (a raw recording of two 1360x1024 cameras at 20 fps writes 56 MB/s)."""
-        status = self.client.status()["cameras"]
+    def _pixel_rate(self, status: dict) -> float:
+        """Bytes of pixels a second the recording takes (a raw recording of two 1360x1024
+        cameras at 20 fps writes 56 MB/s)."""
         rate = 0.0
         for cam in self.cameras:
             info = status[cam]
             frame_bytes = math.prod(info.get("shape") or [0]) * np.dtype(info.get("dtype") or "uint8").itemsize
             fps = self.s.rate_hz or info.get("fps") or 0.0
             rate += frame_bytes * min(fps, info.get("fps") or fps)
-        free = shutil.disk_usage(os.path.dirname(os.path.abspath(self.s.out))).free
+        return rate
+
+    def _free(self) -> int:
+        return shutil.disk_usage(os.path.dirname(os.path.abspath(self.s.out))).free
+
+    def _check_room(self, status: dict) -> None:
+        """DiskFull, before the bag is made, if its disk cannot hold even a few seconds of a raw
+        recording (issue 33: it would start, and stop with nothing), as a snapshot's bag says
+        when there is no room to start it."""
+        rate, free = self._pixel_rate(status), self._free()
+        if self.s.encoding == codec.RAW and rate and free < _MIN_SECONDS * rate:
+            raise DiskFull(
+                f"--out {self.s.out}: {_size(free)} free there holds {free / rate:.1f} s of this recording "
+                f"({_size(rate)}/s raw): nothing was recorded; free some room, record elsewhere, or record "
+                "less (--cameras, --rate, --encoding jpeg)",
+                folder=self.s.out,
+                reason=os.strerror(errno.ENOSPC),
+            )
+
+    def _data_rate_line(self) -> str:
+        """What the recording will write a second, and how long the disk lasts at that rate."""
+        rate, free = self._pixel_rate(self.client.status()["cameras"]), self._free()
         if self.s.encoding != codec.RAW:
-            return f"about {rate / 1e6:.0f} MB/s of pixels before JPEG; {free / 1e9:.1f} GB free"
-        lasts = f"full in about {free / rate / 60:.0f} min" if rate else "no frame rate known yet"
-        return f"writing about {rate / 1e6:.0f} MB/s (raw); {free / 1e9:.1f} GB free there: {lasts}"
+            return f"about {rate / 1e6:.0f} MB/s of pixels before JPEG; {_size(free)} free"
+        seconds = free / rate if rate else 0.0
+        lasts = f"full in about {seconds / 60:.0f} min" if seconds >= 120 else f"full in about {seconds:.0f} s"
+        return f"writing about {rate / 1e6:.0f} MB/s (raw); {_size(free)} free there: " + (
+            lasts if rate else "no frame rate known yet"
+        )
 
     def _ask_to_stop(self, signum, frame) -> None:
         self._stopping = True

@@ -13,8 +13,9 @@ import socket
 from dataclasses import replace
 
 from fxis_shm.errors import ConfigError
-from fxis_shm.service.config import HTTP_OFF, ServiceConfig, http_address, tcp_host_port
+from fxis_shm.service.config import HTTP_OFF, ServiceConfig, http_address
 from fxis_shm.wire import defaults
+from fxis_shm.wire.endpoints import tcp_host_port
 
 OPTIONS = {
     "endpoint": "--endpoint",

@@ -133,8 +133,8 @@ class ViewerSpec(ChildSpec):
     curve_secret: str | None = None  # the service's pair, to connect with under CurveZMQ
 
     def client_keys(self) -> ClientKeys | None:
-        """Under CurveZMQ the child connects with the service's own pair (its public key is
-        among the clients' keys); None without CurveZMQ."""
+        """Under CurveZMQ the child connects with the service's own pair (the coordinator lets
+        it in, coordinator.AllowedKeys); None without CurveZMQ."""
         if not self.curve_secret:
             return None
         public, secret = load_pair(self.curve_secret)

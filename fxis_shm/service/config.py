@@ -21,6 +21,7 @@ from fxis_shm.service.options import split_key_values
 from fxis_shm.service.ros2config import KEYS as ROS2_KEYS, Ros2Settings, ros2_settings
 from fxis_shm.shm.naming import check_name
 from fxis_shm.wire import defaults
+from fxis_shm.wire.endpoints import check_endpoint
 
 if sys.version_info >= (3, 11):
     import tomllib
@@ -194,25 +195,6 @@ def parse_camera_flag(flag: str) -> CameraSpec:
     return _camera(name.strip(), kind.strip(), split_key_values(name, options))
 
 
-def _check_endpoint(setting: str, endpoint: Any) -> str:
-    if not isinstance(endpoint, str) or not endpoint.startswith(("tcp://", "ipc://")):
-        raise ConfigError(f"{setting} {endpoint!r}: expected tcp://HOST:PORT or ipc://PATH")
-    tcp_host_port(endpoint, setting)
-    return endpoint
-
-
-def tcp_host_port(endpoint: str, setting: str) -> tuple[str, int] | None:
-    """(host, port) of a ``tcp://HOST:PORT`` endpoint, None for ``ipc://``; ConfigError if the
-    port is missing or is not a number (ZeroMQ would only fail on it later, in the coordinator)."""
-    if endpoint.startswith("ipc://"):
-        return None
-    host, sep, port = endpoint[len("tcp://") :].rpartition(":")
-    host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
-    if not sep or not host or not port.isdigit() or not 0 <= int(port) <= 65535:
-        raise ConfigError(f"{setting} {endpoint!r}: expected tcp://HOST:PORT with a port from 0 to 65535")
-    return ("0.0.0.0" if host == "*" else host), int(port)
-
-
 def _with_port_base(config: ServiceConfig, base: Any, given: set[str]) -> ServiceConfig:
     """Ports from ``base`` (requests, streams, events, dashboard: base + 0..3) for every
     address not ``given`` explicitly, on loopback as the defaults are."""
@@ -349,11 +331,11 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
         except ValueError as exc:
             raise ConfigError(str(exc)) from None
     if "endpoint" in values:
-        config = replace(config, endpoint=_check_endpoint("endpoint", values["endpoint"]))
+        config = replace(config, endpoint=check_endpoint(values["endpoint"], "endpoint", bind=True))
     if "pub" in values:
-        config = replace(config, pub=_check_endpoint("pub", values["pub"]))
+        config = replace(config, pub=check_endpoint(values["pub"], "pub", bind=True))
     if "events" in values:
-        config = replace(config, events=_check_endpoint("events", values["events"]))
+        config = replace(config, events=check_endpoint(values["events"], "events", bind=True))
     if "http" in values:
         config = replace(config, http=_check_http(values["http"]), http_given=True)
     if "foxglove" in values:

@@ -18,6 +18,7 @@ import threading
 from collections.abc import Callable
 
 import zmq
+import zmq.auth
 from zmq.auth.thread import ThreadAuthenticator
 
 from fxis_shm.client.sockets import send_parts
@@ -95,6 +96,18 @@ def _readable_field(frame: bytes, name: str, kinds: tuple):
         return None
 
 
+class AllowedKeys:
+    """Who may connect under CurveZMQ: the clients whose public keys are in the folder, and the
+    service itself, whose viewers (dashboard, Foxglove server, ROS 2 bridge) connect with its
+    own pair (ViewerSpec.client_keys). Read once, at start."""
+
+    def __init__(self, pair: tuple[bytes, bytes], folder: str):
+        self.keys = set(zmq.auth.load_certificates(folder)) | {pair[0]}
+
+    def callback(self, domain: str, key: bytes) -> bool:
+        return key in self.keys
+
+
 class Coordinator:
     def __init__(self, spec: CoordinatorSpec):
         self.service = spec.service
@@ -132,7 +145,7 @@ class Coordinator:
             if self.curve is not None:  # only clients whose public keys are in the folder
                 auth = ThreadAuthenticator(ctx, log=logging.getLogger("auth"))
                 auth.start()
-                auth.configure_curve(domain="*", location=self.curve[1])
+                auth.configure_curve_callback(domain="*", credentials_provider=AllowedKeys(*self.curve))
                 closing.append(_Stopping(auth))
             self.router = self._socket(ctx, zmq.ROUTER, self.endpoint, "request endpoint", closing)
             self.router.setsockopt(zmq.ROUTER_MANDATORY, 1)  # report unsendable replies

@@ -37,8 +37,7 @@ def check_room(config: ServiceConfig) -> None:
         each = ", ".join(f"{name} {history.mib(b)}" for name, b in planned.items() if b)
         raise ConfigError(
             f"the rings need {history.mib(total)} ({each}) and {naming.SHM_DIR} has {history.mib(free)} free: "
-            f"ask for less history (--history, history=, --slots), or give {naming.SHM_DIR} more room "
-            f"(mount -o remount,size=4G {naming.SHM_DIR})"
+            f"ask for less history (--history, history=, --slots); {history.room_hint(total)}"
         )
 
 

@@ -22,6 +22,7 @@ import threading
 import time
 
 from fxis_shm.core import timebase
+from fxis_shm.errors import ConfigError, FxisError
 from fxis_shm.service.childspec import (
     CameraWorkerSpec,
     ChildSpec,
@@ -43,8 +44,13 @@ BACKOFF_FIRST_S, BACKOFF_MAX_S = 0.5, 10.0
 STABLE_AFTER_S = 30.0  # a child that ran this long has its backoff reset
 
 
-class StartError(Exception):
+class StartError(FxisError):
     """A child could not start; the message says which and why."""
+
+
+class StartRefused(StartError, ConfigError):
+    """A child said what it could not use of what it was given (a setting the camera refuses, a
+    file or device that is not there, a hook that does not load): a setting to change."""
 
 
 def lock_path(service: str) -> str:
@@ -128,7 +134,7 @@ class Child:
         if line == "ok":
             return
         if line.startswith("error "):
-            raise StartError(f"{self.label}: {line[len('error ') :]}")
+            raise StartRefused(f"{self.label}: {line[len('error ') :]}")
         if not ready:
             raise StartError(f"{self.label} did not become ready within {timeout:.0f} s")
         raise StartError(f"{self.label} exited during start-up (exit code {self.proc.wait(1)})")
@@ -281,11 +287,7 @@ class Supervisor:
             removed = naming.remove_leftovers(self.config.name)
             if removed:
                 log.warning("removed %d leftovers of an earlier run: %s", len(removed), " ".join(removed))
-            try:
-                self._start_all()
-            except StartError as exc:
-                print(f"fxis: {exc}", file=sys.stderr)
-                return 1
+            self._start_all()  # a StartError: the command says it, once all is stopped and removed
             for child in self.children:
                 child.state = "running"
             self._write_state()
@@ -310,8 +312,9 @@ class Supervisor:
     def _announce(self) -> None:
         c = self.config
         lines = [f"fxis: service {c.name!r} is serving {len(c.cameras)} camera(s)"]
-        for cam in c.cameras:
-            opts = ", ".join(f"{k}={v}" for k, v in cam.options.items())
+        for cam in c.cameras:  # the options in force: the service's --history where the camera has none
+            options = {**cam.options, "history": history_of(cam, c)}
+            opts = ", ".join(f"{k}={v}" for k, v in options.items() if v is not None)
             lines.append(f"  {cam.name:<10} {cam.kind:<10} {opts}")
         lines.append(f"  requests on {c.endpoint}, publishing on {c.pub}, request events on {c.events}")
         lines += ring_lines(c)

@@ -37,11 +37,23 @@ def mib(n: float) -> str:
     return f"{n / 2**20:,.0f} MiB" if n >= 2**20 else f"{n / 2**10:,.0f} KiB"
 
 
+def room_hint(needed: int) -> str:
+    """How to give /dev/shm room for ``needed`` more bytes: the size it would need, rounded up
+    to a GiB, or, beyond this host's memory, that no size will do."""
+    stats = os.statvfs(SHM_DIR)
+    used = (stats.f_blocks - stats.f_bfree) * stats.f_frsize
+    size_gib = math.ceil((used + needed) / 2**30)
+    memory = os.sysconf("SC_PHYS_PAGES") * os.sysconf("SC_PAGE_SIZE")
+    if size_gib * 2**30 > memory:
+        return f"{SHM_DIR} would need {size_gib} GiB, more than this host's {memory / 2**30:.0f} GiB of memory"
+    return f"give {SHM_DIR} more room (mount -o remount,size={size_gib}G {SHM_DIR})"
+
+
 def check_room(needed: int, what: str) -> None:
     """RingError naming the numbers if /dev/shm cannot hold ``needed`` more bytes."""
     free = shm_free_bytes()
     if needed > free:
         raise RingError(
             f"{what} needs {mib(needed)}, and {SHM_DIR} has {mib(free)} free: ask for less history "
-            f"(history=, slots=), or give {SHM_DIR} more room (mount -o remount,size=4G {SHM_DIR})"
+            f"(history=, slots=); {room_hint(needed)}"
         )

@@ -21,11 +21,24 @@ import zmq.auth
 from fxis_shm.errors import ConfigError
 
 
-def create_keys(folder: str, name: str) -> tuple[str, str]:
-    """Write NAME.key and NAME.key_secret into ``folder`` (0700); returns their paths."""
-    os.makedirs(folder, mode=0o700, exist_ok=True)
-    public, secret = zmq.auth.create_certificates(folder, name)
-    os.chmod(secret, 0o600)
+def create_keys(folder: str, name: str, *, force: bool = False) -> tuple[str, str]:
+    """Write NAME.key and NAME.key_secret into ``folder`` (0700); returns their paths. A pair
+    already there is replaced only with ``force``: every copy of it handed out would stop working."""
+    paths = [os.path.join(folder, f"{name}.key{suffix}") for suffix in ("", "_secret")]
+    there = [p for p in paths if os.path.lexists(p)]
+    if there and not force:
+        raise ConfigError(
+            f"{' and '.join(there)} exist: replacing them locks out every side that holds them; "
+            "give another --name, or --force to replace them"
+        )
+    try:
+        os.makedirs(folder, mode=0o700, exist_ok=True)
+        public, secret = zmq.auth.create_certificates(folder, name)
+        os.chmod(secret, 0o600)
+    except OSError as exc:
+        raise ConfigError(
+            f"cannot write keys into {folder}: {exc.strerror}; give a folder this user can write to"
+        ) from None
     return public, secret
 
 

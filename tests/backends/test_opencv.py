@@ -225,7 +225,7 @@ def test_a_finished_file_returns_none_without_spinning(video):
 def test_a_missing_file_stops_start_up_naming_camera_and_source(tmp_path):
     missing = tmp_path / "no-such-video.avi"
     result = fxis_run_alone("--camera", f"v=opencv:source={missing}")
-    assert result.returncode == 1
+    assert result.returncode == 2  # a setting to change (docs/cli.md)
     assert "camera 'v'" in result.stderr and "key 'source'" in result.stderr
     assert str(missing) in result.stderr
 

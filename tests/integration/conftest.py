@@ -1,3 +1,4 @@
+import contextlib
 import os
 import subprocess
 
@@ -56,18 +57,25 @@ def client_keys(folder, name):
     return ClientKeys.from_files(str(folder / "server.key"), str(folder / f"{name}.key_secret"))
 
 
-@pytest.fixture
-def small_disk(tmp_path):
-    """An 8 MiB tmpfs mounted for the test (root), unmounted afterwards whatever happened."""
-    mount = tmp_path / "disk"
+@contextlib.contextmanager
+def mounted_tmpfs(mount, options: str):
+    """A tmpfs mounted at ``mount`` (made here) with ``options`` (root), unmounted afterwards
+    whatever happened."""
     mount.mkdir()
-    done = subprocess.run(["mount", "-t", "tmpfs", "-o", "size=8m", "tmpfs", str(mount)], capture_output=True)
+    done = subprocess.run(["mount", "-t", "tmpfs", "-o", options, "tmpfs", str(mount)], capture_output=True)
     if done.returncode != 0:
         pytest.fail(f"mounting a tmpfs needs root: {done.stderr.decode().strip()}", pytrace=False)
     try:
         yield mount
     finally:
         subprocess.run(["umount", str(mount)], check=True)
+
+
+@pytest.fixture
+def small_disk(tmp_path):
+    """An 8 MiB tmpfs mounted for the test."""
+    with mounted_tmpfs(tmp_path / "disk", "size=8m") as mount:
+        yield mount
 
 
 @pytest.fixture

@@ -47,7 +47,7 @@ def test_status_json(two_cameras):
 
 def test_status_without_a_service_fails_clearly():
     result = fxis("status", "--endpoint", "tcp://127.0.0.1:9", "--timeout", "0.3")
-    assert result.returncode == 1 and "no reply" in result.stderr
+    assert result.returncode == 3 and "no reply" in result.stderr  # a service did not answer (docs/cli.md)
 
 
 def test_grab_saves_pngs_and_metadata(two_cameras, tmp_path):
@@ -108,7 +108,7 @@ def test_clean_removes_every_kind_of_leftover_of_a_killed_service(start_service,
 
 def test_clean_refuses_while_running(two_cameras):
     result = fxis("clean", "--name", two_cameras.name)
-    assert result.returncode == 1 and "running" in result.stderr
+    assert result.returncode == 2 and "running" in result.stderr
     assert naming.leftovers(two_cameras.name)
 
 

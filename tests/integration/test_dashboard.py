@@ -215,9 +215,10 @@ def test_a_viewer_that_stops_reading_holds_up_nobody(dashboard):
 
 
 def test_with_curve_the_dashboard_uses_the_services_own_pair(start_service, wait, keys):
+    """Issue 33, finding 12: the allowed clients' folder holds alice's key only, not the
+    service's; the coordinator lets the service's own pair in, so its dashboard connects."""
     folder, allowed = keys
-    # the service's own public key among the allowed ones lets its dashboard in
-    (allowed / "server.key").write_bytes((folder / "server.key").read_bytes())
+    assert os.listdir(allowed) == ["alice.key"]
     port = free_tcp_port()
     start_service(
         *CAMERAS,

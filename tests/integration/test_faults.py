@@ -146,7 +146,7 @@ def test_torn_reads_never_reach_a_client(start_service, local):
     overwrites next, so that copies are torn however fast they are made. Readers go on until
     copies were found torn and made again (the service's count, or the clients' ``paths["torn"]``)
     and enough frames were served: not one served frame is torn, and a request whose frames were
-    overwritten three times is refused saying so (``Overwritten``, or ``INTERNAL`` with that
+    overwritten three times is refused saying so (``Overwritten``, or ``OVERRUN`` with that
     message); any other error fails the test."""
     svc = start_service("--slots", "2", "--camera", "fast=synthetic:fps=500,width=512,height=256")
     errors, served, refused, clients, paths = [], [0], [0], [], set()
@@ -174,7 +174,7 @@ def test_torn_reads_never_reach_a_client(start_service, local):
                         refused[0] += 1
                         continue
                     except ServiceError as exc:
-                        if exc.code != "INTERNAL" or OVERWRITTEN not in exc.message:
+                        if exc.code != "OVERRUN" or OVERWRITTEN not in exc.message:
                             raise
                         refused[0] += 1
                         continue

@@ -73,7 +73,7 @@ def test_second_run_of_the_same_name_is_refused(start_service):
         "--pub",
         "tcp://127.0.0.1:1",
     )
-    assert result.returncode == 1
+    assert result.returncode == 2  # a setting to change: --name (docs/cli.md)
     assert "already running" in result.stderr
     with svc.client() as client:  # the first one is unharmed
         assert client.status()["cameras"]["a"]["alive"]

@@ -136,7 +136,7 @@ def test_status_grab_and_record_take_keys_from_flags_the_environment_or_the_conf
     svc, folder = curve_service
     server, alice = str(folder / "server.key"), str(folder / "alice.key_secret")
     keyless = fxis("status", "--endpoint", svc.endpoint, "--timeout", "3")
-    assert keyless.returncode == 1 and "answers only CurveZMQ" in keyless.stderr
+    assert keyless.returncode == 3 and "answers only CurveZMQ" in keyless.stderr
     flags = fxis("status", "--endpoint", svc.endpoint, "--server-key", server, "--client-key", alice, "--json")
     assert flags.returncode == 0 and json.loads(flags.stdout)["service"] == svc.name
     env = {"FXIS_SERVER_KEY": server, "FXIS_CLIENT_KEY": alice}

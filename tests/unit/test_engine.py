@@ -284,7 +284,7 @@ def test_an_overwritten_copy_is_planned_again_then_given_up():
         assert picked_times(again)["cam"] > picked_times(reply)["cam"]
         reply = again
     failure = only(engine.retry(reply, 22 * PERIOD), Failure)
-    assert failure.code == "INTERNAL" and "overwritten" in failure.message
+    assert failure.code == "OVERRUN" and "overwritten" in failure.message and "--history" in failure.message
 
 
 # ---- triggers, limits, sequences ----
