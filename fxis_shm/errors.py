@@ -22,6 +22,7 @@ class Code:
     OUT_OF_RANGE = "OUT_OF_RANGE"  # t* too far in the future, or history not held
     TOO_LARGE = "TOO_LARGE"  # a configured limit was exceeded
     BUSY = "BUSY"  # too many pending requests
+    SETTING_REFUSED = "SETTING_REFUSED"  # a camera setting unknown, read-only or out of its limits
     INTERNAL = "INTERNAL"
 
     ALL = frozenset(v for k, v in vars().items() if k.isupper() and isinstance(v, str))
@@ -78,6 +79,11 @@ class ProtocolError(FxisError):
         self.message = message
 
 
+class SettingRefused(FxisError, ValueError):
+    """A camera refused a change of its settings (unknown key, read-only, out of its limits);
+    the message names the limits, and the camera keeps its old settings."""
+
+
 class RequestTimeout(FxisError, TimeoutError):
     """The service did not answer within the client's timeout."""
 
@@ -104,6 +110,10 @@ class ServiceError(FxisError):
         self.message = message
 
 
+class SettingRejected(ServiceError):
+    """The service's camera refused a change of settings (code SETTING_REFUSED)."""
+
+
 class CameraDown(ServiceError):
     pass
 
@@ -125,6 +135,7 @@ _BY_CODE = {
     Code.UNKNOWN_CAMERA: UnknownCamera,
     Code.SKEW_EXCEEDED: SkewExceeded,
     Code.TIMEOUT: FrameTimeout,
+    Code.SETTING_REFUSED: SettingRejected,
 }
 
 

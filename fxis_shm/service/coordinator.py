@@ -28,12 +28,13 @@ from fxis_shm.service.childspec import CoordinatorSpec
 from fxis_shm.service.fastanswers import FastAnswers
 from fxis_shm.service.framewatch import FrameWatch
 from fxis_shm.service.streams import Streams
+from fxis_shm.service.workerlink import WorkerLinks
 from fxis_shm.shm import fastpick, naming, ordering
 from fxis_shm.shm.cameras import FRAME_FIELDS, CameraHandle
 from fxis_shm.shm.copyout import MESSAGES, REFS, CopyOut
 from fxis_shm.shm.localpath import boot_id, time_namespace
 from fxis_shm.shm.ring import Overwritten
-from fxis_shm.wire import protocol
+from fxis_shm.wire import commands, protocol
 from fxis_shm.wire.security import load_pair, make_server
 
 log = logging.getLogger("coordinator")
@@ -116,6 +117,8 @@ class Coordinator:
         self.events_dropped = 0
         self.boot_id = boot_id()
         self.time_namespace = time_namespace()
+        self.camera_settings: dict[str, dict] = {}  # per camera, the values its worker last reported
+        self.links: WorkerLinks | None = None
 
     # ---- the loop ----
 
@@ -143,11 +146,15 @@ class Coordinator:
                 self.events.setsockopt(zmq.SUBSCRIBE, protocol.EVENT_TOPIC)
             watch = FrameWatch(ctx, self.service, list(self.cameras))
             closing.append(watch)
+            self.links = links = WorkerLinks(ctx, self.service, list(self.cameras))
+            closing.append(links)
             self.streams = Streams(self.copyout, self._publish)
             poller = zmq.Poller()
-            for sock in (self.router, self.pub, self.events, watch.pull):
+            for sock in (self.router, self.pub, self.events, watch.pull, *links.sockets.values()):
                 if sock is not None:
                     poller.register(sock, zmq.POLLIN)
+            for name in self.cameras:  # what status shows until a change is made
+                links.send(name, commands.SETTINGS, commands.SETTINGS_TIMEOUT_S, self._settings_known(name))
             on_ready()
             log.info(
                 "serving %s on %s, publishing on %s, events on %s",
@@ -165,6 +172,10 @@ class Coordinator:
                     self._drain(self.router, self._on_request)
                 if self.events is not None and self.events in events:
                     self._drain(self.events, self._on_event)
+                for sock in links.sockets.values():
+                    if sock in events:
+                        links.drain(sock)
+                links.expire(timebase.now())
                 if updated or self._due():
                     self._carry_out(self.engine.on_frames(updated, timebase.now()))
                 if updated:
@@ -191,7 +202,8 @@ class Coordinator:
         return sock
 
     def _poll_timeout_ms(self) -> int:
-        wake = self.engine.next_wake()
+        wakes = [t for t in (self.engine.next_wake(), self.links.next_deadline() if self.links else None) if t]
+        wake = min(wakes, default=None)
         if wake is None:
             return 200
         return max(0, min(200, (wake - timebase.now()) // 1_000_000 + 1))
@@ -258,6 +270,9 @@ class Coordinator:
     ) -> None:
         op = request["op"]
         try:
+            if op == "settings":  # answered when the camera's worker has applied it
+                self._settings(request, respond)
+                return
             if op not in FRAME_OPS:
                 self._reply(respond, request, getattr(self, f"_op_{op}")(request, t_received))
                 return
@@ -324,6 +339,7 @@ class Coordinator:
         cameras = {name: cam.status(now) for name, cam in self.cameras.items()}
         for name, info in cameras.items():
             info["restarts"] = processes.get(f"camera:{name}", {}).get("restarts")
+            info["settings"] = self.camera_settings.get(name)
         return cameras
 
     def _state_of(self, process: str) -> dict | None:
@@ -333,6 +349,43 @@ class Coordinator:
                 return json.load(f)
         except (OSError, ValueError):
             return None
+
+    # ---- camera settings, through the camera's worker ----
+
+    def _settings(self, request: dict, respond: Callable[[list], None]) -> None:
+        camera = request["camera"]
+        if camera not in self.cameras:
+            raise ProtocolError(
+                f"unknown camera {camera!r}; this service has {sorted(self.cameras)}", Code.UNKNOWN_CAMERA
+            )
+        known = self._settings_known(camera)
+
+        def done(result: dict | None, code: str | None, message: str | None) -> None:
+            if result is None:
+                respond(protocol.encode_error(request["id"], code or Code.INTERNAL, message or ""))
+                return
+            known(result, None, None)
+            self._reply(respond, request, {"op": "settings", "camera": camera, **result})
+
+        fields = {k: request[k] for k in ("set", "features") if request[k] is not None}
+        assert self.links is not None
+        self.links.send(camera, commands.SETTINGS, commands.SETTINGS_TIMEOUT_S, done, **fields)
+
+    def _settings_known(self, camera: str):
+        """What to do with a worker's settings answer: keep its values for status, and announce
+        a change (log, and the event ``settings/CAMERA|`` on the publish endpoint)."""
+
+        def known(result: dict | None, code: str | None, message: str | None) -> None:
+            if result is None:
+                log.info("camera %s did not report its settings: %s", camera, message)
+                return
+            self.camera_settings[camera] = result["values"]
+            if "changed" in result:
+                log.info("camera %s changed %s (%s)", camera, result["changed"], result["cost"])
+                event = {k: result[k] for k in ("changed", "cost", "values", "generation")}
+                self._publish(f"settings/{camera}|", protocol.encode_reply(None, {"camera": camera, **event}))
+
+        return known
 
     def _op_time(self, request: dict, t_received: int) -> dict:
         """The clock now, and when the request was received: a caller estimating our clock

@@ -315,6 +315,14 @@ class RingWriter(_Mapping):
         self._last, self._samples = None, 0
         return self.generation
 
+    def set_period(self, nominal_period_ns: int) -> None:
+        """The camera was set to another frame rate: readers (the wait policy, the selection)
+        take the new period at once instead of an average that still holds the old one,
+        and the running estimate starts again from it."""
+        h = self.header
+        h["nominal_period_ns"] = h["period_ns"] = nominal_period_ns
+        self._last, self._samples = None, 0
+
     def heartbeat(self) -> None:
         self.header["heartbeat_ns"] = timebase.now()
 

@@ -1,0 +1,78 @@
+"""The ``settings`` command, applied by the capture loop between two frames: read the camera's
+settings, or change some, all or none.
+
+Live keys are set on the running camera (and put back as they were if it refuses one);
+keys that cost a restart (size, pixel format, region) restart the stream with the camera's
+options plus every key asked for, so the new ring, its generation and the camera agree.
+Every refusal names the limits; the camera keeps running on its old settings.
+"""
+
+from __future__ import annotations
+
+import logging
+from typing import TYPE_CHECKING
+
+from fxis_shm.core.tuning import LIVE, RESTART, check_change, cost_of
+from fxis_shm.errors import ConfigError, SettingRefused
+
+if TYPE_CHECKING:
+    from .camera import Stream
+
+log = logging.getLogger("camera")
+
+
+def handle(stream: Stream, command: dict) -> dict:
+    """The answer to a ``settings`` command: the values, their limits, and for a change what
+    each key took and what the change cost."""
+    camera = stream.camera
+    asked = command.get("set") or {}
+    cost = None
+    if asked:
+        split = check_change(camera.name, camera.settings(), asked)
+        cost = cost_of(split)
+        if cost == RESTART:
+            _restart(stream, {**split[LIVE], **split[RESTART]})
+        else:
+            _live(stream, split[LIVE])
+        camera = stream.camera
+    described = camera.settings()
+    answer = {
+        "values": {key: entry["value"] for key, entry in described.items()},
+        "limits": {key: {k: v for k, v in entry.items() if k != "value"} for key, entry in described.items()},
+        "generation": stream.ring.generation,
+    }
+    if asked:
+        answer.update(changed={key: described[key]["value"] for key in asked}, cost=cost)
+        log.info("camera %s: set %s (%s), took %s", camera.name, asked, cost, answer["changed"])
+    if command.get("features"):
+        answer["features"] = camera.features()
+    return answer
+
+
+def _live(stream: Stream, values: dict) -> None:
+    camera = stream.camera
+    before = {key: entry["value"] for key, entry in camera.settings().items() if key in values}
+    period = camera.nominal_period_ns
+    try:
+        camera.set_live(values)
+    except Exception as exc:
+        try:
+            camera.set_live(before)
+        except Exception:
+            log.exception("camera %s: could not put back %s", camera.name, before)
+        raise SettingRefused(f"camera {camera.name!r} refused {values}: {exc}; it keeps {before}") from None
+    if camera.nominal_period_ns != period:  # a new rate: the wait policy and selection take it at once
+        stream.ring.set_period(camera.nominal_period_ns)
+
+
+def _restart(stream: Stream, values: dict) -> None:
+    camera = stream.camera
+    try:
+        stream.restart({**camera.options, **values})
+    except (ValueError, ConfigError) as exc:
+        raise SettingRefused(f"camera {camera.name!r} cannot take {values}: {exc}; it keeps its settings") from None
+    except Exception as exc:
+        raise SettingRefused(
+            f"camera {camera.name!r} failed to restart with {values} ({type(exc).__name__}: {exc}); "
+            "it runs on its old settings"
+        ) from None
