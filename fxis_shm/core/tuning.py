@@ -42,15 +42,19 @@ def describe(
     return entry
 
 
+def _number(value: float) -> str:
+    return f"{value:.10g}"
+
+
 def limits_text(entry: Mapping[str, Any]) -> str:
     """What a setting allows, in words: "1..49000 us", "in steps of 4", "one of mono8, bgr8"."""
     if entry.get("choices") is not None:
         return "one of " + ", ".join(map(str, entry["choices"]))
     if entry["type"] in ("int", "float"):
         lo, hi = entry.get("min"), entry.get("max")
-        text = f"{'-inf' if lo is None else f'{lo:g}'}..{'inf' if hi is None else f'{hi:g}'}"
+        text = f"{'-inf' if lo is None else _number(lo)}..{'inf' if hi is None else _number(hi)}"
         if entry.get("inc") and entry["inc"] != 1:
-            text += f" in steps of {entry['inc']:g}"
+            text += f" in steps of {_number(entry['inc'])}"
         return text + (f" {entry['unit']}" if entry.get("unit") else "")
     return f"a {entry['type']}"
 
@@ -75,7 +79,7 @@ def _typed(key: str, entry: Mapping[str, Any], value: Any) -> Any:
             raise ValueError(f"{key} must be a finite number, got {value!r}")
         lo, hi = entry.get("min"), entry.get("max")
         if (lo is not None and number < lo) or (hi is not None and number > hi):
-            raise ValueError(f"{key}={value:g} is out of range: it allows {limits_text(entry)}")
+            raise ValueError(f"{key}={_number(number)} is out of range: it allows {limits_text(entry)}")
         if kind == "float":
             return number
         inc = entry.get("inc") or 1
