@@ -2,7 +2,7 @@
 
 import pytest
 
-from fxis_shm.core.tuning import LIVE, RESTART, READ_ONLY, check_change, cost_of, describe
+from fxis_shm.core.tuning import LIVE, READ_ONLY, RESTART, check_change, cost_of, describe
 from fxis_shm.errors import SettingRefused
 
 CAMERA = {
