@@ -5,7 +5,7 @@ from __future__ import annotations
 import argparse
 import sys
 
-from fxis_shm.cli import dashboard, local, query, record, run, snapshot
+from fxis_shm.cli import dashboard, local, query, record, run, snapshot, tune
 from fxis_shm.cli.options import EXIT_USAGE
 from fxis_shm.errors import ConfigError, FxisError
 
@@ -21,6 +21,7 @@ def parser() -> argparse.ArgumentParser:
     snapshot.add_parser(sub)
     dashboard.add_parser(sub)
     local.add_parsers(sub)
+    tune.add_parsers(sub)
     return p
 
 
