@@ -40,6 +40,7 @@ class Stream:
         self.ring: RingWriter | None = None
         self.commands: CommandServer | None = None
         self.first = None  # the first frame to store, if finding the layout took one
+        self.named: dict = {}  # node-map features set by name: a restart of the stream sets them again
 
     def start(self) -> None:
         self.camera.open()

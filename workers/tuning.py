@@ -28,14 +28,14 @@ def handle(stream: Stream, command: dict) -> dict:
     asked = command.get("set") or {}
     cost = None
     if asked:
-        split = check_change(camera.name, camera.settings(), asked)
+        split = check_change(camera.name, camera.settings(asked), asked)
         cost = cost_of(split)
         if cost == RESTART:
             _restart(stream, {**split[LIVE], **split[RESTART]})
         else:
             _live(stream, split[LIVE])
         camera = stream.camera
-    described = camera.settings()
+    described = camera.settings(asked)
     answer = {
         "values": {key: entry["value"] for key, entry in described.items()},
         "limits": {key: {k: v for k, v in entry.items() if k != "value"} for key, entry in described.items()},
@@ -51,7 +51,7 @@ def handle(stream: Stream, command: dict) -> dict:
 
 def _live(stream: Stream, values: dict) -> None:
     camera = stream.camera
-    before = {key: entry["value"] for key, entry in camera.settings().items() if key in values}
+    before = {key: entry["value"] for key, entry in camera.settings(values).items() if key in values}
     period = camera.nominal_period_ns
     try:
         camera.set_live(values)
@@ -61,6 +61,7 @@ def _live(stream: Stream, values: dict) -> None:
         except Exception:
             log.exception("camera %s: could not put back %s", camera.name, before)
         raise SettingRefused(f"camera {camera.name!r} refused {values}: {exc}; it keeps {before}") from None
+    stream.named.update({key: value for key, value in values.items() if key not in camera.options})
     if camera.nominal_period_ns != period:  # a new rate: the wait policy and selection take it at once
         stream.ring.set_period(camera.nominal_period_ns)
 
@@ -76,3 +77,10 @@ def _restart(stream: Stream, values: dict) -> None:
             f"camera {camera.name!r} failed to restart with {values} ({type(exc).__name__}: {exc}); "
             "it runs on its old settings"
         ) from None
+    if stream.named:  # the features set by name before, on the new camera object
+        try:
+            stream.camera.set_live(stream.named)
+        except Exception as exc:
+            log.warning("camera %s: after the restart, %s could not be set again: %s", camera.name, stream.named, exc)
+        if stream.camera.nominal_period_ns != stream.ring.field("nominal_period_ns"):
+            stream.ring.set_period(stream.camera.nominal_period_ns)

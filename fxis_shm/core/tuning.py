@@ -111,7 +111,8 @@ def check_change(
             known = ", ".join(sorted(described)) or "none"
             problems.append(f"camera {camera!r} has no setting {key!r} (it has: {known})")
         elif entry["access"] != READ_WRITE:
-            problems.append(f"{key} of camera {camera!r} is read-only (now {entry['value']!r})")
+            note = f": {entry['note']}" if entry.get("note") else ""
+            problems.append(f"{key} of camera {camera!r} is read-only (now {entry['value']!r}){note}")
         else:
             try:
                 split[entry["cost"]][key] = _typed(key, entry, value)

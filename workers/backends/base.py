@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -85,10 +85,11 @@ class Camera(ABC):
 
     # ---- settings at run time (workers/tuning.py applies them between two frames) ----
 
-    def settings(self) -> dict[str, dict]:
+    def settings(self, extra: Iterable[str] = ()) -> dict[str, dict]:
         """Each setting the camera has now, described as fxis_shm.core.tuning.describe makes
         it: value, type, access, cost ("live": applied between two frames; "restart": the
-        stream restarts with a new ring) and limits. A camera without any: {}."""
+        stream restarts with a new ring) and limits; plus the node-map features named in
+        ``extra`` that it has (GenICam cameras). A camera without any: {}."""
         return {}
 
     def set_live(self, values: Mapping[str, Any]) -> None:

@@ -91,7 +91,7 @@ class SyntheticCamera(Camera):
 
     # ---- settings at run time ----
 
-    def settings(self) -> dict[str, dict]:
+    def settings(self, extra=()) -> dict[str, dict]:
         o = self.options
         jitter_ns = o["jitter_ms"] * 1e6
         max_fps = 10_000.0 if not jitter_ns else min(10_000.0, float(f"{1e9 / (2 * jitter_ns):.6g}") * 0.999)
