@@ -112,7 +112,8 @@ def check_change(
             problems.append(f"camera {camera!r} has no setting {key!r} (it has: {known})")
         elif entry["access"] != READ_WRITE:
             note = f": {entry['note']}" if entry.get("note") else ""
-            problems.append(f"{key} of camera {camera!r} is read-only (now {entry['value']!r}){note}")
+            now = "" if entry["value"] is None else f" (now {entry['value']!r})"
+            problems.append(f"{key} of camera {camera!r} is read-only{now}{note}")
         else:
             try:
                 split[entry["cost"]][key] = _typed(key, entry, value)

@@ -5,7 +5,9 @@ with a new generation; node-map features are set by name; refusals leave the cam
 
 import os
 
+import cv2
 import genicam
+import numpy as np
 import pytest
 
 from fxis_shm.errors import ServiceError, SettingRejected
@@ -101,3 +103,24 @@ def test_gentl_viky_live_frame_rate_and_feature_and_a_new_size(start_service):
         features = {f["name"]: f for f in client.settings("g", features=True)["features"]}
         assert features["BouncingBallSize"]["value"] == 40  # set by name before the restart: set again
         assert features["BouncingBallSize"]["max"] == 40 and features["Width"]["access"] == "ro"
+
+
+def test_an_opencv_file_takes_what_a_file_can_and_refuses_the_rest(start_service, tmp_path):
+    path = str(tmp_path / "grey.avi")
+    writer = cv2.VideoWriter(path, cv2.VideoWriter_fourcc(*"MJPG"), 20.0, (64, 48))
+    for k in range(20):
+        writer.write(np.full((48, 64, 3), 10 * k, np.uint8))
+    writer.release()
+    svc = start_service("--camera", f"v=opencv:source={path},loop=true")
+    with svc.client(timeout=15) as client:
+        before = _newest(client, "v")
+        for key in ("exposure_us", "gain", "width"):
+            assert "a video file plays as it was recorded" in _refused(client, "v", **{key: 1})
+        assert "use rate" in _refused(client, "v", fps=5)
+        assert "expected file, max or a number of frames per second" in _refused(client, "v", rate="fast")
+        assert client.configure("v", loop=False)["cost"] == "live"
+        answer = client.configure("v", pixel_format="mono8", loop=True, rate=40)
+        assert answer["cost"] == "restart" and answer["generation"] == before.generation + 1
+        frame = wait_until(lambda: _latest(client, "v", answer["generation"]), what="a mono8 frame")
+        assert frame.image.shape == (48, 64)
+        assert client.status()["cameras"]["v"]["fps"] == 40.0
