@@ -23,6 +23,7 @@ class Code:
     TOO_LARGE = "TOO_LARGE"  # a configured limit was exceeded
     BUSY = "BUSY"  # too many pending requests
     SETTING_REFUSED = "SETTING_REFUSED"  # a camera setting unknown, read-only or out of its limits
+    FORBIDDEN = "FORBIDDEN"  # this client's key may not do that (changing settings: --curve-operators)
     INTERNAL = "INTERNAL"
 
     ALL = frozenset(v for k, v in vars().items() if k.isupper() and isinstance(v, str))

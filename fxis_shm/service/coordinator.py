@@ -18,6 +18,7 @@ import threading
 from collections.abc import Callable
 
 import zmq
+from zmq.auth.certs import load_certificates
 from zmq.auth.thread import ThreadAuthenticator
 
 from fxis_shm.client.sockets import send_parts
@@ -47,6 +48,13 @@ _EVENTS, _POLLIN = int(zmq.EVENTS), int(zmq.POLLIN)
 _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
 _MMAP_THRESHOLD = 32 << 20  # the largest glibc takes (64-bit): below, from the heap; larger frames: the pool
 _TRIM_THRESHOLD = 256 << 20  # freed memory kept for the next messages, as the buffer pool keeps
+
+
+FORBIDDEN_TEXT = (
+    "this client may read settings but not change them: the service lets only the keys in its "
+    "--curve-operators folder change them; ask its operator to add this client's public key (.key) "
+    "there and restart the service, or use a key that is there"
+)
 
 
 def keep_message_memory() -> bool:
@@ -103,8 +111,12 @@ class Coordinator:
         self.pub_endpoint = spec.pub
         self.events_endpoint = spec.events
         self.curve = None
+        self.operators: set[str] | None = None  # the keys (Z85) that may change settings; None: every client
         if spec.curve_secret:
             self.curve = (load_pair(spec.curve_secret), spec.curve_clients)
+            if spec.curve_operators:  # the service's own key too: its dashboard connects with it
+                self.operators = {k.decode() for k in load_certificates(spec.curve_operators)}
+                self.operators.add(self.curve[0][0].decode())
         self.cameras = {
             name: CameraHandle(self.service, name, kind, spec.history.get(name)) for name, kind in spec.cameras.items()
         }
@@ -136,6 +148,8 @@ class Coordinator:
                 auth = ThreadAuthenticator(ctx, log=logging.getLogger("auth"))
                 auth.start()
                 auth.configure_curve(domain="*", location=self.curve[1])
+                if self.operators is not None:  # operators are let in as well
+                    auth.certs["*"].update(dict.fromkeys((k.encode() for k in self.operators), True))
                 closing.append(_Stopping(auth))
             self.router = self._socket(ctx, zmq.ROUTER, self.endpoint, "request endpoint", closing)
             self.router.setsockopt(zmq.ROUTER_MANDATORY, 1)  # report unsendable replies
@@ -168,8 +182,8 @@ class Coordinator:
                 updated = watch.drain() if watch.pull in events else set()
                 if self.pub in events:
                     self._drain_subscriptions()
-                if self.router in events:
-                    self._drain(self.router, self._on_request)
+                if self.router in events:  # (as frames when each request's key must be known)
+                    self._drain(self.router, self._on_request, copy=self.operators is None)
                 if self.events is not None and self.events in events:
                     self._drain(self.events, self._on_event)
                 for sock in links.sockets.values():
@@ -222,12 +236,12 @@ class Coordinator:
                 self.streams.subscription(message[1:].decode(errors="replace"), message[0] == 1)
 
     @staticmethod
-    def _drain(sock, handle, budget: int = 256) -> None:
+    def _drain(sock, handle, budget: int = 256, copy: bool = True) -> None:
         for _ in range(budget):
             if not sock.getsockopt(_EVENTS) & _POLLIN:  # (cheaper than the exception of an empty recv)
                 return
             try:
-                frames = sock.recv_multipart(zmq.NOBLOCK)
+                frames = sock.recv_multipart(zmq.NOBLOCK, copy=copy)
             except zmq.Again:
                 return
             try:
@@ -247,7 +261,15 @@ class Coordinator:
             rid = _readable_field(body[0], "id", (int, str)) if body else None
             respond(protocol.encode_error(rid, exc.code, exc.message))
             return
+        if request["op"] == "settings" and request["set"] and not self._may_change(body[0]):
+            respond(protocol.encode_error(request["id"], Code.FORBIDDEN, FORBIDDEN_TEXT))
+            return
         self._start(request, respond, t_received, client=bytes(envelope[0]))
+
+    def _may_change(self, frame) -> bool:
+        """May the client that sent ``frame`` change camera settings? Everyone, unless the service
+        names its operators: then only their keys (CurveZMQ's User-Id of the message)."""
+        return self.operators is None or (isinstance(frame, zmq.Frame) and frame.get("User-Id") in self.operators)
 
     def _on_event(self, frames: list, t_received: int) -> None:
         try:
