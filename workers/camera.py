@@ -35,20 +35,43 @@ class Stream:
 
     def __init__(self, spec: CameraWorkerSpec, stop: threading.Event):
         self.spec, self.stop = spec, stop
-        self.camera = backend_class(spec.kind)(spec.camera, spec.options, spec.time_origin_ns)
+        # changes made while the service runs, if this worker restarts after a crash
+        self.kept, self.named = tuning.remembered(spec)  # named: features set by name, set again after restarts
+        self.camera = backend_class(spec.kind)(spec.camera, {**spec.options, **self.kept}, spec.time_origin_ns)
         self.process = processing.pipeline(self.camera.options)
         self.ring: RingWriter | None = None
         self.commands: CommandServer | None = None
         self.first = None  # the first frame to store, if finding the layout took one
-        self.named: dict = {}  # node-map features set by name: a restart of the stream sets them again
 
     def start(self) -> None:
-        self.camera.open()
+        try:
+            self.camera.open()
+            if self.named:
+                self.camera.set_live(self.named)
+        except Exception as exc:
+            if not (self.kept or self.named):
+                raise
+            log.warning(
+                "camera %s: the settings changed at run time fail (%s); back to its configured ones",
+                self.spec.camera,
+                exc,
+            )
+            tuning.forget(self.spec)
+            self.camera.close()
+            self.kept, self.named = {}, {}
+            spec = self.spec
+            self.camera = backend_class(spec.kind)(spec.camera, spec.options, spec.time_origin_ns)
+            self.camera.open()
+        if self.kept or self.named:
+            log.info(
+                "camera %s: with the settings changed at run time %s", self.spec.camera, {**self.kept, **self.named}
+            )
         self.first, layout, hook_errors = _layout(self.camera, self.process, self.stop)
+        # before the ring: a coordinator that sees the ring's new generation finds the commands
+        self.commands = CommandServer(self.spec.service, self.spec.camera, threading.Event())
         self.ring = self._ring(layout)
         self.ring.count("hook_errors", hook_errors)
         self.ring.set_flags(FLAG_TRIGGERED if self.camera.supports_trigger else 0)
-        self.commands = CommandServer(self.spec.service, self.spec.camera, threading.Event())
 
     def _ring(self, layout: FrameLayout) -> RingWriter:
         spec, period = self.spec, self.camera.nominal_period_ns

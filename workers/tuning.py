@@ -9,11 +9,15 @@ Every refusal names the limits; the camera keeps running on its old settings.
 
 from __future__ import annotations
 
+import json
 import logging
+import os
 from typing import TYPE_CHECKING
 
 from fxis_shm.core.tuning import LIVE, RESTART, check_change, cost_of
 from fxis_shm.errors import ConfigError, SettingRefused
+from fxis_shm.service.childspec import CameraWorkerSpec
+from fxis_shm.shm import naming
 
 if TYPE_CHECKING:
     from .camera import Stream
@@ -44,9 +48,47 @@ def handle(stream: Stream, command: dict) -> dict:
     if asked:
         answer.update(changed={key: described[key]["value"] for key in asked}, cost=cost)
         log.info("camera %s: set %s (%s), took %s", camera.name, asked, cost, answer["changed"])
+        remember(stream)
     if command.get("features"):
         answer["features"] = camera.features()
     return answer
+
+
+# ---- kept while the service runs: a worker restarted after a crash starts with them ----
+
+
+def _kept_path(spec: CameraWorkerSpec) -> str:
+    return naming.state_path(spec.service, f"camera-{spec.camera}.settings")
+
+
+def remembered(spec: CameraWorkerSpec) -> tuple[dict, dict]:
+    """(options, node-map features by name) that changes made since the service started."""
+    try:
+        with open(_kept_path(spec)) as f:
+            kept = json.load(f)
+        return dict(kept["options"]), dict(kept["named"])
+    except (OSError, ValueError, KeyError, TypeError):
+        return {}, {}
+
+
+def remember(stream: Stream) -> None:
+    spec, options = stream.spec, stream.camera.options
+    changed = {k: v for k, v in options.items() if spec.options.get(k) != v}
+    path = _kept_path(spec)
+    try:
+        with open(path + ".tmp", "w") as f:
+            json.dump({"options": {k: v for k, v in changed.items() if v is not None}, "named": stream.named}, f)
+        os.chmod(path + ".tmp", 0o600)
+        os.replace(path + ".tmp", path)
+    except (OSError, TypeError) as exc:
+        log.warning("camera %s: the change could not be kept for a restart of the worker: %s", spec.camera, exc)
+
+
+def forget(spec: CameraWorkerSpec) -> None:
+    try:
+        os.unlink(_kept_path(spec))
+    except OSError:
+        pass
 
 
 def _live(stream: Stream, values: dict) -> None:

@@ -129,7 +129,8 @@ class Coordinator:
         self.events_dropped = 0
         self.boot_id = boot_id()
         self.time_namespace = time_namespace()
-        self.camera_settings: dict[str, dict] = {}  # per camera, the values its worker last reported
+        # per camera, (generation, values) its worker last reported (values None: asked, not answered yet)
+        self.camera_settings: dict[str, tuple[int, dict | None]] = {}
         self.links: WorkerLinks | None = None
 
     # ---- the loop ----
@@ -361,8 +362,19 @@ class Coordinator:
         cameras = {name: cam.status(now) for name, cam in self.cameras.items()}
         for name, info in cameras.items():
             info["restarts"] = processes.get(f"camera:{name}", {}).get("restarts")
-            info["settings"] = self.camera_settings.get(name)
+            info["settings"] = self._settings_of(name, info.get("generation"))
         return cameras
+
+    def _settings_of(self, camera: str, generation: int | None) -> dict | None:
+        """The values the camera's worker reported for this generation of its frames; a worker
+        that restarted since is asked again (None until it answers)."""
+        known = self.camera_settings.get(camera)
+        if known is not None and (known[0] == generation or generation is None):
+            return known[1]
+        if self.links is not None and generation is not None:
+            self.camera_settings[camera] = (generation, None)
+            self.links.send(camera, commands.SETTINGS, commands.SETTINGS_TIMEOUT_S, self._settings_known(camera))
+        return None
 
     def _state_of(self, process: str) -> dict | None:
         """What the supervisor or the ROS 2 bridge last reported (None: nothing)."""
@@ -400,8 +412,10 @@ class Coordinator:
         def known(result: dict | None, code: str | None, message: str | None) -> None:
             if result is None:
                 log.info("camera %s did not report its settings: %s", camera, message)
+                if self.camera_settings.get(camera, (0, {}))[1] is None:
+                    del self.camera_settings[camera]  # asked again by the next status
                 return
-            self.camera_settings[camera] = result["values"]
+            self.camera_settings[camera] = (result["generation"], result["values"])
             if "changed" in result:
                 log.info("camera %s changed %s (%s)", camera, result["changed"], result["cost"])
                 event = {k: result[k] for k in ("changed", "cost", "values", "generation")}
