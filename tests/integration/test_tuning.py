@@ -9,8 +9,8 @@ import signal
 import numpy as np
 import pytest
 
-from fxis_shm import read_stamp
-from fxis_shm.errors import SettingRejected, UnknownCamera
+from fxis_shm import Client, read_stamp
+from fxis_shm.errors import ConfigError, SettingRejected, UnknownCamera
 
 from ..conftest import wait_until
 from .conftest import SMALL, child_pids
@@ -169,3 +169,15 @@ def test_a_worker_restarted_after_a_crash_keeps_the_changes(start_service):
         assert (again["settings"]["exposure_us"], again["settings"]["width"]) == (2500.0, 80)
         frame = _first_after(client, "left", lambda f: f.generation == again["generation"], "a frame of the new worker")
         assert frame.image.shape == (48, 80)
+
+
+def test_a_multiclient_tunes_the_camera_on_the_service_that_has_it(start_service):
+    first = start_service("--camera", f"a=synthetic:fps=50,{SMALL}")
+    second = start_service("--camera", f"b=synthetic:fps=50,{SMALL}")
+    with Client([first.endpoint, second.endpoint], timeout=5) as cell:
+        assert cell.configure("b", gain=3)["changed"] == {"gain": 3.0}
+        assert cell.settings("a")["values"]["gain"] == 0.0
+        with first.client() as one, second.client() as two:
+            assert one.settings("a")["values"]["gain"] == 0.0 and two.settings("b")["values"]["gain"] == 3.0
+        with pytest.raises(ConfigError):
+            cell.configure("c", gain=1)
