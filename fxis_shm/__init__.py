@@ -20,6 +20,7 @@ from fxis_shm.errors import (
     RequestTimeout,
     RingError,
     ServiceError,
+    SettingRejected,
     SkewExceeded,
     UnknownCamera,
 )
@@ -48,6 +49,7 @@ __all__ = [
     "UnknownCamera",
     "SkewExceeded",
     "FrameTimeout",
+    "SettingRejected",
     "LocalPathUnavailable",
     "RingError",
     "Overwritten",
