@@ -118,8 +118,8 @@ class Stream:
             self.ring = self._ring(layout)
             for counter in ("frames_captured", "frames_dropped", "hook_errors"):
                 self.ring.count(counter, ring.field(counter) - self.ring.field(counter))
-            self.ring.set_flags(ring.field("flags"))
             ring.close()
+        self.ring.set_flags(FLAG_TRIGGERED if camera.supports_trigger else 0)  # read by the next request
         log.info("camera %s restarted its stream (generation %d)", self.spec.camera, self.ring.generation)
 
     def close(self) -> None:
@@ -135,7 +135,7 @@ def run(spec: CameraWorkerSpec, ready: Ready, stop: threading.Event) -> None:
     stream = Stream(spec, stop)
     try:
         stream.start()
-        triggers = _TriggerListener(spec.service, stream, stop) if stream.camera.supports_trigger else None
+        triggers = _TriggerListener(spec.service, stream, stop)  # also for a camera set to trigger=software later
         ready.ok()
         try:
             _stream(stream)
@@ -267,7 +267,8 @@ class _TriggerListener:
             except posix_ipc.BusyError:
                 continue
             try:
-                stream.camera.trigger()
+                if stream.camera.supports_trigger:  # (a post racing a change to trigger=free)
+                    stream.camera.trigger()
             except Exception:
                 log.exception("software trigger of camera %r failed", stream.spec.camera)
 

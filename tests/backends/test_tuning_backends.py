@@ -78,6 +78,10 @@ def test_aravis_fake_camera_live_exposure_gain_features_and_a_new_size(emulator,
         frame = wait_until(lambda: _latest(client, "a", resized["generation"]), what="a frame of the new size")
         assert frame.image.shape == (48, 96)
         assert client.settings("a")["values"]["exposure_us"] == answer["changed"]["exposure_us"]  # kept
+        triggered = client.configure("a", trigger="software")  # TriggerSoftware from now on
+        assert triggered["cost"] == "restart" and client.status()["cameras"]["a"]["trigger"] == "software"
+        frame = client.image("a", timeout=5)
+        assert frame.generation == triggered["generation"] and frame.image.shape == (48, 96)
     listed = fxis("get", "a", "--features", "--endpoint", svc.endpoint)
     assert listed.returncode == 0, listed.stderr
     assert "ExposureTimeAbs" in listed.stdout and "TestRegister" in listed.stdout and "PixelFormat" in listed.stdout
@@ -88,7 +92,8 @@ def test_gentl_viky_live_frame_rate_and_feature_and_a_new_size(start_service):
     with svc.client(timeout=15) as client:
         before = _newest(client, "g", _newest(client, "g"))
         message = _refused(client, "g", exposure_us=1000)  # viky has no ExposureTime
-        assert "has no setting 'exposure_us' (it has: fps, height, pixel_format, width)" in message
+        assert "has no setting 'exposure_us' (it has: fps, height, pixel_format, trigger, width)" in message
+        assert "no TriggerSoftware" in _refused(client, "g", trigger="software")
         answer = client.configure("g", fps=40, BouncingBallSize=40)
         assert answer["cost"] == "live" and answer["changed"] == {"fps": 40.0, "BouncingBallSize": 40}
         assert client.status()["cameras"]["g"]["fps"] == 40.0  # the ring's period, set with the change

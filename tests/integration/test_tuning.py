@@ -5,6 +5,7 @@ and kept in status, and a new frame rate reaches the joint selection at once."""
 
 import os
 import signal
+import time
 
 import numpy as np
 import pytest
@@ -74,7 +75,7 @@ def test_refused_changes_name_the_limits_and_change_nothing(start_service):
         refusals = {
             "out of range": ({"exposure_us": 0}, "exposure_us=0 is out of range: it allows 1..1000000 us"),
             "unknown key": ({"shutter": 3}, "has no setting 'shutter' (it has: exposure_us,"),
-            "read-only": ({"trigger": "software"}, "trigger of camera 'left' is read-only"),
+            "read-only": ({"pattern": "chessboard"}, "pattern of camera 'left' is read-only (now 'stripes')"),
             "not a number": ({"fps": "fast"}, "fps must be a number, got 'fast'"),
             "not a choice": ({"pixel_format": "rgb8"}, "pixel_format='rgb8' is not one of mono8, bgr8"),
             # all or none: the good key of a request with a bad one is not applied
@@ -181,3 +182,20 @@ def test_a_multiclient_tunes_the_camera_on_the_service_that_has_it(start_service
             assert one.settings("a")["values"]["gain"] == 0.0 and two.settings("b")["values"]["gain"] == 3.0
         with pytest.raises(ConfigError):
             cell.configure("c", gain=1)
+
+
+def test_the_trigger_mode_changes_by_a_restart_of_the_stream(start_service):
+    svc = start_service("--camera", f"c=synthetic:fps=50,{SMALL}")
+    with svc.client(timeout=5) as client:
+        free = client.image("c")
+        answer = client.configure("c", trigger="software")
+        assert answer["cost"] == "restart" and answer["generation"] == free.generation + 1
+        assert client.status()["cameras"]["c"]["trigger"] == "software"
+        for _ in range(3):  # each request for now triggers a capture
+            called = time.monotonic_ns()
+            frame = client.image("c")
+            assert frame.t_capture >= called and frame.generation == answer["generation"]
+        client.configure("c", trigger="free")
+        assert client.status()["cameras"]["c"]["trigger"] == "free"
+        first = _first_after(client, "c", lambda f: f.generation == answer["generation"] + 1, "free-running frames")
+        _first_after(client, "c", lambda f: f.frame_id >= first.frame_id + 5, "frames at 50 fps again")

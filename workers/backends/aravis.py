@@ -262,7 +262,7 @@ class AravisCamera(Camera):
     # ---- settings at run time (aravis_tuning.py) -------------------------------------------
 
     def settings(self, extra=()) -> dict[str, dict]:
-        return aravis_tuning.describe_all(self._cam, extra, self._Aravis)
+        return aravis_tuning.describe_all(self._cam, self.options["trigger"], extra, self._Aravis)
 
     def set_live(self, values) -> None:
         try:

@@ -32,8 +32,8 @@ _KINDS = ("GcEnumeration", "GcBoolean", "GcCommand", "GcFloat", "GcInteger", "Gc
 _TYPES = {"GcEnumeration": "enum", "GcBoolean": "bool", "GcCommand": "command", "GcFloat": "float"}
 
 
-def generic(cam) -> dict[str, dict]:
-    """The generic keys the camera has, described."""
+def generic(cam, trigger: str) -> dict[str, dict]:
+    """The generic keys the camera has, described (``trigger``: its trigger option now)."""
     out: dict[str, dict] = {}
     if cam.is_exposure_time_available():
         lo, hi = cam.get_exposure_time_bounds()
@@ -58,6 +58,11 @@ def generic(cam) -> dict[str, dict]:
             out[key] = describe(value, "int", RESTART, lo=bounds[0], hi=bounds[1])
     offered = [f for f in cam.dup_available_pixel_formats_as_strings() if f in PIXEL_FORMATS]
     out["pixel_format"] = describe(cam.get_pixel_format_as_string(), "enum", RESTART, choices=offered)
+    if cam.is_software_trigger_supported():
+        out["trigger"] = describe(trigger, "enum", RESTART, choices=["free", "software"])
+    else:
+        out["trigger"] = describe(trigger, "enum", RESTART, READ_ONLY)
+        out["trigger"]["note"] = "the camera has no TriggerSoftware command"
     return out
 
 
@@ -100,9 +105,9 @@ def feature(cam, name: str, Aravis) -> dict | None:
     return described
 
 
-def describe_all(cam, extra: Iterable[str], Aravis) -> dict[str, dict]:
+def describe_all(cam, trigger: str, extra: Iterable[str], Aravis) -> dict[str, dict]:
     """The generic keys, plus the node-map features named in ``extra`` that the camera has."""
-    out = generic(cam)
+    out = generic(cam, trigger)
     for name in extra:
         if name not in out and (found := feature(cam, name, Aravis)) is not None:
             out[name] = found

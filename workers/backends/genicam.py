@@ -315,7 +315,7 @@ class GenicamCamera(Camera):
     # -- settings at run time (genicam_tuning.py) ---------------------------------------
 
     def settings(self, extra=()) -> dict[str, dict]:
-        return genicam_tuning.describe_all(self._features, extra, _sdk()[1])
+        return genicam_tuning.describe_all(self._features, self.options["trigger"], extra, _sdk()[1])
 
     def set_live(self, values) -> None:
         genicam_tuning.set_live(self._features, values)

@@ -90,8 +90,13 @@ def feature(features: DeviceFeatures, name: str, genapi) -> dict | None:
     return described
 
 
-def describe_all(features: DeviceFeatures, extra: Iterable[str], genapi) -> dict[str, dict]:
+def describe_all(features: DeviceFeatures, trigger: str, extra: Iterable[str], genapi) -> dict[str, dict]:
     out = generic(features, genapi)
+    if features.node("TriggerSoftware") is not None and features.node("TriggerMode") is not None:
+        out["trigger"] = describe(trigger, "enum", RESTART, choices=["free", "software"])
+    else:
+        out["trigger"] = describe(trigger, "enum", RESTART, READ_ONLY)
+        out["trigger"]["note"] = "the device has no TriggerSoftware and TriggerMode"
     for name in extra:
         if name not in out and (found := feature(features, name, genapi)) is not None:
             out[name] = found

@@ -103,7 +103,8 @@ class SyntheticCamera(Camera):
             "height": describe(o["height"], "int", RESTART, lo=1, hi=16384),
             "pixel_format": describe(o["pixel_format"], "enum", RESTART, choices=["mono8", "bgr8"]),
         }
-        fixed = {"trigger": "enum", "pattern": "enum", "phase_ms": "float", "shift_px": "int", "jitter_ms": "float"}
+        described["trigger"] = describe(o["trigger"], "enum", RESTART, choices=["free", "software"])
+        fixed = {"pattern": "enum", "phase_ms": "float", "shift_px": "int", "jitter_ms": "float"}
         for key, type_ in fixed.items():  # set when the service starts
             described[key] = describe(o[key], type_, access=READ_ONLY)
         return described
