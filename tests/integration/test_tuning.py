@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 from fxis_shm import Client, read_stamp
-from fxis_shm.errors import ConfigError, SettingRejected, UnknownCamera
+from fxis_shm.errors import CameraDown, ConfigError, SettingRejected, UnknownCamera
 
 from ..conftest import wait_until
 from .conftest import SMALL, child_pids
@@ -206,3 +206,15 @@ def test_the_trigger_mode_changes_by_a_restart_of_the_stream(start_service):
         assert client.status()["cameras"]["c"]["trigger"] == "free"
         first = _first_after(client, "c", lambda f: f.generation == answer["generation"] + 1, "free-running frames")
         _first_after(client, "c", lambda f: f.frame_id >= first.frame_id + 5, "frames at 50 fps again")
+
+
+def test_a_camera_whose_worker_is_down_says_so_at_once(start_service):
+    svc = start_service("--camera", f"left=synthetic:fps=50,{SMALL}", "--restart-limit", "0")
+    with svc.client(timeout=5) as client:
+        client.settings("left")
+        (pid,) = child_pids(svc, "camera")
+        os.kill(pid, signal.SIGKILL)
+        wait_until(lambda: not client.status()["cameras"]["left"]["alive"], what="the worker seen down")
+        with pytest.raises(CameraDown, match="takes no commands now: its worker is not running"):
+            client.configure("left", gain=3)
+        assert client.time() > 0  # the service answers on
