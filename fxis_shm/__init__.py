@@ -22,6 +22,7 @@ from fxis_shm.errors import (
     RequestTimeout,
     RingError,
     ServiceError,
+    SettingRejected,
     SkewExceeded,
     UnknownCamera,
 )
@@ -50,6 +51,7 @@ __all__ = [
     "UnknownCamera",
     "SkewExceeded",
     "FrameTimeout",
+    "SettingRejected",
     "LocalPathUnavailable",
     "RingError",
     "Overwritten",

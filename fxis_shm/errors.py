@@ -23,6 +23,8 @@ class Code:
     TOO_LARGE = "TOO_LARGE"  # a configured limit was exceeded
     BUSY = "BUSY"  # too many pending requests
     OVERRUN = "OVERRUN"  # the ring came round during every copy attempt: a ring too small, a reader too slow
+    SETTING_REFUSED = "SETTING_REFUSED"  # a camera setting unknown, read-only or out of its limits
+    FORBIDDEN = "FORBIDDEN"  # this client's key may not do that (changing settings: --curve-operators)
     INTERNAL = "INTERNAL"
 
     ALL = frozenset(v for k, v in vars().items() if k.isupper() and isinstance(v, str))
@@ -84,6 +86,11 @@ class ProtocolError(FxisError):
         self.message = message
 
 
+class SettingRefused(FxisError, ValueError):
+    """A camera refused a change of its settings (unknown key, read-only, out of its limits);
+    the message names the limits, and the camera keeps its old settings."""
+
+
 class RequestTimeout(FxisError, TimeoutError):
     """The service did not answer within the client's timeout."""
 
@@ -108,6 +115,10 @@ class ServiceError(FxisError):
         super().__init__(f"{code}: {message}")
         self.code = code
         self.message = message
+
+
+class SettingRejected(ServiceError):
+    """The service's camera refused a change of settings (code SETTING_REFUSED)."""
 
 
 class CameraDown(ServiceError):
@@ -137,6 +148,7 @@ _BY_CODE = {
     Code.SKEW_EXCEEDED: SkewExceeded,
     Code.TIMEOUT: FrameTimeout,
     Code.OVERRUN: Overrun,
+    Code.SETTING_REFUSED: SettingRejected,
 }
 
 

@@ -1,6 +1,7 @@
 """The camera worker process: one camera, one ring. It owns the ring's writer
 side and stores every frame the camera delivers (after the camera's processing
-hook, if it has one); it never waits for readers."""
+hook, if it has one); it never waits for readers. Between two frames it applies
+the coordinator's commands (workers/commands.py, workers/tuning.py)."""
 
 from __future__ import annotations
 
@@ -15,10 +16,11 @@ from fxis_shm.service.childspec import CameraWorkerSpec
 from fxis_shm.shm import history, naming
 from fxis_shm.shm.ring import FLAG_TRIGGERED, FrameLayout, RingWriter, segment_size
 
-from . import processing
+from . import processing, tuning
 from ._child import Ready, child_main
 from .backends import backend_class
 from .backends.base import CameraLost
+from .commands import CommandServer, serve_pending
 
 log = logging.getLogger("camera")
 _GRAB_TIMEOUT_S = 0.1  # also the heartbeat interval while no frames come
@@ -27,21 +29,57 @@ _FIRST_FRAME_TIMEOUT_S = 10.0
 _RECONNECT_FIRST_S, _RECONNECT_MAX_S = 0.5, 10.0
 
 
-def run(spec: CameraWorkerSpec, ready: Ready, stop: threading.Event) -> None:
-    name = spec.camera
-    camera = backend_class(spec.kind)(name, spec.options, spec.time_origin_ns)
-    process = processing.pipeline(camera.options)
-    camera.open()
-    try:
-        first, layout, hook_errors = _layout(camera, process, stop)
-        slots = history.slots_for(spec.history_s, camera.nominal_period_ns, spec.slots)
-        ring = RingWriter(spec.service, name, layout, slots, camera.nominal_period_ns)
-        ring.count("hook_errors", hook_errors)
-        ring.set_flags(FLAG_TRIGGERED if camera.supports_trigger else 0)
-        triggers = _TriggerListener(spec.service, camera, stop) if camera.supports_trigger else None
+class Stream:
+    """What the capture loop holds: the camera, its processing, its ring, and the command
+    server. A change of size or pixel format replaces the camera and the ring (``restart``)."""
+
+    def __init__(self, spec: CameraWorkerSpec, stop: threading.Event):
+        self.spec, self.stop = spec, stop
+        # changes made while the service runs, if this worker restarts after a crash
+        self.kept, self.named = tuning.remembered(spec)  # named: features set by name, set again after restarts
+        self.camera = backend_class(spec.kind)(spec.camera, {**spec.options, **self.kept}, spec.time_origin_ns)
+        self.process = processing.pipeline(self.camera.options)
+        self.ring: RingWriter | None = None
+        self.commands: CommandServer | None = None
+        self.first = None  # the first frame to store, if finding the layout took one
+
+    def start(self) -> None:
+        try:
+            self.camera.open()
+            if self.named:
+                self.camera.set_live(self.named)
+        except Exception as exc:
+            if not (self.kept or self.named):
+                raise
+            log.warning(
+                "camera %s: the settings changed at run time fail (%s); back to its configured ones",
+                self.spec.camera,
+                exc,
+            )
+            tuning.forget(self.spec)
+            self.camera.close()
+            self.kept, self.named = {}, {}
+            spec = self.spec
+            self.camera = backend_class(spec.kind)(spec.camera, spec.options, spec.time_origin_ns)
+            self.camera.open()
+        if self.kept or self.named:
+            log.info(
+                "camera %s: with the settings changed at run time %s", self.spec.camera, {**self.kept, **self.named}
+            )
+        self.first, layout, hook_errors = _layout(self.camera, self.process, self.stop)
+        # before the ring: a coordinator that sees the ring's new generation finds the commands
+        self.commands = CommandServer(self.spec.service, self.spec.camera, threading.Event())
+        self.ring = self._ring(layout)
+        self.ring.count("hook_errors", hook_errors)
+        self.ring.set_flags(FLAG_TRIGGERED if self.camera.supports_trigger else 0)
+
+    def _ring(self, layout: FrameLayout) -> RingWriter:
+        spec, period = self.spec, self.camera.nominal_period_ns
+        slots = history.slots_for(spec.history_s, period, spec.slots)
+        ring = RingWriter(spec.service, spec.camera, layout, slots, period)
         log.info(
             "camera %s (%s) streaming %s into %s (%d slots, %s), generation %d",
-            name,
+            spec.camera,
             spec.kind,
             layout,
             ring.name,
@@ -49,16 +87,63 @@ def run(spec: CameraWorkerSpec, ready: Ready, stop: threading.Event) -> None:
             history.mib(segment_size(layout, slots)[0]),
             ring.generation,
         )
+        return ring
+
+    def restart(self, options: dict) -> None:
+        """The stream again with ``options``: a new camera object, a new ring if the layout or
+        the slots differ (readers re-open it by name), the generation + 1 either way. If the
+        new camera fails, the old one is opened again as it was and the failure raised."""
+        old = self.camera
+        old.close()
+        try:
+            camera = backend_class(self.spec.kind)(self.spec.camera, options, self.spec.time_origin_ns)
+            camera.open()
+        except Exception:
+            old.open()
+            raise
+        try:
+            first, layout, _ = _layout(camera, self.process, self.stop)
+        except Exception:
+            camera.close()
+            old.open()
+            raise
+        self.camera, self.first = camera, first
+        ring = self.ring
+        assert ring is not None
+        slots = history.slots_for(self.spec.history_s, camera.nominal_period_ns, self.spec.slots)
+        if layout == ring.layout and slots == ring.slots:
+            ring.new_generation()
+            ring.set_period(camera.nominal_period_ns)
+        else:  # the new writer retires the old segment; the old writer's mapping is then closed
+            self.ring = self._ring(layout)
+            for counter in ("frames_captured", "frames_dropped", "hook_errors"):
+                self.ring.count(counter, ring.field(counter) - self.ring.field(counter))
+            ring.close()
+        self.ring.set_flags(FLAG_TRIGGERED if camera.supports_trigger else 0)  # read by the next request
+        log.info("camera %s restarted its stream (generation %d)", self.spec.camera, self.ring.generation)
+
+    def close(self) -> None:
+        if self.commands is not None:
+            self.commands.close()
+        if self.ring is not None:
+            self.ring.close()
+        self.process.close()
+        self.camera.close()
+
+
+def run(spec: CameraWorkerSpec, ready: Ready, stop: threading.Event) -> None:
+    stream = Stream(spec, stop)
+    try:
+        stream.start()
+        triggers = _TriggerListener(spec.service, stream, stop)  # also for a camera set to trigger=software later
         ready.ok()
         try:
-            _stream(camera, process, ring, stop, first)
+            _stream(stream)
         finally:
             if triggers:
                 triggers.close()
-            ring.close()
     finally:
-        process.close()
-        camera.close()
+        stream.close()
 
 
 def _layout(camera, process, stop) -> tuple:
@@ -88,15 +173,20 @@ def _layout(camera, process, stop) -> tuple:
     )
 
 
-def _stream(camera, process, ring: RingWriter, stop: threading.Event, first=None) -> None:
-    dropped, note = camera.frames_dropped, ""
-    if first is not None:
-        _store(ring, first)
+def _stream(stream: Stream) -> None:
+    stop, generation = stream.stop, -1
     while not stop.is_set():
+        if stream.ring.generation != generation:  # started, or restarted by a command
+            camera, process, ring, generation = stream.camera, stream.process, stream.ring, stream.ring.generation
+            dropped, note = camera.frames_dropped, ""
+            if stream.first is not None:
+                _store(ring, stream.first)
+                stream.first = None
         try:
             capture = camera.grab(_RESULT_POLL_S if process.in_flight else _GRAB_TIMEOUT_S)
         except CameraLost as exc:
             _reconnect(camera, ring, stop, str(exc))
+            generation = ring.generation  # the same camera and ring, a new generation
             dropped, note = camera.frames_dropped, ""  # _reconnect cleared the status
             continue
         if capture is None:
@@ -113,6 +203,7 @@ def _stream(camera, process, ring: RingWriter, stop: threading.Event, first=None
         if camera.note != note:  # what the camera says about itself ("end of file", ...)
             note = camera.note
             ring.set_status(note)
+        serve_pending(stream.commands, lambda command: tuning.handle(stream, command.body))
 
 
 def _reconnect(camera, ring: RingWriter, stop: threading.Event, reason: str) -> None:
@@ -158,26 +249,28 @@ def _store(ring: RingWriter, item: processing.Processed) -> None:
 
 
 class _TriggerListener:
-    """Fires the camera's software trigger each time the coordinator posts its semaphore."""
+    """Fires the camera's software trigger each time the coordinator posts its semaphore (the
+    stream's camera of the moment: a restart of the stream replaces it)."""
 
-    def __init__(self, service: str, camera, stop: threading.Event):
+    def __init__(self, service: str, stream: Stream, stop: threading.Event):
         self._sem = posix_ipc.Semaphore(
-            naming.trigger_name(service, camera.name), posix_ipc.O_CREAT, mode=0o600, initial_value=0
+            naming.trigger_name(service, stream.spec.camera), posix_ipc.O_CREAT, mode=0o600, initial_value=0
         )
         self._stop = stop
-        self._thread = threading.Thread(target=self._listen, args=(camera,), daemon=True, name="trigger")
+        self._thread = threading.Thread(target=self._listen, args=(stream,), daemon=True, name="trigger")
         self._thread.start()
 
-    def _listen(self, camera) -> None:
+    def _listen(self, stream: Stream) -> None:
         while not self._stop.is_set():
             try:
                 self._sem.acquire(0.2)
             except posix_ipc.BusyError:
                 continue
             try:
-                camera.trigger()
+                if stream.camera.supports_trigger:  # (a post racing a change to trigger=free)
+                    stream.camera.trigger()
             except Exception:
-                log.exception("software trigger of camera %r failed", camera.name)
+                log.exception("software trigger of camera %r failed", stream.spec.camera)
 
     def close(self) -> None:
         self._stop.set()

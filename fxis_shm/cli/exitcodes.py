@@ -7,7 +7,15 @@ from __future__ import annotations
 
 import errno
 
-from fxis_shm.errors import ConfigError, FxisError, InvalidArgument, RequestTimeout, SpecError, UnknownCamera
+from fxis_shm.errors import (
+    ConfigError,
+    FxisError,
+    InvalidArgument,
+    RequestTimeout,
+    SettingRejected,
+    SpecError,
+    UnknownCamera,
+)
 
 DONE = 0  # the command did all it was asked
 MISSING = 1  # done, but some of what was asked is missing (frames gone, a camera down)
@@ -23,7 +31,7 @@ def for_error(exc: BaseException) -> int | None:
     """The code of a failure a user can cause (None: a bug, which shows its traceback)."""
     if isinstance(exc, KeyboardInterrupt):
         return INTERRUPTED
-    if isinstance(exc, (ConfigError, InvalidArgument, UnknownCamera, SpecError)):
+    if isinstance(exc, (ConfigError, InvalidArgument, UnknownCamera, SpecError, SettingRejected)):
         return USAGE  # the command, a file it names, or a camera it names is to change
     if isinstance(exc, RequestTimeout):
         return NO_SERVICE  # no answer: down, a wrong endpoint, keys it refuses

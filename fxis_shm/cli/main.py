@@ -13,7 +13,7 @@ import threading
 import traceback
 from typing import NoReturn
 
-from fxis_shm.cli import dashboard, exitcodes, local, query, record, run, snapshot
+from fxis_shm.cli import dashboard, exitcodes, local, query, record, run, snapshot, tune
 
 DEBUG_ENV = "FXIS_DEBUG"
 
@@ -37,6 +37,7 @@ def parser() -> argparse.ArgumentParser:
     snapshot.add_parser(sub)
     dashboard.add_parser(sub)
     local.add_parsers(sub)
+    tune.add_parsers(sub)
     for command in sub.choices.values():  # --debug after the command too (SUPPRESS: keeps one given before)
         command.add_argument("--debug", action="store_true", default=argparse.SUPPRESS, help=debug_help)
     return p

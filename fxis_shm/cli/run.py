@@ -35,6 +35,7 @@ def run_command(args) -> int:
             "log_level": args.log_level,
             "curve_secret": args.curve_secret,
             "curve_clients": args.curve_clients,
+            "curve_operators": args.curve_operators,
             "insecure_bind": args.insecure_bind or None,
             "clock": args.clock,
             "http": args.http,
@@ -114,6 +115,12 @@ def add_parser(sub) -> None:
     run.add_argument("--curve-secret", metavar="FILE", help="the service's NAME.key_secret: CurveZMQ on every socket")
     run.add_argument(
         "--curve-clients", metavar="DIR", help="folder of the public keys (.key) of the clients allowed in"
+    )
+    run.add_argument(
+        "--curve-operators",
+        metavar="DIR",
+        help="folder of the public keys (.key) that may change camera settings (default: every client let in); "
+        "they are let in too",
     )
     run.add_argument(
         "--insecure-bind",

@@ -127,6 +127,14 @@ class MultiClient:
                 return client.clock_estimate()
         raise InvalidArgument(f"clock_estimate(service) needs one of {self.endpoints}, got {service!r}; or see clocks")
 
+    def settings(self, camera: str, *, features: bool = False) -> dict:
+        """As ``Client.settings``, asked of the service that has ``camera``."""
+        return self.owner[self._known([camera])[0]].settings(camera, features=features)
+
+    def configure(self, camera: str, **values) -> dict:
+        """As ``Client.configure``, on the service that has ``camera``."""
+        return self.owner[self._known([camera])[0]].configure(camera, **values)
+
     def frame_times(self, cameras: list[str] | None = None) -> dict:
         """As ``Client.frame_times`` over every service: each camera's frames without pixels
         (times in its own service's clock, named by the camera's ``service``)."""

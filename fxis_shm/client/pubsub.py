@@ -199,6 +199,11 @@ class Subscriber(Receiver, SocketOwner):
         """Subscribe to synchronized tuples of all cameras as they complete."""
         return self.topic(str(stream_topic("tuples", None, rate_hz, encoding, quality)))
 
+    def settings(self, camera: str) -> str:
+        """Subscribe to the changes of ``camera``'s settings (docs/protocol.md 7.8): each message's
+        header holds ``camera``, ``changed``, ``cost``, ``values`` and ``generation``."""
+        return self.topic(f"settings/{camera}|")
+
     def unsubscribe(self, topic: str) -> None:
         self._sock.setsockopt(zmq.UNSUBSCRIBE, topic.encode())
         self._topics.discard(topic)

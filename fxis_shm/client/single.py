@@ -48,7 +48,7 @@ from fxis_shm.core import timebase
 from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.errors import InvalidArgument, RequestTimeout, service_error
 from fxis_shm.shm.localpath import LocalRings, boot_id
-from fxis_shm.wire import defaults, encoding as codec, protocol
+from fxis_shm.wire import commands, defaults, encoding as codec, protocol
 from fxis_shm.wire.endpoints import check_endpoint, unknown_host
 from fxis_shm.wire.security import ClientKeys
 
@@ -332,6 +332,20 @@ class SingleClient(RequestPaths, SocketOwner):
     def time(self) -> int:
         """The service's clock now (int ns of the clock its status names; CLOCK_MONOTONIC by default)."""
         return self._call("time", 0.0)[0]["now"]
+
+    def settings(self, camera: str, *, features: bool = False) -> dict:
+        """The camera's settings: ``values`` (key: value), ``limits`` (key: type, access, cost
+        "live" or "restart", min/max/inc or choices, unit) and ``generation``; with
+        ``features``, also ``features``: every node-map feature (GenICam cameras)."""
+        return self._call("settings", commands.SETTINGS_TIMEOUT_S, camera=camera, features=features or None)[0]
+
+    def configure(self, camera: str, **values) -> dict:
+        """Change settings of ``camera``, all or none (``client.configure("left", exposure_us=2000,
+        gain=6)``). Returns ``changed`` (the values the camera took: it may round), ``cost``
+        ("live": applied between two frames; "restart": a new ring, the generation + 1),
+        ``values``, ``limits`` and ``generation``. A key the camera lacks, a read-only one or a
+        value out of range raises SettingRejected naming the limits; the camera keeps its settings."""
+        return self._call("settings", commands.SETTINGS_TIMEOUT_S, camera=camera, set=values)[0]
 
     def _service_identity(self) -> dict:
         if self._identity is None:

@@ -73,6 +73,8 @@ COMMON_OPTIONS = {
 
 # ---- synthetic ----
 
+SYNTHETIC_EXPOSURE_US = 10_000.0  # the exposure at which the pattern shows as drawn (brightness x 1)
+
 SYNTHETIC = CameraKind(
     "synthetic",
     "the embedded test camera: a moving, stamped pattern at a set rate",
@@ -81,6 +83,12 @@ SYNTHETIC = CameraKind(
         "width": Option(number(int, 16, 16384), 1360, "image width in pixels"),
         "height": Option(number(int, 1, 16384), 1024, "image height in pixels"),
         "pixel_format": Option(choice("mono8", "bgr8"), "mono8", "mono8 or bgr8"),
+        "exposure_us": Option(
+            number(float, 1, 1_000_000),
+            SYNTHETIC_EXPOSURE_US,
+            "exposure time, microseconds: the picture's brightness scales with it (the default leaves it as drawn)",
+        ),
+        "gain": Option(number(float, 0, 24), 0.0, "gain in dB: brightness x 10^(gain/20)"),
         "phase_ms": Option(number(float), 0.0, "offset of this camera's frame times, ms"),
         "jitter_ms": Option(number(float, 0), 0.0, "uniform timing noise of the capture time, +/- ms"),
         "drop": Option(number(float, 0, 1), 0.0, "probability that a frame is lost"),

@@ -112,7 +112,7 @@ class CameraWorkerSpec(ChildSpec):
 class CoordinatorSpec(ChildSpec):
     ROLE = "coordinator"
     MODULE = "fxis_shm.workers.coordinator"
-    VERSION = 1
+    VERSION = 2
 
     endpoint: str
     pub: str
@@ -121,6 +121,7 @@ class CoordinatorSpec(ChildSpec):
     settings: dict[str, Any]  # request defaults the config changed (engine.REQUEST_DEFAULTS)
     curve_secret: str | None = None
     curve_clients: str | None = None
+    curve_operators: str | None = None  # the keys that may change camera settings (None: every client)
     history: dict[str, float] = dataclasses.field(default_factory=dict)  # camera -> seconds asked for
 
 

@@ -62,6 +62,7 @@ class ServiceConfig:
     log_level: str = defaults.LOG_LEVEL
     curve_secret: str | None = None  # the service's NAME.key_secret: CURVE on every socket
     curve_clients: str | None = None  # folder of the public keys of the clients allowed in
+    curve_operators: str | None = None  # folder of the keys that may change camera settings (None: every client)
     insecure_bind: bool = False  # allow non-loopback endpoints without CURVE
     clock: str = "monotonic"  # the clock every time of the service is in (fxis_shm.core.timebase)
     http: str = defaults.HTTP  # HOST:PORT of the live dashboard, or "off"
@@ -288,6 +289,7 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
         "log_level",
         "curve_secret",
         "curve_clients",
+        "curve_operators",
         "insecure_bind",
         "clock",
         "http",
@@ -410,6 +412,15 @@ def _security(config: ServiceConfig, values: dict) -> ServiceConfig:
         if not os.path.isdir(clients) or not any(f.endswith(".key") for f in os.listdir(clients)):
             raise ConfigError(f"curve_clients {clients}: not a folder holding client .key files")
         config = replace(config, curve_secret=secret, curve_clients=clients)
+    operators = values.get("curve_operators")
+    if operators:
+        if not secret:
+            raise ConfigError(
+                "curve_operators needs curve_secret and curve_clients: without CurveZMQ no client has a key"
+            )
+        if not os.path.isdir(operators) or not any(f.endswith(".key") for f in os.listdir(operators)):
+            raise ConfigError(f"curve_operators {operators}: not a folder holding .key files")
+        config = replace(config, curve_operators=operators)
     insecure = values.get("insecure_bind", False)
     if not isinstance(insecure, bool):
         raise ConfigError(f"insecure_bind must be true or false, got {insecure!r}")

@@ -19,6 +19,7 @@ from collections.abc import Callable
 
 import zmq
 import zmq.auth
+from zmq.auth.certs import load_certificates
 from zmq.auth.thread import ThreadAuthenticator
 
 from fxis_shm.client.sockets import send_parts
@@ -29,12 +30,13 @@ from fxis_shm.service.childspec import CoordinatorSpec
 from fxis_shm.service.fastanswers import FastAnswers
 from fxis_shm.service.framewatch import FrameWatch
 from fxis_shm.service.streams import Streams
+from fxis_shm.service.workerlink import WorkerLinks
 from fxis_shm.shm import fastpick, naming, ordering
 from fxis_shm.shm.cameras import FRAME_FIELDS, CameraHandle
 from fxis_shm.shm.copyout import MESSAGES, REFS, CopyOut
 from fxis_shm.shm.localpath import boot_id, time_namespace
 from fxis_shm.shm.ring import Overwritten
-from fxis_shm.wire import protocol
+from fxis_shm.wire import commands, protocol
 from fxis_shm.wire.security import load_pair, make_server
 
 log = logging.getLogger("coordinator")
@@ -47,6 +49,13 @@ _EVENTS, _POLLIN = int(zmq.EVENTS), int(zmq.POLLIN)
 _M_TRIM_THRESHOLD, _M_MMAP_THRESHOLD = -1, -3
 _MMAP_THRESHOLD = 32 << 20  # the largest glibc takes (64-bit): below, from the heap; larger frames: the pool
 _TRIM_THRESHOLD = 256 << 20  # freed memory kept for the next messages, as the buffer pool keeps
+
+
+FORBIDDEN_TEXT = (
+    "this client may read settings but not change them: the service lets only the keys in its "
+    "--curve-operators folder change them; ask its operator to add this client's public key (.key) "
+    "there and restart the service, or use a key that is there"
+)
 
 
 def keep_message_memory() -> bool:
@@ -101,8 +110,8 @@ class AllowedKeys:
     service itself, whose viewers (dashboard, Foxglove server, ROS 2 bridge) connect with its
     own pair (ViewerSpec.client_keys). Read once, at start."""
 
-    def __init__(self, pair: tuple[bytes, bytes], folder: str):
-        self.keys = set(zmq.auth.load_certificates(folder)) | {pair[0]}
+    def __init__(self, pair: tuple[bytes, bytes], folder: str, operators: set[bytes] = frozenset()):
+        self.keys = set(load_certificates(folder)) | {pair[0]} | operators  # operators are let in too
 
     def callback(self, domain: str, key: bytes) -> bool:
         return key in self.keys
@@ -115,8 +124,12 @@ class Coordinator:
         self.pub_endpoint = spec.pub
         self.events_endpoint = spec.events
         self.curve = None
+        self.operators: set[str] | None = None  # the keys (Z85) that may change settings; None: every client
         if spec.curve_secret:
             self.curve = (load_pair(spec.curve_secret), spec.curve_clients)
+            if spec.curve_operators:  # the service's own key too: its dashboard connects with it
+                self.operators = {k.decode() for k in load_certificates(spec.curve_operators)}
+                self.operators.add(self.curve[0][0].decode())
         self.cameras = {
             name: CameraHandle(self.service, name, kind, spec.history.get(name)) for name, kind in spec.cameras.items()
         }
@@ -129,6 +142,9 @@ class Coordinator:
         self.events_dropped = 0
         self.boot_id = boot_id()
         self.time_namespace = time_namespace()
+        # per camera, (generation, values) its worker last reported (values None: asked, not answered yet)
+        self.camera_settings: dict[str, tuple[int, dict | None]] = {}
+        self.links: WorkerLinks | None = None
 
     # ---- the loop ----
 
@@ -145,7 +161,8 @@ class Coordinator:
             if self.curve is not None:  # only clients whose public keys are in the folder
                 auth = ThreadAuthenticator(ctx, log=logging.getLogger("auth"))
                 auth.start()
-                auth.configure_curve_callback(domain="*", credentials_provider=AllowedKeys(*self.curve))
+                allowed = AllowedKeys(*self.curve, operators={k.encode() for k in self.operators or ()})
+                auth.configure_curve_callback(domain="*", credentials_provider=allowed)
                 closing.append(_Stopping(auth))
             self.router = self._socket(ctx, zmq.ROUTER, self.endpoint, "request endpoint", closing)
             self.router.setsockopt(zmq.ROUTER_MANDATORY, 1)  # report unsendable replies
@@ -156,11 +173,15 @@ class Coordinator:
                 self.events.setsockopt(zmq.SUBSCRIBE, protocol.EVENT_TOPIC)
             watch = FrameWatch(ctx, self.service, list(self.cameras))
             closing.append(watch)
+            self.links = links = WorkerLinks(ctx, self.service, list(self.cameras))
+            closing.append(links)
             self.streams = Streams(self.copyout, self._publish)
             poller = zmq.Poller()
-            for sock in (self.router, self.pub, self.events, watch.pull):
+            for sock in (self.router, self.pub, self.events, watch.pull, *links.sockets.values()):
                 if sock is not None:
                     poller.register(sock, zmq.POLLIN)
+            for name in self.cameras:  # what status shows until a change is made
+                links.send(name, commands.SETTINGS, commands.SETTINGS_TIMEOUT_S, self._settings_known(name))
             on_ready()
             log.info(
                 "serving %s on %s, publishing on %s, events on %s",
@@ -174,10 +195,14 @@ class Coordinator:
                 updated = watch.drain() if watch.pull in events else set()
                 if self.pub in events:
                     self._drain_subscriptions()
-                if self.router in events:
-                    self._drain(self.router, self._on_request)
+                if self.router in events:  # (as frames when each request's key must be known)
+                    self._drain(self.router, self._on_request, copy=self.operators is None)
                 if self.events is not None and self.events in events:
                     self._drain(self.events, self._on_event)
+                for sock in links.sockets.values():
+                    if sock in events:
+                        links.drain(sock)
+                links.expire(timebase.now())
                 if updated or self._due():
                     self._carry_out(self.engine.on_frames(updated, timebase.now()))
                 if updated:
@@ -204,7 +229,8 @@ class Coordinator:
         return sock
 
     def _poll_timeout_ms(self) -> int:
-        wake = self.engine.next_wake()
+        wakes = [t for t in (self.engine.next_wake(), self.links.next_deadline() if self.links else None) if t]
+        wake = min(wakes, default=None)
         if wake is None:
             return 200
         return max(0, min(200, (wake - timebase.now()) // 1_000_000 + 1))
@@ -223,12 +249,12 @@ class Coordinator:
                 self.streams.subscription(message[1:].decode(errors="replace"), message[0] == 1)
 
     @staticmethod
-    def _drain(sock, handle, budget: int = 256) -> None:
+    def _drain(sock, handle, budget: int = 256, copy: bool = True) -> None:
         for _ in range(budget):
             if not sock.getsockopt(_EVENTS) & _POLLIN:  # (cheaper than the exception of an empty recv)
                 return
             try:
-                frames = sock.recv_multipart(zmq.NOBLOCK)
+                frames = sock.recv_multipart(zmq.NOBLOCK, copy=copy)
             except zmq.Again:
                 return
             try:
@@ -248,7 +274,15 @@ class Coordinator:
             rid = _readable_field(body[0], "id", (int, str)) if body else None
             respond(protocol.encode_error(rid, exc.code, exc.message))
             return
+        if request["op"] == "settings" and request["set"] and not self._may_change(body[0]):
+            respond(protocol.encode_error(request["id"], Code.FORBIDDEN, FORBIDDEN_TEXT))
+            return
         self._start(request, respond, t_received, client=bytes(envelope[0]))
+
+    def _may_change(self, frame) -> bool:
+        """May the client that sent ``frame`` change camera settings? Everyone, unless the service
+        names its operators: then only their keys (CurveZMQ's User-Id of the message)."""
+        return self.operators is None or (isinstance(frame, zmq.Frame) and frame.get("User-Id") in self.operators)
 
     def _on_event(self, frames: list, t_received: int) -> None:
         try:
@@ -271,6 +305,9 @@ class Coordinator:
     ) -> None:
         op = request["op"]
         try:
+            if op == "settings":  # answered when the camera's worker has applied it
+                self._settings(request, respond)
+                return
             if op not in FRAME_OPS:
                 self._reply(respond, request, getattr(self, f"_op_{op}")(request, t_received))
                 return
@@ -337,7 +374,19 @@ class Coordinator:
         cameras = {name: cam.status(now) for name, cam in self.cameras.items()}
         for name, info in cameras.items():
             info["restarts"] = processes.get(f"camera:{name}", {}).get("restarts")
+            info["settings"] = self._settings_of(name, info.get("generation"))
         return cameras
+
+    def _settings_of(self, camera: str, generation: int | None) -> dict | None:
+        """The values the camera's worker reported for this generation of its frames; a worker
+        that restarted since is asked again (None until it answers)."""
+        known = self.camera_settings.get(camera)
+        if known is not None and (known[0] == generation or generation is None):
+            return known[1]
+        if self.links is not None and generation is not None:
+            self.camera_settings[camera] = (generation, None)
+            self.links.send(camera, commands.SETTINGS, commands.SETTINGS_TIMEOUT_S, self._settings_known(camera))
+        return None
 
     def _state_of(self, process: str) -> dict | None:
         """What the supervisor or the ROS 2 bridge last reported (None: nothing)."""
@@ -346,6 +395,45 @@ class Coordinator:
                 return json.load(f)
         except (OSError, ValueError):
             return None
+
+    # ---- camera settings, through the camera's worker ----
+
+    def _settings(self, request: dict, respond: Callable[[list], None]) -> None:
+        camera = request["camera"]
+        if camera not in self.cameras:
+            raise ProtocolError(
+                f"unknown camera {camera!r}; this service has {sorted(self.cameras)}", Code.UNKNOWN_CAMERA
+            )
+        known = self._settings_known(camera)
+
+        def done(result: dict | None, code: str | None, message: str | None) -> None:
+            if result is None:
+                respond(protocol.encode_error(request["id"], code or Code.INTERNAL, message or ""))
+                return
+            known(result, None, None)
+            self._reply(respond, request, {"op": "settings", "camera": camera, **result})
+
+        fields = {k: request[k] for k in ("set", "features") if request[k] is not None}
+        assert self.links is not None
+        self.links.send(camera, commands.SETTINGS, commands.SETTINGS_TIMEOUT_S, done, **fields)
+
+    def _settings_known(self, camera: str):
+        """What to do with a worker's settings answer: keep its values for status, and announce
+        a change (log, and the event ``settings/CAMERA|`` on the publish endpoint)."""
+
+        def known(result: dict | None, code: str | None, message: str | None) -> None:
+            if result is None:
+                log.info("camera %s did not report its settings: %s", camera, message)
+                if self.camera_settings.get(camera, (0, {}))[1] is None:
+                    del self.camera_settings[camera]  # asked again by the next status
+                return
+            self.camera_settings[camera] = (result["generation"], result["values"])
+            if "changed" in result:
+                log.info("camera %s changed %s (%s)", camera, result["changed"], result["cost"])
+                event = {k: result[k] for k in ("changed", "cost", "values", "generation")}
+                self._publish(f"settings/{camera}|", protocol.encode_reply(None, {"camera": camera, **event}))
+
+        return known
 
     def _op_time(self, request: dict, t_received: int) -> dict:
         """The clock now, and when the request was received: a caller estimating our clock

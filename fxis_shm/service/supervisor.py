@@ -266,6 +266,7 @@ class Supervisor:
                 settings=config.settings,
                 curve_secret=config.curve_secret,
                 curve_clients=config.curve_clients,
+                curve_operators=config.curve_operators,
                 history={c.name: h for c in config.cameras if (h := history_of(c, config))},
             ),
             "coordinator",

@@ -8,8 +8,10 @@ semaphore as ``/dev/shm/sem.<name>``.
 
 from __future__ import annotations
 
+import hashlib
 import os
 import re
+import shutil
 
 import posix_ipc
 
@@ -43,6 +45,24 @@ def trigger_name(service: str, camera: str) -> str:
     return f"/{prefix(service)}{camera}.trigger"
 
 
+def commands_dir(service: str) -> str:
+    """The folder (mode 0700) holding the command sockets of the service's camera workers."""
+    return os.path.join(SHM_DIR, f"{prefix(service)}commands")
+
+
+_IPC_PATH_MAX = 107  # sun_path holds 108 bytes with its terminating NUL
+
+
+def command_endpoint(service: str, camera: str) -> str:
+    """The ZeroMQ ipc endpoint a camera worker binds for the coordinator's commands. The
+    camera's name is the file's, unless the path would not fit a Unix socket address: then
+    a digest of it (names are at most 48 characters, so only long pairs of names need it)."""
+    path = os.path.join(commands_dir(service), camera)
+    if len(path.encode()) > _IPC_PATH_MAX:
+        path = os.path.join(commands_dir(service), "h" + hashlib.sha256(camera.encode()).hexdigest()[:16])
+    return "ipc://" + path
+
+
 def supervisor_state_path(service: str) -> str:
     """The supervisor's process table, read by the coordinator for status."""
     return state_path(service, "supervisor")
@@ -70,7 +90,9 @@ def remove_leftovers(service: str) -> list[str]:
     for path in leftovers(service):
         entry = os.path.basename(path)
         try:
-            if entry.endswith((".json", ".tmp")):
+            if os.path.isdir(path):  # the folder of command sockets
+                shutil.rmtree(path)
+            elif entry.endswith((".json", ".tmp")):
                 os.unlink(path)
             elif entry.startswith("sem."):
                 posix_ipc.unlink_semaphore("/" + entry[len("sem.") :])

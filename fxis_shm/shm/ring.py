@@ -221,8 +221,7 @@ class RingWriter(_Mapping):
             h["period_ns"] = nominal_period_ns
         self.generation = int(h["generation"])
         self._count = int(h["write_count"])
-        self._last = None  # (frame_id, t_capture) of the previous stored frame
-        self._samples = 0
+        self._last, self._samples = None, 0  # (frame_id, t_capture) of the previous stored frame; their count
         self.semaphore = posix_ipc.Semaphore(
             naming.semaphore_name(service, camera), posix_ipc.O_CREAT, mode=0o600, initial_value=0
         )
@@ -284,8 +283,7 @@ class RingWriter(_Mapping):
         ordering.store_release(self._mm, _seq_at(slot), 2 * w + 2)  # after every byte of the frame
         self._count = w + 1
         ordering.store_release(self._mm, WRITE_COUNT_AT, self._count)
-        h = self.header
-        h["heartbeat_ns"] = t_stored
+        self.header["heartbeat_ns"] = t_stored
         self._update_timing(frame_id, t_capture, t_stored)
         if self.semaphore.value == 0:
             self.semaphore.release()
@@ -308,12 +306,15 @@ class RingWriter(_Mapping):
 
     def new_generation(self) -> int:
         """The camera came back after an outage: later frames carry a new generation."""
-        h = self.header
-        self.generation = int(h["generation"]) + 1
-        h["generation"] = self.generation
-        h["generation_started_ns"] = timebase.now()
+        self.generation = int(self.header["generation"]) + 1
+        self.header["generation"], self.header["generation_started_ns"] = self.generation, timebase.now()
         self._last, self._samples = None, 0
         return self.generation
+
+    def set_period(self, nominal_period_ns: int) -> None:
+        """A new frame rate: readers take its period at once (no stale average); the estimate restarts."""
+        self.header["nominal_period_ns"] = self.header["period_ns"] = nominal_period_ns
+        self._last, self._samples = None, 0
 
     def heartbeat(self) -> None:
         self.header["heartbeat_ns"] = timebase.now()

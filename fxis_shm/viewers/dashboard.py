@@ -6,6 +6,8 @@
     /cameras/NAME/latest.jpg       the newest frame, scaled down (?width=, default 640)
     /cameras/NAME/stream.mjpg      MJPEG (?fps=, default 5; ?width=)
     /tuple.zip                     one synchronized tuple: NAME.png per camera + tuple.json
+    /cameras/NAME/settings.json    GET: the camera's settings and limits; POST {"key": value, ...}:
+                                   change them (docs/protocol.md 7.8), 400/403 with the refusal
 
 It runs in a process of its own (workers/dashboard.py) and reads through fxis_shm.Client
 (fxis_shm.viewers.livefeed). A slow viewer gets fewer frames, never a queue: each stream sends the
@@ -25,17 +27,19 @@ from importlib import resources
 
 from aiohttp import web
 
-from fxis_shm.errors import FxisError, InvalidArgument, UnknownCamera
+from fxis_shm.errors import Code, FxisError, InvalidArgument, ServiceError, UnknownCamera
 from fxis_shm.service.config import ViewerAccess
 from fxis_shm.viewers.access import middlewares, ssl_context
 from fxis_shm.viewers.livefeed import SAMPLE_PERIOD_S, LiveFeed
 from fxis_shm.viewers.preview import parse_fps, parse_width
+from fxis_shm.viewers.tuningfeed import CameraTuning
 
 log = logging.getLogger("dashboard")
 
 BOUNDARY = "fxisframe"
 NOT_READY_RETRY_S = 0.2  # a stream whose camera is down looks again this often
 FEED = web.AppKey("feed", LiveFeed)
+TUNING = web.AppKey("tuning", CameraTuning)
 FRAME_HEADER = "X-Fxis-Frame"  # GENERATION:FRAME_ID of the frame a picture shows
 
 
@@ -45,8 +49,10 @@ def _page() -> bytes:
 
 def _error(exc: Exception) -> web.Response:
     """The HTTP answer to an error of a request: 400, 404 or 503 with a readable message."""
-    if isinstance(exc, InvalidArgument):
+    if isinstance(exc, InvalidArgument) or getattr(exc, "code", None) == Code.SETTING_REFUSED:
         status = 400
+    elif getattr(exc, "code", None) == Code.FORBIDDEN:
+        status = 403
     elif isinstance(exc, UnknownCamera):
         status = 404
     else:  # CameraDown, RequestTimeout, a service gone: worth trying again later
@@ -124,6 +130,25 @@ async def _stream(request: web.Request) -> web.StreamResponse:
     return response
 
 
+async def _settings(request: web.Request) -> web.Response:
+    camera = request.match_info["name"]
+    try:
+        request.app[FEED].check_camera(camera)
+        if request.method == "POST":
+            try:
+                values = await request.json()
+            except ValueError:
+                values = None
+            if not isinstance(values, dict) or not values:
+                raise InvalidArgument('POST a JSON object of settings, e.g. {"exposure_us": 5000}')
+            answer = await request.app[TUNING].configure(camera, values)
+        else:
+            answer = await request.app[TUNING].settings(camera)
+    except (FxisError, ServiceError) as exc:
+        return _error(exc)
+    return web.json_response(answer, headers={"Cache-Control": "no-store"})
+
+
 async def _tuple_zip(request: web.Request) -> web.Response:
     try:
         data, name = await request.app[FEED].tuple_zip()
@@ -154,6 +179,9 @@ def make_app(feed: LiveFeed, access: ViewerAccess | None = None, port: int = 0) 
     app.router.add_get("/cameras/{name}/latest.jpg", _latest)
     app.router.add_get("/cameras/{name}/stream.mjpg", _stream)
     app.router.add_get("/tuple.zip", _tuple_zip)
+    app.router.add_get("/cameras/{name}/settings.json", _settings)
+    app.router.add_post("/cameras/{name}/settings.json", _settings)
+    app[TUNING] = CameraTuning(feed.endpoint, feed.keys)
 
     async def sampler(app: web.Application):
         task = asyncio.create_task(_sample_forever(app))
@@ -163,6 +191,7 @@ def make_app(feed: LiveFeed, access: ViewerAccess | None = None, port: int = 0) 
             await task
 
     app.cleanup_ctx.append(sampler)
+    app.on_cleanup.append(lambda app: asyncio.get_running_loop().run_in_executor(None, app[TUNING].close))
     return app
 
 

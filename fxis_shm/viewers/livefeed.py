@@ -50,7 +50,7 @@ class LiveFeed:
         keys: ClientKeys | None = None,
         timeout: float = REQUEST_TIMEOUT_S,
     ):
-        self.endpoint = endpoint
+        self.endpoint, self.keys = endpoint, keys
         self.cell = isinstance(endpoint, list)
         self._pictures = ThreadPoolExecutor(1, thread_name_prefix="dashboard-pictures")
         self._sampler = ThreadPoolExecutor(1, thread_name_prefix="dashboard-sampler")

@@ -25,7 +25,7 @@ from fxis_shm.wire.framemeta import described, encoded_meta, frame_meta, frame_r
 VERSION = 1
 CLOCK = "CLOCK_MONOTONIC"
 MAX_HEADER_BYTES = 64 * 1024
-RESERVED_TOPICS = ("frames/", "tuples", "fxis.")  # stream topics the service publishes itself
+RESERVED_TOPICS = ("frames/", "tuples", "settings/", "fxis.")  # stream topics the service publishes itself
 DTYPES = ("uint8", "uint16", "float32")
 _DTYPE_OF = {name: np.dtype(name) for name in DTYPES}  # (np.dtype(name) parses the name on every call)
 LOCAL = "local"  # the delivery of a reply whose frames the client copies from the rings itself
@@ -126,6 +126,22 @@ def _optional(check):
     return wrapped
 
 
+MAX_SETTINGS = 64  # keys in one settings request
+
+
+def _setting_values(field, v):
+    if not isinstance(v, dict) or not v:
+        _fail(field, "must be a non-empty object of setting names and values")
+    if len(v) > MAX_SETTINGS:
+        _fail(field, f"may set at most {MAX_SETTINGS} keys at once, got {len(v)}")
+    for key, value in v.items():
+        if not key or not isinstance(value, (str, int, float, bool)):
+            _fail(field, f"must map each setting name to a number, string or boolean, got {key!r}: {value!r}")
+        if isinstance(value, float) and not math.isfinite(value):
+            _fail(field, f"must hold finite numbers, got {key!r}: {value!r}")
+    return v
+
+
 def _boot_id(field, v):
     if not isinstance(v, str) or not 0 < len(v) <= 64:
         _fail(field, "must be the client's boot id, a string of 1 to 64 characters")
@@ -199,6 +215,12 @@ OPS: dict[str, dict[str, tuple[Check, Any]]] = {
     "status": {},
     "time": {},
     "frames": {"cameras": (_optional(_names), None)},  # frame times without pixels
+    # a camera's settings; with "set", a change applied all or none (docs/protocol.md 7.8)
+    "settings": {
+        "camera": (_name, ...),
+        "set": (_optional(_setting_values), None),
+        "features": (_optional(_boolean), None),
+    },
 }
 EVENT_OPS = ("image", "tuple", "latest", "sequence", "time")
 EVENT_TOPIC = b"fxis.request"  # the topic of request events published to the service

@@ -20,6 +20,7 @@ from fxis_shm.workers.backends.aravis import PIXEL_FORMATS, FrameCounter, load_a
 
 from ..conftest import fxis_run_alone, wait_until
 from .conftest import fxis
+from .tuning_helpers import latest_of, newest_after, refusal
 
 pytestmark = pytest.mark.integration
 SMALL = "width=64,height=48"  # 3 KiB per Mono8 frame: 3 GVSP data packets
@@ -259,3 +260,42 @@ def test_device_timestamps_land_on_the_host_clock(emulator, start_service):
         assert f.t_capture <= f.t_stored <= now
         assert now - 2_000_000_000 < f.t_capture
     assert all(b.t_capture > a.t_capture for a, b in zip(frames, frames[1:]))
+
+
+def test_aravis_fake_camera_live_exposure_gain_features_and_a_new_size(emulator, start_service):
+    cam = emulator()
+    svc = start_service("--camera", f"a=aravis:device={cam.device_id},fps=20,width=64,height=48,pixel_format=Mono8")
+    with svc.client(timeout=15) as client:
+        before = newest_after(client, "a", newest_after(client, "a"))
+        limits = client.settings("a")["limits"]
+        assert limits["exposure_us"]["min"] == 10.0 and limits["width"]["cost"] == "restart"
+        # the fake camera's picture scales with 1 + gain + log10(exposure / 10 ms)
+        answer = client.configure("a", exposure_us=3162.3)
+        assert answer["cost"] == "live" and answer["generation"] == before.generation
+        assert abs(answer["changed"]["exposure_us"] - 3162.3) < 1
+        dark = newest_after(client, "a", newest_after(client, "a", before))
+        assert dark.image.mean() < before.image.mean() * 0.75, (dark.image.mean(), before.image.mean())
+        assert dark.generation == before.generation
+        client.configure("a", gain=3)
+        bright = newest_after(client, "a", newest_after(client, "a", dark))
+        assert bright.image.mean() > dark.image.mean() * 1.5
+        # any node-map feature by its SFNC name
+        assert client.configure("a", TestRegister=7)["changed"] == {"TestRegister": 7}
+        assert client.settings("a")["generation"] == before.generation
+        assert "exposure_us=5 is out of range: it allows 10..10000000 us" in refusal(client, "a", exposure_us=5)
+        assert "DeviceID of camera 'a' is read-only" in refusal(client, "a", DeviceID="x")
+        assert "set it as width" in refusal(client, "a", Width=96)
+        assert "has no setting 'Shutter'" in refusal(client, "a", Shutter=1, gain=1)  # all or none
+        assert client.settings("a")["values"]["gain"] == 3.0
+        resized = client.configure("a", width=96)
+        assert resized["cost"] == "restart" and resized["generation"] == before.generation + 1
+        frame = wait_until(lambda: latest_of(client, "a", resized["generation"]), what="a frame of the new size")
+        assert frame.image.shape == (48, 96)
+        assert client.settings("a")["values"]["exposure_us"] == answer["changed"]["exposure_us"]  # kept
+        triggered = client.configure("a", trigger="software")  # TriggerSoftware from now on
+        assert triggered["cost"] == "restart" and client.status()["cameras"]["a"]["trigger"] == "software"
+        frame = client.image("a", timeout=5)
+        assert frame.generation == triggered["generation"] and frame.image.shape == (48, 96)
+    listed = fxis("get", "a", "--features", "--endpoint", svc.endpoint)
+    assert listed.returncode == 0, listed.stderr
+    assert "ExposureTimeAbs" in listed.stdout and "TestRegister" in listed.stdout and "PixelFormat" in listed.stdout

@@ -13,6 +13,8 @@ SYNTHETIC_DEFAULTS = {
     "width": 1360,
     "height": 1024,
     "pixel_format": "mono8",
+    "exposure_us": 10_000.0,
+    "gain": 0.0,
     "phase_ms": 0.0,
     "jitter_ms": 0.0,
     "drop": 0.0,

@@ -43,6 +43,7 @@ from fxis_shm.core import timebase
 from fxis_shm.core.clocks import wall_to_monotonic
 from fxis_shm.shm.ring import FrameLayout
 
+from . import aravis_tuning
 from .aravis_settings import PIXEL_FORMATS, apply_options
 from .base import Camera, CameraLost, Capture
 from .genicam_timing import SilenceWatch, device_clock, period_ns
@@ -257,6 +258,23 @@ class AravisCamera(Camera):
             cam.software_trigger()  # executes TriggerSoftware
         except self._GLib.Error as exc:
             raise RuntimeError(f"TriggerSoftware failed: {exc.message}") from None
+
+    # ---- settings at run time (aravis_tuning.py) -------------------------------------------
+
+    def settings(self, extra=()) -> dict[str, dict]:
+        return aravis_tuning.describe_all(self._cam, self.options["trigger"], extra, self._Aravis)
+
+    def set_live(self, values) -> None:
+        try:
+            aravis_tuning.set_live(self._cam, values, self._Aravis)
+        except self._GLib.Error as exc:
+            raise ValueError(exc.message) from None
+        self.options.update({k: v for k, v in values.items() if k in self.options})
+        if self.options["trigger"] == "free" and self._cam.is_frame_rate_available():
+            self._period_ns = period_ns(self._cam.get_frame_rate())
+
+    def features(self) -> list[dict]:
+        return aravis_tuning.features(self._cam, self._Aravis)
 
     # ---- frames ------------------------------------------------------------------------------
 

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 from abc import ABC, abstractmethod
-from collections.abc import Mapping
+from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 from typing import Any, ClassVar
 
@@ -82,3 +82,23 @@ class Camera(ABC):
     def trigger(self) -> None:
         """Capture one frame now; called from another thread than ``grab``."""
         raise NotImplementedError(f"camera {self.name!r} is not software-triggered")
+
+    # ---- settings at run time (workers/tuning.py applies them between two frames) ----
+
+    def settings(self, extra: Iterable[str] = ()) -> dict[str, dict]:
+        """Each setting the camera has now, described as fxis_shm.core.tuning.describe makes
+        it: value, type, access, cost ("live": applied between two frames; "restart": the
+        stream restarts with a new ring) and limits; plus the node-map features named in
+        ``extra`` that it has (GenICam cameras). A camera without any: {}."""
+        return {}
+
+    def set_live(self, values: Mapping[str, Any]) -> None:
+        """Apply checked live settings (called between two ``grab``); raise ValueError if the
+        camera refuses one (the worker then puts back the values it had)."""
+        raise ValueError(f"camera {self.name!r} ({self.kind}) changes nothing at run time")
+
+    def features(self) -> list[dict]:
+        """Every feature of the camera's node map ("name", "type", "access", its range or
+        enumeration, "value"), as `arv-tool features` lists them; cameras without a node map
+        list their settings."""
+        return [{"name": key, **entry} for key, entry in self.settings().items()]

@@ -36,6 +36,7 @@ from fxis_shm.core.clocks import DeviceClockFit, PtpClock
 from fxis_shm.service.camerakinds import GENTL_PATH_VAR
 from fxis_shm.shm.ring import FrameLayout
 
+from . import genicam_tuning
 from .base import Camera, CameraLost, Capture
 from .genicam_features import DeviceFeatures, refusal, short_error
 from .genicam_timing import SilenceWatch, device_clock
@@ -310,6 +311,20 @@ class GenicamCamera(Camera):
             _ = node.value  # a read the device must answer
         except (gentl.GenericException, genapi.GenericException) as exc:
             raise CameraLost(f"the device does not answer: {short_error(exc)}") from None
+
+    # -- settings at run time (genicam_tuning.py) ---------------------------------------
+
+    def settings(self, extra=()) -> dict[str, dict]:
+        return genicam_tuning.describe_all(self._features, self.options["trigger"], extra, _sdk()[1])
+
+    def set_live(self, values) -> None:
+        genicam_tuning.set_live(self._features, values)
+        self.options.update({k: v for k, v in values.items() if k in self.options})
+        if not self.supports_trigger:
+            self._period_ns = self._features.frame_period_ns()
+
+    def features(self) -> list[dict]:
+        return genicam_tuning.features_of(self._features, _sdk()[1])
 
     def close(self) -> None:
         ia, harvester = self._ia, self._harvester

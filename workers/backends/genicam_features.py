@@ -36,6 +36,13 @@ class DeviceFeatures:
     def _refuse(self, key: str | None, why: str) -> ValueError:
         return refusal(self.camera, key, why)
 
+    @property
+    def node_map(self):
+        return self._node_map
+
+    def available(self, node) -> bool:
+        return self._available(node)
+
     def _available(self, node) -> bool:
         return node.get_access_mode() not in (self._genapi.EAccessMode.NI, self._genapi.EAccessMode.NA)
 

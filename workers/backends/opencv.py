@@ -37,6 +37,7 @@ import cv2
 import numpy as np
 
 from fxis_shm.core import timebase
+from fxis_shm.core.tuning import READ_ONLY, RESTART, describe
 from fxis_shm.shm.ring import FrameLayout
 
 from .base import Camera, CameraLost, Capture
@@ -179,6 +180,29 @@ class OpenCVCamera(Camera):
                     f"the device does not accept {o[key]:g}; it gives {got:g} "
                     f"(now {w:g}x{h:g} at {cap.get(cv2.CAP_PROP_FPS):g} fps)",
                 )
+
+    # -- settings at run time ------------------------------------------------------------
+
+    def settings(self, extra=()) -> dict[str, dict]:
+        """A file: loop (live), rate and pixel_format (restart); it plays as recorded, so
+        exposure, gain and size are read-only. A device or URL: its options by a restart of the
+        stream (its reader thread owns the capture, so nothing is set under it)."""
+        o = self.options
+        out = {"pixel_format": describe(o["pixel_format"], "enum", RESTART, choices=["bgr8", "mono8"])}
+        if self._kind == "file":
+            out["loop"] = describe(o["loop"], "bool")
+            out["rate"] = describe(o["rate"], "string", RESTART)
+            for key in ("exposure_us", "gain", "width", "height", "fps"):
+                out[key] = describe(None, "float", access=READ_ONLY)
+                out[key]["note"] = "a video file plays as it was recorded" + ("; use rate" if key == "fps" else "")
+        elif self._kind == "device":
+            for key in ("width", "height"):
+                out[key] = describe(o[key], "int", RESTART, lo=1, hi=65535)
+            out["fps"] = describe(o["fps"], "float", RESTART, lo=0.01, hi=10_000.0)
+        return out
+
+    def set_live(self, values) -> None:
+        self.options.update(values)  # loop: read when the file ends
 
     def grab(self, timeout: float) -> Capture | None:
         if self._reader is not None:

@@ -15,6 +15,12 @@ Two patterns, both drawn once by ``open`` so that a frame costs one copy:
   margin, which ``cv2.findChessboardCorners`` finds. It sways slowly
   (1 px per frame, at most ``square/4`` px either side of its rest position).
 
+``exposure_us`` and ``gain`` scale the picture's brightness as a real sensor's would
+(x exposure_us / 10 ms x 10^(gain/20), clipped at white; the stamp is written after), and
+with ``fps`` they change between two frames (``set_live``). A new fps keeps the frame times on
+the shared origin's grid of the new period (cameras set alike still capture together) and
+the frame ids counting on.
+
 ``shift_px`` moves the picture left by that many pixels. Two cameras with the
 same fps and phase capture frames with the same k and see the same sway, so
 ``left`` with shift_px=0 and ``right`` with shift_px=d form a stereo pair
@@ -31,7 +37,9 @@ from fractions import Fraction
 import numpy as np
 
 from fxis_shm.core import timebase
+from fxis_shm.core.tuning import READ_ONLY, RESTART, describe
 from fxis_shm.formats.stamp import write_stamp
+from fxis_shm.service.camerakinds import SYNTHETIC_EXPOSURE_US
 from fxis_shm.shm.ring import FrameLayout
 
 from .base import Camera, Capture
@@ -53,12 +61,10 @@ class SyntheticCamera(Camera):
     def __init__(self, name, options, time_origin_ns):
         super().__init__(name, options, time_origin_ns)
         o = self.options
-        self._period = Fraction(10**9) / Fraction(o["fps"]).limit_denominator(10**6)
-        if o["jitter_ms"] * 1e6 >= self._period / 2:
-            raise ValueError(
-                f"jitter_ms={o['jitter_ms']} must be below half the frame period "
-                f"({float(self._period) / 2e6:.3f} ms), or frames would reorder"
-            )
+        self._period = self._period_of(o["fps"])
+        self._grid0 = 0  # frame k is due at index k - _grid0 of the origin's grid (moved by fps changes)
+        self._lut: np.ndarray | None = None  # brightness as a look-up table; None: as drawn
+        self._set_brightness()
         self._phase_ns = round(o["phase_ms"] * 1e6)
         self._jitter_ns = round(o["jitter_ms"] * 1e6)
         self._rng = random.Random(o["seed"] or None)
@@ -66,6 +72,56 @@ class SyntheticCamera(Camera):
         self._triggers: queue.SimpleQueue[int] = queue.SimpleQueue()  # trigger times, ns
         if o["pattern"] == "chessboard":
             self._check_board_fits()
+
+    def _period_of(self, fps: float) -> Fraction:
+        period = Fraction(10**9) / Fraction(fps).limit_denominator(10**6)
+        if self.options["jitter_ms"] * 1e6 >= period / 2:
+            raise ValueError(
+                f"jitter_ms={self.options['jitter_ms']} must be below half the frame period "
+                f"({float(period) / 2e6:.3f} ms), or frames would reorder"
+            )
+        return period
+
+    def _set_brightness(self) -> None:
+        gain = self.options["exposure_us"] / SYNTHETIC_EXPOSURE_US * 10 ** (self.options["gain"] / 20)
+        if gain == 1:
+            self._lut = None
+        else:
+            self._lut = np.clip(np.arange(256) * gain + 0.5, 0, 255).astype(np.uint8)
+
+    # ---- settings at run time ----
+
+    def settings(self, extra=()) -> dict[str, dict]:
+        o = self.options
+        jitter_ns = o["jitter_ms"] * 1e6
+        max_fps = 10_000.0 if not jitter_ns else min(10_000.0, float(f"{1e9 / (2 * jitter_ns):.6g}") * 0.999)
+        described = {
+            "exposure_us": describe(o["exposure_us"], "float", lo=1.0, hi=1_000_000.0, unit="us"),
+            "gain": describe(o["gain"], "float", lo=0.0, hi=24.0, unit="dB"),
+            "fps": describe(o["fps"], "float", lo=0.01, hi=max_fps),
+            "width": describe(o["width"], "int", RESTART, lo=16, hi=16384),
+            "height": describe(o["height"], "int", RESTART, lo=1, hi=16384),
+            "pixel_format": describe(o["pixel_format"], "enum", RESTART, choices=["mono8", "bgr8"]),
+        }
+        described["trigger"] = describe(o["trigger"], "enum", RESTART, choices=["free", "software"])
+        fixed = {"pattern": "enum", "phase_ms": "float", "shift_px": "int", "jitter_ms": "float"}
+        for key, type_ in fixed.items():  # set when the service starts
+            described[key] = describe(o[key], type_, access=READ_ONLY)
+        return described
+
+    def set_live(self, values) -> None:
+        if "fps" in values:
+            self._change_period(self._period_of(values["fps"]))
+        self.options.update(values)
+        self._set_brightness()
+
+    def _change_period(self, period: Fraction) -> None:
+        """The next frame is due at the first time of the new period's grid from now on."""
+        self._period = period
+        if self._k < 0:  # not started: frame numbers start on the grid as at start-up
+            return
+        self._grid0 = 0
+        self._grid0 = self._k - self._index_at(timebase.now())
 
     def _check_board_fits(self) -> None:
         w, h, shift = self.options["width"], self.options["height"], self.options["shift_px"]
@@ -129,14 +185,14 @@ class SyntheticCamera(Camera):
         return (k * _SHIFT_PER_FRAME + self.options["shift_px"]) % 256
 
     def _due(self, k: int) -> int:
-        return self.time_origin_ns + self._phase_ns + int(k * self._period)
+        return self.time_origin_ns + self._phase_ns + int((k - self._grid0) * self._period)
 
     def _index_at(self, t: int) -> int:
         """The first frame index due at or after t."""
-        k = int((t - self.time_origin_ns - self._phase_ns) / self._period)
+        k = int((t - self.time_origin_ns - self._phase_ns) / self._period) + self._grid0
         while self._due(k) < t:
             k += 1
-        return max(k, 0)
+        return max(k, self._grid0)
 
     def grab(self, timeout: float) -> Capture | None:
         if self.supports_trigger:
@@ -181,6 +237,10 @@ class SyntheticCamera(Camera):
 
     def _render(self, k: int) -> np.ndarray:
         x = self._window(k)
-        np.copyto(self._image, self._pattern[:, x : x + self.options["width"]])
+        window = self._pattern[:, x : x + self.options["width"]]
+        if self._lut is None:
+            np.copyto(self._image, window)
+        else:
+            np.take(self._lut, window, out=self._image)
         write_stamp(self._image, k)
         return self._image

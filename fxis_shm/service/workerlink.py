@@ -1,0 +1,94 @@
+"""The coordinator's end of the command path to its camera workers (docs/design.md, "Commands
+to a camera worker"): one DEALER socket per worker, connected to the ipc endpoint the worker
+binds (fxis_shm.shm.naming.command_endpoint).
+
+The coordinator's poll loop never waits on a worker: ``send`` queues a command with a
+deadline and returns, ``drain`` hands each reply to its callback, and ``expire`` fails the
+commands whose deadline passed. The deadline travels with the command, so a worker that
+takes it late (it was restarting) drops it instead of applying a change its caller was told
+had failed. ZMQ_IMMEDIATE: a command to a worker that is not there fails at once.
+"""
+
+from __future__ import annotations
+
+import itertools
+import logging
+from collections.abc import Callable
+from dataclasses import dataclass
+
+import zmq
+
+from fxis_shm.core import timebase
+from fxis_shm.errors import Code, ProtocolError
+from fxis_shm.shm import naming
+from fxis_shm.wire import commands
+
+log = logging.getLogger("coordinator")
+
+# (result or None, error code or None, error message or None)
+Done = Callable[[dict | None, str | None, str | None], None]
+
+
+@dataclass
+class _Pending:
+    camera: str
+    deadline: int  # ns of the service's clock
+    done: Done
+
+
+class WorkerLinks:
+    def __init__(self, ctx: zmq.Context, service: str, cameras: list[str]):
+        self.sockets: dict[str, zmq.Socket] = {}
+        for name in cameras:
+            sock = ctx.socket(zmq.DEALER)
+            sock.setsockopt(zmq.LINGER, 0)
+            sock.setsockopt(zmq.IMMEDIATE, 1)  # no queueing for a worker that is not connected
+            sock.setsockopt(zmq.RECONNECT_IVL, 100)
+            sock.connect(naming.command_endpoint(service, name))
+            self.sockets[name] = sock
+        self._pending: dict[int, _Pending] = {}
+        self._ids = itertools.count(1)
+
+    def send(self, camera: str, cmd: str, timeout_s: float, done: Done, **fields) -> None:
+        """Send ``cmd`` to the camera's worker; ``done`` is called once, from ``drain`` or
+        ``expire`` (or now, if the worker cannot be reached)."""
+        command_id = next(self._ids)
+        deadline = timebase.now() + int(timeout_s * 1e9)
+        frame = commands.encode_command(command_id, cmd, deadline=deadline, **fields)
+        try:
+            self.sockets[camera].send_multipart([b"", frame], zmq.NOBLOCK)
+        except zmq.Again:
+            done(None, Code.CAMERA_DOWN, f"camera {camera!r} takes no commands now: its worker is not running")
+            return
+        self._pending[command_id] = _Pending(camera, deadline, done)
+
+    def drain(self, sock: zmq.Socket) -> None:
+        while sock.poll(0):
+            frames = sock.recv_multipart()
+            try:
+                reply = commands.decode_reply(frames[-1])
+            except ProtocolError as exc:
+                log.warning("a camera worker sent an unreadable reply: %s", exc.message)
+                continue
+            pending = self._pending.pop(reply.get("id"), None)  # type: ignore[arg-type]
+            if pending is None:
+                continue  # expired already: its caller was answered
+            if reply["ok"]:
+                pending.done(reply.get("result") or {}, None, None)
+            else:
+                pending.done(None, reply.get("code") or Code.INTERNAL, reply.get("error") or "")
+
+    def expire(self, now: int) -> None:
+        for command_id, pending in list(self._pending.items()):
+            if now >= pending.deadline:
+                del self._pending[command_id]
+                pending.done(
+                    None, Code.TIMEOUT, f"camera {pending.camera!r}'s worker did not answer in time (is it restarting?)"
+                )
+
+    def next_deadline(self) -> int | None:
+        return min((p.deadline for p in self._pending.values()), default=None)
+
+    def close(self) -> None:
+        for sock in self.sockets.values():
+            sock.close()
