@@ -92,12 +92,15 @@ def files_under(folder) -> list[str]:
 
 # ---- the table: command x bad input ----
 
-CLIENT_COMMANDS = ["status", "grab", "record", "snapshot"]  # they take --endpoint, --timeout and keys
+CLIENT_COMMANDS = ["status", "grab", "record", "snapshot", "get", "set"]  # they take --endpoint, --timeout and keys
 OUT_COMMANDS = ["grab", "record", "snapshot"]  # they take --out, a folder to create
 
 
+POSITIONAL = {"get": ["cam0"], "set": ["cam0", "gain=1"]}  # a well-formed rest: the mistake is elsewhere
+
+
 def with_out(command: str, out: str) -> list[str]:
-    return [command, "--out", out] if command in OUT_COMMANDS else [command]
+    return [command, "--out", out] if command in OUT_COMMANDS else [command, *POSITIONAL.get(command, [])]
 
 
 TMP = "{tmp}"  # the test's own folder, put in when a case runs
@@ -153,6 +156,7 @@ def table() -> list[tuple[list[str], int, tuple[str, ...]]]:
         (["run", "--endpoint", "127.0.0.1:6500"], USAGE, ("expected tcp://HOST:PORT",)),
         (["run", "--endpoint", "tcp://127.0.0.1:99999"], USAGE, ("port from 0 to 65535",)),
         (["no-such-command"], USAGE, ("invalid choice",)),
+        (["set", "cam0", "gain"], USAGE, ("KEY=VALUE",)),
     ]
     rows += [(["dashboard", endpoint], USAGE, ("expected tcp://HOST:PORT",)) for endpoint in NO_SCHEME]
     rows += [(["dashboard", endpoint], USAGE, ("port from 1 to 65535",)) for endpoint in BAD_PORTS]
