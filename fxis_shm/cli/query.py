@@ -69,18 +69,24 @@ def status_command(args) -> int:
         if not cam["alive"] and cam.get("reason"):
             print(f"  {name}: {cam['reason']}")
     if status.get("ros2"):
-        print(_ros2_line(status["ros2"]))
+        print("\n".join(_ros2_lines(status["ros2"])))
     return 0
 
 
-def _ros2_line(ros2: dict) -> str:
-    """What the ROS 2 bridge reported: frames published and skipped per camera, frames_at."""
+def _ros2_lines(ros2: dict) -> list[str]:
+    """What the ROS 2 bridge reported: frames published and skipped per camera, frames_at, and
+    each topic some endpoint reads (or could not match, and why)."""
     cameras = ", ".join(f"{n} {c['published']} ({c['skipped']} skipped)" for n, c in ros2["cameras"].items())
     asked = ros2["frames_at"]
-    return (
-        f"ros2 on domain {ros2['domain']} under {ros2['namespace'] or '/'}: published {cameras}; "
-        f"frames_at answered {asked['published']}, refused {asked['refused']}"
-    )
+    lines = [
+        f"ros2 via {ros2.get('via', 'cyclone')} on domain {ros2['domain']} under {ros2['namespace'] or '/'}: "
+        f"published {cameras}; frames_at answered {asked['published']}, refused {asked['refused']}"
+    ]
+    for topic, match in (ros2.get("topics") or {}).items():
+        if match["matched"] or match["refused"]:
+            refused = f", {match['refused']} could not match: {'; '.join(match['why'])}" if match["refused"] else ""
+            lines.append(f"  {topic}: {match['matched']} matched{refused}")
+    return lines
 
 
 def grab_command(args) -> int:

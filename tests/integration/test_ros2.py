@@ -25,7 +25,7 @@ from fxis_shm.service.launch import ServiceProcess
 from tests.dds_peer import ROS_VENVS, Peer, domain_id, loopback_config, stamp_rows
 from tests.hosts import LoopbackNamespace
 
-from ..conftest import fxis_run_alone, wait_until
+from ..conftest import fxis, fxis_run_alone, wait_until
 from .bags import read_bag
 
 pytestmark = pytest.mark.integration
@@ -281,6 +281,17 @@ def test_a_reader_that_asks_for_xcdr2_only_is_not_matched_as_a_ros_reader_would_
         peer.wait_for_samples(topic, 5, profile="default")  # the XCDR2 reader had as long
         assert peer.samples(topic, profile="xcdr2") == []
     assert peer.of("incompatible_qos", topic, "xcdr2")[-1]["policy_id"] == 25  # DATA_REPRESENTATION
+    # nothing silent: the bridge's side says so too, in fxis status and its log
+    with bridge.svc.client() as client:
+
+        def refused():
+            return ((client.status().get("ros2") or {}).get("topics") or {}).get(topic, {}).get("refused", 0) >= 1
+
+        wait_until(refused, what="the refused reader in the bridge's status")
+    status = fxis("status", "--endpoint", bridge.svc.endpoint)
+    assert f"{topic}: " in status.stdout and "could not match: 1 with an incompatible DATA_REPRESENTATION QoS" in (
+        status.stdout
+    ), status.stdout
 
 
 # A bridge on Cyclone reaches Fast DDS nodes over UDP, repairing what their 208 KiB receive buffer
