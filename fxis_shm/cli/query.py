@@ -3,10 +3,9 @@
 from __future__ import annotations
 
 import json
-import os
-import sys
 
 from fxis_shm.cli.options import add_client_options, client_for
+from fxis_shm.cli.stopsignals import as_interrupts, interrupted
 
 
 def status_command(args) -> int:
@@ -84,23 +83,16 @@ def _ros2_line(ros2: dict) -> str:
 
 
 def grab_command(args) -> int:
-    from fxis_shm.formats.tuplefiles import tuple_files
+    from fxis_shm.cli.grabfiles import save_tuple
+    from fxis_shm.client.snapshot import interrupted_by
 
     cameras = args.cameras.split(",") if args.cameras else None
-    with client_for(args) as client:
-        frames = client.tuple(cameras=cameras, at=args.at)
-    files = tuple_files(frames)
-    os.makedirs(args.out, exist_ok=True)
-    for name, data in files.items():
-        path = os.path.join(args.out, name)
-        try:
-            with open(path, "wb") as f:
-                f.write(data)
-        except OSError as exc:
-            print(f"fxis grab: could not write {path}: {exc.strerror}", file=sys.stderr)
-            return 1
-    print(f"saved {len(frames)} image(s) and tuple.json to {args.out} (skew {frames.skew_ns / 1e6:.3f} ms)")
-    return 0
+    try:
+        with as_interrupts(), client_for(args) as client:
+            frames = client.tuple(cameras=cameras, at=args.at)
+    except KeyboardInterrupt as exc:
+        return interrupted("grab", f"interrupted by {interrupted_by(exc)} before the tuple came: nothing saved")
+    return save_tuple(args.out, frames)
 
 
 def add_parsers(sub) -> None:

@@ -269,7 +269,8 @@ class MultiClient:
         the caller's clock."""
         names = self._known(cameras or list(self.owner))
         owners = {name: self.owner[name] for name in names}
-        return snapshot.take(owners, self.clock, out, at, before, after, encoding, quality)
+        clock_name = self.clients[0]._clock_name
+        return snapshot.take(owners, self.clock, out, at, before, after, encoding, quality, clock_name)
 
     def subscribe(self, timeout: float = 2.0, queue: int = 16) -> MultiSubscriber:
         """A subscriber of every service's streams, every time in the caller's clock:
