@@ -6,6 +6,7 @@ import json
 
 from fxis_shm.cli.options import add_client_options, client_for
 from fxis_shm.cli.stopsignals import as_interrupts, interrupted
+from fxis_shm.shm.cameras import RATE_WINDOW_NS
 
 
 def status_command(args) -> int:
@@ -27,12 +28,14 @@ def status_command(args) -> int:
         f"{mapping['offset_ns'] / 1e6:+.3f} ms, drift {mapping['drift_ppm']:+.2f} ppm, "
         f"uncertainty {mapping['uncertainty_ns'] / 1e3:.0f} us"
     )
+    window_s = RATE_WINDOW_NS / 1e9
     columns = [
         "camera",
         "kind",
         "alive",
         "shape",
-        "fps",
+        f"fps (last {window_s:g} s)",
+        "set fps",
         "stored",
         "dropped",
         "age_ms",
@@ -50,10 +53,11 @@ def status_command(args) -> int:
                 cam["kind"],
                 "yes" if cam["alive"] else "NO",
                 shape,
-                cam.get("fps"),
+                _measured(cam, window_s),
+                _fixed(cam.get("fps"), 3, "g"),
                 cam.get("frames_stored"),
                 cam.get("frames_dropped"),
-                cam.get("last_frame_age_ms"),
+                _fixed(cam.get("last_frame_age_ms"), 1),
                 cam.get("ring_slots"),
                 cam.get("history_s"),
                 cam.get("generation"),
@@ -70,6 +74,19 @@ def status_command(args) -> int:
     if status.get("ros2"):
         print(_ros2_line(status["ros2"]))
     return 0
+
+
+def _fixed(value, decimals: int, kind: str = "f") -> str | None:
+    """A figure with a fixed number of decimals (``g``: significant digits), or None."""
+    return None if value is None else f"{value:.{decimals}{kind}}"
+
+
+def _measured(cam: dict, window_s: float) -> str | None:
+    """The measured rate; with its window when the ring held less than the column's."""
+    fps, over = cam.get("measured_fps"), cam.get("measured_over_s") or 0.0
+    if fps is None:
+        return None
+    return f"{fps:.1f}" if over >= window_s - 0.01 else f"{fps:.1f} ({over:.1f} s)"
 
 
 def _ros2_line(ros2: dict) -> str:
