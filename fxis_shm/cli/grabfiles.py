@@ -1,7 +1,8 @@
 """``fxis grab``'s files: one PNG per camera, each written whole (a temporary name renamed),
-then ``tuple.json``. Ctrl-C or SIGTERM while they are written keeps the PNGs already there
-and writes a ``tuple.json`` that names them, says ``ended: interrupted by SIGINT`` and lists
-the frames ``not_saved``; exit 130 (exitcodes.INTERRUPTED)."""
+then ``tuple.json``; files of an earlier grab in the folder are never replaced (refused).
+Ctrl-C or SIGTERM while they are written keeps the PNGs already there and writes a
+``tuple.json`` that names them, says ``ended: interrupted by SIGINT`` and lists the frames
+``not_saved``; exit 130 (exitcodes.INTERRUPTED)."""
 
 from __future__ import annotations
 
@@ -19,6 +20,11 @@ def save_tuple(folder: str, frames) -> int:
     """The tuple's files in ``folder``; the exit code, with a line on what was saved."""
     saved: list[str] = []
     ended = "complete"
+    names = [f"{c}.png" for c in frames] + [META_FILE]
+    there = [n for n in names if os.path.lexists(os.path.join(folder, n))]
+    if there:  # an earlier grab's: never replaced
+        print(f"fxis grab: {folder} already holds {', '.join(there)}: choose another --out", file=sys.stderr)
+        return exitcodes.USAGE
     try:
         os.makedirs(folder, exist_ok=True)
         try:

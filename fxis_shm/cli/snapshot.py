@@ -9,7 +9,7 @@ import sys
 from fxis_shm.cli import exitcodes
 from fxis_shm.cli.options import add_client_options, client_for
 from fxis_shm.cli.stopsignals import as_interrupts, interrupted
-from fxis_shm.errors import InvalidArgument
+from fxis_shm.errors import FxisError, InvalidArgument
 
 
 def snapshot_command(args) -> int:
@@ -24,6 +24,10 @@ def snapshot_command(args) -> int:
     except InvalidArgument as exc:
         print(f"fxis snapshot: {exc}", file=sys.stderr)
         return exitcodes.USAGE
+    except FxisError as exc:  # said by the command's error handler; what the bag kept, here
+        for note in getattr(exc, "__notes__", []):
+            print(f"fxis snapshot: {note}", file=sys.stderr)
+        raise
     except Interrupted as exc:
         report(exc.result)
         return interrupted("snapshot", str(exc))

@@ -135,6 +135,13 @@ def take(
         bag.close()
     except DiskFull as exc:
         raise _disk_full(exc, lock, partial, out) from None
+    except KeyboardInterrupt:  # a second Ctrl-C while the bag was being closed: left as it is
+        os.close(lock)
+        raise Interrupted(
+            f"interrupted while the bag was being closed: it stays unfinished in {partial}; "
+            f"fxis snapshot --recover {partial} makes it the bag {out}",
+            {"out": None, "event_ns": t, "window_ns": window, "cameras": _summary(cameras)},
+        ) from None
     except BaseException as exc:
         os.close(lock)
         raise FxisError(

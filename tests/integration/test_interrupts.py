@@ -195,3 +195,32 @@ def test_frames_the_ring_lost_before_the_first_look_are_named_missing():
     # a window wholly older than the ring: its frames by the ids the period gives them
     assert lost_to_ring(oldest, 9_000_000_000, 9_250_000_000, 100_000_000) == [90, 91, 92]
     assert lost_to_ring(oldest, 9_000_000_000, 9_250_000_000, 0) == []  # a triggered camera: no period
+
+
+def test_a_second_grab_into_the_same_folder_replaces_nothing(cell, tmp_path):
+    out = tmp_path / "g"
+    first = start("grab", "--endpoint", cell.endpoint, "--out", str(out))
+    assert first.wait(30) == 0
+    before = {p.name: p.read_bytes() for p in out.iterdir()}
+    again = start("grab", "--endpoint", cell.endpoint, "--out", str(out))
+    _, stderr = again.communicate(timeout=30)
+    assert again.returncode == 2
+    assert stderr.strip() == f"fxis grab: {out} already holds a.png, b.png, tuple.json: choose another --out"
+    assert {p.name: p.read_bytes() for p in out.iterdir()} == before
+
+
+def test_a_service_that_goes_away_mid_snapshot_leaves_a_valid_bag_of_what_was_copied(start_service, tmp_path):
+    svc = start_service("--camera", "a=synthetic:fps=20,width=320,height=240", "--history", "2")
+    with svc.client() as client:
+        wait_until(lambda: client.status()["cameras"]["a"]["frames_stored"] >= 30, what="a second of history")
+    out = tmp_path / "gone"
+    proc = start("snapshot", "--endpoint", svc.endpoint, "--out", str(out), "--before", "1", "--after", "8")
+    wait_until(lambda: (tmp_path / "gone.partial" / "gone_0.mcap").exists(), timeout=30, what="the bag begun")
+    svc.stop()
+    _, stderr = proc.communicate(timeout=60)
+    assert proc.returncode not in (0, 130) and "Traceback" not in stderr, stderr
+    kept = re.search(rf"fxis snapshot: the snapshot kept a (\d+) frames in {re.escape(str(out))}, a valid bag", stderr)
+    assert kept, stderr
+    bag = read_bag(out)
+    assert bag.custom_data["ended"].startswith("stopped by an error: ")
+    assert len(stamps_in_order(bag, "a")) == int(kept[1]) >= 15

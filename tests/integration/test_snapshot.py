@@ -3,6 +3,7 @@ future as it comes, into a bag that rosbags reads; nothing missing without sayin
 
 from __future__ import annotations
 
+import _thread
 import json
 import os
 import subprocess
@@ -13,6 +14,7 @@ import numpy as np
 import pytest
 
 from fxis_shm import Client, InvalidArgument
+from fxis_shm.client.snapshot import Interrupted
 from fxis_shm.errors import DiskFull
 from fxis_shm.formats import rosmsgs
 from fxis_shm.formats.stamp import read_stamp
@@ -213,6 +215,25 @@ def test_the_bag_names_the_callers_clock(history3, tmp_path):
     with Client(history3.endpoint, clock="realtime") as client:
         client.snapshot(before=0.2, after=0.0, out=str(tmp_path / "rt"))
     assert read_bag(tmp_path / "rt").custom_data["clock"] == "CLOCK_REALTIME"
+
+
+def test_ctrl_c_in_the_library_keeps_the_bag_of_what_was_copied_and_says_where(history3, tmp_path):
+    out = tmp_path / "lib"
+    ctrl_c = threading.Timer(1.0, _thread.interrupt_main)  # KeyboardInterrupt in this thread, as Ctrl-C
+    with Client(history3.endpoint) as client:
+        ctrl_c.start()
+        try:
+            with pytest.raises(Interrupted) as info:
+                client.snapshot(before=0.5, after=5.0, out=str(out))
+        finally:
+            ctrl_c.cancel()
+    assert isinstance(info.value, KeyboardInterrupt)  # a caller's `except KeyboardInterrupt` still sees it
+    result = info.value.result
+    assert result["out"] == str(out) and f"in {out}, a valid bag" in str(info.value)
+    bag = read_bag(out)
+    assert bag.custom_data["ended"] == "interrupted by SIGINT" and not (tmp_path / "lib.partial").exists()
+    for camera in CAMERAS:
+        assert len(images(bag, camera)) == result["cameras"][camera]["frames"] > 0
 
 
 def test_a_full_disk_stops_a_snapshot_with_a_valid_bag_of_what_it_kept(start_service, small_disk):
