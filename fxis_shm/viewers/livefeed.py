@@ -75,12 +75,17 @@ class LiveFeed:
         self.view: dict = {"service_ok": False, "error": "not sampled yet", "status": None}
 
     def _learn(self, cameras: dict[str, dict]) -> None:
+        """Adds the cameras not known yet (a cell's service that came); the page's threads read
+        ``cameras`` meanwhile, so a new dict replaces it rather than it changing under them."""
+        known = dict(self.cameras)
         for name, cam in cameras.items():
-            if name not in self.cameras or self.cameras[name].get("service") != cam.get("service"):
-                self.cameras[name] = {"kind": cam.get("kind"), "fps": cam.get("fps")}
+            if name not in known or known[name].get("service") != cam.get("service"):
+                known[name] = {"kind": cam.get("kind"), "fps": cam.get("fps")}
                 if cam.get("service"):
-                    self.cameras[name]["service"] = cam["service"]
+                    known[name]["service"] = cam["service"]
                 self._rates.setdefault(name, RateMeter())
+        if known != self.cameras:
+            self.cameras = known
 
     def close(self) -> None:
         for pool in (self._pictures, self._sampler):
