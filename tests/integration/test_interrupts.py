@@ -215,7 +215,8 @@ def test_a_service_that_goes_away_mid_snapshot_leaves_a_valid_bag_of_what_was_co
         wait_until(lambda: client.status()["cameras"]["a"]["frames_stored"] >= 30, what="a second of history")
     out = tmp_path / "gone"
     proc = start("snapshot", "--endpoint", svc.endpoint, "--out", str(out), "--before", "1", "--after", "8")
-    wait_until(lambda: (tmp_path / "gone.partial" / "gone_0.mcap").exists(), timeout=30, what="the bag begun")
+    mcap = tmp_path / "gone.partial" / "gone_0.mcap"
+    wait_until(lambda: mcap.exists() and mcap.stat().st_size > 1_000_000, timeout=30, what="the past copied")
     svc.stop()
     _, stderr = proc.communicate(timeout=60)
     assert proc.returncode not in (0, 130) and "Traceback" not in stderr, stderr
@@ -223,4 +224,4 @@ def test_a_service_that_goes_away_mid_snapshot_leaves_a_valid_bag_of_what_was_co
     assert kept, stderr
     bag = read_bag(out)
     assert bag.custom_data["ended"].startswith("stopped by an error: ")
-    assert len(stamps_in_order(bag, "a")) == int(kept[1]) >= 15
+    assert len(stamps_in_order(bag, "a")) == int(kept[1]) >= 10
