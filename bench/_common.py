@@ -403,3 +403,12 @@ class _StageLines:
 def sleep_ms(duration_ms: float) -> None:
     if duration_ms > 0:
         time.sleep(duration_ms / 1000)
+
+
+def sleep_late_ms(duration_ms: float) -> float:
+    """Sleeps ``duration_ms``; how many ms late the sleep ended: the scheduler's delay in waking
+    a process at that moment (tens of us on an idle machine, ms on a loaded one), which every
+    wake-up a bench times includes."""
+    began = time.monotonic_ns()
+    sleep_ms(duration_ms)
+    return max(0.0, (time.monotonic_ns() - began) / 1e6 - max(0.0, duration_ms))

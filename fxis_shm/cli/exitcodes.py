@@ -24,7 +24,7 @@ NO_SERVICE = 3  # a service did not answer (down, wrong endpoint, wrong keys)
 FAILED = 4  # anything else went wrong at run time (a full disk, a refusal by the service)
 INTERRUPTED = 130  # Ctrl-C or SIGTERM: stopped, with what was kept said on screen (128 + SIGINT)
 
-_DISK_FULL = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+DISK_FULL = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
 
 
 def for_error(exc: BaseException) -> int | None:
@@ -36,7 +36,7 @@ def for_error(exc: BaseException) -> int | None:
     if isinstance(exc, RequestTimeout):
         return NO_SERVICE  # no answer: down, a wrong endpoint, keys it refuses
     if isinstance(exc, OSError):  # a path the command was given (unwritable, missing), or a full disk
-        return FAILED if exc.errno in _DISK_FULL or not exc.filename else USAGE
+        return FAILED if exc.errno in DISK_FULL or not exc.filename else USAGE
     if isinstance(exc, FxisError):
         return FAILED  # the service refused (CAMERA_DOWN, OVERRUN, ...), a full disk, a start that failed
     return None
@@ -48,6 +48,6 @@ def message(exc: BaseException) -> str:
         return "interrupted"
     if isinstance(exc, OSError) and not isinstance(exc, FxisError):
         where = f"{exc.filename}: " if exc.filename else ""
-        room = "; free some room there, or write elsewhere" if exc.errno in _DISK_FULL else ""
+        room = "; free some room there, or write elsewhere" if exc.errno in DISK_FULL else ""
         return f"{where}{exc.strerror or exc}{room}"
     return " ".join(str(exc).split()) or type(exc).__name__

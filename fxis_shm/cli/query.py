@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-import contextlib
 import json
-import os
 
 from fxis_shm.cli.options import add_client_options, client_for, nanoseconds
+from fxis_shm.cli.stopsignals import as_interrupts, interrupted
+from fxis_shm.shm.cameras import RATE_WINDOW_NS
 
 
 def status_command(args) -> int:
@@ -28,12 +28,14 @@ def status_command(args) -> int:
         f"{mapping['offset_ns'] / 1e6:+.3f} ms, drift {mapping['drift_ppm']:+.2f} ppm, "
         f"uncertainty {mapping['uncertainty_ns'] / 1e3:.0f} us"
     )
+    window_s = RATE_WINDOW_NS / 1e9
     columns = [
         "camera",
         "kind",
         "alive",
         "shape",
-        "fps",
+        f"fps (last {window_s:g} s)",
+        "set fps",
         "stored",
         "dropped",
         "age_ms",
@@ -51,10 +53,11 @@ def status_command(args) -> int:
                 cam["kind"],
                 "yes" if cam["alive"] else "NO",
                 shape,
-                cam.get("fps"),
+                _measured(cam, window_s),
+                _fixed(cam.get("fps"), 3, "g"),
                 cam.get("frames_stored"),
                 cam.get("frames_dropped"),
-                cam.get("last_frame_age_ms"),
+                _fixed(cam.get("last_frame_age_ms"), 1),
                 cam.get("ring_slots"),
                 cam.get("history_s"),
                 cam.get("generation"),
@@ -71,6 +74,19 @@ def status_command(args) -> int:
     if status.get("ros2"):
         print("\n".join(_ros2_lines(status["ros2"])))
     return 0
+
+
+def _fixed(value, decimals: int, kind: str = "f") -> str | None:
+    """A figure with a fixed number of decimals (``g``: significant digits), or None."""
+    return None if value is None else f"{value:.{decimals}{kind}}"
+
+
+def _measured(cam: dict, window_s: float) -> str | None:
+    """The measured rate; with its window when the ring held less than the column's."""
+    fps, over = cam.get("measured_fps"), cam.get("measured_over_s") or 0.0
+    if fps is None:
+        return None
+    return f"{fps:.1f}" if over >= window_s - 0.01 else f"{fps:.1f} ({over:.1f} s)"
 
 
 def _ros2_lines(ros2: dict) -> list[str]:
@@ -90,39 +106,18 @@ def _ros2_lines(ros2: dict) -> list[str]:
 
 
 def grab_command(args) -> int:
+    from fxis_shm.cli.grabfiles import save_tuple
+    from fxis_shm.client.snapshot import interrupted_by
     from fxis_shm.formats.outfolder import check_out_folder
-    from fxis_shm.formats.tuplefiles import tuple_files
 
     check_out_folder(args.out, "--out")
     cameras = args.cameras.split(",") if args.cameras else None
-    with client_for(args) as client:
-        frames = client.tuple(cameras=cameras, at=args.at)
-    write_files(args.out, tuple_files(frames))
-    print(f"saved {len(frames)} image(s) and tuple.json to {args.out} (skew {frames.skew_ns / 1e6:.3f} ms)")
-    return 0
-
-
-def write_files(folder: str, files: dict[str, bytes]) -> None:
-    """``files`` into ``folder``, all or none: a write that fails (a full disk) removes what
-    this call wrote, the folder too if it made it, and raises the OSError."""
-    made = not os.path.isdir(folder)
-    written: list[str] = []
-    path = folder
     try:
-        os.makedirs(folder, exist_ok=True)
-        for name, data in files.items():
-            path = os.path.join(folder, name)
-            written.append(path)
-            with open(path, "wb") as f:
-                f.write(data)
-    except OSError as exc:
-        for done in written:
-            with contextlib.suppress(OSError):
-                os.remove(done)
-        if made:
-            with contextlib.suppress(OSError):
-                os.rmdir(folder)
-        raise OSError(exc.errno, f"{exc.strerror} (nothing was saved)", exc.filename or path) from None
+        with as_interrupts(), client_for(args) as client:
+            frames = client.tuple(cameras=cameras, at=args.at)
+    except KeyboardInterrupt as exc:
+        return interrupted("grab", f"interrupted by {interrupted_by(exc)} before the tuple came: nothing saved")
+    return save_tuple(args.out, frames)
 
 
 def add_parsers(sub) -> None:

@@ -4,12 +4,15 @@ from __future__ import annotations
 
 import sys
 
+from fxis_shm.cli import exitcodes
 from fxis_shm.cli.options import EXIT_USAGE, add_client_options, client_for
+from fxis_shm.cli.stopsignals import as_interrupts, interrupted
 from fxis_shm.errors import ConfigError
 from fxis_shm.formats.outfolder import check_out_folder
 
 
 def record_command(args) -> int:
+    from fxis_shm.client.snapshot import interrupted_by
     from fxis_shm.record.recorder import Recorder, RecordSettings, summary_table
     from fxis_shm.wire import encoding
 
@@ -47,14 +50,32 @@ def record_command(args) -> int:
         encoding=args.encoding,
         quality=args.quality or encoding.DEFAULT_JPEG_QUALITY,
     )
-    with client_for(args) as client:
-        try:
-            recorder = Recorder(settings, client)
-        except ConfigError as exc:
-            return usage(str(exc))
-        summary = recorder.run()
+    recorder = None
+    try:
+        with as_interrupts(), client_for(args) as client:
+            try:
+                recorder = Recorder(settings, client)
+            except ConfigError as exc:
+                return usage(str(exc))
+            summary = recorder.run()
+    except KeyboardInterrupt as exc:  # before the recording's loop began, or a second Ctrl-C
+        if recorder is None:
+            return interrupted("record", f"interrupted by {interrupted_by(exc)} before recording began: no bag")
+        recorder.bag.custom_data["ended"] = f"interrupted by {interrupted_by(exc)}"
+        recorder.bag.close()  # (a no-op if the loop closed it)
+        summary = recorder.summary()
+        summary["interrupted_by"] = interrupted_by(exc)
     print(summary_table(summary))
-    return 0
+    if summary["interrupted_by"]:
+        return interrupted("record", f"interrupted by {summary['interrupted_by']}: {kept_line(summary)}")
+    return exitcodes.DONE
+
+
+def kept_line(summary: dict) -> str:
+    """What an interrupted recording kept, in one line."""
+    frames = ", ".join(f"{cam} {c['frames']} frames" for cam, c in summary["cameras"].items())
+    tuples = f", {summary['tuples']} tuples" if summary["tuples"] is not None else ""
+    return f"kept {frames}{tuples}, {summary['seconds']:.1f} s, in {summary['out']}, a valid bag"
 
 
 def recover_command(path: str) -> int:
@@ -91,8 +112,9 @@ def add_parser(sub) -> None:
         "--tuples) into a rosbag2 folder with MCAP storage: /NAME/image_raw "
         "(sensor_msgs/msg/Image) or /NAME/image_raw/compressed (JPEG), stamps in the "
         "service's clock (CLOCK_MONOTONIC unless fxis run --clock says otherwise). "
-        "Ctrl-C ends the recording with a valid bag; so does a full disk, with a one-line "
-        "error saying what the bag kept and exit code 4. "
+        "Ctrl-C or SIGTERM ends the recording with a valid bag (its metadata's 'ended' says "
+        "'interrupted by SIGINT'), a line saying what it kept and exit code 130; so does a full disk, "
+        "with a one-line error saying what the bag kept and exit code 4. "
         "Replay it with a camera of kind bag (docs/recording.md).",
     )
     add_client_options(record)

@@ -90,22 +90,7 @@ class MultiClient:
         endpoint to its status (or ``{"ok": False, "error": ...}`` for one that does not
         answer; it is left out of the rest), ``cameras`` each camera's status with its
         ``service``, ``now`` the caller's clock. Raises only when no service answers."""
-        answers = dict(zip(self.endpoints, self._pool.map(_or_error, [c.status for c in self.clients])))
-        if all(isinstance(a, FxisError) for a in answers.values()):
-            raise RequestTimeout(f"none of the services answers: {_errors(answers)}")
-        cameras = {}
-        for endpoint, answer in answers.items():
-            if not isinstance(answer, FxisError):
-                cameras.update({name: {**cam, "service": endpoint} for name, cam in answer["cameras"].items()})
-        return {
-            "op": "status",
-            "now": self.clock(),
-            "ok": not any(isinstance(a, FxisError) for a in answers.values()),
-            "services": {
-                e: {"ok": False, "error": str(a)} if isinstance(a, FxisError) else a for e, a in answers.items()
-            },
-            "cameras": cameras,
-        }
+        return joint_status(self.clients, self._pool, self.clock)
 
     def time(self) -> dict[str, int]:
         """Each service's clock now (int ns of the clock its status names), by endpoint;
@@ -280,7 +265,8 @@ class MultiClient:
         the caller's clock."""
         names = self._known(cameras or list(self.owner))
         owners = {name: self.owner[name] for name in names}
-        return snapshot.take(owners, self.clock, out, at, before, after, encoding, quality)
+        clock_name = self.clients[0]._clock_name
+        return snapshot.take(owners, self.clock, out, at, before, after, encoding, quality, clock_name)
 
     def subscribe(self, timeout: float = 2.0, queue: int = 16) -> MultiSubscriber:
         """A subscriber of every service's streams, every time in the caller's clock:
@@ -304,6 +290,24 @@ class MultiClient:
         if unknown:
             raise ConfigError(f"unknown camera(s) {unknown}; the services have {sorted(self.owner)}")
         return names
+
+
+def joint_status(clients: list[SingleClient], pool: ThreadPoolExecutor, clock: Callable[[], int]) -> dict:
+    """The status of several services asked at once, as ``MultiClient.status`` returns it."""
+    answers = {c.endpoint: a for c, a in zip(clients, pool.map(_or_error, [c.status for c in clients]))}
+    if all(isinstance(a, FxisError) for a in answers.values()):
+        raise RequestTimeout(f"none of the services answers: {_errors(answers)}")
+    cameras = {}
+    for endpoint, answer in answers.items():
+        if not isinstance(answer, FxisError):
+            cameras.update({name: {**cam, "service": endpoint} for name, cam in answer["cameras"].items()})
+    return {
+        "op": "status",
+        "now": clock(),
+        "ok": not any(isinstance(a, FxisError) for a in answers.values()),
+        "services": {e: {"ok": False, "error": str(a)} if isinstance(a, FxisError) else a for e, a in answers.items()},
+        "cameras": cameras,
+    }
 
 
 def _or_error(call: Callable[[], Any]) -> Any:

@@ -291,7 +291,9 @@ class SingleClient(RequestPaths, SocketOwner):
         ``out``, stamps in the caller's clock; returns per camera the frames kept and the ids
         of any missing (fxis_shm.client.snapshot). Blocks until ``at + after`` has passed."""
         names = cameras or list(self.status()["cameras"])
-        return snapshot.take(dict.fromkeys(names, self), self.clock, out, at, before, after, encoding, quality)
+        return snapshot.take(
+            dict.fromkeys(names, self), self.clock, out, at, before, after, encoding, quality, self._clock_name
+        )
 
     @property
     def clocks(self) -> dict[str, ClockEstimate]:

@@ -7,28 +7,36 @@ window's past is taken from the rings at the first look; its future as the frame
 each camera polled about twice a frame period, its frames copied out long before its ring
 comes round. A frame the window should hold but the bag does not (the camera skipped its
 id, or the ring came round first) is listed by id in the bag's metadata; a ring that no
-longer held the window's start says how much of it was gone. Nothing is lost silently.
+longer held the window's start says how much of it was gone (and its frames, by the ids
+the camera's period gives them, are missing too). Nothing is lost silently.
 
-The bag is written under ``OUT.partial`` and renamed to ``OUT`` once complete, so a bag
-named ``OUT`` is always whole. Any number of snapshots may run at once (each reads the rings
-like any client), also while the service serves at full rate.
+The bag is written under ``OUT.partial``, a folder this snapshot makes itself and locks
+while it writes (one found there is never touched: a second snapshot to the same ``OUT``
+refuses), and renamed to ``OUT`` when it ends, so a bag named ``OUT`` is always valid. Its
+metadata's ``ended`` says whether it is complete or was interrupted (Ctrl-C:
+``Interrupted``, a KeyboardInterrupt) or stopped by an error; either way it holds every
+frame copied until then. A snapshot killed outright leaves ``OUT.partial``, which
+``fxis snapshot --recover`` makes a bag. A window of which the rings held no frame writes
+no bag (``out`` None): an empty one would say nothing more than the result does. Any number
+of snapshots may run at once (each reads the rings like any client), also while the service
+serves at full rate.
 """
 
 from __future__ import annotations
 
-import contextlib
+import fcntl
 import json
 import math
 import os
 import queue
-import shutil
 import threading
 import time
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
-from fxis_shm.errors import CameraDown, DiskFull, InvalidArgument, Overwritten, ServiceError
+from fxis_shm.core import timebase
+from fxis_shm.errors import CameraDown, DiskFull, FxisError, InvalidArgument, Overwritten, ServiceError
 from fxis_shm.formats import rosmsgs
 from fxis_shm.formats.bagfile import BagWriter
 from fxis_shm.formats.outfolder import check_out_folder
@@ -58,8 +66,9 @@ class _Camera:
     def new_rows(self, info: dict) -> list[list[int]]:
         self.period_ns = info.get("period_ns") or self.period_ns
         rows = info.get("frames") or []
-        if self.last_t is None and rows and rows[0][T_CAPTURE] > self.start:
-            self.gone_ms = (rows[0][T_CAPTURE] - self.start) / 1e6
+        if self.last_t is None and rows and rows[0][T_CAPTURE] > self.start:  # the first look
+            self.gone_ms = (min(rows[0][T_CAPTURE], self.end) - self.start) / 1e6
+            self.missing += lost_to_ring(rows[0], self.start, self.end, self.period_ns)
         if rows and rows[-1][T_CAPTURE] > self.end:
             self.past_end = True
         fresh = [r for r in rows if self.start <= r[T_CAPTURE] <= self.end]
@@ -71,6 +80,18 @@ class _Camera:
         return fresh
 
 
+def lost_to_ring(oldest: list[int], start: int, end: int, period_ns: int) -> list[int]:
+    """The ids of the window's frames older than the ring's ``oldest`` row: those a camera of
+    this period captured in [start, end] before it (estimated: a camera that dropped frames
+    meanwhile captured fewer)."""
+    if period_ns <= 0:
+        return []
+    t0, id0 = oldest[T_CAPTURE], oldest[ID]
+    first_k = max(1, -(-(t0 - end) // period_ns))  # k periods before the oldest: inside the window
+    last_k = (t0 - start) // period_ns
+    return [id0 - k for k in range(last_k, first_k - 1, -1) if id0 - k >= 0]
+
+
 def take(
     owners: dict[str, Any],
     clock: Callable[[], int],
@@ -80,55 +101,189 @@ def take(
     after: float = 1.0,
     encoding: str = codec.RAW,
     quality: int | None = None,
+    clock_name: str | None = None,
 ) -> dict:
     """The snapshot of the cameras ``owners`` names (camera -> the client of its service)
-    around ``at`` (ns of ``clock``, default now) into the bag ``out``; what it holds."""
+    around ``at`` (ns of ``clock``, whose name ``clock_name`` is; default now) into the bag
+    ``out``; what it holds. ``out`` is None if the rings held no frame of the window (no
+    bag is written then: an empty bag would say nothing and reads badly)."""
     t = clock() if at is None else at
     _check(at, before, after, out, encoding)
-    partial = os.path.normpath(out) + ".partial"
-    shutil.rmtree(partial, ignore_errors=True)  # an earlier snapshot that did not finish
+    out = os.path.normpath(out)
+    partial = out + ".partial"
+    lock = _claim(partial, out)
     window = (t - round(before * 1e9), t + round(after * 1e9))
-    cameras = {name: _Camera(name, c, *map(c.clock_estimate().to_service, window)) for name, c in owners.items()}
-    custom = {"clock": "the caller's (Client(clock=...))", "stamps": "header.stamp: capture time in that clock"}
-    custom.update(event_ns=t, before_s=before, after_s=after, window_ns=f"{window[0]} {window[1]}")
-    bag = BagWriter(partial, {**custom, "cameras": ",".join(cameras), "encoding": encoding})
-    writer = _Writer(bag, time.time_ns() - clock(), encoding, quality)  # MCAP log times: wall-clock
     try:
-        give_up = window[1] + round(GRACE_S * 1e9)
-        while True:  # at least one look: a window long past is taken from the rings at once
-            began = time.monotonic()
-            for cam in cameras.values():
-                _poll(cam, writer)
-            if all(c.past_end for c in cameras.values()) or clock() >= give_up:
-                break
-            time.sleep(max(0.0, _poll_s(cameras) - (time.monotonic() - began)))
-        writer.finish()
-    except BaseException as exc:
-        with contextlib.suppress(BaseException):
-            writer.finish()  # stops the writer; its own error is the one being raised
-        if isinstance(exc, DiskFull) and exc.valid:  # the bag was closed whole up to its last message
-            os.rename(partial, out)
-            kept = ", ".join(f"{topic} {n}" for topic, n in exc.kept.items())
-            raise DiskFull(
-                f"{exc.reason or 'the disk is full'}: the snapshot stopped and kept {kept} in {out}, a valid bag",
-                folder=out,
-                reason=exc.reason,
-                kept=exc.kept,
-                seconds=exc.seconds,
-                file_bytes=exc.file_bytes,
-            ) from None
-        bag.close()
-        shutil.rmtree(partial, ignore_errors=True)
+        cameras = {name: _Camera(name, c, *map(c.clock_estimate().to_service, window)) for name, c in owners.items()}
+        custom = {"clock": _clock_words(clock_name), "stamps": "header.stamp: capture time in that clock"}
+        custom.update(event_ns=t, before_s=before, after_s=after, window_ns=f"{window[0]} {window[1]}")
+        custom.update(cameras=",".join(cameras), encoding=encoding, missing="", gone_before_ms="", ended="")
+        bag = BagWriter(partial, custom, file_stem=os.path.basename(out))
+    except BaseException:
+        _release(lock, partial, remove=True)  # nothing written yet: the folder made in this run goes
         raise
-    summary = {
-        name: {"frames": c.taken, "missing": c.missing, "gone_before_ms": round(c.gone_ms, 3), "complete": c.past_end}
+    writer = _Writer(bag, time.time_ns() - clock(), encoding, quality)  # MCAP log times: wall-clock
+    stopped: BaseException | None = None
+    try:
+        _follow(cameras, writer, clock, window[1] + round(GRACE_S * 1e9))
+    except BaseException as exc:  # Ctrl-C, a service gone: what was copied is kept all the same
+        stopped = exc
+    try:
+        writer.finish()
+        summary = _summary(cameras)
+        bag.custom_data.update({key: json.dumps({n: s[key] for n, s in summary.items()}) for key in KEYS})
+        bag.custom_data["ended"] = _ended(stopped)
+        bag.close()
+    except DiskFull as exc:
+        raise _disk_full(exc, lock, partial, out) from None
+    except KeyboardInterrupt:  # a second Ctrl-C while the bag was being closed: left as it is
+        os.close(lock)
+        raise Interrupted(
+            f"interrupted while the bag was being closed: it stays unfinished in {partial}; "
+            f"fxis snapshot --recover {partial} makes it the bag {out}",
+            {"out": None, "event_ns": t, "window_ns": window, "cameras": _summary(cameras)},
+        ) from None
+    except BaseException as exc:
+        os.close(lock)
+        raise FxisError(
+            f"the snapshot's bag {partial} could not be finished ({exc!r}): "
+            f"fxis snapshot --recover {partial} keeps what it holds"
+        ) from exc
+    kept = sum(c.taken for c in cameras.values())
+    _release(lock, partial, remove=not kept)
+    if kept:
+        _move(partial, out)
+    result = {"out": out if kept else None, "event_ns": t, "window_ns": window, "cameras": summary}
+    if stopped is None:
+        return result
+    said = f"the snapshot kept {_kept_words(summary)} in {out}, a valid bag" if kept else "no frame was kept"
+    if isinstance(stopped, KeyboardInterrupt):
+        raise Interrupted(f"{_ended(stopped)}: {said}", result) from None
+    stopped.add_note(said)
+    raise stopped
+
+
+KEYS = ("missing", "gone_before_ms")  # per camera, in the bag's metadata as JSON
+
+
+class Interrupted(KeyboardInterrupt):
+    """A snapshot stopped by Ctrl-C (KeyboardInterrupt; ``fxis snapshot`` makes SIGTERM one
+    too): ``result`` is what ``take`` returns, its ``out`` a valid bag of every frame copied
+    until then (its metadata's ``ended`` says it was interrupted), or None if none was."""
+
+    def __init__(self, message: str, result: dict):
+        super().__init__(message)
+        self.result = result
+
+
+def interrupted_by(exc: KeyboardInterrupt) -> str:
+    """The signal a KeyboardInterrupt stands for: SIGTERM if a command raised it for one
+    (its argument), else SIGINT (Ctrl-C)."""
+    name = exc.args[0] if exc.args and isinstance(exc.args[0], str) else ""
+    return name if name.startswith("SIG") else "SIGINT"
+
+
+def _ended(stopped: BaseException | None) -> str:
+    if stopped is None:
+        return "complete"
+    if isinstance(stopped, KeyboardInterrupt):
+        return f"interrupted by {interrupted_by(stopped)}"
+    return f"stopped by an error: {stopped}"
+
+
+def _follow(cameras: dict[str, _Camera], writer: _Writer, clock: Callable[[], int], give_up: int) -> None:
+    while True:  # at least one look: a window long past is taken from the rings at once
+        began = time.monotonic()
+        for cam in cameras.values():
+            _poll(cam, writer)
+        if all(c.past_end for c in cameras.values()) or clock() >= give_up:
+            return
+        time.sleep(max(0.0, _poll_s(cameras) - (time.monotonic() - began)))
+
+
+def _summary(cameras: dict[str, _Camera]) -> dict:
+    return {
+        name: {
+            "frames": c.taken,
+            "missing": sorted(c.missing),
+            "gone_before_ms": round(c.gone_ms, 3),
+            "complete": c.past_end,
+        }
         for name, c in cameras.items()
     }
-    bag.custom_data["missing"] = json.dumps({n: s["missing"] for n, s in summary.items()})
-    bag.custom_data["gone_before_ms"] = json.dumps({n: s["gone_before_ms"] for n, s in summary.items()})
-    bag.close()
-    os.rename(partial, out)
-    return {"out": out, "event_ns": t, "window_ns": window, "cameras": summary}
+
+
+def _kept_words(summary: dict) -> str:
+    return ", ".join(f"{name} {kept['frames']} frames" for name, kept in summary.items())
+
+
+def _clock_words(name: str | None) -> str:
+    if name is None:
+        return "the caller's own clock function (Client(clock=fn)): not one of the named clocks"
+    return timebase.WIRE_NAMES[name]
+
+
+def _claim(partial: str, out: str):
+    """The snapshot's own ``partial`` folder, made here (never one found: it may hold an
+    earlier snapshot's frames, or another's being written) and locked while it is written."""
+    try:
+        os.mkdir(partial)
+    except FileExistsError:
+        state = "another snapshot is writing it now" if _locked(partial) else "one that was stopped (killed?) left it"
+        raise InvalidArgument(
+            f"{partial} holds an unfinished snapshot ({state}); nothing was changed: "
+            f"`fxis snapshot --recover {partial}` makes it the bag {out}, or remove it"
+        ) from None
+    except OSError as exc:
+        raise InvalidArgument(f"out {out}: cannot make {partial}: {exc.strerror}") from None
+    lock = os.open(partial, os.O_RDONLY | os.O_DIRECTORY)
+    fcntl.flock(lock, fcntl.LOCK_EX | fcntl.LOCK_NB)  # the folder itself: the bag holds nothing else
+    return lock
+
+
+def _locked(partial: str) -> bool:
+    try:
+        fd = os.open(partial, os.O_RDONLY | os.O_DIRECTORY)
+    except OSError:
+        return False
+    try:
+        fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+    except OSError:
+        return True
+    finally:
+        os.close(fd)
+    return False
+
+
+def _release(lock: int, partial: str, remove: bool) -> None:
+    """Unlock; ``remove``: the folder too, if it holds nothing but what this run wrote and no frame."""
+    os.close(lock)
+    if remove:
+        for name in os.listdir(partial):  # the empty bag's own files (this run's)
+            os.remove(os.path.join(partial, name))
+        os.rmdir(partial)
+
+
+def _move(partial: str, out: str) -> None:
+    try:
+        os.rename(partial, out)  # onto nothing, or onto an empty folder
+    except OSError as exc:
+        raise FxisError(f"{out}: {exc.strerror}: the snapshot is kept, whole, in {partial}") from None
+
+
+def _disk_full(exc: DiskFull, lock, partial: str, out: str) -> DiskFull:
+    _release(lock, partial, remove=False)
+    if not exc.valid:  # the bag could not be closed: it stays unfinished, for --recover
+        return DiskFull(f"{exc} (the snapshot's bag: {partial})", **{k: getattr(exc, k) for k in DISK_FULL_FIELDS})
+    _move(partial, out)  # the bag was closed whole up to its last message
+    kept = ", ".join(f"{topic} {n}" for topic, n in exc.kept.items())
+    return DiskFull(
+        f"{exc.reason or 'the disk is full'}: the snapshot stopped and kept {kept} in {out}, a valid bag",
+        **{**{k: getattr(exc, k) for k in DISK_FULL_FIELDS}, "folder": out},
+    )
+
+
+DISK_FULL_FIELDS = ("folder", "reason", "kept", "seconds", "file_bytes", "valid")
 
 
 def _check(at, before, after, out, encoding) -> None:

@@ -3,7 +3,9 @@
 
 A bag is a folder holding ``metadata.yaml`` (what ``ros2 bag info`` and the ``rosbags``
 library read first) and one ``.mcap`` file (its own summary: schemas, channels,
-statistics, and a metadata record ``fxis`` naming the clock the stamps are in). The
+statistics, and a metadata record ``fxis`` naming the clock the stamps are in and how the
+bag ended, written when it is closed; ``fxis.begun``, written first, says what was known
+at the start, so that a bag whose writer was killed still names its clock). The
 writer keeps the counts ``metadata.yaml`` needs and writes it when the bag is closed,
 so a bag is valid as soon as ``close`` returns (also after Ctrl-C, and when the disk fills:
 ``BagWriter``). A bag whose writer was killed is read as far as it is complete
@@ -30,6 +32,7 @@ RESERVE_BASE = 1 << 20  # beyond twice the summary: metadata.yaml, the message i
 RESERVE_STEP = 1 << 18  # grown by at least this much at a time
 CHUNK_SECONDS = 1.0  # a chunk is written at the latest this long after it was begun
 DISK_FULL = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)
+RECORD, BEGUN_RECORD = "fxis", "fxis.begun"  # the MCAP metadata records (the module's docstring)
 ROSBAG2_VERSION = 8  # custom_data (6), type_description_hash (7), ros_distro (8)
 EXTRA_HINT = "pip install 'fxis-shm[record]' (or `make setup`)"
 
@@ -76,13 +79,18 @@ class BagWriter:
     **A kill or a power cut** leaves the records written up to then (the writer holds at
     most one chunk in memory: 1 MiB, or ``CHUNK_SECONDS`` of messages) and no end;
     fxis_shm.formats.bagrecover (``fxis record --recover``) finishes such a bag, and
-    ``BagReader`` plays it as it is. The ``fxis`` metadata record is written first, so that
-    it survives too (and again at the end if ``custom_data`` changed meanwhile).
+    ``BagReader`` plays it as it is. ``custom_data`` is written first as the ``fxis.begun``
+    metadata record, so that it survives too, and as it is at the end as ``fxis`` (once,
+    complete) when the bag is closed, also on a full disk.
+
+    ``file_stem``: the .mcap file is ``STEM_0.mcap`` (default: the folder's name, as rosbag2
+    names it; a bag written under a temporary name passes its final one).
     """
 
     folder: str
     custom_data: dict = field(default_factory=dict)
     ros_distro: str = "jazzy"  # the message definitions are those of every ROS 2 release
+    file_stem: str = ""
 
     def __post_init__(self):
         mcap, mcap_ros2 = require_mcap("recording")
@@ -94,10 +102,9 @@ class BagWriter:
             )
         made = not os.path.exists(self.folder)
         os.makedirs(self.folder, exist_ok=True)
-        self.file_name = os.path.basename(os.path.normpath(self.folder)) + "_0.mcap"
+        self.file_name = (self.file_stem or os.path.basename(os.path.normpath(self.folder))) + "_0.mcap"
         self.path = os.path.join(self.folder, self.file_name)
         self._reserve = _Reserve(os.path.join(self.folder, RESERVE_FILE))
-        self._written_custom = self._custom_strings()
         self._schemas: dict = {}
         self.topics: dict[str, _TopicCount] = {}
         self.first_time: int | None = None
@@ -110,7 +117,7 @@ class BagWriter:
             # No chunk compression: images are large and raw ones barely compress; the
             # recorder's CPU is better spent keeping up (JPEG is compressed already).
             self._writer = mcap_ros2.writer.Writer(self._file, compression=mcap.writer.CompressionType.NONE)
-            self._writer.add_metadata("fxis", self._written_custom)  # first, so a cut-off bag keeps it
+            self._writer.add_metadata(BEGUN_RECORD, self._custom_strings())  # first, so a cut-off bag keeps it
         except OSError as exc:
             if exc.errno not in DISK_FULL:
                 raise
@@ -173,8 +180,7 @@ class BagWriter:
         self.closed = True
         try:
             self._reserve.remove()
-            if self._custom_strings() != self._written_custom:  # changed while recording: the last one counts
-                self._writer.add_metadata("fxis", self._custom_strings())
+            self._writer.add_metadata(RECORD, self._custom_strings())
             self._writer.finish()
             self._file.close()
             write_metadata(self.folder, self.metadata())
@@ -192,7 +198,10 @@ class BagWriter:
         index = self._file.index
         failed = None
         try:
-            self._file.close_at(index.end, closing(index))
+            if not self.custom_data.get("ended"):  # (how the bag ended, if its writer did not say)
+                self.custom_data["ended"] = f"the disk was full ({exc.strerror}): closed with what fitted"
+            last_word = {} if RECORD in index.metadata else {RECORD: self._custom_strings()}
+            self._file.close_at(index.end, closing(index, last_word))
             self.topics = {t: _TopicCount(msgtype, n) for t, (msgtype, n) in index.topics().items()}
             self.first_time, self.last_time = (
                 (index.start_time, index.end_time) if index.message_count else (None, None)

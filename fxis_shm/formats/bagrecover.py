@@ -16,7 +16,9 @@ from typing import TYPE_CHECKING
 
 from fxis_shm.errors import FxisError
 from fxis_shm.formats.bagfile import (
+    BEGUN_RECORD,
     METADATA_FILE,
+    RECORD,
     RESERVE_FILE,
     BagReader,
     bag_info,
@@ -26,7 +28,9 @@ from fxis_shm.formats.bagfile import (
 )
 
 if TYPE_CHECKING:
-    from fxis_shm.formats.mcaprecover import Repair
+    from fxis_shm.formats.mcaprecover import McapIndex, Repair
+
+KILLED = "the writer stopped without closing the bag (killed?): recovered up to its last complete message"
 
 
 @dataclass
@@ -55,10 +59,10 @@ def recover_bag(path: str) -> Recovered:
     with contextlib.suppress(FileNotFoundError):
         os.remove(os.path.join(folder, RESERVE_FILE))  # a killed recorder's: room for the copy
     reader = BagReader(file)
-    repair = reader.repair
-    if repair is None and os.path.exists(os.path.join(folder, METADATA_FILE)):
+    if reader.repair is None and os.path.exists(os.path.join(folder, METADATA_FILE)):
         return Recovered(folder, file, {}, reader.start_time, reader.end_time)
-    repair = repair or examine(file)  # whole, but without metadata.yaml: its counts
+    # damaged: made whole, ending on a complete ``fxis`` record; or whole without metadata.yaml: its counts
+    repair = examine(file, _last_word) if reader.repair is not None else examine(file)
     index = repair.index
     done = Recovered(folder, file, index.topics(), index.start_time, index.end_time, wrote_metadata=True)
     if reader.repair is not None:
@@ -72,10 +76,17 @@ def recover_bag(path: str) -> Recovered:
         except OSError:
             os.rename(file, done.damaged)  # no hard links here (FAT): a moment without the file
         os.replace(file + ".recovering", file)
-    custom = index.metadata.get("fxis", {})
+    custom = index.metadata.get(RECORD) or index.metadata.get(BEGUN_RECORD, {})
     first = index.start_time if index.message_count else None
     write_metadata(folder, bag_info(os.path.basename(file), done.topics, first, index.end_time, custom))
     return done
+
+
+def _last_word(index: McapIndex) -> dict[str, dict[str, str]]:
+    """The ``fxis`` record a killed writer did not write: what it knew when it began, and how it ended."""
+    if RECORD in index.metadata:
+        return {}
+    return {RECORD: {**index.metadata.get(BEGUN_RECORD, {}), "ended": KILLED}}
 
 
 def _free_name(path: str) -> str:

@@ -28,6 +28,7 @@ import os
 import struct
 import zlib
 from collections import defaultdict
+from collections.abc import Callable
 from dataclasses import dataclass
 
 from mcap.data_stream import ReadDataStream, RecordBuilder
@@ -221,8 +222,9 @@ def salvage(body) -> bytes | None:
     return builder.end()
 
 
-def closing(index: McapIndex) -> bytes:
-    """The records that close a file whose complete data records end at ``index.end``."""
+def closing(index: McapIndex, metadata: dict[str, dict[str, str]] | None = None) -> bytes:
+    """The records that close a file whose complete data records end at ``index.end``;
+    ``metadata`` (name -> strings): metadata records to add after the data (the last word)."""
     builder, start = RecordBuilder(), index.end
     if index._last is not None:  # the last chunk's message indexes were cut: they follow it here
         for channel, entries in index._unindexed.items():
@@ -230,6 +232,11 @@ def closing(index: McapIndex) -> bytes:
             MessageIndex(channel, entries).write(builder)
         index._last.message_index_length += builder.count
         index._last, index._unindexed = None, {}
+    for name, values in (metadata or {}).items():
+        offset = builder.count
+        Metadata(name=name, metadata=values).write(builder)
+        index.metadata[name] = dict(values)
+        index.metadata_indexes.append(MetadataIndex(offset=start + offset, length=builder.count - offset, name=name))
     DataEnd(0).write(builder)
     summary_start = start + builder.count
     statistics = Statistics(
@@ -355,9 +362,10 @@ class Repair:
             raise
 
 
-def examine(path: str) -> Repair:
+def examine(path: str, last_word: Callable[[McapIndex], dict[str, dict[str, str]]] | None = None) -> Repair:
     """Read ``path`` record by record up to its first incomplete or corrupt record (or its
-    data end) and work out what makes it whole. ConfigError if it is not an MCAP file."""
+    data end) and work out what makes it whole. ConfigError if it is not an MCAP file.
+    ``last_word``: the metadata records (``closing``) to end it with, given what it holds."""
     index = McapIndex()
     torn, why, opcode, body = None, "", 0, b""
     with open(path, "rb") as f:
@@ -397,7 +405,7 @@ def examine(path: str) -> Repair:
         index.add(Opcode.CHUNK, memoryview(rescued)[9:], index.end)
         repair.salvaged, repair.tail = index.message_count - before, rescued
     repair.cut = size - repair.keep - len(repair.tail)  # a rescued chunk's header stands for the torn one's
-    repair.tail += closing(index)
+    repair.tail += closing(index, last_word(index) if last_word else None)
     return repair
 
 

@@ -1,20 +1,30 @@
 """The frame-id stamp that the synthetic camera writes into its pixels.
 
-The id is written twice, into the first and the last row of the image: eight
-bytes of the id (little-endian uint64) followed by eight bytes of its bitwise
-complement. ``read_stamp`` returns the id only if both rows carry the same
-valid stamp, so an image assembled from two different frames (a torn copy)
-reads as ``None`` or as a different id, never as the id in its metadata.
+The id is written twice, into the first and the last row of the image: eight bytes of the
+id (little-endian uint64) followed by eight bytes of its bitwise complement, and, where a
+row holds 24 bytes, a check: four bytes of the CRC-32 of the id's eight and four of that
+CRC's complement. ``read_stamp`` returns the id only if both rows carry the same valid
+stamp, so an image assembled from two different frames (a torn copy) reads as ``None`` or
+as a different id, never as the id in its metadata; and bytes that lossy compression
+happened to leave looking like an id and its complement (1 JPEG in 600 did) fail the check
+and read as None. (Clients that read only the first 16 bytes, docs/protocol.md section 17,
+read raw frames as before.)
 
 Works for any dtype and channel count as long as a row holds 16 bytes.
 
-Lossy compression (JPEG) changes those bytes, so 8-bit images large enough also carry
-the id as black and white 8x8 blocks, JPEG's own block size, in a band near the top and
-again near the bottom (32 bits of the id, then their complement): ``read_stamp`` falls
-back to them when the bytes do not read, and a torn image still reads as None.
+Lossy compression (JPEG) changes those bytes, so 8-bit images large enough also carry the
+id's low 32 bits as black and white 8x8 blocks, JPEG's own block size, with a 16-bit check
+(of the CRC-32 of those bits), in a band near the top and again near the bottom: each bit
+as a block and, further on, its complement. A bit reads as the sign of the difference
+between the two, in each band; both bands must agree on every bit, each clearly, and the
+check must hold: ``read_stamp`` falls back to them when the bytes do not read, a torn image
+still reads as None, and a misread is caught by the check, not returned (the redundancy,
+two copies, complements and a check, is what a lossy video codec will need too).
 """
 
 from __future__ import annotations
+
+import zlib
 
 import numpy as np
 
@@ -28,14 +38,24 @@ def _row_bytes(image: np.ndarray, row: int) -> np.ndarray:
     return row_bytes
 
 
-def _encode(frame_id: int) -> np.ndarray:
-    ident = np.array([frame_id & 0xFFFFFFFFFFFFFFFF], dtype="<u8")
-    return np.concatenate([ident.view(np.uint8), (~ident).view(np.uint8)])
+CHECKED_BYTES = 24  # a row this long also holds the check
+
+
+def _encode(frame_id: int, row_bytes: int) -> np.ndarray:
+    """The stamp for a row of ``row_bytes``: the id and its complement, then the check if it fits."""
+    ident = (frame_id & 0xFFFFFFFFFFFFFFFF).to_bytes(8, "little")
+    code = ident + bytes(b ^ 0xFF for b in ident)
+    if row_bytes >= CHECKED_BYTES:
+        crc = zlib.crc32(ident)
+        code += crc.to_bytes(4, "little") + (crc ^ 0xFFFFFFFF).to_bytes(4, "little")
+    return np.frombuffer(code, np.uint8)
 
 
 BLOCK = 8  # px: JPEG compresses 8x8 blocks, so a block of one value survives it
-BLOCK_BITS = 64  # 32 bits of the id and their complement
+ID_BITS, CHECK_BITS = 32, 16  # the id's low 32 bits and a 16-bit check of them
+BLOCK_BITS = 2 * (ID_BITS + CHECK_BITS)  # each bit and, further on, its complement
 MARGIN = 8  # px between the byte stamp's row and a block band
+CLEAR = 40  # of 255: how much a bit's block must differ from its complement's to be read
 
 
 def _bands(shape: tuple[int, ...]) -> tuple[int, int, int] | None:
@@ -48,9 +68,15 @@ def _bands(shape: tuple[int, ...]) -> tuple[int, int, int] | None:
     return (per_row, height, bottom) if bottom >= 2 * MARGIN + height else None
 
 
+def _check(ident: int) -> int:
+    """The 16-bit check of a 32-bit id: the low half of its CRC-32."""
+    return zlib.crc32(ident.to_bytes(4, "little")) & 0xFFFF
+
+
 def _block_bits(frame_id: int) -> np.ndarray:
     ident = frame_id & 0xFFFFFFFF
-    bits = [(ident >> i) & 1 for i in range(32)]
+    word = ident | _check(ident) << ID_BITS
+    bits = [(word >> i) & 1 for i in range(ID_BITS + CHECK_BITS)]
     return np.array(bits + [1 - b for b in bits], dtype=np.uint8)
 
 
@@ -80,10 +106,15 @@ def _read_blocks(image: np.ndarray) -> int | None:
             area = area.mean(axis=2)
         # each block's centre, away from its edges where compression rings
         centres = area.reshape(height // BLOCK, BLOCK, per_row, BLOCK)[:, 2:6, :, 2:6].mean(axis=(1, 3))
-        read.append((centres.reshape(-1)[:BLOCK_BITS] > 127).astype(np.uint8))
-    if not np.array_equal(read[0], read[1]) or not np.all(read[0][:32] != read[0][32:]):
-        return None
-    return int(sum(int(b) << i for i, b in enumerate(read[0][:32])))
+        values = centres.reshape(-1)[:BLOCK_BITS]
+        half = BLOCK_BITS // 2
+        read.append(values[:half] - values[half:])  # a bit's block less its complement's
+    top, bottom = read
+    if np.any(np.abs(top) < CLEAR) or np.any(np.abs(bottom) < CLEAR) or np.any((top > 0) != (bottom > 0)):
+        return None  # a bit not clear, or the bands disagree (a torn image)
+    word = sum(1 << i for i, d in enumerate(top) if d > 0)
+    ident = word & 0xFFFFFFFF
+    return ident if word >> ID_BITS == _check(ident) else None
 
 
 def write_stamp(image: np.ndarray, frame_id: int) -> None:
@@ -93,9 +124,9 @@ def write_stamp(image: np.ndarray, frame_id: int) -> None:
         raise InvalidArgument(f"an image of shape {image.shape} has no row to hold a stamp")
     if image[0].nbytes < STAMP_BYTES:
         raise InvalidArgument(f"image rows of {image[0].nbytes} bytes cannot hold a stamp")
-    code = _encode(frame_id)
+    code = _encode(frame_id, image[0].nbytes)
     for row in (0, image.shape[0] - 1):
-        _row_bytes(image, row)[:STAMP_BYTES] = code
+        _row_bytes(image, row)[: len(code)] = code
     if image.ndim >= 2:
         _write_blocks(image, frame_id)
 
@@ -105,9 +136,10 @@ def read_stamp(image: np.ndarray) -> int | None:
     lossy compression only the blocks read: then the id's low 32 bits."""
     if image.ndim < 2 or image[0].nbytes < STAMP_BYTES or not image[0].flags.c_contiguous:
         return None
-    first = _row_bytes(image, 0)[:STAMP_BYTES]
-    last = _row_bytes(image, image.shape[0] - 1)[:STAMP_BYTES]
-    ident = first[:8].view("<u8")[0]
-    if np.array_equal(first, last) and first[8:].view("<u8")[0] == ~ident:
-        return int(ident)
+    size = CHECKED_BYTES if image[0].nbytes >= CHECKED_BYTES else STAMP_BYTES
+    first = _row_bytes(image, 0)[:size]
+    last = _row_bytes(image, image.shape[0] - 1)[:size]
+    ident = int(first[:8].view("<u8")[0])
+    if np.array_equal(first, last) and np.array_equal(first, _encode(ident, size)):
+        return ident
     return _read_blocks(image)

@@ -5,6 +5,7 @@ save button sends them as a zip. Pure: a tuple in, file names and bytes out."""
 from __future__ import annotations
 
 import json
+from collections.abc import Iterator
 
 from fxis_shm.wire import encoding
 
@@ -13,7 +14,20 @@ META_FILE = "tuple.json"
 
 def tuple_files(frames) -> dict[str, bytes]:
     """``{file name: bytes}`` of a FrameTuple: NAME.png per camera, then tuple.json."""
-    files: dict[str, bytes] = {}
+    files = dict(image_files(frames))
+    files[META_FILE] = tuple_json(frames, list(frames))
+    return files
+
+
+def image_files(frames) -> Iterator[tuple[str, bytes]]:
+    """(NAME.png, its bytes) per camera of a FrameTuple, each encoded when asked for."""
+    for name, frame in frames.items():
+        yield f"{name}.png", encoding.encode(frame.image, encoding.PNG)
+
+
+def tuple_json(frames, saved: list[str], ended: str = "complete") -> bytes:
+    """tuple.json of the cameras ``saved`` (those whose PNG is there); ``ended`` says whether
+    the saving was complete or interrupted, and ``not_saved`` which frames it left out."""
     meta = {
         "t_request": frames.t_request,
         "skew_ns": frames.skew_ns,
@@ -22,8 +36,11 @@ def tuple_files(frames) -> dict[str, bytes]:
         "frames": {},
         "missing": list(getattr(frames, "missing", [])),
     }
-    for name, frame in frames.items():
-        files[f"{name}.png"] = encoding.encode(frame.image, encoding.PNG)
+    if ended != "complete":
+        meta["ended"] = ended
+        meta["not_saved"] = [name for name in frames if name not in saved]
+    for name in saved:
+        frame = frames[name]
         meta["frames"][name] = {
             "file": f"{name}.png",
             "frame_id": frame.frame_id,
@@ -33,5 +50,4 @@ def tuple_files(frames) -> dict[str, bytes]:
             "shape": list(frame.image.shape),
             "dtype": frame.image.dtype.name,
         }
-    files[META_FILE] = json.dumps(meta, indent=2).encode()
-    return files
+    return json.dumps(meta, indent=2).encode()

@@ -23,6 +23,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from fxis_shm.client.client import Client
+from fxis_shm.client.snapshot import interrupted_by
 from fxis_shm.core import timebase
 from fxis_shm.errors import CameraDown, ConfigError, DiskFull, Overwritten, ServiceError
 from fxis_shm.formats import rosmsgs
@@ -98,6 +99,7 @@ class Recorder:
             "rate_hz": self.s.rate_hz or (self.steps.rate_hz if self.s.tuples else "all frames"),
             "encoding": self.s.encoding,
             "recorder": "fxis record",
+            "ended": "",  # complete, interrupted by SIGINT / SIGTERM, the disk was full: set when closed
         }
 
     # ---- the loop ----
@@ -107,6 +109,7 @@ class Recorder:
         only asks the loop to stop, so it never lands in the middle of writing a message; a
         second Ctrl-C interrupts at once."""
         self._stopping = False
+        self.interrupted_by: str | None = None  # the signal that ended the recording, if one did
         previous = (
             {sig: signal.signal(sig, self._ask_to_stop) for sig in (signal.SIGINT, signal.SIGTERM)}
             if _main_thread()
@@ -114,6 +117,7 @@ class Recorder:
         )
         self.progress.stage(f"recording {', '.join(self.cameras)} into {self.s.out}")
         self.progress.stage(self._data_rate_line())
+        ended = "complete"
         try:
             try:
                 while not self._stopping and not self._done():
@@ -122,8 +126,17 @@ class Recorder:
                     self.progress.update(self._line())
                     time.sleep(max(0.0, self.poll_s - (time.monotonic() - began)))
                 if self._stopping:
-                    self.progress.stage("interrupted: closing the bag")
+                    ended = f"interrupted by {self.interrupted_by}"
+                    self.progress.stage(f"{ended}: closing the bag")
+            except KeyboardInterrupt as exc:  # a second Ctrl-C: the bag is closed all the same
+                self.interrupted_by = interrupted_by(exc)
+                ended = f"interrupted by {self.interrupted_by}"
+                raise
+            except BaseException as exc:
+                ended = f"stopped by an error: {exc}"
+                raise
             finally:
+                self.bag.custom_data["ended"] = ended
                 self.bag.close()
         except DiskFull as exc:  # the bag was closed with what fitted
             raise self._disk_full(exc) from None
@@ -189,6 +202,7 @@ class Recorder:
 
     def _ask_to_stop(self, signum, frame) -> None:
         self._stopping = True
+        self.interrupted_by = self.interrupted_by or signal.Signals(signum).name
         signal.signal(signal.SIGINT, signal.default_int_handler)  # a second Ctrl-C: at once
 
     def _now(self) -> int:
@@ -319,6 +333,7 @@ class Recorder:
         file_path = os.path.join(self.s.out, self.bag.file_name)
         return {
             "out": self.s.out,
+            "interrupted_by": self.interrupted_by,
             "seconds": (self._now() - self.t_start) / 1e9,
             "cameras": per_camera,
             "tuples": self.steps.taken if self.s.tuples else None,

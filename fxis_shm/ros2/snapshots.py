@@ -67,7 +67,8 @@ class SnapshotRequests(HeaderRequests):
                 kept = client.snapshot(t_ros, BEFORE_S, AFTER_S, out)
             cameras = kept["cameras"]
             self.counts.published += 1
-            self._answer({"name": name, "bag": out, "event_ros_ns": t_ros, "cameras": cameras})
+            # "bag" None: the rings held no frame of the window (no bag written)
+            self._answer({"name": name, "bag": kept["out"], "event_ros_ns": t_ros, "cameras": cameras})
         except FxisError as exc:  # a bad time, a full disk (its bag is kept), a camera down
             self._answer({"name": name, "error": str(exc)})
         finally:

@@ -28,6 +28,21 @@ def process_alive(pid: int) -> bool:
     return stat is not None and stat.running
 
 
+RATE_WINDOW_NS = 5_000_000_000  # the measured rate: frames stored over the last 5 s
+
+
+def measured_rate(snap: Snapshot, now: int) -> dict:
+    """``measured_fps``: the frames the ring holds that were captured in the last
+    ``measured_over_s`` seconds, per second; 5 s, or as far back as the ring reaches. A
+    camera that drops frames or stalls shows it here, whatever its set rate."""
+    n = len(snap.timeline)
+    window = min(RATE_WINDOW_NS, now - snap.timeline.at(0)) if n else RATE_WINDOW_NS
+    if window <= 0:
+        return {"measured_fps": None, "measured_over_s": 0.0}
+    count = n - snap.timeline.bisect_right(now - window)
+    return {"measured_fps": round(count * 1e9 / window, 2), "measured_over_s": round(window / 1e9, 2)}
+
+
 class CameraHandle:
     def __init__(self, service: str, name: str, kind: str, history_s: float | None = None):
         self.service, self.name, self.kind = service, name, kind
@@ -124,7 +139,8 @@ class CameraHandle:
         info.update(
             shape=list(ring.layout.shape),
             dtype=ring.layout.dtype,
-            fps=round(1e9 / period, 3) if period > 0 else None,
+            fps=round(1e9 / period, 3) if period > 0 else None,  # the camera's set rate (its period)
+            **measured_rate(snap, now),
             frames_stored=ring.field("write_count"),
             frames_dropped=ring.field("frames_dropped"),
             # a frame stored after ``now`` was read (between it and the snapshot) is 0 ms old, not negative

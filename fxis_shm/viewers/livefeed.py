@@ -10,18 +10,20 @@ second (status, frame times, one synchronized tuple for its skew). The web side
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import io
 import logging
 import time
 import zipfile
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
-from typing import TypeVar
+from typing import Any, TypeVar
 
 from fxis_shm.client.client import Client
-from fxis_shm.errors import Code, FxisError, UnknownCamera
+from fxis_shm.errors import CameraDown, Code, FxisError, UnknownCamera
 from fxis_shm.formats.tuplefiles import tuple_files
 from fxis_shm.service.childspec import ViewerSpec
+from fxis_shm.viewers.cellclient import CellClient, CellProbe
 from fxis_shm.viewers.preview import EncodedCache, RateMeter, SkewHistory, frame_intervals_ms, preview_jpeg, preview_key
 from fxis_shm.wire.security import ClientKeys
 
@@ -54,25 +56,55 @@ class LiveFeed:
         self.cell = isinstance(endpoint, list)
         self._pictures = ThreadPoolExecutor(1, thread_name_prefix="dashboard-pictures")
         self._sampler = ThreadPoolExecutor(1, thread_name_prefix="dashboard-sampler")
-        self._picture_client = Client(endpoint, timeout=timeout, keys=keys)
-        self._sample_client = Client(endpoint, timeout=timeout, keys=keys)
-        if cameras is None:  # a cell: the cameras its services have now
-            cameras = {
-                name: {"kind": cam.get("kind"), "fps": cam.get("fps"), "service": cam.get("service")}
-                for name, cam in self._sample_client.status()["cameras"].items()
-            }
-        self.cameras = cameras  # name -> {"kind", "fps" (configured, or None)[, "service"]}
+        if isinstance(endpoint, list):  # a cell, some of it perhaps down: fxis_shm.viewers.cellclient
+            self._probe = CellProbe(endpoint, timeout, keys)
+            self._picture_cell, self._sample_cell = CellClient(timeout, keys), CellClient(timeout, keys)
+        else:
+            self._picture_client = Client(endpoint, timeout=timeout, keys=keys)
+            self._sample_client = Client(endpoint, timeout=timeout, keys=keys)
+        # name -> {"kind", "fps" (configured, or None)[, "service"]}; a cell's as its services answer
+        self.cameras: dict[str, dict] = {}
+        self._rates: dict[str, RateMeter] = {}
+        self._learn(cameras or {})
+        if self.cell:
+            with contextlib.suppress(FxisError):  # those that answer now; the others when they come
+                self._learn(self._probe.status()["cameras"])
         self.cache = EncodedCache()
-        self._rates = {name: RateMeter() for name in cameras}
         self._skews = SkewHistory()
         self.started = time.monotonic()
         self.view: dict = {"service_ok": False, "error": "not sampled yet", "status": None}
 
+    def _learn(self, cameras: dict[str, dict]) -> None:
+        """Adds the cameras not known yet (a cell's service that came); the page's threads read
+        ``cameras`` meanwhile, so a new dict replaces it rather than it changing under them."""
+        known = dict(self.cameras)
+        for name, cam in cameras.items():
+            if name not in known or known[name].get("service") != cam.get("service"):
+                known[name] = {"kind": cam.get("kind"), "fps": cam.get("fps")}
+                if cam.get("service"):
+                    known[name]["service"] = cam["service"]
+                self._rates.setdefault(name, RateMeter())
+        if known != self.cameras:
+            self.cameras = known
+
     def close(self) -> None:
         for pool in (self._pictures, self._sampler):
             pool.shutdown(wait=True)
-        self._picture_client.close()
-        self._sample_client.close()
+        if self.cell:
+            for closing in (self._probe, self._picture_cell, self._sample_cell):
+                closing.close()
+        else:
+            self._picture_client.close()
+            self._sample_client.close()
+
+    def _pictures_client(self) -> Any:
+        """The pictures' client (in their thread): a cell's over the services that answer."""
+        return self._picture_cell.over_services(self._probe.up) if self.cell else self._picture_client
+
+    def _gone(self, camera: str) -> str | None:
+        """Why a cell's camera cannot be asked now: its service did not answer the last look."""
+        service = self.cameras.get(camera, {}).get("service")
+        return f"its service {service} does not answer" if self.cell and service not in self._probe.up else None
 
     def check_camera(self, camera: str) -> None:
         if camera not in self.cameras:
@@ -91,8 +123,11 @@ class LiveFeed:
         return await asyncio.get_running_loop().run_in_executor(self._pictures, self._latest, camera, make, torn)
 
     def _latest(self, camera: str, make: Callable[..., T], torn: Callable[[T], None] | None) -> T:
+        gone = self._gone(camera)
+        if gone:
+            raise CameraDown(Code.CAMERA_DOWN, f"camera {camera!r}: {gone}")
         for copy in (False, True):
-            with self._picture_client.latest([camera], copy=copy) as frames:
+            with self._pictures_client().latest([camera], copy=copy) as frames:
                 frame = frames[camera]
                 result = make(frame)
                 if frame.still_valid():
@@ -117,7 +152,9 @@ class LiveFeed:
         return await asyncio.get_running_loop().run_in_executor(self._pictures, self._tuple_zip)
 
     def _tuple_zip(self) -> tuple[bytes, str]:
-        with self._picture_client.tuple(partial=True) as frames:
+        with self._pictures_client().tuple(partial=True) as frames:
+            # a cell's cameras whose service is gone are missing from the tuple as a down camera is
+            frames.missing = [*frames.missing, *(n for n in self.cameras if self._gone(n) and n not in frames)]
             files = tuple_files(frames)
             name = f"fxis-tuple-{frames.t_request}.zip"
         buffer = io.BytesIO()
@@ -130,7 +167,8 @@ class LiveFeed:
 
     async def status(self) -> dict:
         """The service's ``status`` reply now (what ``fxis status --json`` prints)."""
-        return await asyncio.get_running_loop().run_in_executor(self._sampler, self._sample_client.status)
+        status = self._probe.status if self.cell else self._sample_client.status
+        return await asyncio.get_running_loop().run_in_executor(self._sampler, status)
 
     async def sample(self) -> dict:
         """Look at the service once; ``view`` holds what the page shows until the next look."""
@@ -138,9 +176,8 @@ class LiveFeed:
         return self.view
 
     def _sample(self) -> dict:
-        client = self._sample_client
         try:
-            status = client.status()
+            status = self._probe.status() if self.cell else self._sample_client.status()
         except FxisError as exc:
             log.debug("status failed: %s", exc)
             return {
@@ -148,6 +185,7 @@ class LiveFeed:
                 "service_ok": False,
                 "error": f"the service at {self.endpoint} does not answer ({exc})",
             }
+        self._learn(status["cameras"])
         cameras = {}
         for name, cam in status["cameras"].items():
             config = self.cameras.get(name, {})
@@ -156,6 +194,7 @@ class LiveFeed:
             )
             cameras[name] = {"configured_fps": config.get("fps"), "measured_fps": measured, "intervals_ms": []}
         try:
+            client = self._sample_cell.over_services(self._probe.up) if self.cell else self._sample_client
             times = client.frame_times(list(cameras)) if cameras else {"cameras": {}}  # of services that answer
             for name, info in times["cameras"].items():
                 cameras[name]["intervals_ms"] = frame_intervals_ms(info["frames"], times["columns"], INTERVALS_SHOWN)
@@ -173,16 +212,17 @@ class LiveFeed:
             "sampled": time.time(),
         }
         if self.cell:
-            view["services"] = services_view(status, client.clocks)
+            view["services"] = services_view(status, self._probe.clocks)
         return view
 
 
 def services_view(status: dict, clocks: dict) -> dict:
     """What the page shows of each service of a cell: whether it answers (and why not), its
-    name and uptime, and its clock against the dashboard's (offset, uncertainty, how known)."""
+    name and uptime, and its clock against the dashboard's (offset, uncertainty, how known;
+    None for a service that does not answer: its clock is not known now)."""
     services = {}
     for endpoint, answer in status["services"].items():
-        clock = clocks.get(endpoint)
+        clock = clocks.get(endpoint) if answer.get("ok") is not False else None
         services[endpoint] = {
             "ok": answer.get("ok", False),
             "error": answer.get("error"),

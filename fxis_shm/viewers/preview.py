@@ -127,11 +127,14 @@ class RateMeter:
 
 
 def frame_intervals_ms(rows: list[list[int]], columns: list[str], last: int) -> list[float]:
-    """The intervals between consecutive captures (ms) of the newest ``last`` + 1 frames of
-    a ``frames`` op reply (rows oldest first); a gap in frame ids is not an interval."""
-    i_id, i_t = columns.index("frame_id"), columns.index("t_capture")
+    """The intervals between consecutive stored frames (ms) of the newest ``last`` + 1 frames
+    of a ``frames`` op reply (rows oldest first). Frames the camera dropped make the interval
+    across them long: a spike, as a stutter is. Only a restart (another generation, its ids
+    counted afresh) breaks the series."""
+    i_t = columns.index("t_capture")
+    i_gen = columns.index("generation") if "generation" in columns else None
     rows = rows[-(last + 1) :]
-    return [round((b[i_t] - a[i_t]) / 1e6, 3) for a, b in zip(rows, rows[1:]) if b[i_id] == a[i_id] + 1]
+    return [round((b[i_t] - a[i_t]) / 1e6, 3) for a, b in zip(rows, rows[1:]) if i_gen is None or a[i_gen] == b[i_gen]]
 
 
 class SkewHistory:

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import os
 import shutil
+import signal
 import struct
 from dataclasses import dataclass
 from pathlib import Path
@@ -136,3 +137,15 @@ def played_once(client, camera: str, recorded_ids: list[int]):
     assert status["frames_stored"] + status["frames_dropped"] == len(recorded_ids)
     assert set(played) <= set(recorded_ids) and played == sorted(set(played)), (played, recorded_ids)
     return status, frames
+
+
+def kill_9_once_written(proc, mcap: Path, size: int) -> None:
+    """SIGKILL to ``proc`` once its bag file ``mcap`` holds ``size`` bytes (as a power cut would)."""
+    try:
+        wait_until(lambda: mcap.exists() and mcap.stat().st_size > size, timeout=30, what="chunks written")
+        proc.send_signal(signal.SIGKILL)
+        proc.wait(timeout=10)
+    finally:
+        if proc.poll() is None:
+            proc.kill()
+            proc.wait()

@@ -4,6 +4,7 @@ service's health and clock, "Save tuple" across hosts, and a host that stops sho
 
 from __future__ import annotations
 
+import contextlib
 import io
 import json
 import os
@@ -32,27 +33,28 @@ def cell(emulated_hosts, tmp_path):
     sa = a.service("--camera", f"left=synthetic:fps=20,{SMALL}")
     sb = b.service("--camera", f"right=synthetic:fps=20,phase_ms=9,{SMALL}")
     keys = os.path.join(emulated_hosts._keys_dir, "keys")
-    port = free_tcp_port()
-    out = open(tmp_path / "dashboard.out", "w+")
-    dashboard = subprocess.Popen(
-        [
-            sys.executable, "-m", "fxis_shm.cli", "dashboard", sa.endpoint, sb.endpoint,
-            "--http", f"127.0.0.1:{port}",
-            "--server-key", os.path.join(keys, "server.key"),
-            "--client-key", os.path.join(keys, "client.key_secret"),
-        ],
-        stdout=out,
-        stderr=subprocess.STDOUT,
-    )  # fmt: skip
-    base = f"http://127.0.0.1:{port}"
-    try:
+    key_options = ["--server-key", os.path.join(keys, "server.key")]
+    key_options += ["--client-key", os.path.join(keys, "client.key_secret")]
+    with cell_dashboard([sa.endpoint, sb.endpoint, *key_options], tmp_path / "dashboard.out") as base:
         wait_until(lambda: _all_answer(base), timeout=60, what="the cell dashboard's first look at both hosts")
         yield base, (a, sa), (b, sb)
+
+
+@contextlib.contextmanager
+def cell_dashboard(args: list[str], log_path):
+    """``fxis dashboard ARGS`` on a free port of this host, its output in ``log_path`` (printed
+    at the end: shown when a test fails); its base URL."""
+    port = free_tcp_port()
+    out = open(log_path, "w+")
+    command = [sys.executable, "-m", "fxis_shm.cli", "dashboard", *args, "--http", f"127.0.0.1:{port}"]
+    dashboard = subprocess.Popen(command, stdout=out, stderr=subprocess.STDOUT)
+    try:
+        yield f"http://127.0.0.1:{port}"
     finally:
         dashboard.terminate()
         dashboard.wait(15)
         out.seek(0)
-        print(out.read())  # shown when a test fails
+        print(out.read())
         out.close()
 
 

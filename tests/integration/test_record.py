@@ -123,11 +123,12 @@ def test_ctrl_c_ends_the_recording_with_a_valid_bag(cell, tmp_path):
     finally:
         proc.kill()
         proc.wait()
-    assert proc.returncode == 0, stderr
-    assert "interrupted" in stderr
+    assert proc.returncode == 130, stderr  # stopped by a signal, what was recorded kept
+    assert "interrupted by SIGINT" in stderr
     bag = read_bag(out)
     assert len(bag.messages["/left/image_raw"]) > 0
     assert f"{len(bag.messages['/left/image_raw'])}" in stdout
+    assert bag.custom_data["ended"] == "interrupted by SIGINT"
 
 
 @pytest.mark.parametrize(
@@ -165,6 +166,8 @@ def test_the_mcap_file_names_its_clock_in_a_metadata_record(raw_bag):
         records = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
     assert records["fxis"]["clock"] == "CLOCK_MONOTONIC"
     assert records["fxis"]["mode"] == "frames" and int(records["fxis"]["clock_to_realtime_ns"]) > 0
+    assert records["fxis"]["ended"] == "complete"  # written once, complete, when the bag was closed
+    assert records["fxis.begun"]["clock"] == "CLOCK_MONOTONIC"  # what a killed recording still says
 
 
 def test_a_recorder_that_cannot_keep_up_says_how_many_frames_it_missed(start_service, tmp_path):

@@ -3,7 +3,6 @@ a bag cut off at any byte. Real processes and files; every bag read back with ro
 
 import os
 import re
-import signal
 import subprocess
 import sys
 from pathlib import Path
@@ -11,8 +10,10 @@ from pathlib import Path
 import pytest
 from ruamel.yaml import YAML
 
-from ..conftest import fxis, wait_until
-from .bags import cut_copy, frame_ids, message_ends, read_bag, record, start_cameras, stop
+from fxis_shm.formats.bagrecover import KILLED
+
+from ..conftest import fxis
+from .bags import cut_copy, frame_ids, kill_9_once_written, message_ends, read_bag, record, start_cameras, stop
 
 pytestmark = pytest.mark.integration
 CAMS = ("left", "right")
@@ -57,6 +58,7 @@ def test_a_full_disk_stops_the_recording_with_a_valid_bag_and_says_what_it_kept(
     assert len(bag.messages["/left/image_raw"]) == left and len(bag.messages["/right/image_raw"]) == right
     assert counts_in_metadata(out) == {"/left/image_raw": left, "/right/image_raw": right}
     assert_every_frame_in_order(bag)
+    assert bag.custom_data["ended"] == "the disk was full (No space left on device): closed with what fitted"
     every = sorted(m.log_time for msgs in bag.messages.values() for m in msgs)
     assert abs((every[-1] - every[0]) / 1e9 - seconds) < 0.06
     assert abs(os.path.getsize(out / "bag_0.mcap") / 1e6 - megabytes) < 0.06
@@ -71,15 +73,7 @@ def test_kill_9_then_recover_makes_the_bag_readable_up_to_its_last_complete_mess
             stdout=log,
             stderr=log,
         )
-        try:
-            mcap = out / "k_0.mcap"
-            wait_until(lambda: mcap.exists() and mcap.stat().st_size > 3_000_000, timeout=30, what="chunks written")
-            proc.send_signal(signal.SIGKILL)
-            proc.wait(timeout=10)
-        finally:
-            if proc.poll() is None:
-                proc.kill()
-                proc.wait()
+        kill_9_once_written(proc, out / "k_0.mcap", 3_000_000)
     assert not (out / "metadata.yaml").exists()
     with pytest.raises(FileNotFoundError, match="metadata"):  # rosbags refuses it as it is
         read_bag(out)
@@ -95,6 +89,7 @@ def test_kill_9_then_recover_makes_the_bag_readable_up_to_its_last_complete_mess
         assert re.search(rf"^  {topic}\s+{n}\s+sensor_msgs/msg/Image$", result.stdout, re.M), result.stdout
     assert "k_0.mcap.damaged" in result.stdout and (out / "k_0.mcap.damaged").exists()
     assert not (out / ".fxis-reserve").exists()
+    assert bag.custom_data["ended"] == KILLED and bag.custom_data["clock"] == "CLOCK_MONOTONIC"
     again = fxis("record", "--recover", str(out))
     assert again.returncode == 0 and "the bag is whole" in again.stdout
 

@@ -3,7 +3,9 @@ future as it comes, into a bag that rosbags reads; nothing missing without sayin
 
 from __future__ import annotations
 
+import _thread
 import json
+import os
 import subprocess
 import sys
 import threading
@@ -12,6 +14,7 @@ import numpy as np
 import pytest
 
 from fxis_shm import Client, InvalidArgument
+from fxis_shm.client.snapshot import Interrupted
 from fxis_shm.errors import DiskFull
 from fxis_shm.formats import rosmsgs
 from fxis_shm.formats.stamp import read_stamp
@@ -134,12 +137,36 @@ def test_a_window_older_than_the_history_says_what_was_gone(history3, tmp_path):
     bag = read_bag(tmp_path / "old")
     assert json.loads(bag.custom_data["gone_before_ms"]) == gone
     start = t - 500_000_000
+    missing = json.loads(bag.custom_data["missing"])
     for camera, period_ms in (("a", 40), ("b", 50)):
         # about 1 s of the window is older than the ring (less where the camera dropped
         # frames: the ring then spans longer), and gone_before_ms is what the bag lacks
         assert 500 <= gone[camera] <= 1200, gone
         first_ms = (images(bag, camera)[0].stamp - start) / 1e6
         assert abs(first_ms - gone[camera]) <= period_ms * (1 + len(result["cameras"][camera]["missing"]))
+        # the frames the ring lost are named missing too, by the ids before the first one kept
+        first_id = read_stamp(rosmsgs.image_array(images(bag, camera)[0].msg))
+        lost = [i for i in missing[camera] if i < first_id]
+        assert lost == list(range(first_id - len(lost), first_id)), (camera, lost, first_id)
+        assert abs(len(lost) - gone[camera] / period_ms) <= 1, (camera, len(lost), gone)
+    assert missing == {c: kept["missing"] for c, kept in result["cameras"].items()}
+
+
+def test_a_window_wholly_older_than_the_history_writes_no_bag_and_names_every_frame_missing(history3, tmp_path):
+    with Client(history3.endpoint) as client:
+        wait_until(lambda: client.status()["uptime_s"] > 6, what="cameras older than the window")
+        t = client.clock() - 4_200_000_000  # the window is 4.7 .. 3.7 s ago; the rings hold the last 3 s
+        result = client.snapshot(at=t, before=0.5, after=0.5, out=str(tmp_path / "gone"))
+    assert result["out"] is None and not (tmp_path / "gone").exists() and not (tmp_path / "gone.partial").exists()
+    for camera, period_ms in (("a", 40), ("b", 50)):
+        kept = result["cameras"][camera]
+        assert kept["frames"] == 0 and kept["gone_before_ms"] == 1000.0
+        assert abs(len(kept["missing"]) - 1000 / period_ms) <= 1, kept
+    at = str(t)
+    cli = fxis("snapshot", "--endpoint", history3.endpoint, "--out", str(tmp_path / "gone"), "--at", at, "--after", "0")
+    assert cli.returncode == 1, cli.stderr
+    assert "no bag written: the rings held no frame of the window" in cli.stdout
+    assert not (tmp_path / "gone").exists() and not (tmp_path / "gone.partial").exists()
 
 
 @pytest.mark.parametrize(
@@ -169,6 +196,44 @@ def test_fxis_snapshot_writes_the_bag_and_reports_each_camera(history3, tmp_path
     bag = read_bag(tmp_path / "cli")
     assert {rosmsgs.image_topic(c) for c in CAMERAS} <= set(bag.topics)
     assert all(isinstance(rosmsgs.image_array(m.msg), np.ndarray) for m in images(bag, "a"))
+    assert sorted(os.listdir(tmp_path / "cli")) == ["cli_0.mcap", "metadata.yaml"]  # named as rosbag2 names it
+    records = fxis_records(tmp_path / "cli" / "cli_0.mcap")
+    assert [name for name, _ in records].count("fxis") == 1
+    final = dict(records)["fxis"]
+    assert final == bag.custom_data and final["clock"] == "CLOCK_MONOTONIC" and final["ended"] == "complete"
+    assert json.loads(final["missing"]).keys() == json.loads(final["gone_before_ms"]).keys() == set(CAMERAS)
+
+
+def fxis_records(mcap) -> list[tuple[str, dict]]:
+    from mcap.reader import make_reader
+
+    with open(mcap, "rb") as f:
+        return [(m.name, dict(m.metadata)) for m in make_reader(f).iter_metadata()]
+
+
+def test_the_bag_names_the_callers_clock(history3, tmp_path):
+    with Client(history3.endpoint, clock="realtime") as client:
+        client.snapshot(before=0.2, after=0.0, out=str(tmp_path / "rt"))
+    assert read_bag(tmp_path / "rt").custom_data["clock"] == "CLOCK_REALTIME"
+
+
+def test_ctrl_c_in_the_library_keeps_the_bag_of_what_was_copied_and_says_where(history3, tmp_path):
+    out = tmp_path / "lib"
+    ctrl_c = threading.Timer(1.0, _thread.interrupt_main)  # KeyboardInterrupt in this thread, as Ctrl-C
+    with Client(history3.endpoint) as client:
+        ctrl_c.start()
+        try:
+            with pytest.raises(Interrupted) as info:
+                client.snapshot(before=0.5, after=5.0, out=str(out))
+        finally:
+            ctrl_c.cancel()
+    assert isinstance(info.value, KeyboardInterrupt)  # a caller's `except KeyboardInterrupt` still sees it
+    result = info.value.result
+    assert result["out"] == str(out) and f"in {out}, a valid bag" in str(info.value)
+    bag = read_bag(out)
+    assert bag.custom_data["ended"] == "interrupted by SIGINT" and not (tmp_path / "lib.partial").exists()
+    for camera in CAMERAS:
+        assert len(images(bag, camera)) == result["cameras"][camera]["frames"] > 0
 
 
 def test_a_full_disk_stops_a_snapshot_with_a_valid_bag_of_what_it_kept(start_service, small_disk):

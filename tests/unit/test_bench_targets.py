@@ -30,14 +30,45 @@ def test_a_request_waited_only_if_a_frame_it_returns_was_stored_after_it_was_mad
 
 def test_wake_targets_judge_median_and_p99_of_copied_and_zero_copy_apart(bench_modules):
     wake = bench_modules["latency_wake"]
+    idle = {"copy_ms": {"median": 0.0, "p99": 0.0}, "sleep_late_ms": {"median": 0.0, "p99": 0.0}}
     summary = {
         "all, copied": {"wake_ms": {"median": 0.4, "p99": 2.5}},
         "all, zero-copy": {"wake_ms": {"median": None, "p99": None}},
+        "machine": idle,
     }
     verdicts = {t["target"]: (t["passed"], t["ratio"]) for t in wake.targets(summary)}
     assert verdicts["local wake-up median, copied"] == (True, pytest.approx(0.8))
     assert verdicts["local wake-up p99, copied"] == (False, pytest.approx(1.25))
     assert verdicts["local wake-up median, zero-copy"] == (None, None)
+
+
+def test_wake_limits_add_this_machines_copy_and_scheduler_delay_and_say_so(bench_modules):
+    wake = bench_modules["latency_wake"]
+    machine = {"copy_ms": {"median": 0.45, "p99": 0.9}, "sleep_late_ms": {"median": 0.1, "p99": 3.0}}
+    summary = {
+        "all, copied": {"wake_ms": {"median": 0.889, "p99": 2.627}},
+        "all, zero-copy": {"wake_ms": {"median": 0.3, "p99": 5.868}},
+        "machine": machine,
+    }
+    got = {t["target"]: t for t in wake.targets(summary)}
+    copied_median = got["local wake-up median, copied"]
+    assert copied_median["limit_ms"] == pytest.approx(1.05) and copied_median["passed"] is True
+    assert copied_median["limit_is"] == "0.5 + scheduler 0.100 + copy 0.450"
+    zero_p99 = got["local wake-up p99, zero-copy"]
+    assert zero_p99["limit_ms"] == pytest.approx(5.0) and zero_p99["passed"] is False  # 5.868: still too late
+    assert zero_p99["limit_is"] == "2 + scheduler p99 3.000"
+    assert got["local wake-up p99, copied"]["limit_ms"] == pytest.approx(5.45)  # + the copy's median
+
+
+def test_the_demo_ends_on_a_verdict_a_newcomer_can_read(bench_modules):
+    import latency
+
+    met = [{"target": "x", "passed": True, "value_ms": 0.1, "limit_ms": 0.5}]
+    assert latency.verdict_line(met, (1.0, 1.0, 1.0), []).startswith("verdict: all 1 targets met (")
+    missed = [*met, {"target": "local wake-up p99, zero-copy", "passed": False, "value_ms": 5.868, "limit_ms": 5.0}]
+    line = latency.verdict_line(missed, (4.6, 4.0, 4.0), [])
+    assert line.startswith("verdict: 1 of 2 targets missed: local wake-up p99, zero-copy: 5.868 ms > 5.000 ms (")
+    assert "load average 4.6 at the start" in line
 
 
 def result(median_ms):

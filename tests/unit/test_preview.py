@@ -106,11 +106,13 @@ def test_the_rate_forgets_samples_older_than_its_window():
     assert rate == 10.0
 
 
-def test_intervals_are_between_consecutive_frames_only():
-    columns = ["frame_id", "t_capture", "t_stored"]
-    rows = [[1, 0, 0], [2, 50_000_000, 0], [4, 150_000_000, 0], [5, 200_000_000, 0]]
-    assert frame_intervals_ms(rows, columns, last=10) == [50.0, 50.0]
+def test_dropped_frames_show_as_a_spike_and_only_a_restart_breaks_the_series():
+    columns = ["frame_id", "t_capture", "t_stored", "t_available", "generation"]
+    rows = [[1, 0, 0, 0, 1], [2, 50_000_000, 0, 0, 1], [4, 150_000_000, 0, 0, 1], [5, 200_000_000, 0, 0, 1]]
+    assert frame_intervals_ms(rows, columns, last=10) == [50.0, 100.0, 50.0]  # frame 3 dropped: a spike
     assert frame_intervals_ms(rows, columns, last=1) == [50.0]
+    restarted = [*rows, [0, 900_000_000, 0, 0, 2], [1, 950_000_000, 0, 0, 2]]
+    assert frame_intervals_ms(restarted, columns, last=10) == [50.0, 100.0, 50.0, 50.0]
 
 
 def test_the_skew_history_keeps_the_newest():
