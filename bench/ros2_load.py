@@ -26,12 +26,12 @@ import time
 ROOT = os.path.dirname(os.path.dirname(os.path.abspath(__file__)))
 sys.path.insert(0, ROOT)  # for tests.hosts
 
+from _cpu import cpu_ticks  # noqa: E402  (bench/, this script's folder)
+
 from fxis_shm import Client  # noqa: E402
 from fxis_shm.service.launch import ServiceProcess  # noqa: E402
 from tests.dds_peer import ROS_VENVS, ros_environment  # noqa: E402
 from tests.hosts import LoopbackNamespace  # noqa: E402
-
-from _cpu import cpu_ticks  # noqa: E402  (bench/, this script's folder)
 
 NS = "/loadcell"
 DOMAIN = 201
@@ -170,7 +170,7 @@ def table(results: list[dict]) -> str:
         ("node CPU %", lambda r: f"{r['node_cpu_pct']:.0f}"),
         ("publisher CPU %", lambda r: f"{r['publisher_cpu_pct']:.0f}"),
         ("publisher CPU ms per MB", lambda r: f"{r['publisher_cpu_ms_per_mb']:.2f}"),
-        ("camera frames dropped", lambda r: str(r["camera_frames_dropped"]) if r["camera_frames_dropped"] is not None else "-"),
+        ("camera frames dropped", lambda r: str(r.get("camera_frames_dropped", "-")).replace("None", "-")),
     ]  # fmt: skip
     names = {"rclpy": "bridge (rclpy)", "cyclone": "bridge (Cyclone)", "anchor": "anchor (rclpy pub)"}
     width = max(len(label) for label, _ in rows)
