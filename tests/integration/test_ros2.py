@@ -14,6 +14,7 @@ import contextlib
 import json
 import os
 import signal
+import subprocess
 from types import SimpleNamespace
 
 import pytest
@@ -23,7 +24,7 @@ from fxis_shm.core import timebase
 from fxis_shm.formats.stamp import read_stamp
 from fxis_shm.service.launch import ServiceProcess
 from tests.dds_peer import ROS_VENVS, Peer, domain_id, loopback_config, stamp_rows
-from tests.hosts import LoopbackNamespace
+from tests.hosts import Lab, LoopbackNamespace
 
 from ..conftest import fxis, fxis_run_alone, wait_until
 from .bags import read_bag
@@ -376,3 +377,29 @@ def test_the_bridge_is_a_ros_node_and_publishes_each_cameras_diagnostics(bridge)
         assert 15.0 <= float(values["rate_measured_hz"]) <= 25.0, values
         assert float(values["newest_frame_age_ms"]) < 1000.0
         assert status["level"] in (0, 1) and (status["level"] == 0) == (status["message"] == "streaming")
+
+
+def test_a_fastdds_node_on_another_host_gets_every_frame_from_a_bridge_without_ros():
+    """A camera PC without ROS (the bridge on Cyclone) and a Kilted node on another emulated host
+    (its own network, clock and /dev/shm, behind a 1 Gbit link), in its default configuration:
+    Fast DDS's multicast discovery across the link, images over UDP into its default buffer."""
+    topic = f"{NS}/cam0/image_raw"
+    domain = domain_id()
+    with Lab() as lab:
+        host = lab.host(clock_offset_s=1000, rate="1gbit")
+        subprocess.run(["ip", "-n", host.netns, "route", "add", "224.0.0.0/4", "dev", host.inner_link], check=True)
+        cyclone = (
+            '<CycloneDDS xmlns="https://cdds.io/config"><Domain Id="any"><General><Interfaces>'
+            f'<NetworkInterface name="{host.link}" multicast="true"/></Interfaces>'
+            "<AllowMulticast>true</AllowMulticast></General></Domain></CycloneDDS>"
+        )
+        args = ["--camera", "cam0=synthetic:width=640,height=480,fps=20", "--ros2", "--ros2-via", "cyclone"]
+        args += ["--ros2-domain", str(domain), "--ros2-namespace", NS]
+        with ServiceProcess(args, env={**os.environ, "CYCLONEDDS_URI": cyclone}) as svc:
+            with Peer(domain, [(topic, IMAGE)], kind="kilted", wrapper=host.wrapper()) as peer:
+                samples = peer.wait_for_samples(topic, 40, timeout=30)  # 2 s of frames
+            with svc.client() as client:
+                matched = client.status()["ros2"]["topics"][topic]
+    ids = [read_stamp(stamp_rows(s)) for s in samples]
+    assert None not in ids and ids == list(range(ids[0], ids[0] + len(ids))), ids
+    assert matched["refused"] == 0
