@@ -22,8 +22,6 @@ SIGTERM or after ``--timeout`` seconds.
 """
 
 import argparse
-import base64
-import hashlib
 import json
 import queue
 import signal
@@ -41,6 +39,7 @@ from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
+from ..peer_fields import describe
 from .config import loopback_config
 from .types import BY_ROS_NAME, Header, Time
 
@@ -66,35 +65,6 @@ def qos_of(profile: str) -> Qos:
         else Policy.Reliability.BestEffort
     )
     return Qos(reliability, Policy.History.KeepLast(depth), Policy.Durability.Volatile, representation)
-
-
-def describe(ros_type: str, message: Any, with_data: bool) -> dict[str, Any]:
-    """A sample's fields as JSON; pixel data as a size, a digest and the bytes a test looks at."""
-    if ros_type == HEADER:
-        return {"stamp": [message.stamp.sec, message.stamp.nanosec], "frame_id": message.frame_id}
-    if ros_type == "std_msgs/msg/String":
-        return {"data": message.data}
-    fields: dict[str, Any] = {"stamp": [message.header.stamp.sec, message.header.stamp.nanosec]}
-    fields["frame_id"] = message.header.frame_id
-    if ros_type == "sensor_msgs/msg/CameraInfo":
-        roi = message.roi
-        fields.update(height=message.height, width=message.width, distortion_model=message.distortion_model)
-        fields.update(d=list(message.d), k=list(message.k), r=list(message.r), p=list(message.p))
-        fields.update(binning=[message.binning_x, message.binning_y])
-        fields.update(roi=[roi.x_offset, roi.y_offset, roi.height, roi.width, bool(roi.do_rectify)])
-        return fields
-    data = bytes(message.data)
-    fields.update(size=len(data), sha256=hashlib.sha256(data).hexdigest(), head=data[:16].hex(), tail=data[-16:].hex())
-    if with_data:
-        fields["data"] = base64.b64encode(data).decode()
-    if ros_type == "sensor_msgs/msg/CompressedImage":
-        fields["format"] = message.format
-        return fields
-    fields.update(height=message.height, width=message.width, encoding=message.encoding, step=message.step)
-    fields["is_bigendian"] = message.is_bigendian
-    last, width = max(message.height - 1, 0) * message.step, min(16, message.step)
-    fields["rows"] = [data[:width].hex(), data[last : last + width].hex()]  # where the pixel stamp is
-    return fields
 
 
 def matched_writers(reader: DataReader) -> list[dict[str, Any]]:
