@@ -10,9 +10,9 @@ from fxis_shm.service.launch import ServiceProcess
 from fxis_shm.service.supervisor import lock_path
 from fxis_shm.shm import naming
 
-
 # a real ROS 2 node run by its own venv's Python (tests.dds_peer.Peer), not a module to collect
 collect_ignore = ["rclpy_peer.py"]
+
 
 def wait_until(predicate, timeout: float = 10.0, interval: float = 0.02, what: str = "condition"):
     """Poll ``predicate`` until it returns a truthy value; fail after ``timeout`` seconds."""
