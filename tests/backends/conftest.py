@@ -8,6 +8,7 @@ fail saying what to install (`make test` installs both).
 
 from __future__ import annotations
 
+import contextlib
 import itertools
 import shutil
 import signal
@@ -123,23 +124,32 @@ class Emulator:
             self.proc.wait(5)
 
 
-@pytest.fixture(scope="session")
-def second_address():
-    """127.0.0.2 on lo for a second emulator; added (root) if missing, removed afterwards."""
+@contextlib.contextmanager
+def loopback_address(address: str):
+    """``address`` on lo while the block runs: added (root) if missing, removed afterwards."""
     shown = subprocess.run(
         ["ip", "-o", "-4", "addr", "show", "dev", "lo"], capture_output=True, text=True, check=True
     ).stdout
-    added = f" {SECOND_ADDRESS}/" not in shown
+    added = f" {address}/" not in shown
     if added:
-        done = subprocess.run(["ip", "addr", "add", f"{SECOND_ADDRESS}/8", "dev", "lo"], capture_output=True, text=True)
+        done = subprocess.run(["ip", "addr", "add", f"{address}/8", "dev", "lo"], capture_output=True, text=True)
         if done.returncode != 0:
             pytest.fail(
-                f"a second emulator needs {SECOND_ADDRESS} on lo: `ip addr add "
-                f"{SECOND_ADDRESS}/8 dev lo` failed (needs root): {done.stderr.strip()}"
+                f"this test needs {address} on lo: `ip addr add {address}/8 dev lo` failed (needs root): "
+                f"{done.stderr.strip()}"
             )
-    yield SECOND_ADDRESS
-    if added:
-        subprocess.run(["ip", "addr", "del", f"{SECOND_ADDRESS}/8", "dev", "lo"], check=False)
+    try:
+        yield address
+    finally:
+        if added:
+            subprocess.run(["ip", "addr", "del", f"{address}/8", "dev", "lo"], check=False)
+
+
+@pytest.fixture(scope="session")
+def second_address():
+    """127.0.0.2 on lo for a second emulator."""
+    with loopback_address(SECOND_ADDRESS) as address:
+        yield address
 
 
 _serials = itertools.count(1)

@@ -41,9 +41,11 @@ import numpy as np
 
 from fxis_shm.core import timebase
 from fxis_shm.core.clocks import wall_to_monotonic
+from fxis_shm.core.ptp import PtpState
 from fxis_shm.shm.ring import FrameLayout
 
 from . import aravis_tuning
+from .aravis_ptp import camera_ptp
 from .aravis_settings import PIXEL_FORMATS, apply_options
 from .base import Camera, CameraLost, Capture
 from .genicam_timing import SilenceWatch, device_clock, period_ns
@@ -203,6 +205,9 @@ class AravisCamera(Camera):
             else "frame rate unknown",
             o["timestamp"],
         )
+        ptp = self.ptp()
+        why = ptp.why_not_locked()
+        log.info("camera %s: PTP %s", self.name, why or f"locked ({ptp.status}, offset {ptp.offset_ns} ns)")
 
     def _start_stream(self) -> None:
         Aravis, cam = self._Aravis, self._cam
@@ -258,6 +263,12 @@ class AravisCamera(Camera):
             cam.software_trigger()  # executes TriggerSoftware
         except self._GLib.Error as exc:
             raise RuntimeError(f"TriggerSoftware failed: {exc.message}") from None
+
+    def ptp(self) -> PtpState:
+        """The camera's PTP state (fxis_shm/core/ptp.py): scheduled action commands need it locked."""
+        if self._cam is None:
+            raise RuntimeError(f"camera {self.name!r} is not open (lost?)")
+        return camera_ptp(self._cam, self._GLib)
 
     # ---- settings at run time (aravis_tuning.py) -------------------------------------------
 
