@@ -11,7 +11,8 @@ Run as a script by ``Peer(kind="kilted")``::
     .venv-ros/bin/python tests/rclpy_peer.py --domain 42 --sub /cam0/image_raw:sensor_msgs/msg/Image:default
 
 Extra commands: ``{"cmd": "nodes", "id": 1}`` answers ``nodes`` with the graph's (name, namespace)
-pairs. Extra sample fields: ``diagnostic_msgs/msg/DiagnosticArray`` gives ``status``, a list of
+pairs; ``{"cmd": "string", "id": 2, "topic": T, "data": TEXT}`` publishes a std_msgs/String as
+``header`` does a Header. Extra sample fields: ``diagnostic_msgs/msg/DiagnosticArray`` gives ``status``, a list of
 {level, name, message, hardware_id, values}.
 """
 
@@ -32,7 +33,7 @@ from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
 from rclpy.signals import SignalHandlerOptions
 
-HEADER = "std_msgs/msg/Header"
+HEADER, STRING = "std_msgs/msg/Header", "std_msgs/msg/String"
 PROFILES = {
     "sensor_data": (ReliabilityPolicy.BEST_EFFORT, 5),  # rclcpp's SensorDataQoS
     "default": (ReliabilityPolicy.RELIABLE, 10),  # rclcpp's QoS(10)
@@ -72,6 +73,8 @@ class PeerNode:
         for spec in args.pub_header:
             topic, _, profile = spec.partition(":")
             self.header_writer(topic, profile or "default")
+        for topic in args.pub_string:
+            self.header_writer(topic, "default", STRING)
         self.commands: queue.Queue[dict[str, Any] | None] = queue.Queue()
         self.pending: list[tuple[float, dict[str, Any]]] = []
         self.stopping = False
@@ -98,7 +101,7 @@ class PeerNode:
             message_class(ros_type), topic, on_message, qos_of(profile), event_callbacks=events
         )
 
-    def header_writer(self, topic: str, profile: str = "default") -> Any:
+    def header_writer(self, topic: str, profile: str = "default", ros_type: str = HEADER) -> Any:
         if topic not in self.writers:
 
             def on_matched(status: Any) -> None:
@@ -106,7 +109,7 @@ class PeerNode:
 
             events = PublisherEventCallbacks(matched=on_matched)
             self.writers[topic] = self.node.create_publisher(
-                message_class(HEADER), topic, qos_of(profile), event_callbacks=events
+                message_class(ros_type), topic, qos_of(profile), event_callbacks=events
             )
         return self.writers[topic]
 
@@ -126,8 +129,9 @@ class PeerNode:
                 return
             if command is None:
                 self.stopping = True
-            elif command.get("cmd") == "header":
-                self.header_writer(command["topic"], command.get("profile", "default"))
+            elif command.get("cmd") in ("header", "string"):
+                ros_type = HEADER if command["cmd"] == "header" else STRING
+                self.header_writer(command["topic"], command.get("profile", "default"), ros_type)
                 self.pending.append((time.monotonic() + float(command.get("timeout", 10)), command))
             elif command.get("cmd") == "nodes":
                 names = self.node.get_node_names_and_namespaces()
@@ -140,6 +144,10 @@ class PeerNode:
         for deadline, command in self.pending:
             writer = self.writers[command["topic"]]
             if writer.get_subscription_count() >= command.get("min_readers", 1):
+                if command["cmd"] == "string":
+                    writer.publish(message_class(STRING)(data=command["data"]))
+                    emit(event="published", id=command.get("id"), topic=command["topic"], data=command["data"])
+                    continue
                 header = message_class(HEADER)()
                 header.stamp.sec, header.stamp.nanosec = command["sec"], command["nanosec"]
                 header.frame_id = command.get("frame_id", "")
@@ -176,6 +184,7 @@ def main() -> int:
     parser.add_argument("--name", default="fxis_test_peer", help="the node's name")
     parser.add_argument("--sub", action="append", default=[], metavar="TOPIC:TYPE:PROFILE")
     parser.add_argument("--pub-header", action="append", default=[], metavar="TOPIC[:PROFILE]")
+    parser.add_argument("--pub-string", action="append", default=[], metavar="TOPIC")
     parser.add_argument("--data", action="store_true", help="samples carry their data, base64")
     parser.add_argument("--timeout", type=float, default=300.0, help="seconds before the peer ends anyway")
     args = parser.parse_args()

@@ -33,6 +33,7 @@ from fxis_shm.ros2.follow import CameraFollower
 from fxis_shm.ros2.frames_at import FramesAt
 from fxis_shm.ros2.participants import open_participant
 from fxis_shm.ros2.rostime import RosTime
+from fxis_shm.ros2.settings import SettingsRequests
 from fxis_shm.ros2.snapshots import SnapshotRequests
 from fxis_shm.ros2.topics import CameraTopics
 from fxis_shm.ros2.tuples import TupleStream
@@ -81,6 +82,7 @@ class Bridge:
             if spec.tuples_hz
             else None
         )
+        self.settings = SettingsRequests(self.participant, ns, self.make_client, stop)
         self.frames_at = FramesAt(self.participant, ns, self.topics_under, self.make_client, self.ros_time, stop)
         self.snapshots = (
             SnapshotRequests(
@@ -109,6 +111,7 @@ class Bridge:
         for thread in threads:
             thread.start()
         self.frames_at.start()
+        self.settings.start()
         if self.snapshots:
             self.snapshots.start()
         self.report()
@@ -127,7 +130,7 @@ class Bridge:
             self.diagnostics.close()
             self.stop.set()
             deadline = time.monotonic() + STOP_S
-            for thread in [*threads, *self.frames_at.threads]:  # a request may still be waiting
+            for thread in [*threads, *self.frames_at.threads, *self.settings.threads]:  # a request may still be waiting
                 thread.join(timeout=max(0.0, deadline - time.monotonic()))
             self.participant.close()
             _remove(naming.state_path(self.spec.service, "ros2"))
@@ -141,6 +144,7 @@ class Bridge:
             "tuples": self.tuples.counts.as_dict() if self.tuples else None,
             "frames_at": self.frames_at.status(),
             "snapshots": self.snapshots.counts.as_dict() if self.snapshots else None,
+            "settings": self.settings.counts.as_dict(),
             "via": self.participant.VIA,
             "topics": self.participant.matches.status(),
         }

@@ -56,7 +56,7 @@ from cyclonedds.util import duration
 
 from fxis_shm.formats import cdr
 from fxis_shm.formats.rosnames import dds_topic_name, dds_type_name
-from fxis_shm.ros2.endpoints import CAMERA_PUBLISHER, DEFAULT_SUBSCRIBER, QosProfile, ReceivedHeader
+from fxis_shm.ros2.endpoints import CAMERA_PUBLISHER, DEFAULT_SUBSCRIBER, HEADER, STRING, QosProfile, decode_requests
 from fxis_shm.ros2.matching import MatchTable, TopicMatches
 
 # Cyclone's dds_qos_policy_id_t, as *_incompatible_qos statuses report the policy that failed.
@@ -334,9 +334,13 @@ class RosParticipant:
         """A :class:`RawReader`, with :data:`DEFAULT_SUBSCRIBER` unless told otherwise."""
         return RawReader(self, ros_topic, ros_type, profile or DEFAULT_SUBSCRIBER)
 
-    def header_reader(self, ros_topic: str, profile: QosProfile | None = None) -> "HeaderReader":
-        """A :class:`HeaderReader`, with :data:`DEFAULT_SUBSCRIBER` unless told otherwise."""
-        return HeaderReader(self, ros_topic, profile or DEFAULT_SUBSCRIBER)
+    def header_reader(self, ros_topic: str, profile: QosProfile | None = None) -> "RequestReader":
+        """A :class:`RequestReader` of Headers, with :data:`DEFAULT_SUBSCRIBER` unless told otherwise."""
+        return RequestReader(self, ros_topic, HEADER, profile or DEFAULT_SUBSCRIBER)
+
+    def string_reader(self, ros_topic: str, profile: QosProfile | None = None) -> "RequestReader":
+        """A :class:`RequestReader` of Strings (JSON requests)."""
+        return RequestReader(self, ros_topic, STRING, profile or DEFAULT_SUBSCRIBER)
 
     def close(self) -> None:
         """Delete the participant (with its readers and writers) and its domain now; idempotent."""
@@ -435,7 +439,7 @@ class RawReader:
     _ANY = SampleState.Any | ViewState.Any | InstanceState.Any
 
     def __init__(self, node: RosParticipant, ros_topic: str, ros_type: str, profile: QosProfile) -> None:
-        self.ros_topic = ros_topic
+        self.ros_topic, self.ros_type = ros_topic, ros_type
         qos = cyclone_qos(profile, _typehash_user_data(ros_type))
         self._reader = DataReader(node.participant, node.topic(ros_topic, ros_type), qos=qos)
         self._waitset = WaitSet(node.participant)
@@ -463,31 +467,19 @@ class RawReader:
         return int(self._reader.get_subscription_matched_status().current_count)
 
 
-class HeaderReader(RawReader):
-    """Reads ``std_msgs/msg/Header`` messages (the bridge's requests), decoded by ``cdr``.
+class RequestReader(RawReader):
+    """Reads requests (``std_msgs/msg/Header`` or ``String``), decoded by ``cdr``
+    (:func:`fxis_shm.ros2.endpoints.decode_requests`).
 
     Reliable by default, so that no request is lost: it then does not match a best-effort
     publisher (``ros2 topic pub --qos-reliability best_effort``); ``ros2 topic pub``, rclpy
     and rclcpp publish reliably unless told otherwise.
     """
 
-    def __init__(self, node: RosParticipant, ros_topic: str, profile: QosProfile) -> None:
-        super().__init__(node, ros_topic, "std_msgs/msg/Header", profile)
-
-    def take(self, max_samples: int = 64) -> list[ReceivedHeader]:
+    def take(self, max_samples: int = 64) -> list[Any]:
         """Without blocking: what has arrived (malformed messages are dropped)."""
-        return self._decoded(self.take_raw(max_samples))
+        return decode_requests(self.ros_type, self.take_raw(max_samples))
 
-    def wait(self, timeout: float) -> list[ReceivedHeader]:
+    def wait(self, timeout: float) -> list[Any]:
         """Block up to ``timeout`` s for messages, then take them (may be [])."""
-        return self._decoded(self.wait_raw(timeout))
-
-    @staticmethod
-    def _decoded(received: list[tuple[bytes, int]]) -> list[ReceivedHeader]:
-        headers = []
-        for data, source_timestamp in received:
-            try:
-                headers.append(ReceivedHeader(cdr.decode_header(data), source_timestamp))
-            except cdr.CdrError:
-                continue
-        return headers
+        return decode_requests(self.ros_type, self.wait_raw(timeout))

@@ -6,7 +6,7 @@ endpoints and the requests it reads. Imports no DDS library.
 from __future__ import annotations
 
 from dataclasses import dataclass
-from typing import Protocol
+from typing import Any, Protocol
 
 from fxis_shm.formats import cdr
 from fxis_shm.ros2.matching import MatchTable
@@ -42,6 +42,24 @@ class ReceivedHeader:
     source_timestamp_ns: int
 
 
+HEADER, STRING = "std_msgs/msg/Header", "std_msgs/msg/String"  # the types requests come as
+
+
+def decode_requests(ros_type: str, received: list[tuple[bytes, int]]) -> list[Any]:
+    """Requests as they arrived, (CDR, source timestamp ns), decoded: a Header as a
+    :class:`ReceivedHeader`, a String as its text. A malformed one is dropped."""
+    requests: list[Any] = []
+    for data, source_timestamp in received:
+        try:
+            if ros_type == HEADER:
+                requests.append(ReceivedHeader(cdr.decode_header(data), source_timestamp))
+            else:
+                requests.append(cdr.decode_string(data))
+        except cdr.CdrError:
+            continue
+    return requests
+
+
 class Writer(Protocol):
     """Publishes pre-built CDR messages (encapsulation header included) of one topic and type."""
 
@@ -52,10 +70,10 @@ class Writer(Protocol):
     def matched_count(self) -> int: ...
 
 
-class HeaderReader(Protocol):
-    """Reads ``std_msgs/msg/Header`` requests of one topic."""
+class RequestReader(Protocol):
+    """Reads requests of one topic (:func:`decode_requests`)."""
 
-    def wait(self, timeout: float) -> list[ReceivedHeader]: ...
+    def wait(self, timeout: float) -> list[Any]: ...
 
     def matched_count(self) -> int: ...
 
@@ -68,6 +86,8 @@ class Participant(Protocol):
 
     def writer(self, ros_topic: str, ros_type: str, profile: QosProfile | None = None) -> Writer: ...
 
-    def header_reader(self, ros_topic: str, profile: QosProfile | None = None) -> HeaderReader: ...
+    def header_reader(self, ros_topic: str, profile: QosProfile | None = None) -> RequestReader: ...
+
+    def string_reader(self, ros_topic: str, profile: QosProfile | None = None) -> RequestReader: ...
 
     def close(self) -> None: ...

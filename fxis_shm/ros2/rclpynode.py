@@ -22,8 +22,7 @@ import time
 from collections import deque
 from typing import Any
 
-from fxis_shm.formats import cdr
-from fxis_shm.ros2.endpoints import CAMERA_PUBLISHER, DEFAULT_SUBSCRIBER, QosProfile, ReceivedHeader
+from fxis_shm.ros2.endpoints import CAMERA_PUBLISHER, DEFAULT_SUBSCRIBER, HEADER, STRING, QosProfile, decode_requests
 from fxis_shm.ros2.matching import MatchTable
 from fxis_shm.ros2.vendors import use_fastdds_transports
 
@@ -84,8 +83,11 @@ class RclpyNode:
     def writer(self, ros_topic: str, ros_type: str, profile: QosProfile | None = None) -> RclpyWriter:
         return RclpyWriter(self, ros_topic, ros_type, profile or CAMERA_PUBLISHER)
 
-    def header_reader(self, ros_topic: str, profile: QosProfile | None = None) -> RclpyHeaderReader:
-        return RclpyHeaderReader(self, ros_topic, profile or DEFAULT_SUBSCRIBER)
+    def header_reader(self, ros_topic: str, profile: QosProfile | None = None) -> RclpyRequestReader:
+        return RclpyRequestReader(self, ros_topic, HEADER, profile or DEFAULT_SUBSCRIBER)
+
+    def string_reader(self, ros_topic: str, profile: QosProfile | None = None) -> RclpyRequestReader:
+        return RclpyRequestReader(self, ros_topic, STRING, profile or DEFAULT_SUBSCRIBER)
 
     def close(self) -> None:
         """Stop spinning, destroy the node and shut the context down; idempotent."""
@@ -158,18 +160,19 @@ class RclpyWriter:
         return bool(self._publisher.wait_for_all_acked(Duration(nanoseconds=int(timeout * 1e9))))
 
 
-class RclpyHeaderReader:
-    """Reads ``std_msgs/msg/Header`` requests as CDR (``raw=True``), decoded by ``cdr`` as on the
-    Cyclone path; the executor's thread queues them, ``wait`` hands them over."""
+class RclpyRequestReader:
+    """Reads requests (Header or String) as CDR (``raw=True``), decoded as on the Cyclone path
+    (:func:`fxis_shm.ros2.endpoints.decode_requests`); the executor's thread queues them,
+    ``wait`` hands them over."""
 
     QUEUE_LIMIT = 256  # requests beyond this, unread, are dropped oldest first
 
-    def __init__(self, node: RclpyNode, ros_topic: str, profile: QosProfile) -> None:
-        self.ros_topic = ros_topic
+    def __init__(self, node: RclpyNode, ros_topic: str, ros_type: str, profile: QosProfile) -> None:
+        self.ros_topic, self.ros_type = ros_topic, ros_type
         self._queue: deque[bytes] = deque(maxlen=self.QUEUE_LIMIT)
         self._arrived = threading.Condition()
         self._subscription = node.node.create_subscription(
-            message_class("std_msgs/msg/Header"), ros_topic, self._on_message, qos_of(profile), raw=True
+            message_class(ros_type), ros_topic, self._on_message, qos_of(profile), raw=True
         )
         node.matches.of(ros_topic).counter = self.matched_count
 
@@ -178,18 +181,12 @@ class RclpyHeaderReader:
             self._queue.append(data)
             self._arrived.notify_all()
 
-    def take(self) -> list[ReceivedHeader]:
+    def take(self) -> list[Any]:
         with self._arrived:
             received, self._queue = list(self._queue), deque(maxlen=self.QUEUE_LIMIT)
-        headers = []
-        for data in received:
-            try:
-                headers.append(ReceivedHeader(cdr.decode_header(data), 0))
-            except cdr.CdrError:
-                continue
-        return headers
+        return decode_requests(self.ros_type, [(data, 0) for data in received])  # rclpy gives no source time here
 
-    def wait(self, timeout: float) -> list[ReceivedHeader]:
+    def wait(self, timeout: float) -> list[Any]:
         with self._arrived:
             if not self._queue:
                 self._arrived.wait(timeout)

@@ -94,6 +94,7 @@ class Peer:
         *,
         profile: str = "default",
         publish_headers: Iterable[str] = (),
+        publish_strings: Iterable[str] = (),
         with_data: bool = False,
         lifetime: float = 300.0,
         kind: str = "cyclone",
@@ -109,6 +110,8 @@ class Peer:
             command += ["--sub", f"{topic}:{ros_type}:{named[0] if named else profile}"]
         for topic in publish_headers:
             command += ["--pub-header", topic]
+        for topic in publish_strings:  # rclpy peers only
+            command += ["--pub-string", topic]
         command += ["--data"] if with_data else []
         self.proc = subprocess.Popen(
             command, cwd=ROOT, env=env, text=True, stdin=subprocess.PIPE, stdout=subprocess.PIPE, stderr=subprocess.PIPE
@@ -212,10 +215,18 @@ class Peer:
     ) -> Event:
         """Publish a ``std_msgs/msg/Header`` once ``min_readers`` readers of ``topic`` match;
         its ``published`` event. Fails the test if no reader matches in ``timeout`` s."""
+        return self._publish(
+            {"cmd": "header", "sec": sec, "nanosec": nanosec, "frame_id": frame_id}, topic, min_readers, timeout
+        )
+
+    def publish_string(self, topic: str, data: str, *, min_readers: int = 1, timeout: float = DEADLINE) -> Event:
+        """As :meth:`publish_header`, a ``std_msgs/msg/String`` (rclpy peers only)."""
+        return self._publish({"cmd": "string", "data": data}, topic, min_readers, timeout)
+
+    def _publish(self, command: dict, topic: str, min_readers: int, timeout: float) -> Event:
         self._last_id += 1
         ident = self._last_id
-        command = {"cmd": "header", "id": ident, "topic": topic, "sec": sec, "nanosec": nanosec}
-        command.update(frame_id=frame_id, min_readers=min_readers, timeout=timeout)
+        command.update(id=ident, topic=topic, min_readers=min_readers, timeout=timeout)
         assert self.proc.stdin is not None
         self.proc.stdin.write(json.dumps(command) + "\n")
         self.proc.stdin.flush()
@@ -223,7 +234,7 @@ class Peer:
         def answers() -> list[Event]:
             return [e for e in self.events if e.get("id") == ident and e["event"] in ("published", "error")]
 
-        self.wait_for(lambda _: bool(answers()), timeout + DEADLINE, f"publishing a Header on {topic}")
+        self.wait_for(lambda _: bool(answers()), timeout + DEADLINE, f"publishing on {topic}")
         answer = answers()[0]
         assert answer["event"] == "published", answer["message"]
         return answer

@@ -211,12 +211,12 @@ def frames_at_peer(bridge, names, with_errors=()):
 
 
 @contextlib.contextmanager
-def requester(bridge, topics, request_topic):
+def requester(bridge, topics, request_topic, kind="publish_headers"):
     """A peer that will publish requests on ``request_topic``, once both ends matched: as with a
     ROS service's wait_for_service, since a DDS writer may see its match before the reader does,
     and a volatile reader never gets what was written before it knew the writer (seen with
     Jazzy's Fast DDS 2.14: its first request reached the bridge before its discovery did)."""
-    with bridge.peer(topics, publish_headers=[request_topic]) as peer, bridge.svc.client() as client:
+    with bridge.peer(topics, **{kind: [request_topic]}) as peer, bridge.svc.client() as client:
 
         def matched():
             topics = (client.status().get("ros2") or {}).get("topics", {})
@@ -403,3 +403,23 @@ def test_a_fastdds_node_on_another_host_gets_every_frame_from_a_bridge_without_r
     ids = [read_stamp(stamp_rows(s)) for s in samples]
     assert None not in ids and ids == list(range(ids[0], ids[0] + len(ids))), ids
     assert matched["refused"] == 0
+
+
+@pytest.mark.parametrize(
+    "bridge", ["fastdds-kilted-node,cyclone-bridge", "fastdds-kilted-node,rclpy-bridge"], indirect=True
+)
+def test_a_ros_node_reads_and_changes_a_cameras_settings_on_the_settings_topics(bridge):
+    result = f"{NS}/settings/result"
+    with requester(bridge, [(result, STRING)], f"{NS}/settings", "publish_strings") as peer:
+        peer.publish_string(f"{NS}/settings", json.dumps({"id": 1, "camera": "cam0"}))
+        peer.publish_string(f"{NS}/settings", json.dumps({"id": 2, "camera": "cam0", "set": {"gain": 6}}))
+        peer.publish_string(f"{NS}/settings", json.dumps({"id": 3, "camera": "cam0", "set": {"nonsense": 1}}))
+        peer.publish_string(f"{NS}/settings", "not json")
+        answers = {a.get("id"): a for a in (json.loads(s["data"]) for s in peer.wait_for_samples(result, 4))}
+    assert answers[1]["camera"] == "cam0" and "gain" in answers[1]["values"]
+    assert answers[2]["changed"] == {"gain": 6.0} and answers[2]["cost"] == "live"
+    assert "nonsense" in answers[3]["error"]
+    assert "not JSON" in answers[None]["error"]
+    with bridge.svc.client() as client:  # the change took, in the service itself
+        assert client.settings("cam0")["values"]["gain"] == 6.0
+        client.configure("cam0", gain=0)  # the module's service, as the other tests found it
