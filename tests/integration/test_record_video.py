@@ -1,0 +1,137 @@
+"""``fxis record --codec`` against a real service: the bag read back with rosbags and every
+frame decoded with PyAV (FFmpeg's own decoders, not the encoder's)."""
+
+import av
+import pytest
+
+from fxis_shm import read_stamp
+from fxis_shm.formats import rosmsgs
+
+from ..conftest import fxis
+from .bags import read_bag, record, record_until_ctrl_c, two_cameras
+
+pytestmark = pytest.mark.integration
+cell = pytest.fixture(scope="module", name="cell")(two_cameras)
+SECONDS, GOP = 3.0, 0.5
+PIXELS = {"left": "gray", "right": "bgr24"}  # the synthetic cameras' mono8 and bgr8, as PyAV names them
+START_CODE = b"\x00\x00\x01"
+
+
+@pytest.fixture(scope="module")
+def h264_bag(cell, tmp_path_factory):
+    out = tmp_path_factory.mktemp("bags") / "h264"
+    result = record(cell, out, "--seconds", str(SECONDS), "--codec", "h264", "--gop", str(GOP))
+    return read_bag(out), result
+
+
+def stamp_ns(msg) -> int:
+    return rosmsgs.stamp_ns(msg.timestamp)
+
+
+def decoded(messages, pixels: str):
+    """Each message's data decoded on its own: one frame per message, at once (no B-frames, no delay)."""
+    decoder = av.CodecContext.create("h264", "r")
+    for m in messages:
+        frames = decoder.decode(av.Packet(bytes(m.msg.data)))
+        assert len(frames) == 1, f"{len(frames)} frames out of one message"
+        yield frames[0], frames[0].to_ndarray(format=pixels)
+
+
+def nal_types(data: bytes) -> list[int]:
+    """The types of an Annex B stream's NAL units (5: IDR slice, 7: SPS, 8: PPS)."""
+    return [unit[0] & 0x1F for unit in data.split(START_CODE)[1:] if unit]
+
+
+def test_each_camera_is_a_compressed_video_topic_with_its_frame_ids_beside_it(h264_bag):
+    bag, result = h264_bag
+    assert bag.topics == {
+        f"/{cam}/{topic}": kind
+        for cam in PIXELS
+        for topic, kind in (("video", rosmsgs.VIDEO), ("video/frames", rosmsgs.VIDEO_FRAME))
+    }
+    assert bag.custom_data["encoding"] == "h264"
+    offset = int(bag.custom_data["clock_to_realtime_ns"])
+    for cam in PIXELS:
+        video, frames = bag.messages[f"/{cam}/video"], bag.messages[f"/{cam}/video/frames"]
+        assert len(video) == len(frames) > SECONDS * 20 / 2
+        stamps = [stamp_ns(m.msg) for m in video]
+        assert all(b > a for a, b in zip(stamps, stamps[1:]))  # capture order
+        assert stamps == [rosmsgs.stamp_ns(f.msg.header.stamp) for f in frames]  # message for message
+        assert all(m.log_time == stamp_ns(m.msg) + offset for m in video)
+        assert {(m.msg.format, m.msg.frame_id) for m in video} == {("h264", cam)}
+        ids = [f.msg.frame_id for f in frames]
+        assert all(b > a for a, b in zip(ids, ids[1:]))
+        row = next(line.split() for line in result.stdout.splitlines() if line.startswith(cam))
+        assert row[1:3] == [f"/{cam}/video", str(len(video))]
+        # each frame id absent is reported: missed by the recorder, dropped by the camera
+        assert ids[-1] - ids[0] + 1 - len(ids) <= int(row[3]) + int(row[4])
+
+
+def test_every_frame_decodes_as_the_frame_its_id_names_at_its_capture_time(h264_bag):
+    """The synthetic camera's pixel stamp survives h264 at the default CRF: each decoded image
+    reads as the frame id /NAME/video/frames gives, and the stamp is that frame's capture time."""
+    bag, _ = h264_bag
+    for cam, pixels in PIXELS.items():
+        frames = bag.messages[f"/{cam}/video/frames"]
+        images = decoded(bag.messages[f"/{cam}/video"], pixels)
+        read = [read_stamp(image) for _, image in images]
+        assert read == [f.msg.frame_id for f in frames]
+
+
+def test_keyframes_carry_their_parameter_sets_at_the_start_and_at_least_every_gop(h264_bag):
+    bag, _ = h264_bag
+    for cam, pixels in PIXELS.items():
+        video, frames = bag.messages[f"/{cam}/video"], bag.messages[f"/{cam}/video/frames"]
+        period = (stamp_ns(video[-1].msg) - stamp_ns(video[0].msg)) / (len(video) - 1)
+        keys = []
+        for m, info, (frame, _) in zip(video, frames, decoded(video, pixels)):
+            types = nal_types(bytes(m.msg.data))
+            assert frame.pict_type != av.video.frame.PictureType.B
+            assert info.msg.keyframe == frame.key_frame == (5 in types)
+            if frame.key_frame:
+                assert types[:2] == [7, 8], types  # SPS and PPS first: a player may start here
+                keys.append(stamp_ns(m.msg))
+        assert keys[0] == stamp_ns(video[0].msg)
+        gaps = [b - a for a, b in zip(keys, keys[1:])] + [stamp_ns(video[-1].msg) - keys[-1]]
+        assert len(keys) >= SECONDS / GOP - 1 and max(gaps) <= GOP * 1e9 + 1.5 * period, gaps
+
+
+def test_ctrl_c_during_a_video_recording_leaves_a_valid_bag_that_decodes(cell, tmp_path):
+    out = tmp_path / "c"
+    returncode, stdout, stderr = record_until_ctrl_c(cell, out, 30_000, "--codec", "h264")
+    assert returncode == 130, stderr
+    bag = read_bag(out)
+    assert bag.custom_data["ended"] == "interrupted by SIGINT"
+    video = bag.messages["/left/video"]
+    assert len(video) == len(bag.messages["/left/video/frames"]) > 0
+    assert next(line.split() for line in stdout.splitlines() if line.startswith("left"))[2] == str(len(video))
+    assert len(list(decoded(video, "gray"))) == len(video)
+
+
+@pytest.mark.parametrize(
+    "args, words",
+    [
+        (["--codec", "vp8"], ["--codec vp8: unknown", "h264, h265, av1"]),
+        (["--codec", "h264", "--encoder", "libx265"], ["--encoder libx265", "libx264"]),
+        (["--codec", "h264", "--crf", "52"], ["--crf 52", "0 to 51"]),
+        (["--codec", "av1", "--gop", "0"], ["--gop 0", "0.1 to 60"]),
+        (["--codec", "h264", "--preset", "quick"], ["--preset quick", "veryfast"]),
+        (["--crf", "20"], ["--crf", "give --codec"]),
+        (["--codec", "h264", "--encoding", "jpeg"], ["--codec", "--encoding jpeg"]),
+        (["--codec", "h264", "--tuples"], ["--codec", "--tuples"]),
+    ],
+)
+def test_bad_video_settings_exit_2_in_one_line_leaving_nothing(cell, tmp_path, args, words):
+    result = fxis("record", "--endpoint", cell.endpoint, "--out", str(tmp_path / "x"), *args)
+    assert result.returncode == 2, result.stderr
+    assert all(w in result.stderr for w in words), result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1, result.stderr
+    assert not (tmp_path / "x").exists()
+
+
+def test_a_camera_video_cannot_carry_is_refused_at_start(start_service, tmp_path):
+    svc = start_service("--camera", "odd=synthetic:fps=10,width=161,height=120")
+    result = fxis("record", "--endpoint", svc.endpoint, "--out", str(tmp_path / "x"), "--codec", "h264")
+    assert result.returncode == 2, result.stderr
+    assert "camera odd is 161x120; 4:2:0 video needs an even width and height" in result.stderr
+    assert not (tmp_path / "x").exists()
