@@ -2,10 +2,13 @@
 frame decoded with PyAV (FFmpeg's own decoders, not the encoder's)."""
 
 import av
+import numpy as np
 import pytest
 
 from fxis_shm import read_stamp
 from fxis_shm.formats import rosmsgs
+from fxis_shm.record import videochoice
+from fxis_shm.record.videoencoder import CameraEncoder
 
 from ..conftest import fxis
 from .bags import read_bag, record, record_until_ctrl_c, two_cameras
@@ -28,9 +31,11 @@ def stamp_ns(msg) -> int:
     return rosmsgs.stamp_ns(msg.timestamp)
 
 
-def decoded(messages, pixels: str):
+def decoded(messages, pixels: str, decoder_name: str = "h264"):
     """Each message's data decoded on its own: one frame per message, at once (no B-frames, no delay)."""
-    decoder = av.CodecContext.create("h264", "r")
+    decoder = av.CodecContext.create(decoder_name, "r")
+    if decoder_name == "libdav1d":
+        decoder.options = {"max_frame_delay": "1"}  # dav1d's threads otherwise hold frames back
     for m in messages:
         frames = decoder.decode(av.Packet(bytes(m.msg.data)))
         assert len(frames) == 1, f"{len(frames)} frames out of one message"
@@ -94,6 +99,32 @@ def test_keyframes_carry_their_parameter_sets_at_the_start_and_at_least_every_go
         assert keys[0] == stamp_ns(video[0].msg)
         gaps = [b - a for a, b in zip(keys, keys[1:])] + [stamp_ns(video[-1].msg) - keys[-1]]
         assert len(keys) >= SECONDS / GOP - 1 and max(gaps) <= GOP * 1e9 + 1.5 * period, gaps
+
+
+@pytest.mark.parametrize("codec, decoder", [("h265", "hevc"), ("av1", "libdav1d")])
+def test_h265_and_av1_recordings_decode_as_the_frames_they_name(cell, tmp_path, codec, decoder):
+    record(cell, tmp_path / codec, "--frames", "12", "--codec", codec)
+    bag = read_bag(tmp_path / codec)
+    for cam, pixels in PIXELS.items():
+        video, frames = bag.messages[f"/{cam}/video"], bag.messages[f"/{cam}/video/frames"]
+        assert len(video) == len(frames) == 12 and {m.msg.format for m in video} == {codec}
+        read = [read_stamp(image) for _, image in decoded(video, pixels, decoder)]
+        assert read == [f.msg.frame_id for f in frames]
+        assert frames[0].msg.keyframe
+
+
+def test_an_encoder_that_falls_behind_skips_frames_and_counts_them():
+    """Frames offered faster than x264 encodes them: the queue fills, offer() returns False at
+    once instead of waiting, and every frame is either encoded, in order, or counted as skipped."""
+    choice = videochoice.Choice("h264", "libx264", hardware=False)
+    encoder = CameraEncoder("cam", choice, crf=23, preset="veryfast", gop_s=2.0, fps=30.0)
+    image = np.random.default_rng(1).integers(0, 256, (480, 640), np.uint8)
+    taken = [i for i in range(200) if encoder.offer(image, 1_000_000_000 + i * 33_000_000, i, 1)]
+    packets = encoder.finish()
+    assert encoder.error is None
+    assert encoder.skipped > 0 and encoder.offered == 200 == len(taken) + encoder.skipped
+    assert [p.frame_id for p in packets] == taken
+    assert [p.t_ns for p in packets] == [1_000_000_000 + i * 33_000_000 for i in taken]
 
 
 def test_ctrl_c_during_a_video_recording_leaves_a_valid_bag_that_decodes(cell, tmp_path):
