@@ -208,7 +208,8 @@ class Recorder:
         recording (issue 33: it would start, and stop with nothing), as a snapshot's bag says
         when there is no room to start it."""
         rate, free = self._pixel_rate(status), self._free()
-        if self.s.encoding == codec.RAW and rate and free < _MIN_SECONDS * rate:
+        raw = self.s.encoding == codec.RAW and self.s.video is None  # (video: its size is not known ahead)
+        if raw and rate and free < _MIN_SECONDS * rate:
             raise DiskFull(
                 f"--out {self.s.out}: {_size(free)} free there holds {free / rate:.1f} s of this recording "
                 f"({_size(rate)}/s raw): nothing was recorded; free some room, record elsewhere, or record "

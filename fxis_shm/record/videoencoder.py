@@ -142,8 +142,12 @@ class CameraEncoder:
 
     def finish(self) -> list[Packet]:
         """Encode what is queued, flush the encoder, stop its thread; the packets not taken yet."""
-        self._inbox.put((None, 0, 0, 0))  # blocks only while the queue is full, which the thread empties
-        self._thread.join(_JOIN_S)
+        if self._thread.is_alive():  # (a thread that failed empties its queue no more)
+            try:
+                self._inbox.put((None, 0, 0, 0), timeout=_JOIN_S)
+            except queue.Full:
+                pass
+            self._thread.join(_JOIN_S)
         return self.ready()
 
     def _run(self) -> None:

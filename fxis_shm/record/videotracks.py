@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from fxis_shm.errors import ConfigError, InvalidArgument
+from fxis_shm.errors import FxisError, InvalidArgument
 from fxis_shm.formats import rosmsgs
 from fxis_shm.record import videochoice
 from fxis_shm.record.videoencoder import CameraEncoder, opens, require_av
@@ -103,7 +103,7 @@ class VideoTracks:
         for cam, encoder in self.encoders.items():
             self._write(bag, cam, encoder.ready(), to_realtime)
             if encoder.error is not None:
-                raise ConfigError(f"{cam}: the {self.plan.choice.encoder} encoder failed: {encoder.error}")
+                raise FxisError(f"{cam}: the {self.plan.choice.encoder} encoder failed: {encoder.error}")
 
     def finish(self, bag, to_realtime: int) -> None:
         """Flush every encoder and write what it still held."""
