@@ -44,8 +44,36 @@ def decoded(messages, pixels: str, decoder_name: str = "h264"):
 
 
 def nal_types(data: bytes) -> list[int]:
-    """The types of an Annex B stream's NAL units (5: IDR slice, 7: SPS, 8: PPS)."""
+    """The types of an Annex B H.264 stream's NAL units (5: IDR slice, 7: SPS, 8: PPS)."""
     return [unit[0] & 0x1F for unit in data.split(START_CODE)[1:] if unit]
+
+
+def hevc_nal_types(data: bytes) -> list[int]:
+    """The types of an Annex B H.265 stream's NAL units (32: VPS, 33: SPS, 34: PPS)."""
+    return [(unit[0] >> 1) & 0x3F for unit in data.split(START_CODE)[1:] if unit]
+
+
+def obu_types(data: bytes) -> list[int]:
+    """The types of an AV1 low-overhead bitstream's OBUs (1: sequence header, 2: temporal
+    delimiter), each with its size field (AV1 spec 5.3)."""
+    types, i = [], 0
+    while i < len(data):
+        header = data[i]
+        assert header & 0x02, "an OBU without its size field"
+        i += 1 + ((header >> 2) & 1)  # the extension byte, if any
+        size = shift = 0
+        while True:  # leb128
+            byte = data[i]
+            i, size, shift = i + 1, size | (byte & 0x7F) << shift, shift + 7
+            if not byte & 0x80:
+                break
+        types.append((header >> 3) & 0x0F)
+        i += size
+    return types
+
+
+# What Foxglove asks of each keyframe message (foxglove.CompressedVideo, the foxglove SDK's docs)
+PARAMETER_SETS = {"h265": (hevc_nal_types, {32, 33, 34}), "av1": (obu_types, {1})}
 
 
 def test_each_camera_is_a_compressed_video_topic_with_its_frame_ids_beside_it(h264_bag):
@@ -119,6 +147,9 @@ def test_h265_and_av1_recordings_decode_as_the_frames_they_name(cell, tmp_path, 
         else:
             assert read == ids
         assert frames[0].msg.keyframe
+        units, needed = PARAMETER_SETS[codec]
+        for m, f in zip(video, frames):
+            assert f.msg.keyframe == (needed <= set(units(bytes(m.msg.data))))
 
 
 def test_an_encoder_that_falls_behind_skips_frames_and_counts_them():
