@@ -13,6 +13,7 @@ name, a line of text and the command that starts it):
   record        fxis record, every frame raw (sensor_msgs/Image) into a bag in a temp folder
   record-jpeg   fxis record --encoding jpeg
   record-tuples fxis record --tuples (one synchronized tuple per step)
+  record-h264   fxis record --codec h264 (and record-h265, record-av1): video, default settings
 
 Prints a table (rows: processes; columns: phases), then each observer's own report (for
 `fxis record`: frames, missed and dropped by camera per camera, the losses of a recording on
@@ -72,6 +73,12 @@ OBSERVERS = {
     "record": Observer("fxis record, every frame raw", fxis_record()),
     "record-jpeg": Observer("fxis record --encoding jpeg", fxis_record("--encoding", "jpeg")),
     "record-tuples": Observer("fxis record --tuples", fxis_record("--tuples")),
+    **{
+        f"record-{codec}": Observer(
+            f"fxis record --codec {codec} (default encoder, CRF, preset)", fxis_record("--codec", codec)
+        )
+        for codec in ("h264", "h265", "av1")
+    },
 }
 
 
@@ -121,7 +128,7 @@ def run_phase(name: str, endpoint: str, procs: dict[str, int], args) -> dict:
             if proc.poll() is None:
                 proc.kill()
                 proc.wait()
-        if proc.returncode != 0:
+        if proc.returncode not in (0, 130):  # 130: ended by the SIGINT sent above, its bag kept
             raise RuntimeError(f"observer {name!r} failed (exit {proc.returncode}): {err.strip()}")
     return {"cpu_percent": cpu, "output": out}
 

@@ -23,6 +23,7 @@ def record_command(args) -> int:
     if args.recover is not None:
         options = (("--cameras", args.cameras), ("--seconds", args.seconds), ("--frames", args.frames))
         options += (("--rate", args.rate), ("--quality", args.quality), ("--tuples", args.tuples or None))
+        options += (("--codec", args.codec),)
         given = [flag for flag, value in options if value is not None]
         if given:
             return usage(f"--recover repairs a bag: it takes no {', '.join(given)}")
@@ -35,6 +36,10 @@ def record_command(args) -> int:
         return usage("--quality applies to --encoding jpeg only")
     if args.quality is not None and not 1 <= args.quality <= 100:
         return usage(f"--quality must be from 1 to 100, got {args.quality}")
+    try:
+        video = video_settings(args)
+    except ConfigError as exc:
+        return usage(str(exc))
     cameras = [c.strip() for c in args.cameras.split(",") if c.strip()] if args.cameras else None
     if args.cameras is not None and not cameras:
         return usage("--cameras names no camera")
@@ -49,6 +54,7 @@ def record_command(args) -> int:
         tuples=args.tuples,
         encoding=args.encoding,
         quality=args.quality or encoding.DEFAULT_JPEG_QUALITY,
+        video=video,
     )
     recorder = None
     try:
@@ -69,6 +75,23 @@ def record_command(args) -> int:
     if summary["interrupted_by"]:
         return interrupted("record", f"interrupted by {summary['interrupted_by']}: {kept_line(summary)}")
     return exitcodes.DONE
+
+
+def video_settings(args):
+    """--codec and its flags (fxis_shm.record.videotracks), checked before a service is asked."""
+    from fxis_shm.record.videotracks import VideoSettings, check_flags
+
+    given = [f for f, v in (("--encoder", args.encoder), ("--crf", args.crf), ("--preset", args.preset)) if v]
+    given += ["--gop"] if args.gop is not None else []
+    if args.codec is None:
+        if given:
+            raise ConfigError(f"{', '.join(given)} apply to video only: give --codec h264, h265 or av1")
+        return None
+    if args.encoding != "raw" or args.quality is not None:
+        raise ConfigError("--codec records video: it takes no --encoding jpeg or --quality")
+    video = VideoSettings(args.codec, args.encoder or "auto", args.crf, args.preset, args.gop)
+    check_flags(video)
+    return video
 
 
 def kept_line(summary: dict) -> str:
@@ -152,4 +175,19 @@ def add_parser(sub) -> None:
         help="raw: sensor_msgs/Image (default); jpeg: sensor_msgs/CompressedImage",
     )
     record.add_argument("--quality", type=int, metavar="Q", help="JPEG quality 1-100 (default 90)")
+    record.add_argument(
+        "--codec",
+        metavar="C",
+        help="record video instead: h264, h265 or av1, as foxglove_msgs/CompressedVideo on /NAME/video "
+        "(one frame per message, stamped with its capture time) and each frame's id on /NAME/video/frames",
+    )
+    record.add_argument(
+        "--encoder",
+        metavar="E",
+        help="auto (default: a hardware encoder, NVENC, VAAPI or QSV, if one opens, else software), "
+        "software, or an FFmpeg encoder's name (libx264, h264_nvenc, ...)",
+    )
+    record.add_argument("--crf", type=int, metavar="N", help="quality: lower is better and bigger (default per codec)")
+    record.add_argument("--preset", metavar="P", help="the encoder's speed preset (default veryfast for libx264)")
+    record.add_argument("--gop", type=float, metavar="S", help="a keyframe at least every S seconds (default 2)")
     record.set_defaults(func=record_command)

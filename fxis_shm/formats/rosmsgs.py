@@ -14,6 +14,9 @@ from fxis_shm.wire import encoding as codec
 
 IMAGE, COMPRESSED, TUPLE = "sensor_msgs/msg/Image", "sensor_msgs/msg/CompressedImage", "fxis_msgs/msg/FrameTuple"
 TUPLES_TOPIC = "/fxis/tuples"
+# Video (fxis record --codec): Foxglove's CompressedVideo, as its ROS 2 package foxglove_msgs
+# defines it, one frame per message; and beside it, message for message, the frame each is.
+VIDEO, VIDEO_FRAME = "foxglove_msgs/msg/CompressedVideo", "fxis_msgs/msg/VideoFrame"
 
 _SEP = "=" * 80 + "\n"
 _HEADER_DEPS = (
@@ -44,6 +47,17 @@ DEFINITIONS = {
         "uint32[] generations\n"
         "builtin_interfaces/Time[] capture_stamps\n" + _HEADER_DEPS
     ),
+    # foxglove_msgs/msg/CompressedVideo (github.com/foxglove/schemas, ros_foxglove_msgs): the
+    # fields of the foxglove.CompressedVideo schema; format "h264", "h265", "vp9" or "av1".
+    VIDEO: (
+        "builtin_interfaces/Time timestamp\n"
+        "string frame_id\n"
+        "uint8[] data\n"
+        "string format\n" + _SEP + "MSG: builtin_interfaces/Time\nint32 sec\nuint32 nanosec\n"
+    ),
+    # What lossy video cannot be trusted to keep: the frame id and generation of the message of
+    # the same stamp (and index) on the video topic, and whether it is a keyframe.
+    VIDEO_FRAME: ("std_msgs/Header header\nuint64 frame_id\nuint32 generation\nbool keyframe\n" + _HEADER_DEPS),
 }
 
 # ROS encoding names (sensor_msgs/image_encodings.hpp) of the layouts the rings hold.
@@ -59,6 +73,27 @@ _LAYOUTS = {name: layout for layout, name in _ENCODINGS.items()}
 
 def image_topic(camera: str, compressed: bool = False) -> str:
     return f"/{camera}/image_raw" + ("/compressed" if compressed else "")
+
+
+def video_topic(camera: str) -> str:
+    return f"/{camera}/video"
+
+
+def video_frames_topic(camera: str) -> str:
+    return f"/{camera}/video/frames"
+
+
+def video_messages(packet, camera: str, codec_name: str) -> tuple[dict, dict]:
+    """The CompressedVideo message of one encoded frame (fxis_shm.record.videoencoder's
+    ``Packet``) and its VideoFrame beside it, both stamped with the frame's capture time."""
+    video = {"timestamp": stamp(packet.t_ns), "frame_id": camera, "data": packet.data, "format": codec_name}
+    info = {
+        "header": header(packet.t_ns, camera),
+        "frame_id": packet.frame_id,
+        "generation": packet.generation,
+        "keyframe": packet.keyframe,
+    }
+    return video, info
 
 
 def stamp(ns: int) -> dict:

@@ -29,6 +29,7 @@ from fxis_shm.errors import CameraDown, ConfigError, DiskFull, Overwritten, Serv
 from fxis_shm.formats import rosmsgs
 from fxis_shm.formats.bagfile import BagWriter
 from fxis_shm.record.recording import Follower, Steps
+from fxis_shm.record.videotracks import VideoPlan, VideoSettings, VideoTracks
 from fxis_shm.wire import encoding as codec
 
 _MAX_TUPLES_PER_REQUEST = 16  # bounds a reply's size (and the service's sequence limit)
@@ -51,6 +52,7 @@ class RecordSettings:
     tuples: bool = False
     encoding: str = codec.RAW
     quality: int = codec.DEFAULT_JPEG_QUALITY
+    video: VideoSettings | None = None  # --codec: video instead of images (fxis_shm.record.videotracks)
 
 
 class Recorder:
@@ -82,8 +84,24 @@ class Recorder:
         else:
             self.followers = {c: Follower(self.t_start, settings.rate_hz) for c in self.cameras}
         self._check_room(status["cameras"])
+        plan = self._video_plan(status["cameras"])  # before the bag: bad settings leave nothing behind
         self.bag = BagWriter(settings.out, self._custom_data())
+        self.video = VideoTracks(plan, self.cameras) if plan else None
         self.poll_s = min(_POLL_MAX_S, max(_POLL_MIN_S, min((p for p in periods.values() if p), default=1e8) / 2e9))
+
+    def _video_plan(self, status: dict) -> VideoPlan | None:
+        if self.s.video is None:
+            return None
+        if self.s.tuples:
+            raise ConfigError("--codec records every frame of each camera; it does not take --tuples")
+        plan = VideoPlan.make(self.s.video, {c: status[c] for c in self.cameras})
+        self.progress.stage(plan.describe())
+        return plan
+
+    def _topic(self, cam: str) -> str:
+        if self.s.video is not None:
+            return rosmsgs.video_topic(cam)
+        return rosmsgs.image_topic(cam, self.s.encoding == codec.JPEG)
 
     def _custom_data(self) -> dict:
         return {
@@ -97,7 +115,7 @@ class Recorder:
             "cameras": ",".join(self.cameras),
             "mode": "tuples" if self.s.tuples else "frames",
             "rate_hz": self.s.rate_hz or (self.steps.rate_hz if self.s.tuples else "all frames"),
-            "encoding": self.s.encoding,
+            "encoding": self.s.video.codec if self.s.video else self.s.encoding,
             "recorder": "fxis record",
             "ended": "",  # complete, interrupted by SIGINT / SIGTERM, the disk was full: set when closed
         }
@@ -123,6 +141,8 @@ class Recorder:
                 while not self._stopping and not self._done():
                     began = time.monotonic()
                     self._poll()
+                    if self.video is not None:
+                        self._write_video()
                     self.progress.update(self._line())
                     time.sleep(max(0.0, self.poll_s - (time.monotonic() - began)))
                 if self._stopping:
@@ -137,6 +157,8 @@ class Recorder:
                 raise
             finally:
                 self.bag.custom_data["ended"] = ended
+                if self.video is not None and not self.bag.closed:
+                    self.video.finish(self.bag, self.to_realtime)  # what the encoders still hold
                 self.bag.close()
         except DiskFull as exc:  # the bag was closed with what fitted
             raise self._disk_full(exc) from None
@@ -147,12 +169,18 @@ class Recorder:
         self.progress.stage(f"recorded {summary['seconds']:.1f} s into {self.s.out}")
         return summary
 
+    def _write_video(self) -> None:
+        self.video.write_ready(self.bag, self.to_realtime)
+        for cam in self.video.newly_behind():
+            self.progress.stage(
+                f"{cam}: the {self.video.plan.choice.encoder} encoder is behind: skipping frames (counted)"
+            )
+
     def _disk_full(self, exc: DiskFull) -> DiskFull:
         """The bag's DiskFull in the recording's words: frames per camera, seconds, bytes."""
         if not exc.valid:
             return exc
-        jpeg = self.s.encoding == codec.JPEG
-        kept = ", ".join(f"{cam} {exc.kept.get(rosmsgs.image_topic(cam, jpeg), 0)} frames" for cam in self.cameras)
+        kept = ", ".join(f"{cam} {exc.kept.get(self._topic(cam), 0)} frames" for cam in self.cameras)
         if self.s.tuples:
             kept += f", {exc.kept.get(rosmsgs.TUPLES_TOPIC, 0)} tuples"
         return DiskFull(
@@ -180,7 +208,8 @@ class Recorder:
         recording (issue 33: it would start, and stop with nothing), as a snapshot's bag says
         when there is no room to start it."""
         rate, free = self._pixel_rate(status), self._free()
-        if self.s.encoding == codec.RAW and rate and free < _MIN_SECONDS * rate:
+        raw = self.s.encoding == codec.RAW and self.s.video is None  # (video: its size is not known ahead)
+        if raw and rate and free < _MIN_SECONDS * rate:
             raise DiskFull(
                 f"--out {self.s.out}: {_size(free)} free there holds {free / rate:.1f} s of this recording "
                 f"({_size(rate)}/s raw): nothing was recorded; free some room, record elsewhere, or record "
@@ -192,8 +221,9 @@ class Recorder:
     def _data_rate_line(self) -> str:
         """What the recording will write a second, and how long the disk lasts at that rate."""
         rate, free = self._pixel_rate(self.client.status()["cameras"]), self._free()
-        if self.s.encoding != codec.RAW:
-            return f"about {rate / 1e6:.0f} MB/s of pixels before JPEG; {_size(free)} free"
+        if self.s.encoding != codec.RAW or self.s.video is not None:
+            before = self.s.video.codec if self.s.video else "JPEG"
+            return f"about {rate / 1e6:.0f} MB/s of pixels before {before}; {_size(free)} free"
         seconds = free / rate if rate else 0.0
         lasts = f"full in about {seconds / 60:.0f} min" if seconds >= 120 else f"full in about {seconds:.0f} s"
         return f"writing about {rate / 1e6:.0f} MB/s (raw); {_size(free)} free there: " + (
@@ -294,6 +324,9 @@ class Recorder:
         self.steps.advance(len(times))
 
     def _write_image(self, frame, t_stamp: int) -> None:
+        if self.video is not None:
+            self.video.offer(frame, t_stamp)  # copied: the encoder's thread writes it later
+            return
         image = frame.image
         if self.s.encoding == codec.JPEG:
             data = codec.encode(image, codec.JPEG, self.s.quality)
@@ -312,6 +345,8 @@ class Recorder:
         else:
             counts = "  ".join(f"{c} {f.taken}" for c, f in self.followers.items())
             counts += f"  missed {sum(f.missed for f in self.followers.values())}"
+            if self.video is not None:
+                counts += f"  skipped {sum(e.skipped for e in self.video.encoders.values())}"
         return f"{(self._now() - self.t_start) / 1e9:6.1f} s  {counts}  {self.bag.bytes_written / 1e6:.1f} MB"
 
     def summary(self) -> dict:
@@ -321,7 +356,7 @@ class Recorder:
             status = {}
         per_camera = {}
         for cam in self.cameras:
-            topic = rosmsgs.image_topic(cam, self.s.encoding == codec.JPEG)
+            topic = self._topic(cam)
             counted = self.bag.topics.get(topic)
             dropped = status.get(cam, {}).get("frames_dropped")
             per_camera[cam] = {
@@ -329,6 +364,7 @@ class Recorder:
                 "frames": counted.count if counted else 0,
                 "missed": None if self.s.tuples else self.followers[cam].missed,
                 "dropped_by_camera": None if dropped is None else dropped - self._dropped_at_start[cam],
+                "skipped_by_encoder": self.video.encoders[cam].skipped if self.video else None,
             }
         file_path = os.path.join(self.s.out, self.bag.file_name)
         return {
@@ -357,6 +393,11 @@ def summary_table(summary: dict) -> str:
         )
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     lines = ["  ".join(v.ljust(w) for v, w in zip(r, widths)).rstrip() for r in rows]
+    lines += [
+        f"{cam}: the encoder fell behind and skipped {c['skipped_by_encoder']} frames"
+        for cam, c in summary["cameras"].items()
+        if c.get("skipped_by_encoder")
+    ]
     if summary["tuples"] is not None:
         lines.append(f"tuples {summary['tuples']}, missed {summary['tuples_missed']}")
     lines.append(

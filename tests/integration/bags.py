@@ -7,6 +7,8 @@ import os
 import shutil
 import signal
 import struct
+import subprocess
+import sys
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -74,6 +76,30 @@ def record(svc: ServiceProcess, out, *args):
     assert result.returncode == 0, result.stderr
     assert os.path.exists(os.path.join(out, "metadata.yaml"))
     return result
+
+
+def two_cameras(tmp_path_factory):
+    """The two cameras, a service for a test module: ``cell = pytest.fixture(scope="module",
+    name="cell")(two_cameras)``."""
+    svc = start_cameras(tmp_path_factory.mktemp("svc") / "service.log")
+    yield svc
+    stop(svc)
+
+
+def record_until_ctrl_c(svc: ServiceProcess, out: Path, written: int, *args) -> tuple[int, str, str]:
+    """``fxis record ARGS`` interrupted by SIGINT once its .mcap file holds ``written`` bytes:
+    (exit code, stdout, stderr)."""
+    command = [sys.executable, "-m", "fxis_shm.cli", "record", "--endpoint", svc.endpoint, "--out", str(out), *args]
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        mcap = out / f"{out.name}_0.mcap"
+        wait_until(lambda: mcap.exists() and mcap.stat().st_size > written, timeout=30, what="frames recorded")
+        proc.send_signal(signal.SIGINT)
+        stdout, stderr = proc.communicate(timeout=30)
+    finally:
+        proc.kill()
+        proc.wait()
+    return proc.returncode, stdout, stderr
 
 
 def record_a_cell(folder, *args) -> Path:

@@ -1,9 +1,6 @@
 """``fxis record`` against a real service; the bag read back with rosbags (an independent reader)."""
 
 import os
-import signal
-import subprocess
-import sys
 
 import cv2
 import numpy as np
@@ -12,18 +9,12 @@ import pytest
 from fxis_shm import read_stamp
 from fxis_shm.formats import rosmsgs
 
-from ..conftest import fxis, wait_until
-from .bags import FPS, read_bag, record, start_cameras, stop
+from ..conftest import fxis
+from .bags import FPS, read_bag, record, record_until_ctrl_c, two_cameras
 
 pytestmark = pytest.mark.integration
+cell = pytest.fixture(scope="module", name="cell")(two_cameras)
 SECONDS = 2.0
-
-
-@pytest.fixture(scope="module")
-def cell(tmp_path_factory):
-    svc = start_cameras(tmp_path_factory.mktemp("svc") / "service.log")
-    yield svc
-    stop(svc)
 
 
 @pytest.fixture(scope="module")
@@ -109,21 +100,8 @@ def test_jpeg_images_are_compressed_images_of_the_frames_they_name(cell, tmp_pat
 
 def test_ctrl_c_ends_the_recording_with_a_valid_bag(cell, tmp_path):
     out = tmp_path / "c"
-    proc = subprocess.Popen(
-        [sys.executable, "-m", "fxis_shm.cli", "record", "--endpoint", cell.endpoint, "--out", str(out)],
-        stdout=subprocess.PIPE,
-        stderr=subprocess.PIPE,
-        text=True,
-    )
-    try:
-        mcap = out / "c_0.mcap"
-        wait_until(lambda: mcap.exists() and mcap.stat().st_size > 200_000, timeout=30, what="frames recorded")
-        proc.send_signal(signal.SIGINT)
-        stdout, stderr = proc.communicate(timeout=30)
-    finally:
-        proc.kill()
-        proc.wait()
-    assert proc.returncode == 130, stderr  # stopped by a signal, what was recorded kept
+    returncode, stdout, stderr = record_until_ctrl_c(cell, out, 200_000)
+    assert returncode == 130, stderr  # stopped by a signal, what was recorded kept
     assert "interrupted by SIGINT" in stderr
     bag = read_bag(out)
     assert len(bag.messages["/left/image_raw"]) > 0

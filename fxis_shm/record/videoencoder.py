@@ -1,0 +1,183 @@
+"""One camera's video encoder for ``fxis record --codec``: a PyAV (FFmpeg) encoder in a thread
+of its own, fed frames copied out of the ring, so a slow encoder never holds up the recorder's
+reading of the rings or the other cameras. A full queue means the encoder fell behind: the
+frame is skipped and counted, never waited for.
+
+The stream is what Foxglove plays: one frame per packet, in capture order, no B-frames, Annex B
+with the parameter sets (SPS/PPS) repeated on every keyframe, and a keyframe forced on the first
+frame and then at least every ``gop_s`` seconds of capture time. Each packet keeps its frame's
+capture time (variable frame rate: the encoder's pts are microseconds of capture time).
+"""
+
+from __future__ import annotations
+
+import os
+import queue
+import threading
+from dataclasses import dataclass
+from fractions import Fraction
+
+import numpy as np
+
+from fxis_shm.errors import ConfigError
+from fxis_shm.record.videochoice import Choice
+
+QUEUE_FRAMES = 16  # frames waiting for an encoder; more and the camera's frames are skipped
+_PTS_NS = 1000  # pts in microseconds of capture time
+_INPUT_FORMATS = {1: "gray", 3: "bgr24", 4: "bgra"}  # the channels of the carried 8-bit layouts
+_JOIN_S = 30.0  # finishing waits this long for an encoder to flush
+
+
+def require_av():
+    try:
+        import av
+    except ImportError as exc:
+        raise ConfigError(
+            f"--codec needs the optional extra 'video' (PyAV; {exc}): pip install 'fxis-shm[video]' (or `make setup`)"
+        ) from None
+    return av
+
+
+@dataclass
+class Packet:
+    """One encoded frame: its capture time, the frame it is, its bytes."""
+
+    t_ns: int
+    frame_id: int
+    generation: int
+    data: bytes
+    keyframe: bool
+
+
+def encoder_options(choice: Choice, crf: int, preset: str | None, gop_frames: int) -> dict[str, str]:
+    """FFmpeg options for one frame out per frame in, no B-frames, parameter sets on keyframes."""
+    name = choice.encoder
+    if name == "libx264":
+        params = "bframes=0:repeat-headers=1:annexb=1:scenecut=0:rc-lookahead=0:sync-lookahead=0"
+        options = {"crf": str(crf), "x264-params": params, "forced-idr": "1"}
+    elif name == "libx265":
+        params = f"bframes=0:repeat-headers=1:annexb=1:scenecut=0:rc-lookahead=0:keyint={gop_frames}:log-level=error"
+        options = {"crf": str(crf), "x265-params": params, "forced-idr": "1"}
+    elif name == "libsvtav1":
+        # low delay (pred-struct 1): frames out in order, none held back for later ones
+        options = {"crf": str(crf), "svtav1-params": f"pred-struct=1:keyint={gop_frames}:scd=0"}
+    elif name.endswith("_nvenc"):
+        options = {"cq": str(crf), "bf": "0", "forced-idr": "1", "zerolatency": "1"}
+    elif name.endswith("_qsv"):
+        options = {"global_quality": str(crf), "bf": "0", "forced_idr": "1"}
+    else:  # VAAPI
+        options = {"qp": str(crf), "bf": "0"}
+    if preset is not None:
+        options["preset"] = preset
+    return options
+
+
+def open_context(av, choice: Choice, width: int, height: int, fps: float, options: dict[str, str]):
+    os.environ.setdefault("SVT_LOG", "1")  # SVT-AV1 prints its whole configuration otherwise; errors only
+    context = av.CodecContext.create(choice.encoder, "w")
+    context.width, context.height = width, height
+    context.pix_fmt = "yuv420p"
+    context.time_base = Fraction(1, 1_000_000_000 // _PTS_NS)
+    context.framerate = Fraction(fps or 30).limit_denominator(1001)
+    context.gop_size = 1 << 20  # keyframes are forced by capture time (CameraEncoder._keyframe_due)
+    context.max_b_frames = 0
+    context.options = options
+    context.open()
+    return context
+
+
+def opens(encoder: Choice) -> bool:
+    """Whether ``encoder`` opens and encodes a frame here (a hardware encoder FFmpeg lists may
+    have no device behind it)."""
+    av = require_av()
+    try:
+        context = open_context(av, encoder, 64, 64, 30.0, encoder_options(encoder, 30, None, 30))
+        frame = av.VideoFrame.from_ndarray(np.zeros((64, 64), np.uint8), format="gray").reformat(format="yuv420p")
+        frame.pts = 0
+        context.encode(frame)
+        context.encode(None)
+        return True
+    except Exception:  # noqa: BLE001 (any failure to open means: not this one)
+        return False
+
+
+class CameraEncoder:
+    """``offer(image, t_ns, frame_id, generation)`` from the recorder's thread; ``ready()``
+    the packets encoded since; ``finish()`` flushes and returns the last ones."""
+
+    def __init__(self, camera: str, choice: Choice, crf: int, preset: str | None, gop_s: float, fps: float):
+        self.camera, self.choice = camera, choice
+        self.gop_ns = int(gop_s * 1e9)
+        self._av = require_av()
+        self._options = encoder_options(choice, crf, preset, max(1, round(gop_s * (fps or 30))))
+        self._fps = fps
+        self._context = None
+        self._inbox: queue.Queue = queue.Queue(maxsize=QUEUE_FRAMES)
+        self._outbox: queue.SimpleQueue[Packet] = queue.SimpleQueue()
+        self._pending: dict[int, tuple[int, int, int]] = {}  # pts -> (t_ns, frame id, generation)
+        self._t0: int | None = None
+        self._last_key: int | None = None
+        self.offered = self.skipped = 0
+        self.error: BaseException | None = None
+        self._thread = threading.Thread(target=self._run, name=f"encode-{camera}", daemon=True)
+        self._thread.start()
+
+    def offer(self, image: np.ndarray, t_ns: int, frame_id: int, generation: int) -> bool:
+        """Queue a copy of the frame; False (and counted) if the encoder is behind."""
+        self.offered += 1
+        try:
+            self._inbox.put_nowait((np.array(image, copy=True), t_ns, frame_id, generation))
+            return True
+        except queue.Full:
+            self.skipped += 1
+            return False
+
+    def ready(self) -> list[Packet]:
+        packets = []
+        while True:
+            try:
+                packets.append(self._outbox.get_nowait())
+            except queue.Empty:
+                return packets
+
+    def finish(self) -> list[Packet]:
+        """Encode what is queued, flush the encoder, stop its thread; the packets not taken yet."""
+        if self._thread.is_alive():  # (a thread that failed empties its queue no more)
+            try:
+                self._inbox.put((None, 0, 0, 0), timeout=_JOIN_S)
+            except queue.Full:
+                pass
+            self._thread.join(_JOIN_S)
+        return self.ready()
+
+    def _run(self) -> None:
+        try:
+            while True:
+                image, t_ns, frame_id, generation = self._inbox.get()
+                if image is None:
+                    break
+                self._encode(image, t_ns, frame_id, generation)
+            if self._context is not None:
+                self._deliver(self._context.encode(None))
+        except BaseException as exc:  # noqa: BLE001 (kept for the recorder to report)
+            self.error = exc
+
+    def _encode(self, image: np.ndarray, t_ns: int, frame_id: int, generation: int) -> None:
+        av = self._av
+        height, width = image.shape[:2]
+        if self._context is None:
+            self._context = open_context(av, self.choice, width, height, self._fps, self._options)
+            self._t0 = t_ns
+        channels = 1 if image.ndim == 2 else image.shape[2]
+        frame = av.VideoFrame.from_ndarray(image, format=_INPUT_FORMATS[channels]).reformat(format="yuv420p")
+        frame.pts = (t_ns - self._t0) // _PTS_NS
+        if self._last_key is None or t_ns - self._last_key >= self.gop_ns:
+            frame.pict_type = av.video.frame.PictureType.I
+            self._last_key = t_ns
+        self._pending[frame.pts] = (t_ns, frame_id, generation)
+        self._deliver(self._context.encode(frame))
+
+    def _deliver(self, packets) -> None:
+        for packet in packets:
+            t_ns, frame_id, generation = self._pending.pop(packet.pts)
+            self._outbox.put(Packet(t_ns, frame_id, generation, bytes(packet), bool(packet.is_keyframe)))
