@@ -34,20 +34,13 @@ from fxis_shm.client.localreads import LocalReads
 from fxis_shm.client.pubsub import EventPublisher, Subscriber
 from fxis_shm.client.requestpaths import RequestPaths
 from fxis_shm.client.requesttimes import fixed_mapping, last_needed
-from fxis_shm.client.sockets import (
-    SocketOwner,
-    checked_encoding,
-    connected_socket,
-    reachable,
-    recv_parts,
-    send_parts,
-    wire_timeout_ms,
-)
+from fxis_shm.client.sockets import SocketOwner, checked_encoding, connected_socket, reachable, wire_timeout_ms
 from fxis_shm.core import timebase
 from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.errors import InvalidArgument, RequestTimeout, service_error
 from fxis_shm.shm.localpath import LocalRings, boot_id
 from fxis_shm.wire import defaults, encoding as codec, protocol
+from fxis_shm.wire.multipart import recv_parts, send_parts
 from fxis_shm.wire.security import ClientKeys
 
 DEFAULT_ENDPOINT = defaults.ENDPOINT
