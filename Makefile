@@ -38,10 +38,13 @@ PURE_TESTS := tests/unit tests/integration/test_ring.py tests/integration/test_l
 TEST_WORKERS ?= 2
 XDIST := $(if $(filter 0,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist loadscope)
 
+# Last, scripts/test-aarch64.sh's steps on this machine's own CPU (its emulated ARM64 run is by
+# hand, 25 minutes): the ordering mode, and its pytest call over one file (its list ran above).
 test: setup lint
 	$(BIN)/python -c "import fxis_shm, os, sys; sys.exit(not (fxis_shm.compiled or os.environ.get('FXIS_PURE_PYTHON') == '1'))"
 	$(BIN)/python -m pytest $(XDIST)
 	FXIS_PURE_PYTHON=1 $(BIN)/python -m pytest -q $(XDIST) $(PURE_TESTS)
+	scripts/test-aarch64.sh --quick -q tests/unit/test_ordering.py
 
 lint: setup
 	$(BIN)/ruff check .
