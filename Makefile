@@ -25,7 +25,7 @@ $(VENV)/.installed: pyproject.toml setup.py $(COMPILED_SOURCES) scripts/install-
 	touch $@
 
 demo: setup
-	$(BIN)/python bench/latency.py
+	$(BIN)/python bench/latency/paper.py
 
 # The whole suite on the compiled hot path (the first line fails if it is not compiled), then the
 # engine's, the ring's and the local path's tests again on the pure-Python fallback

@@ -2,7 +2,7 @@
 streams at a rate, their skew against the least the rings allowed, a host that stops and comes
 back, a slow subscriber that holds up no one, and frame streams in the caller's clock.
 
-None of them asserts a duration: bench/multihost_tuples.py measures 1000 tuples."""
+None of them asserts a duration: bench/scale/hosts.py measures 1000 tuples."""
 
 import pytest
 
