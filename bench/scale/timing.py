@@ -1,7 +1,7 @@
 """What the sections of bench/scale/scaling.py share: the transports a client can use, timed
 past-tuple requests and their summary, one service log per section, list-valued flags.
 
-Not a public module; imported as ``_scaling`` (scripts) or ``bench._scaling`` (package).
+Not a public module: scaling.py's sections import it as ``bench.scale.timing``.
 """
 
 from __future__ import annotations

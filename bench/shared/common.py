@@ -1,8 +1,7 @@
 """What the benchmarks in bench/ share: the service they measure, statistics,
 tables, JSON and figure output, progress bars.
 
-Not a public module; the scripts import it as ``_common`` (run as scripts) or
-``bench._common`` (imported as a package).
+Not a public module: the benches import it as ``bench.shared.common``.
 """
 
 from __future__ import annotations

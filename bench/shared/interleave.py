@@ -3,7 +3,7 @@ order, each after a random sleep, so a drift of the machine's speed hits all of 
 Then the hot loop: each contender called back to back (no sleep, its caches and threads warm),
 in blocks, the contenders in a random order in every block.
 
-Not a public module; imported as ``_interleave`` (scripts) or ``bench._interleave`` (package).
+Not a public module: the benches import it as ``bench.shared.interleave``.
 """
 
 from __future__ import annotations
