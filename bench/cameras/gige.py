@@ -67,11 +67,10 @@ HOOK_COST_MS = 10.0
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="bench/cameras/gige.py", description=__doc__, formatter_class=common.HelpFormatter)
+    p = common.parser_for(__file__, __doc__)
     p.add_argument("--seconds", type=common.positive_float, default=60.0, help="length of each run")
     p.add_argument("--fps", type=common.positive_float, default=20.0)
-    p.add_argument("--width", type=common.positive_int, default=640)
-    p.add_argument("--height", type=common.positive_int, default=480)
+    common.add_frame_size_args(p, 640, 480)
     p.add_argument("--pixel-format", default="Mono8", help="Mono8, Mono16, RGB8, BayerRG8, ...")
     p.add_argument(
         "--timestamp",
@@ -298,10 +297,9 @@ def plot(runs: list[dict], path: str, title: str) -> None:
 
 def main(argv: list[str] | None = None) -> int:
     p = parser()
-    try:
-        args = p.parse_args(argv)
-    except SystemExit as exc:
-        return exc.code
+    args = common.parse_args(p, argv)
+    if isinstance(args, int):
+        return args
     if not 0 <= args.loss <= 1000:
         return common.usage_error(p, f"--loss must be 0..1000 packets per thousand, got {args.loss}")
     out = common.ensure_dir(args.out)

@@ -43,9 +43,7 @@ PID_ROW = 24
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="bench/cameras/hook_rate.py", description=__doc__, formatter_class=common.HelpFormatter
-    )
+    p = common.parser_for(__file__, __doc__)
     p.add_argument("--workers", type=common.int_list, default=[1, 3], help="process_workers of each run")
     p.add_argument("--fps", type=common.positive_float, default=20.0)
     p.add_argument("--seconds", type=common.positive_float, default=30.0, help="length of each run")
@@ -87,10 +85,9 @@ def measure(args, workers: int, out: str) -> dict:
 
 def main(argv: list[str] | None = None) -> int:
     p = parser()
-    try:
-        args = p.parse_args(argv)
-    except SystemExit as exc:
-        return exc.code
+    args = common.parse_args(p, argv)
+    if isinstance(args, int):
+        return args
     if 0 in args.workers:
         return common.usage_error(p, "--workers must be 1 or more")
     out = common.ensure_dir(args.out)

@@ -288,7 +288,7 @@ def quality_list(text: str) -> list[int]:
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(prog="bench/compare/jpeg.py", description=__doc__, formatter_class=common.HelpFormatter)
+    p = common.parser_for(__file__, __doc__)
     p.add_argument(
         "-n",
         "--rounds",
@@ -316,8 +316,7 @@ def parser() -> argparse.ArgumentParser:
     p.add_argument(
         "--pick-quality", type=int, default=90, help="the quality the second table compares at (one of --qualities)"
     )
-    p.add_argument("--width", type=common.positive_int, default=1360)
-    p.add_argument("--height", type=common.positive_int, default=1024)
+    common.add_frame_size_args(p, 1360, 1024)
     p.add_argument("--out", default=common.DEFAULT_OUT, metavar="DIR", help="folder for the JSON file")
     p.add_argument(
         "--seed",

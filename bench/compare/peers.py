@@ -97,9 +97,7 @@ def scenario_list(text: str) -> list[str]:
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="bench/compare/peers.py", description=__doc__, formatter_class=common.HelpFormatter
-    )
+    p = common.parser_for(__file__, __doc__)
     p.add_argument(
         "-n", "--samples", type=common.positive_int, default=300, help="measured samples of each contender per scenario"
     )
@@ -163,11 +161,10 @@ def report_errors(results: dict) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = parser()
-    args = common.parse_args(p, argv)
-    if isinstance(args, int):
-        return args
-    out = common.ensure_dir(args.out)
+    parsed = common.parse_args_and_out(parser(), argv)
+    if isinstance(parsed, int):
+        return parsed
+    args, out = parsed
     rng = random.Random(args.seed)
     started = time.time()
     host = common.host_info()

@@ -48,9 +48,7 @@ MAIN, IO, OTHER = "main thread", "ZeroMQ I/O", "other threads"
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="bench/costs/coordinator.py", description=__doc__, formatter_class=common.HelpFormatter
-    )
+    p = common.parser_for(__file__, __doc__)
     for flag, kind, default, text in (
         ("--cameras", common.positive_int, 4, "synthetic cameras"),
         ("--fps", common.positive_float, 100.0, "frame rate of every camera"),

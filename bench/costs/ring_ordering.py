@@ -30,13 +30,10 @@ from bench.shared import common
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="bench/costs/ring_ordering.py", description=__doc__, formatter_class=common.HelpFormatter
-    )
+    p = common.parser_for(__file__, __doc__)
     p.add_argument("-n", type=common.positive_int, default=2000, help="operations per round")
     p.add_argument("--repeat", type=common.positive_int, default=7, help="rounds; the median is reported")
-    p.add_argument("--width", type=common.positive_int, default=640)
-    p.add_argument("--height", type=common.positive_int, default=480)
+    common.add_frame_size_args(p, 640, 480)
     p.add_argument("--slots", type=common.positive_int, default=16)
     p.add_argument("--measure", action="store_true", help=argparse.SUPPRESS)  # the child's part
     return p

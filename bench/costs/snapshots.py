@@ -27,13 +27,10 @@ from bench.shared import common, cpu
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="bench/costs/snapshots.py", description=__doc__, formatter_class=common.HelpFormatter
-    )
+    p = common.parser_for(__file__, __doc__)
     p.add_argument("--cameras", type=common.positive_int, default=4, help="synthetic cameras")
     p.add_argument("--fps", type=common.positive_float, default=30.0, help="their frame rate")
-    p.add_argument("--width", type=common.positive_int, default=1360, help="their width (px)")
-    p.add_argument("--height", type=common.positive_int, default=1024, help="their height (px)")
+    common.add_frame_size_args(p, 1360, 1024)
     p.add_argument("--history", type=common.positive_float, default=3.0, help="seconds each ring holds")
     p.add_argument("--before", type=common.nonnegative_float, default=2.0, help="the snapshot's seconds before t")
     p.add_argument("--after", type=common.nonnegative_float, default=1.0, help="and after t")

@@ -47,13 +47,10 @@ FOXGLOVE_MESSAGE_DATA = 0x01  # the opcode of a binary message carrying a channe
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="bench/costs/viewers.py", description=__doc__, formatter_class=common.HelpFormatter
-    )
+    p = common.parser_for(__file__, __doc__)
     p.add_argument("--cameras", type=common.positive_int, default=2, help="synthetic cameras")
     p.add_argument("--camera-fps", type=common.positive_float, default=20.0, help="their frame rate")
-    p.add_argument("--width", type=common.positive_int, default=1360, help="their width (px)")
-    p.add_argument("--height", type=common.positive_int, default=1024, help="their height (px)")
+    common.add_frame_size_args(p, 1360, 1024)
     p.add_argument("--fps", type=common.positive_float, default=10.0, help="rate each viewer asks for")
     p.add_argument("--preview-width", type=common.positive_int, default=640, help="width of the pictures viewers get")
     p.add_argument(
@@ -368,11 +365,10 @@ def report(results: list[dict], args) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = parser()
-    args = common.parse_args(p, argv)
-    if isinstance(args, int):
-        return args
-    out = common.ensure_dir(args.out)
+    parsed = common.parse_args_and_out(parser(), argv)
+    if isinstance(parsed, int):
+        return parsed
+    args, out = parsed
     results = stages(args, out)
     report(results, args)
     common.write_json(

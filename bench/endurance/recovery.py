@@ -10,7 +10,6 @@ restart within 30 s; this bench waits 31 s between kills of the same process unl
 
 from __future__ import annotations
 
-import argparse
 import os
 import signal
 import subprocess
@@ -43,9 +42,7 @@ def time_to_recover(client, request, timeout: float = 30.0) -> float:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(
-        prog="bench/endurance/recovery.py", description=__doc__, formatter_class=common.HelpFormatter
-    )
+    p = common.parser_for(__file__, __doc__)
     p.add_argument("--repeat", type=common.positive_int, default=3, help="kills of each kind")
     p.add_argument("--quick", action="store_true", help="do not wait for the backoff to reset between kills")
     p.add_argument("--out", default=common.DEFAULT_OUT)

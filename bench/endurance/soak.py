@@ -11,7 +11,6 @@ soak.png into --out.
 
 from __future__ import annotations
 
-import argparse
 import os
 import sys
 import threading
@@ -59,13 +58,10 @@ def sample(root: int) -> dict:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = argparse.ArgumentParser(
-        prog="bench/endurance/soak.py", description=__doc__, formatter_class=common.HelpFormatter
-    )
+    p = common.parser_for(__file__, __doc__)
     p.add_argument("--minutes", type=common.positive_float, default=10.0)
     p.add_argument("--every", type=common.positive_float, default=10.0, help="seconds between samples")
-    p.add_argument("--width", type=common.positive_int, default=640)
-    p.add_argument("--height", type=common.positive_int, default=480)
+    common.add_frame_size_args(p, 640, 480)
     p.add_argument("--out", default=common.DEFAULT_OUT)
     args = p.parse_args(argv)
     out = common.ensure_dir(args.out)

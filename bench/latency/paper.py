@@ -89,9 +89,7 @@ from fxis_shm import Client
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="bench/latency/paper.py", description=__doc__, formatter_class=common.HelpFormatter
-    )
+    p = common.parser_for(__file__, __doc__)
     p.add_argument(
         "-n", "--requests", type=common.positive_int, default=100, help="requests per policy (the paper: 100)"
     )
@@ -148,8 +146,7 @@ def parser() -> argparse.ArgumentParser:
         default=0.3,
         help="uniform capture-time jitter +/- ms of every camera",
     )
-    cams.add_argument("--width", type=common.positive_int, default=1360)
-    cams.add_argument("--height", type=common.positive_int, default=1024)
+    common.add_frame_size_args(cams, 1360, 1024)
     cams.add_argument("--slots", type=common.positive_int, default=20, help="frames per camera ring")
     common.add_service_args(
         p, "--fps and --phases must then describe it: the cameras' count and fps are checked against its status"

@@ -37,15 +37,12 @@ LIVE_SUBSCRIBERS = 3
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="bench/latency/pubsub.py", description=__doc__, formatter_class=common.HelpFormatter
-    )
+    p = common.parser_for(__file__, __doc__)
     p.add_argument("-n", "--events", type=common.positive_int, default=200, help="request events to measure")
     p.add_argument("--seconds", type=common.positive_float, default=10.0, help="how long the stream part runs")
     cams = p.add_argument_group("the launched service (ignored with --endpoint)")
     cams.add_argument("--fps", type=common.positive_float, default=20.0)
-    cams.add_argument("--width", type=common.positive_int, default=1360)
-    cams.add_argument("--height", type=common.positive_int, default=1024)
+    common.add_frame_size_args(cams, 1360, 1024)
     common.add_service_args(p)
     return p
 

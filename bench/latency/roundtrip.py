@@ -38,9 +38,7 @@ SERVICE_STEPS = (("received", "waited"), ("waited", "searched"), ("searched", "c
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="bench/latency/roundtrip.py", description=__doc__, formatter_class=common.HelpFormatter
-    )
+    p = common.parser_for(__file__, __doc__)
     p.add_argument("-n", "--requests", type=common.positive_int, default=300, help="measured requests of each kind")
     p.add_argument(
         "--sleep-max-ms",
@@ -52,8 +50,7 @@ def parser() -> argparse.ArgumentParser:
     cams = p.add_argument_group("the launched service (ignored with --endpoint)")
     cams.add_argument("--cameras", type=common.positive_int, default=2, help="synthetic cameras cam0, cam1, ...")
     cams.add_argument("--fps", type=common.positive_float, default=20.0)
-    cams.add_argument("--width", type=common.positive_int, default=1360)
-    cams.add_argument("--height", type=common.positive_int, default=1024)
+    common.add_frame_size_args(cams, 1360, 1024)
     cams.add_argument("--slots", type=common.positive_int, default=20, help="frames per camera ring")
     common.add_service_args(p, "every camera of that service is requested")
     return p
@@ -171,11 +168,10 @@ def run(args, client, status: dict) -> list[dict]:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = parser()
-    args = common.parse_args(p, argv)
-    if isinstance(args, int):
-        return args
-    out = common.ensure_dir(args.out)
+    parsed = common.parse_args_and_out(parser(), argv)
+    if isinstance(parsed, int):
+        return parsed
+    args, out = parsed
     names = [f"cam{j}" for j in range(args.cameras)]
     run_args = common.synthetic_camera_flags(names, args.fps, args.width, args.height)
     run_args += ["--slots", str(args.slots)]

@@ -28,9 +28,7 @@ from fxis_shm.client.pubsub import Subscriber
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="bench/latency/stream_rates.py", description=__doc__, formatter_class=common.HelpFormatter
-    )
+    p = common.parser_for(__file__, __doc__)
     p.add_argument(
         "--fps", type=common.positive_float, nargs="+", default=[15, 20, 25, 30, 100], help="one camera per frame rate"
     )
@@ -78,11 +76,10 @@ def measure(pub: str, topics: list[str], seconds: float, timeout: float) -> dict
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = parser()
-    args = common.parse_args(p, argv)
-    if isinstance(args, int):
-        return args
-    out = common.ensure_dir(args.out)
+    parsed = common.parse_args_and_out(parser(), argv)
+    if isinstance(parsed, int):
+        return parsed
+    args, out = parsed
     names = {f"cam{fps:g}".replace(".", "_"): fps for fps in args.fps}
     run_args = [flag for name, fps in names.items() for flag in common.synthetic_camera_flags([name], fps, 64, 48)]
     streams = {}  # topic -> (label, asked rate, camera-limited rate, period ns)

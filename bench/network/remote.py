@@ -82,9 +82,7 @@ def parse_parts(text: str) -> list[str]:
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="bench/network/remote.py", description=__doc__, formatter_class=common.HelpFormatter
-    )
+    p = common.parser_for(__file__, __doc__)
     p.add_argument("--parts", type=parse_parts, default=",".join(PARTS), help="comma list of " + ", ".join(PARTS))
     p.add_argument(
         "--minutes",
@@ -133,8 +131,7 @@ def parser() -> argparse.ArgumentParser:
     cams = p.add_argument_group("cameras")
     cams.add_argument("--fps", type=common.positive_float, default=20.0)
     cams.add_argument("--jitter-ms", type=common.nonnegative_float, default=0.3)
-    cams.add_argument("--width", type=common.positive_int, default=1360)
-    cams.add_argument("--height", type=common.positive_int, default=1024)
+    common.add_frame_size_args(cams, 1360, 1024)
     cams.add_argument("--slots", type=common.positive_int, default=20)
     p.add_argument("--strict", action="store_true", help="exit 1 if a target fails")
     common.add_output_args(p)

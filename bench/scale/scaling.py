@@ -69,9 +69,7 @@ def description() -> str:
 
 
 def parser() -> argparse.ArgumentParser:
-    p = argparse.ArgumentParser(
-        prog="bench/scale/scaling.py", description=description(), formatter_class=common.HelpFormatter
-    )
+    p = common.parser_for(__file__, description())
     p.add_argument(
         "--only",
         type=shared.name_list(tuple(SECTIONS)),

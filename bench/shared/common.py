@@ -70,6 +70,24 @@ def add_output_args(
     )
 
 
+def parser_for(path: str, description: str | None) -> argparse.ArgumentParser:
+    """A bench's command line, named as it is run from the project root (bench/FOLDER/NAME.py)."""
+    prog = os.path.relpath(os.path.abspath(path), os.path.dirname(BENCH))
+    return argparse.ArgumentParser(prog=prog, description=description, formatter_class=HelpFormatter)
+
+
+def add_frame_size_args(p, width: int, height: int) -> None:
+    """--width and --height of the frames (``p``: a parser or an argument group)."""
+    p.add_argument("--width", type=positive_int, default=width, help="frame width (px)")
+    p.add_argument("--height", type=positive_int, default=height, help="frame height (px)")
+
+
+def parse_args_and_out(p: argparse.ArgumentParser, argv: list[str] | None):
+    """As ``parse_args``, with the results folder (--out) made: (args, out), or the exit status."""
+    args = parse_args(p, argv)
+    return args if isinstance(args, int) else (args, ensure_dir(args.out))
+
+
 def parse_args(p: argparse.ArgumentParser, argv: list[str] | None):
     """The parsed flags, with ``seed`` drawn if none was given; or the exit status
     of --help or of bad flags (argparse printed why), returned rather than raised."""
