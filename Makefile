@@ -1,13 +1,14 @@
 # Two entry points for a newcomer on a fresh machine (see README.md):
 #   make demo   set everything up, start the default service, run the paper's experiment
 #   make test   set everything up and run the whole test suite
+#   make test-quick  the inner loop, under a minute: the unit tests and one integration smoke test
 #   make lint   ruff (lint and format) over the tree, mypy --strict over the modules pyproject.toml
 #               lists, import-linter over the layers ([tool.importlinter] in pyproject.toml)
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 
-.PHONY: setup demo test lint clean mutation
+.PHONY: setup demo test test-quick lint clean mutation
 
 setup: $(VENV)/.installed
 
@@ -50,7 +51,7 @@ ros-venvs: $(ROS_VENVS)
 	touch $@
 
 demo: setup
-	$(BIN)/python bench/latency.py
+	$(BIN)/python bench/latency/paper.py
 
 # The whole suite on the compiled hot path (the first line fails if it is not compiled), then the
 # engine's, the ring's and the local path's tests again on the pure-Python fallback
@@ -64,10 +65,24 @@ PURE_TESTS := tests/unit tests/integration/test_ring.py tests/integration/test_l
 TEST_WORKERS ?= 2
 XDIST := $(if $(filter 0,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist loadscope)
 
+# Last, scripts/test-aarch64.sh's steps on this machine's own CPU (its emulated ARM64 run is by
+# hand, 25 minutes): the ordering mode, and its pytest call over one file (its list ran above).
 test: setup lint $(ROS_VENVS)
 	$(BIN)/python -c "import fxis_shm, os, sys; sys.exit(not (fxis_shm.compiled or os.environ.get('FXIS_PURE_PYTHON') == '1'))"
 	$(BIN)/python -m pytest $(XDIST)
 	FXIS_PURE_PYTHON=1 $(BIN)/python -m pytest -q $(XDIST) $(PURE_TESTS)
+	scripts/test-aarch64.sh --quick -q tests/unit/test_ordering.py
+
+# The inner loop: every unit test and one smoke test of a real service (a tuple's pixels checked
+# against its metadata), without lint; `make test` (and CI) still runs everything.
+QUICK_TESTS := tests/unit tests/integration/test_requests.py::test_tuple_pixels_are_the_frames_the_metadata_names
+
+# --dist load: test by test, not file by file, so the few long property-test files do not hold
+# up one worker (58 s on this 2-core machine while others loaded it to 5; 104 s file by file).
+QUICK_XDIST := $(if $(filter 0,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist load)
+
+test-quick: setup
+	$(BIN)/python -m pytest -q $(QUICK_XDIST) $(QUICK_TESTS)
 
 lint: setup
 	$(BIN)/ruff check .

@@ -11,7 +11,7 @@
 #   gcc, which builds the ring's memory-ordering helper (fxis_shm/shm/_ordered.c), its seqlock reads
 #   (_slotio.c) and the request engine mypyc compiles (setup.py), and python3-dev (Python.h) for them
 #   when this Python has no headers of its own;
-# - libturbojpeg0, the TurboJPEG library PyTurboJPEG loads (bench/jpeg_codecs.py measures it);
+# - libturbojpeg0, the TurboJPEG library PyTurboJPEG loads (bench/compare/jpeg.py measures it);
 # - chromium, the headless browser the dashboard's browser test drives
 #   (tests/integration/test_dashboard_browser.py);
 # - g++, make, libzmq3-dev (libzmq), cppzmq-dev (its C++ header zmq.hpp) and nlohmann-json3-dev

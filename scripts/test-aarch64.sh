@@ -1,7 +1,8 @@
 #!/usr/bin/env bash
 # Runs the ring's memory-ordering tests on an emulated aarch64 (ARM64) CPU, where the
 # seqlock needs the fences of fxis_shm/shm/_ordered.c (docs/design.md, "Memory ordering").
-# Not part of `make test`: it takes a few minutes and needs root (apt, mounts, chroot).
+# The emulated run is not part of `make test` (about 25 minutes; root for apt, mounts, chroot);
+# its --quick mode below is.
 #
 # How: Debian's qemu-user-static runs aarch64 binaries through binfmt_misc; mmdebstrap
 # makes a Debian arm64 root (python3, gcc) in $FXIS_AARCH64_ROOT, kept between runs;
@@ -9,22 +10,61 @@
 # which compiles the helper for aarch64. No foreign architecture is added to this
 # machine's dpkg. Remove the root with `rm -rf` (nothing stays mounted after a run).
 #
-# Usage: scripts/test-aarch64.sh [pytest arguments]  (default: the tests below)
+# Usage: scripts/test-aarch64.sh [--quick] [pytest arguments]  (default: the tests below)
+#   --quick: the same checks on this machine's own CPU with this checkout's .venv, without
+#   qemu and without root, in seconds; `make test` runs it, so that the script cannot rot
+#   unnoticed between the runs on the emulated CPU (tests/unit/test_scripts.py checks the
+#   modules its Python imports and the test files it names).
 set -euo pipefail
 
 ROOT=${FXIS_AARCH64_ROOT:-/var/tmp/fxis-aarch64-root}
 SRC=$(cd "$(dirname "$0")/.." && pwd)
-[ "$(id -u)" -eq 0 ] || { echo "scripts/test-aarch64.sh: run as root (apt, mounts, chroot)" >&2; exit 2; }
+QUICK=0
+if [ "${1:-}" = --quick ]; then QUICK=1; shift; fi
 
-# The ring tests, the stamp that detects torn frames, and the local path (clients
-# copying from the rings under the seqlock). Not run: the torn-read stress, whose frames-served floor (> 1000 in 8 x 150 tries against a
-# 500 fps writer) an emulated CPU does not reach; run it with
+# The ring tests, the stamp that detects torn frames, the local path (clients copying from
+# the rings under the seqlock), the slot records' reads and the compiled read of the common
+# requests. Not run: the torn-read stress, whose frames-served floor (> 1000 in 8 x 150 tries
+# against a 500 fps writer) an emulated CPU does not reach; run it with
 # `scripts/test-aarch64.sh tests/integration/test_faults.py -k torn`.
 TESTS=(tests/unit/test_ordering.py tests/integration/test_ring.py tests/unit/test_stamp.py
-       tests/integration/test_localpath.py)
+       tests/integration/test_localpath.py tests/unit/test_slotio.py tests/integration/test_compiledread.py)
 [ $# -eq 0 ] || TESTS=("$@")
 
 step() { echo "== $*"; }
+
+# The machine is the one expected ($1), the helper's fences are in use, and asking for plain
+# accesses (FXIS_PLAIN_ORDERING=1) gives $2: plain ones only where they are correct (x86),
+# the fences still elsewhere. The rest of the arguments: how to run python there.
+check_ordering() {
+  local machine=$1 plain=$2
+  shift 2
+  "$@" python -c '
+import platform, subprocess, sys
+from fxis_shm.shm import ordering
+machine, expected_plain = sys.argv[1:]
+plain = subprocess.run([sys.executable, "-c", "from fxis_shm.shm import ordering; print(ordering.MODE)"],
+                       env={"FXIS_PLAIN_ORDERING": "1"}, capture_output=True, text=True, check=True).stdout.strip()
+print(f"machine={platform.machine()} python={platform.python_version()} MODE={ordering.MODE} "
+      f"MODE with FXIS_PLAIN_ORDERING=1: {plain}")
+assert platform.machine() == machine and ordering.MODE == "fenced" and plain == expected_plain' "$machine" "$plain"
+}
+
+run_tests() {  # the arguments: how to run python in the tree
+  step "pytest ${TESTS[*]}"
+  "$@" python -m pytest -p no:cacheprovider "${TESTS[@]}"
+}
+
+if [ "$QUICK" -eq 1 ]; then
+  here() { (cd "$SRC" && PATH="$SRC/.venv/bin:$PATH" "$@"); }
+  case $(uname -m) in x86_64 | amd64 | i386 | i686) plain=x86-tso ;; *) plain=fenced ;; esac
+  step "quick: the ordering mode and the tests on this machine's CPU, $(uname -m) (no qemu)"
+  check_ordering "$(uname -m)" "$plain" here
+  run_tests here
+  exit 0
+fi
+
+[ "$(id -u)" -eq 0 ] || { echo "scripts/test-aarch64.sh: run as root (apt, mounts, chroot)" >&2; exit 2; }
 
 wanted=(qemu-user-static binfmt-support mmdebstrap arch-test)
 missing=()
@@ -90,16 +130,8 @@ git -C "$SRC" ls-files -co --exclude-standard -z | (cd "$SRC" && tar --null -T -
 [ -x "$ROOT/opt/venv/bin/python" ] || in_root python3 -m venv /opt/venv
 in_root sh -c 'cd /src && pip install --quiet -e ".[test]"'
 
-step "the helper and the ordering mode on the emulated CPU"
+step "the helper's instructions and the ordering mode on the emulated CPU"
 in_root sh -c 'objdump -d /src/fxis_shm/shm/_ordered.*.so | grep -E "<(load_acquire|store_release|fence_acquire|fence_release)>:|ldar|stlr|dmb"'
-in_root python -c '
-import platform, subprocess, sys
-from fxis_shm.shm import ordering
-plain = subprocess.run([sys.executable, "-c", "from fxis_shm import ordering; print(ordering.MODE)"],
-                       env={"FXIS_PLAIN_ORDERING": "1"}, capture_output=True, text=True, check=True).stdout.strip()
-print(f"machine={platform.machine()} python={platform.python_version()} MODE={ordering.MODE} "
-      f"MODE with FXIS_PLAIN_ORDERING=1: {plain}")
-assert platform.machine() == "aarch64" and ordering.MODE == plain == "fenced"'
-
-step "pytest ${TESTS[*]}"
-in_root sh -c 'cd /src && exec python -m pytest -p no:cacheprovider "$@"' pytest "${TESTS[@]}"
+check_ordering aarch64 fenced in_root
+in_tree() { in_root sh -c 'cd /src && exec "$@"' sh "$@"; }
+run_tests in_tree

@@ -76,10 +76,20 @@ def emulated_hosts(tmp_path):
     """A ``tests.hosts.Lab``: emulated hosts (namespaces, own clocks, shaped links), all removed
     afterwards, also when the test failed. Fails, saying why, where they cannot be made (not
     root, no time namespaces): these tests need them, and CI runs as root."""
+    yield from _lab(tmp_path)
+
+
+@pytest.fixture(scope="module")
+def module_hosts(tmp_path_factory):
+    """As ``emulated_hosts``, one Lab for a module's tests that only read from its hosts."""
+    yield from _lab(tmp_path_factory.mktemp("hosts"))
+
+
+def _lab(log_dir):
     from .hosts import HostsUnavailable, Lab
 
     try:
-        lab = Lab(log_dir=str(tmp_path))
+        lab = Lab(log_dir=str(log_dir))
     except HostsUnavailable as exc:
         pytest.fail(f"emulated hosts unavailable: {exc}", pytrace=False)
     with lab:

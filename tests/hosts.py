@@ -29,7 +29,7 @@ a kernel with time namespaces (Linux >= 5.6); ``check_support`` says what is mis
             frame = client.image("a")     # frame.service_t_capture - host.clock_offset_ns ~ our clock
 
 Used by tests/integration/test_hosts.py (the ``emulated_hosts`` fixture in tests/conftest.py)
-and bench/network.py (with the repository's root on sys.path).
+and bench/network/remote.py (with the repository's root on sys.path).
 """
 
 from __future__ import annotations

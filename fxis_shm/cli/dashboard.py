@@ -15,8 +15,6 @@ from fxis_shm.errors import ConfigError
 from fxis_shm.service.config import ViewerAccess, check_viewer_files, http_address, viewer_token
 from fxis_shm.service.stopsignals import stop_on
 from fxis_shm.service.supervisor import link_host
-from fxis_shm.viewers.dashboard import serve
-from fxis_shm.viewers.livefeed import LiveFeed
 from fxis_shm.wire.endpoints import check_endpoint, check_host_known
 from fxis_shm.wire.security import is_loopback
 
@@ -34,6 +32,11 @@ def access_for(args) -> ViewerAccess:
 
 
 def dashboard_command(args) -> int:
+    # here, not at the top: every `fxis` command (and each service, `fxis run`) would import
+    # aiohttp and the page's server, a third of a second, for this one command
+    from fxis_shm.viewers.dashboard import serve
+    from fxis_shm.viewers.livefeed import LiveFeed
+
     if len(set(args.endpoints)) != len(args.endpoints):
         raise ConfigError(f"an endpoint is given twice: {args.endpoints}")
     for endpoint in args.endpoints:  # a mistyped one: a line now, not a service that never answers

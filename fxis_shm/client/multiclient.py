@@ -12,8 +12,7 @@ from collections.abc import Callable, Sequence
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
-from fxis_shm.client import snapshot
-from fxis_shm.client.frames import Frame, FrameTuple, frames_of, sequence_of, tuple_of
+from fxis_shm.client.api import ClientApi
 from fxis_shm.client.jointrequests import JointRequests
 from fxis_shm.client.multistreams import MultiEventPublisher, MultiSubscriber
 from fxis_shm.client.single import SingleClient
@@ -23,7 +22,7 @@ from fxis_shm.errors import ConfigError, FxisError, InvalidArgument, RequestTime
 from fxis_shm.wire.endpoints import check_endpoint
 
 
-class MultiClient:
+class MultiClient(ClientApi):
     """``MultiClient(["tcp://hostA:5555", "tcp://hostB:5555"])`` (what ``Client([...])``
     makes): the methods of ``Client`` over the cameras of every service. Camera names must be
     unique across the services. Times are in the caller's clock (``clock``); the other
@@ -46,6 +45,7 @@ class MultiClient:
         self._options = {"timeout": timeout, "clock": clock, **client_options}
         self.clients = [SingleClient(e, timeout=timeout, clock=clock, **client_options) for e in endpoints]
         self.clock = self.clients[0].clock
+        self._clock_name = self.clients[0]._clock_name
         self._pool = ThreadPoolExecutor(max_workers=len(self.clients), thread_name_prefix="fxis-multi-status")
         self._requests: JointRequests | None = None
         try:
@@ -76,12 +76,6 @@ class MultiClient:
             self._requests.close()
         for client in self.clients:
             client.close()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()
 
     # ---- the services ----
 
@@ -120,9 +114,8 @@ class MultiClient:
         """As ``Client.configure``, on the service that has ``camera``."""
         return self.owner[self._known([camera])[0]].configure(camera, **values)
 
-    def frame_times(self, cameras: list[str] | None = None) -> dict:
-        """As ``Client.frame_times`` over every service: each camera's frames without pixels
-        (times in its own service's clock, named by the camera's ``service``)."""
+    def _frame_times(self, cameras: list[str] | None) -> dict:
+        """Every service's answer together, each camera named with its ``service``."""
         names = self._known(cameras or list(self.owner))
         merged: dict = {"cameras": {}, "columns": None}
         for client in self.clients:
@@ -141,137 +134,30 @@ class MultiClient:
         reasons = [f"{c.endpoint}: {c.local_unavailable}" for c in self.clients if c.local_unavailable]
         return "; ".join(reasons) or None
 
-    # ---- operations (as Client's, over every service) ----
+    # ---- what ClientApi's operations ask of several services ----
 
-    def image(
+    def _answer(
         self,
-        camera: str,
-        *,
-        at: int | None = None,
-        wait: str | None = None,
-        timeout: float | None = None,
-        copy: bool = True,
-        encoding: str | None = None,
-        quality: int | None = None,
-        timeout_ms: float | None = None,
-    ) -> Frame:
-        """As ``Client.image``, for a camera of any of the services."""
-        return frames_of(
-            *self._answer(
-                "image",
-                copy,
-                encoding,
-                quality,
-                camera=camera,
-                at=at,
-                wait=wait,
-                timeout_ms=wire_timeout_ms(timeout, timeout_ms),
-            )
-        )[0]
-
-    def tuple(
-        self,
-        cameras: list[str] | None = None,
-        *,
-        at: int | None = None,
-        sync: str | None = None,
-        wait: str | None = None,
-        max_skew_ms: float | None = None,
-        timeout: float | None = None,
-        partial: bool = False,
-        copy: bool = True,
-        encoding: str | None = None,
-        quality: int | None = None,
-        timeout_ms: float | None = None,
-    ) -> FrameTuple:
-        """As ``Client.tuple``: frames of cameras of several services chosen together."""
-        return tuple_of(
-            *self._answer(
-                "tuple",
-                copy,
-                encoding,
-                quality,
-                cameras=cameras,
-                at=at,
-                sync=sync,
-                wait=wait,
-                max_skew_ms=max_skew_ms,
-                timeout_ms=wire_timeout_ms(timeout, timeout_ms),
-                partial=partial or None,
-            )
+        op: str,
+        timeout: float | None,
+        timeout_ms: float | None,
+        copy: bool,
+        encoding: str | None,
+        quality: int | None,
+        **fields,
+    ) -> tuple[dict, list, Callable | None]:
+        """Answered by one engine over every service's frame times (fxis_shm.client.jointrequests)."""
+        assert self._requests is not None
+        return self._requests.answer(
+            op, copy, encoding, quality, **fields, timeout_ms=wire_timeout_ms(timeout, timeout_ms)
         )
 
-    def latest(
-        self,
-        cameras: list[str] | None = None,
-        *,
-        copy: bool = True,
-        encoding: str | None = None,
-        quality: int | None = None,
-    ) -> FrameTuple:
-        """As ``Client.latest``: the newest stored frame of each camera of every service."""
-        return tuple_of(*self._answer("latest", copy, encoding, quality, cameras=cameras))
+    def _owners(self, cameras: list[str] | None) -> dict[str, SingleClient]:
+        return {name: self.owner[name] for name in self._known(cameras or list(self.owner))}
 
-    def sequence(
-        self,
-        kind: str,
-        *,
-        camera: str | None = None,
-        cameras: list[str] | None = None,
-        count: int | None = None,
-        direction: str = "before",
-        interval_ms: float | None = None,
-        start: int | None = None,
-        end: int | None = None,
-        at: int | None = None,
-        sync: str | None = None,
-        timeout: float | None = None,
-        copy: bool = True,
-        encoding: str | None = None,
-        quality: int | None = None,
-        timeout_ms: float | None = None,
-    ) -> list:
-        """As ``Client.sequence`` (a list of Frame for one ``camera``, else of FrameTuple)."""
-        header, images, check = self._answer(
-            "sequence",
-            copy,
-            encoding,
-            quality,
-            kind=kind,
-            camera=camera,
-            cameras=cameras,
-            count=count,
-            direction=direction,
-            interval_ms=interval_ms,
-            start=start,
-            end=end,
-            at=at,
-            sync=sync,
-            timeout_ms=wire_timeout_ms(timeout, timeout_ms),
-        )
-        return sequence_of(header, images, check, single=camera is not None)
-
-    def snapshot(
-        self,
-        at: int | None = None,
-        before: float = 2.0,
-        after: float = 1.0,
-        out: str = "snapshot",
-        cameras: list[str] | None = None,
-        encoding: str = "raw",
-        quality: int | None = None,
-    ) -> dict:
-        """As ``Client.snapshot``, the cameras of every service into one bag, every stamp in
-        the caller's clock."""
-        names = self._known(cameras or list(self.owner))
-        owners = {name: self.owner[name] for name in names}
-        clock_name = self.clients[0]._clock_name
-        return snapshot.take(owners, self.clock, out, at, before, after, encoding, quality, clock_name)
-
-    def subscribe(self, timeout: float = 2.0, queue: int = 16) -> MultiSubscriber:
-        """A subscriber of every service's streams, every time in the caller's clock:
-        ``frames(camera)`` of any camera, and ``tuples(rate_hz)``, joint tuples across the
-        services (fxis_shm.client.tuplestream)."""
+    def _subscriber(self, timeout: float, queue: int) -> MultiSubscriber:
+        """Every service's streams: ``frames(camera)`` of any camera, and ``tuples(rate_hz)``,
+        joint tuples across the services (fxis_shm.client.tuplestream)."""
         return MultiSubscriber(self.clients, self.owner, self._options, timeout, queue)
 
     def events(self) -> MultiEventPublisher:
@@ -280,10 +166,6 @@ class MultiClient:
         return MultiEventPublisher(self.clients, self.owner)
 
     # ---- helpers ----
-
-    def _answer(self, op: str, copy: bool, encoding: str | None, quality: int | None, **fields):
-        assert self._requests is not None
-        return self._requests.answer(op, copy, encoding, quality, **fields)
 
     def _known(self, names: list[str]) -> list[str]:
         unknown = [n for n in names if n not in self.owner]

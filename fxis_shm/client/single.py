@@ -26,30 +26,23 @@ from collections.abc import Callable
 import numpy as np
 import zmq
 
-from fxis_shm.client import snapshot
+from fxis_shm.client.api import ClientApi
 from fxis_shm.client.clocktracker import ClockTracker
 from fxis_shm.client.fastreads import FastReads
-from fxis_shm.client.frames import LOCAL, NETWORK, Frame, FrameTuple, frames_of, in_caller_clock, sequence_of, tuple_of
+from fxis_shm.client.frames import LOCAL, NETWORK, in_caller_clock
 from fxis_shm.client.handshake import HandshakeWatch
 from fxis_shm.client.localreads import LocalReads
 from fxis_shm.client.pubsub import EventPublisher, Subscriber
 from fxis_shm.client.requestpaths import RequestPaths
 from fxis_shm.client.requesttimes import fixed_mapping, last_needed
-from fxis_shm.client.sockets import (
-    SocketOwner,
-    checked_encoding,
-    connected_socket,
-    reachable,
-    recv_parts,
-    send_parts,
-    wire_timeout_ms,
-)
+from fxis_shm.client.sockets import SocketOwner, checked_encoding, connected_socket, reachable, wire_timeout_ms
 from fxis_shm.core import timebase
 from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.errors import InvalidArgument, RequestTimeout, service_error
 from fxis_shm.shm.localpath import LocalRings, boot_id
 from fxis_shm.wire import commands, defaults, encoding as codec, protocol
 from fxis_shm.wire.endpoints import check_endpoint, unknown_host
+from fxis_shm.wire.multipart import recv_parts, send_parts
 from fxis_shm.wire.security import ClientKeys
 
 DEFAULT_ENDPOINT = defaults.ENDPOINT
@@ -59,7 +52,7 @@ _PERIODS_VALID_S = 10.0  # the cameras' periods learnt from the status, for sequ
 _EVENTS, _POLLOUT = int(zmq.EVENTS), int(zmq.POLLOUT)
 
 
-class SingleClient(RequestPaths, SocketOwner):
+class SingleClient(RequestPaths, SocketOwner, ClientApi):
     """A client of one service (what ``Client(endpoint)`` makes): every call raises
     RequestTimeout after ``timeout`` seconds."""
 
@@ -133,139 +126,10 @@ class SingleClient(RequestPaths, SocketOwner):
         """Why the last request could not use the local path (None: it could, or was not asked to)."""
         return self._local_off[0] if self._local_off else None
 
-    # ---- operations ----
+    # ---- what ClientApi's operations ask of one service ----
 
-    def image(
-        self,
-        camera: str,
-        *,
-        at: int | None = None,
-        wait: str | None = None,
-        timeout: float | None = None,
-        copy: bool = True,
-        encoding: str | None = None,
-        quality: int | None = None,
-        timeout_ms: float | None = None,
-    ) -> Frame:
-        """The frame of ``camera`` nearest to ``at`` (ns of the caller's clock; default: the
-        moment of this call).
-
-        ``timeout``: seconds the service may wait for frames (default: its setting).
-        ``copy=False`` (local path only): the image is a read-only view of the ring slot,
-        with no copy at all; check ``frame.still_valid()`` after using it.
-        ``encoding``/``quality``: as the client's, for this request."""
-        if self._fast is not None and encoding is quality is timeout is timeout_ms is None:
-            frame = self._compiled(self._fast.image(camera, at, wait, copy))
-            if frame is not None:
-                return frame
-        return frames_of(
-            *self._request("image", timeout, timeout_ms, copy, encoding, quality, camera=camera, at=at, wait=wait)
-        )[0]
-
-    def tuple(
-        self,
-        cameras: list[str] | None = None,
-        *,
-        at: int | None = None,
-        sync: str | None = None,
-        wait: str | None = None,
-        max_skew_ms: float | None = None,
-        timeout: float | None = None,
-        partial: bool = False,
-        copy: bool = True,
-        encoding: str | None = None,
-        quality: int | None = None,
-        timeout_ms: float | None = None,
-    ) -> FrameTuple:
-        """One frame per camera (default: all), nearest to ``at`` (ns of the caller's clock;
-        default: the moment of this call) and to each other. With ``partial``, cameras
-        that are down are left out (``.missing`` names them) instead of failing the request
-        with CameraDown."""
-        if self._fast is not None and encoding is quality is timeout is timeout_ms is max_skew_ms is None:
-            tuple_ = self._compiled(self._fast.tuple(cameras, at, sync, wait, copy))
-            if tuple_ is not None:
-                return tuple_
-        return tuple_of(
-            *self._request(
-                "tuple",
-                timeout,
-                timeout_ms,
-                copy,
-                encoding,
-                quality,
-                cameras=cameras,
-                at=at,
-                sync=sync,
-                wait=wait,
-                max_skew_ms=max_skew_ms,
-                partial=partial or None,
-            )
-        )
-
-    def latest(
-        self,
-        cameras: list[str] | None = None,
-        *,
-        copy: bool = True,
-        encoding: str | None = None,
-        quality: int | None = None,
-    ) -> FrameTuple:
-        """The newest stored frame of each camera, without waiting."""
-        if self._fast is not None and encoding is quality is None:
-            tuple_ = self._compiled(self._fast.latest(cameras, copy))
-            if tuple_ is not None:
-                return tuple_
-        return tuple_of(*self._request("latest", None, None, copy, encoding, quality, cameras=cameras))
-
-    def sequence(
-        self,
-        kind: str,
-        *,
-        camera: str | None = None,
-        cameras: list[str] | None = None,
-        count: int | None = None,
-        direction: str = "before",
-        interval_ms: float | None = None,
-        start: int | None = None,
-        end: int | None = None,
-        at: int | None = None,
-        sync: str | None = None,
-        timeout: float | None = None,
-        copy: bool = True,
-        encoding: str | None = None,
-        quality: int | None = None,
-        timeout_ms: float | None = None,
-    ) -> list:
-        """Several frames of one ``camera`` (a list of Frame) or tuples of ``cameras``
-        (default all; a list of FrameTuple):
-
-        - ``kind="consecutive"``: ``count`` frames ``before``, ``after`` or ``around`` t*;
-        - ``kind="interval"``: the frames nearest to t* + i*interval_ms, i = 0..count-1;
-        - ``kind="range"``: every frame captured in [start, end] (ns of the caller's clock).
-        """
-        header, images, check = self._request(
-            "sequence",
-            timeout,
-            timeout_ms,
-            copy,
-            encoding,
-            quality,
-            camera=camera,
-            cameras=cameras,
-            kind=kind,
-            count=count,
-            direction=direction,
-            interval_ms=interval_ms,
-            start=start,
-            end=end,
-            at=at,
-            sync=sync,
-        )
-        return sequence_of(header, images, check, single=camera is not None)
-
-    def subscribe(self, timeout: float = 2.0, queue: int = 16) -> Subscriber:
-        """A Subscriber of this service's streams (its publisher, learnt from the status), every
-        time in this client's clock; a context manager like the client."""
+    def _subscriber(self, timeout: float, queue: int) -> Subscriber:
+        """A Subscriber of this service's streams (its publisher, learnt from the status)."""
         pub = reachable(self.status()["pub"], self.endpoint)
         return Subscriber(pub, timeout, queue, self._context, self._keys, estimate=self.clock_estimate)
 
@@ -276,24 +140,8 @@ class SingleClient(RequestPaths, SocketOwner):
         events = reachable(self.status()["events"], self.endpoint)
         return EventPublisher(events, self._context, self._keys, estimate=self.clock_estimate, now=self.clock)
 
-    def snapshot(
-        self,
-        at: int | None = None,
-        before: float = 2.0,
-        after: float = 1.0,
-        out: str = "snapshot",
-        cameras: list[str] | None = None,
-        encoding: str = codec.RAW,
-        quality: int | None = None,
-    ) -> dict:
-        """Every frame of ``cameras`` (default all) captured in [at - before, at + after]
-        (``at``: ns of the caller's clock, default now; seconds) into the rosbag2/MCAP bag
-        ``out``, stamps in the caller's clock; returns per camera the frames kept and the ids
-        of any missing (fxis_shm.client.snapshot). Blocks until ``at + after`` has passed."""
-        names = cameras or list(self.status()["cameras"])
-        return snapshot.take(
-            dict.fromkeys(names, self), self.clock, out, at, before, after, encoding, quality, self._clock_name
-        )
+    def _owners(self, cameras: list[str] | None) -> dict[str, SingleClient]:
+        return dict.fromkeys(cameras or list(self.status()["cameras"]), self)
 
     @property
     def clocks(self) -> dict[str, ClockEstimate]:
@@ -355,7 +203,7 @@ class SingleClient(RequestPaths, SocketOwner):
         assert self._identity is not None
         return self._identity
 
-    def _request(
+    def _answer(
         self,
         op: str,
         timeout: float | None,
@@ -391,9 +239,7 @@ class SingleClient(RequestPaths, SocketOwner):
         header, images, check = self._fetch(op, extra, copy, timeout_ms=waits_ms, **fields)
         return in_caller_clock(header, mapping), images, check
 
-    def frame_times(self, cameras: list[str] | None = None) -> dict:
-        """Each camera's frames without pixels (the ``frames`` op): liveness, period and a row
-        per valid frame with the fields named in ``columns``, times in the service's clock."""
+    def _frame_times(self, cameras: list[str] | None) -> dict:
         return self._call("frames", 0.0, cameras=cameras)[0]
 
     # ---- plumbing ----

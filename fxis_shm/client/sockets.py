@@ -1,13 +1,12 @@
 """What every socket of the client side shares: the frame encoding checked before a request
 leaves, a connected socket that never blocks on close, closing as a context manager, a
-request's own timeout as the wire carries it, and a message sent and received by pyzmq's
-direct calls."""
+request's own timeout as the wire carries it (a message's parts are sent and received by
+fxis_shm.wire.multipart, as the service sends them)."""
 
 from __future__ import annotations
 
-import math
 import warnings
-from collections.abc import Callable, Sequence
+from collections.abc import Callable
 
 import zmq
 
@@ -24,35 +23,6 @@ def checked_encoding(encoding: str, quality: int | None) -> tuple[str, int | Non
     except ProtocolError as exc:
         raise InvalidArgument(exc.message) from None
     return encoding, quality
-
-
-# plain ints: their arithmetic is far cheaper than that of pyzmq's enums
-_MORE, _LAST, _RCVTIMEO = int(zmq.NOBLOCK | zmq.SNDMORE), int(zmq.NOBLOCK), int(zmq.RCVTIMEO)
-
-
-def send_parts(sock: zmq.Socket, parts: Sequence) -> None:
-    """``parts`` as one message, without blocking (zmq.Again if it cannot go now): messages
-    (zmq.Frame) and image buffers handed to ZeroMQ without a copy, small byte strings copied
-    (cheaper than tracking them). (pyzmq's send_multipart checks each part's type in Python
-    first; cold, as a request is when it comes long after the last, that costs more than the
-    sends themselves.)"""
-    last = len(parts) - 1
-    for i, part in enumerate(parts):
-        sock.send(part, _MORE if i < last else _LAST, copy=isinstance(part, (bytes, zmq.Frame)))
-
-
-def recv_parts(sock: zmq.Socket, timeout_s: float) -> list[zmq.Frame] | None:
-    """The next message's parts (uncopied), waiting at most ``timeout_s``; None if none came.
-    (A receive with a timeout of its own: pyzmq's poll makes a Poller in Python every call,
-    a quarter of the cold cost of a small round trip's client side.)"""
-    sock.setsockopt(_RCVTIMEO, max(1, math.ceil(timeout_s * 1000)))
-    try:
-        parts = [sock.recv(copy=False)]
-    except zmq.Again:
-        return None
-    while parts[-1].more:  # ZeroMQ delivers a message whole: the rest is there
-        parts.append(sock.recv(copy=False))
-    return parts
 
 
 def connected_socket(

@@ -22,7 +22,6 @@ import zmq.auth
 from zmq.auth.certs import load_certificates
 from zmq.auth.thread import ThreadAuthenticator
 
-from fxis_shm.client.sockets import send_parts
 from fxis_shm.core import timebase
 from fxis_shm.core.engine import FRAME_OPS, Action, Failure, Reply, RequestEngine, Trigger
 from fxis_shm.errors import Code, ConfigError, ProtocolError
@@ -37,6 +36,7 @@ from fxis_shm.shm.copyout import MESSAGES, REFS, CopyOut
 from fxis_shm.shm.localpath import boot_id, time_namespace
 from fxis_shm.shm.ring import Overwritten
 from fxis_shm.wire import commands, protocol
+from fxis_shm.wire.multipart import send_parts
 from fxis_shm.wire.security import load_pair, make_server
 
 log = logging.getLogger("coordinator")

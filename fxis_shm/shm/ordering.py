@@ -36,7 +36,7 @@ def choose_mode(helper_built: bool, machine: str, want_plain: bool = False) -> s
     return "x86-tso" if plain_is_correct else None
 
 
-# FXIS_PLAIN_ORDERING=1: plain accesses where they are correct (bench/ring_ordering.py compares).
+# FXIS_PLAIN_ORDERING=1: plain accesses where they are correct (bench/costs/ring_ordering.py compares).
 MODE = choose_mode(_ordered is not None, platform.machine(), os.environ.get("FXIS_PLAIN_ORDERING") == "1")
 
 

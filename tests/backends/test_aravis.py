@@ -95,7 +95,7 @@ def test_without_pygobject_the_error_names_the_extra(monkeypatch):
 
 
 def test_a_free_running_camera_stores_complete_frames_across_the_id_wrap_and_counts_any_lost(emulator, start_service):
-    """Frame rate, losses and periods on loopback are measured by bench/gige.py; here: what is
+    """Frame rate, losses and periods on loopback are measured by bench/cameras/gige.py; here: what is
     stored is complete, in order, past the 16-bit wrap, and what is not stored is counted."""
     cam = emulator()
     svc = start_service(
@@ -256,7 +256,7 @@ def test_device_timestamps_land_on_the_host_clock(emulator, start_service):
         assert f.image.dtype == np.uint16 and f.image.shape == (48, 64)
         assert f.image[0, 0] == (256 * f.frame_id) % 65535  # the emulator's Mono16 ramp
         # captured (device clock, mapped onto the host's) before the host stored it, and recently:
-        # the device's own clock is another epoch (how long after capture: bench/gige.py --timestamp device)
+        # the device's own clock is another epoch (how long after capture: bench/cameras/gige.py --timestamp device)
         assert f.t_capture <= f.t_stored <= now
         assert now - 2_000_000_000 < f.t_capture
     assert all(b.t_capture > a.t_capture for a, b in zip(frames, frames[1:]))

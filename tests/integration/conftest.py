@@ -1,5 +1,4 @@
 import contextlib
-import os
 import subprocess
 
 import pytest
@@ -12,13 +11,27 @@ from ..conftest import assert_nothing_left, start_service  # noqa: F401  (shared
 SMALL = "width=64,height=48"
 
 
+def module_services(*arg_lists: list[str], **options):
+    """Services shared by a module's tests that only read (yield from it in a module-scoped
+    fixture): started once rather than once a test, each with ``options`` (ServiceProcess's).
+    Each is stopped and checked for leftovers afterwards, also when a later one failed to start."""
+    started: list[ServiceProcess] = []
+    try:
+        for args in arg_lists:
+            started.append(ServiceProcess(args, stderr=subprocess.DEVNULL, **options))
+            started[-1].start()
+        yield started
+    finally:
+        for svc in started:
+            svc.stop()
+    for svc in started:
+        assert_nothing_left(svc.name)
+
+
 def module_service(args: list[str]):
     """A service shared by a module's tests (yield from it in a module-scoped fixture)."""
-    svc = ServiceProcess(args, stderr=open(os.devnull, "w"))
-    svc.start()
-    yield svc
-    svc.stop()
-    assert_nothing_left(svc.name)
+    for (svc,) in module_services(args):
+        yield svc
 
 
 @pytest.fixture(scope="module")

@@ -25,17 +25,28 @@ from .test_dashboard_browser import TILES_JS, browser  # noqa: F401  (the fixtur
 pytestmark = pytest.mark.integration
 
 
+@pytest.fixture(scope="module")
+def cell(module_hosts, tmp_path_factory):
+    """Two hosts, a camera on each, and ``fxis dashboard`` over both on this host: shared by
+    the tests that only read from them."""
+    yield from _cell(module_hosts, tmp_path_factory.mktemp("cell"))
+
+
 @pytest.fixture
-def cell(emulated_hosts, tmp_path):
-    """Two hosts, a camera on each, and ``fxis dashboard`` over both on this host."""
-    a = emulated_hosts.host(clock_offset_s=1000)
-    b = emulated_hosts.host(clock_offset_s=3000)
+def cell_to_stop(emulated_hosts, tmp_path):
+    """A test's own, for the test that stops a host's service."""
+    yield from _cell(emulated_hosts, tmp_path)
+
+
+def _cell(lab, folder):
+    a = lab.host(clock_offset_s=1000)
+    b = lab.host(clock_offset_s=3000)
     sa = a.service("--camera", f"left=synthetic:fps=20,{SMALL}")
     sb = b.service("--camera", f"right=synthetic:fps=20,phase_ms=9,{SMALL}")
-    keys = os.path.join(emulated_hosts._keys_dir, "keys")
+    keys = os.path.join(lab._keys_dir, "keys")
     key_options = ["--server-key", os.path.join(keys, "server.key")]
     key_options += ["--client-key", os.path.join(keys, "client.key_secret")]
-    with cell_dashboard([sa.endpoint, sb.endpoint, *key_options], tmp_path / "dashboard.out") as base:
+    with cell_dashboard([sa.endpoint, sb.endpoint, *key_options], folder / "dashboard.out") as base:
         wait_until(lambda: _all_answer(base), timeout=60, what="the cell dashboard's first look at both hosts")
         yield base, (a, sa), (b, sb)
 
@@ -102,8 +113,8 @@ def test_save_tuple_takes_a_tuple_across_hosts(cell):
     assert described["skew_ns"] <= 50_000_000
 
 
-def test_in_chromium_both_hosts_are_live_and_a_host_that_stops_shows_as_gone(cell, browser):  # noqa: F811
-    base, _, (_, sb) = cell
+def test_in_chromium_both_hosts_are_live_and_a_host_that_stops_shows_as_gone(cell_to_stop, browser):  # noqa: F811
+    base, _, (_, sb) = cell_to_stop
     browser.open(base + "/")
 
     def tiles() -> dict:

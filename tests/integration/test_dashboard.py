@@ -17,8 +17,8 @@ import pytest
 from fxis_shm import read_stamp
 from fxis_shm.service.launch import free_tcp_port
 
-from ..conftest import fxis_run_alone
-from .conftest import SMALL, client_keys
+from ..conftest import fxis_run_alone, wait_until
+from .conftest import SMALL, client_keys, module_services
 
 pytestmark = pytest.mark.integration
 
@@ -50,17 +50,29 @@ def jpeg(body: bytes) -> np.ndarray:
     return cv2.imdecode(np.frombuffer(body, np.uint8), cv2.IMREAD_UNCHANGED)
 
 
+@pytest.fixture(scope="module")
+def dashboard():
+    """Shared by the tests that only read from the dashboard and its service."""
+    port = free_tcp_port()
+    for (svc,) in module_services([*CAMERAS, "--restart-limit", "0"], http=f"127.0.0.1:{port}"):
+        yield _seen(svc, port)
+
+
 @pytest.fixture
-def dashboard(start_service, wait):
+def own_dashboard(start_service, wait):
+    """A test's own, for the tests that stop its processes or count its work."""
     return start_dashboard(start_service, wait)
 
 
 def start_dashboard(start_service, wait):
     """A service with two cameras and its dashboard: (service, base URL)."""
     port = free_tcp_port()
-    svc = start_service(*CAMERAS, "--restart-limit", "0", http=f"127.0.0.1:{port}")
+    return _seen(start_service(*CAMERAS, "--restart-limit", "0", http=f"127.0.0.1:{port}"), port)
+
+
+def _seen(svc, port: int):
     base = f"http://127.0.0.1:{port}"
-    wait(lambda: service_ok(base), timeout=20, what="the dashboard's first look at the service")
+    wait_until(lambda: service_ok(base), timeout=20, what="the dashboard's first look at the service")
     return svc, base
 
 
@@ -86,8 +98,8 @@ def test_pictures_are_the_newest_frames_scaled_down(dashboard, wait):
     wait(lambda: get(base + "/cameras/a/latest.jpg?width=160")[1]["X-Fxis-Frame"] != first, what="a newer frame")
 
 
-def test_each_frame_shown_is_encoded_once_however_often_it_is_asked_for(dashboard):
-    svc, base = dashboard
+def test_each_frame_shown_is_encoded_once_however_often_it_is_asked_for(own_dashboard):
+    svc, base = own_dashboard
     before = view(base)["previews_encoded"]
     frames = {get(base + "/cameras/b/latest.jpg?width=33")[1]["X-Fxis-Frame"] for _ in range(12)}
     assert view(base)["previews_encoded"] - before == len(frames) < 12
@@ -137,8 +149,8 @@ def test_the_save_button_gives_a_zip_of_pngs_and_the_tuple(dashboard):
             assert image.shape == tuple(frame["shape"]) and read_stamp(image) == frame["frame_id"]
 
 
-def test_a_killed_camera_worker_shows_as_down(dashboard, wait):
-    svc, base = dashboard
+def test_a_killed_camera_worker_shows_as_down(own_dashboard, wait):
+    svc, base = own_dashboard
     pid = json.loads(get(base + "/status.json")[2])["supervisor"]["processes"]["camera:b"]["pid"]
     os.kill(pid, signal.SIGKILL)  # --restart-limit 0: it stays down
     wait(lambda: not view(base)["status"]["cameras"]["b"]["alive"], timeout=15, what="b shown down")
@@ -149,8 +161,8 @@ def test_a_killed_camera_worker_shows_as_down(dashboard, wait):
         assert json.loads(archive.read("tuple.json"))["missing"] == ["b"]
 
 
-def test_a_silent_service_is_shown_as_gone_and_back(dashboard, wait):
-    svc, base = dashboard
+def test_a_silent_service_is_shown_as_gone_and_back(own_dashboard, wait):
+    svc, base = own_dashboard
     pid = json.loads(get(base + "/status.json")[2])["supervisor"]["processes"]["coordinator"]["pid"]
     os.kill(pid, signal.SIGSTOP)
     try:

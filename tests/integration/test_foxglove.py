@@ -21,9 +21,9 @@ from websockets.sync.client import connect
 from fxis_shm import read_stamp
 from fxis_shm.service.launch import free_tcp_port
 
-from ..conftest import fxis, fxis_run_alone
+from ..conftest import fxis, fxis_run_alone, wait_until
 from ..foxglove_decode import message_class
-from .conftest import SMALL
+from .conftest import SMALL, module_services
 
 pytestmark = pytest.mark.integration
 
@@ -107,20 +107,27 @@ def foxglove_client(url: str, wait) -> FoxgloveClient:
     return wait(attempt, timeout=30, interval=0.1, what=f"the Foxglove server at {url}")
 
 
-@pytest.fixture
-def served(start_service, wait):
-    """A service with two cameras and its Foxglove server; yields (service, connected client)."""
+SERVED = [*CAMERAS, "--restart-limit", "0", "--slots", "100"]  # 100 slots: 5 s of a's frames
+
+
+@pytest.fixture(scope="module")
+def served():
+    """A service with two cameras and its Foxglove server, shared by the tests that only read
+    from it; yields (service, connected client)."""
     port = free_tcp_port()
-    svc = start_service(
-        *CAMERAS,
-        "--restart-limit",
-        "0",
-        "--slots",
-        "100",  # 5 s of a's frames
-        "--foxglove",
-        f"127.0.0.1:{port}",
-    )
-    client = foxglove_client(f"ws://127.0.0.1:{port}", wait)
+    for (svc,) in module_services([*SERVED, "--foxglove", f"127.0.0.1:{port}"]):
+        yield from _connected(svc, port)
+
+
+@pytest.fixture
+def served_to_set(start_service):
+    """A test's own, for the test that sets the server's rate."""
+    port = free_tcp_port()
+    yield from _connected(start_service(*SERVED, "--foxglove", f"127.0.0.1:{port}"), port)
+
+
+def _connected(svc, port: int):
+    client = foxglove_client(f"ws://127.0.0.1:{port}", wait_until)
     client.until(lambda _: TOPICS <= set(client.channels), what="every channel advertised")
     yield svc, client
     client.close()
@@ -176,8 +183,8 @@ def test_images_are_the_cameras_frames_stamped_with_their_capture_time(served):
     assert status["service_ok"] and set(status["status"]["cameras"]) == set(SIZES)
 
 
-def test_the_viewer_sets_the_rate_and_a_bad_one_is_refused(served):
-    svc, client = served
+def test_the_viewer_sets_the_rate_and_a_bad_one_is_refused(served_to_set):
+    svc, client = served_to_set
     client.ws.send(json.dumps({"op": "getParameters", "parameterNames": ["rate_hz"], "id": "get"}))
     values = client.until(
         lambda m: isinstance(m, dict) and m.get("op") == "parameterValues" and m, what="the rate parameter"

@@ -3,7 +3,7 @@ link over TEST-NET-2, CurveZMQ. The caller's clock across hosts, tuples across h
 that goes away and comes back, compressed frames (issue 11, items 1-8).
 
 Every test here needs root and namespaces; without them the ``emulated_hosts`` fixture fails
-saying so. None of them asserts a duration: bench/network.py measures."""
+saying so. None of them asserts a duration: bench/network/remote.py measures."""
 
 import os
 import subprocess

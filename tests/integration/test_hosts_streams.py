@@ -2,7 +2,7 @@
 streams at a rate, their skew against the least the rings allowed, a host that stops and comes
 back, a slow subscriber that holds up no one, and frame streams in the caller's clock.
 
-None of them asserts a duration: bench/multihost_tuples.py measures 1000 tuples."""
+None of them asserts a duration: bench/scale/hosts.py measures 1000 tuples."""
 
 import pytest
 
@@ -18,13 +18,24 @@ SPIKE_MARGIN_NS = 2_000_000  # the issue's bound: the phases' least skew + 2 ms
 TIMEOUT_S = 15.0  # CurveZMQ handshakes on a loaded machine
 
 
+@pytest.fixture(scope="module")
+def two_hosts(module_hosts):
+    """Shared by the tests that only read from the hosts."""
+    yield from _two_hosts(module_hosts)
+
+
 @pytest.fixture
-def two_hosts(emulated_hosts):
-    a = emulated_hosts.host(clock_offset_s=1000)
-    b = emulated_hosts.host(clock_offset_s=3000)
+def two_hosts_to_stop(emulated_hosts):
+    """A test's own, for the tests that stop a host's service."""
+    yield from _two_hosts(emulated_hosts)
+
+
+def _two_hosts(lab):
+    a = lab.host(clock_offset_s=1000)
+    b = lab.host(clock_offset_s=3000)
     sa = a.service("--camera", f"left=synthetic:fps={FPS},{SMALL}")
     sb = b.service("--camera", f"right=synthetic:fps={FPS},phase_ms=13,{SMALL}")
-    client = Client([sa.endpoint, sb.endpoint], timeout=TIMEOUT_S, keys=emulated_hosts.client_keys)
+    client = Client([sa.endpoint, sb.endpoint], timeout=TIMEOUT_S, keys=lab.client_keys)
     wait_until(lambda: _both(client), timeout=60, what="frames of both hosts")
     yield client, (a, sa), (b, sb)
     client.close()
@@ -76,8 +87,8 @@ def _quick(client) -> Client:
     return Client([c.endpoint for c in client.clients], timeout=3.0, keys=client.clients[0]._keys)
 
 
-def test_a_host_that_stops_gives_errors_in_the_stream_and_tuples_again_when_back(two_hosts):
-    client, _, (_, sb) = two_hosts
+def test_a_host_that_stops_gives_errors_in_the_stream_and_tuples_again_when_back(two_hosts_to_stop):
+    client, _, (_, sb) = two_hosts_to_stop
     with _quick(client) as quick, quick.subscribe(timeout=TIMEOUT_S) as sub:
         sub.tuples(rate_hz=5)
         assert sub.receive().ok
@@ -90,8 +101,8 @@ def test_a_host_that_stops_gives_errors_in_the_stream_and_tuples_again_when_back
         assert read_stamp(back.tuple["right"].image) == back.tuple["right"].frame_id
 
 
-def test_partial_tuples_leave_a_stopped_host_out(two_hosts):
-    client, _, (_, sb) = two_hosts
+def test_partial_tuples_leave_a_stopped_host_out(two_hosts_to_stop):
+    client, _, (_, sb) = two_hosts_to_stop
     with _quick(client) as quick, quick.subscribe(timeout=TIMEOUT_S) as sub:
         sub.tuples(rate_hz=5, partial=True)
         sb.stop()

@@ -135,7 +135,7 @@ def test_a_local_wait_ends_with_the_frame_it_waited_for_not_a_period_later(start
     that frame and slept a whole period more). Shown without a clock: a software-triggered
     camera stores a frame only when told, so exactly one frame lands between the counts read
     before the look and the wait, and no later one could end the wait instead. How soon a wait
-    ends is measured by bench/latency_wake.py."""
+    ends is measured by bench/latency/wake.py."""
     from fxis_shm.client.localreads import LocalReads
 
     svc = start_service("--camera", f"a=synthetic:trigger=software,{SMALL}")

@@ -13,20 +13,31 @@ from fxis_shm import CameraDown, Client, InvalidArgument, read_stamp
 from fxis_shm.client.pubsub import handshake
 
 from ..conftest import wait_until
-from .conftest import SMALL, child_pids
+from .conftest import SMALL, child_pids, module_services
 
 pytestmark = pytest.mark.integration
 
 
+TWO_SERVICES = (
+    ["--camera", f"left=synthetic:fps=50,{SMALL}"],
+    ["--camera", f"right=synthetic:fps=25,phase_ms=7,{SMALL}"],
+)
+
+
+@pytest.fixture(scope="module")
+def two_services():
+    """Shared by the tests that only read from the services."""
+    yield from module_services(*TWO_SERVICES)
+
+
 @pytest.fixture
-def two_services(start_service):
-    a = start_service("--camera", f"left=synthetic:fps=50,{SMALL}")
-    b = start_service("--camera", f"right=synthetic:fps=25,phase_ms=7,{SMALL}")
-    return a, b
+def two_services_to_stop(start_service):
+    """A test's own, for the tests that stop a service's coordinator."""
+    return [start_service(*args) for args in TWO_SERVICES]
 
 
-def test_status_is_each_services_and_the_cameras_of_all_and_a_silent_one_is_named(two_services):
-    a, b = two_services
+def test_status_is_each_services_and_the_cameras_of_all_and_a_silent_one_is_named(two_services_to_stop):
+    a, b = two_services_to_stop
     with Client([a.endpoint, b.endpoint], timeout=0.5) as client:
         before = time.monotonic_ns()
         status = client.status()
@@ -158,8 +169,8 @@ def test_an_event_goes_to_the_service_of_its_camera_and_its_answer_comes_back(tw
             events.request("tuple", "robot/frames", cameras=["left", "right"])
 
 
-def test_a_tuple_stream_says_when_a_service_is_down_and_goes_on_when_it_is_back(two_services):
-    a, b = two_services
+def test_a_tuple_stream_says_when_a_service_is_down_and_goes_on_when_it_is_back(two_services_to_stop):
+    a, b = two_services_to_stop
     with Client([a.endpoint, b.endpoint], timeout=0.5) as client, client.subscribe(timeout=5) as sub:
         wait_until(lambda: client.latest(), what="frames")
         sub.tuples(rate_hz=10)

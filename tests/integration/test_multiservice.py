@@ -11,18 +11,27 @@ from fxis_shm.client.multiclient import MultiClient
 from fxis_shm.errors import ConfigError
 
 from ..conftest import wait_until
-from .conftest import SMALL, child_pids
+from .conftest import SMALL, child_pids, module_services
 
 pytestmark = pytest.mark.integration
 
 
+TWO_SERVICES = (
+    ["--camera", f"left=synthetic:fps=50,{SMALL}"],
+    ["--camera", f"right=synthetic:fps=50,phase_ms=7,{SMALL}", "--camera", f"top=synthetic:fps=25,phase_ms=3,{SMALL}"],
+)
+
+
+@pytest.fixture(scope="module")
+def two_services():
+    """Shared by the tests that only read from the services."""
+    yield from module_services(*TWO_SERVICES)
+
+
 @pytest.fixture
-def two_services(start_service):
-    a = start_service("--camera", f"left=synthetic:fps=50,{SMALL}")
-    b = start_service(
-        "--camera", f"right=synthetic:fps=50,phase_ms=7,{SMALL}", "--camera", f"top=synthetic:fps=25,phase_ms=3,{SMALL}"
-    )
-    return a, b
+def two_services_to_stop(start_service):
+    """A test's own, for the test that stops a service's coordinator."""
+    return [start_service(*args) for args in TWO_SERVICES]
 
 
 def _least_skew_near(times: dict[str, list[int]], t_star: int, radius: int) -> int:
@@ -91,8 +100,8 @@ def test_a_camera_name_in_two_services_is_refused_naming_both(start_service):
     assert a.endpoint in str(err.value) and b.endpoint in str(err.value)
 
 
-def test_a_service_that_stops_gives_camera_down_or_is_left_out(two_services):
-    a, b = two_services
+def test_a_service_that_stops_gives_camera_down_or_is_left_out(two_services_to_stop):
+    a, b = two_services_to_stop
     with MultiClient([a.endpoint, b.endpoint], timeout=0.5) as client:
         wait_until(lambda: client.latest(), what="frames")
         with pytest.raises(UnknownCamera):

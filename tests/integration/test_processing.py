@@ -54,7 +54,7 @@ def test_a_slow_hook_spread_over_processes_keeps_order_and_counts_any_drop(start
     """A 60 ms hook at 20 fps (50 ms apart) over 3 processes: the frames are stored in capture
     order, each after the hook ran on it in one of several processes (not in the worker); a
     frame no process was free for is counted as dropped. How many a loaded machine drops is
-    bench/hook_rate.py's figure."""
+    bench/cameras/hook_rate.py's figure."""
     from tests.hooks import pid_of
 
     svc = start_service("--camera", f"a=synthetic:fps=20,{SMALL},process=tests.hooks:slow_60ms_pid,process_workers=3")

@@ -113,7 +113,7 @@ def test_a_stalled_subscriber_blocks_no_one(start_service):
         stalled.receive()  # it is connected; now it stops reading
         # over a second of tuples at 50 per second, each within the receive timeout: the stalled
         # subscriber holds the stream up for no one (whether the live one lost any on a loaded
-        # machine is bench/pubsub.py's figure: the live subscribers' gaps beside a stalled one)
+        # machine is bench/latency/pubsub.py's figure: the live subscribers' gaps beside a stalled one)
         seqs = [live.receive().seq for _ in range(60)]
         with svc.client() as client:
             assert client.tuple()["a"].frame_id > 0  # requests are served meanwhile

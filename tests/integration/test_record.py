@@ -40,7 +40,7 @@ def test_a_recording_opens_with_rosbags_one_image_topic_per_camera(raw_bag):
             assert rosmsgs.image_array(m.msg).shape == shape
         # each frame once, in order: the pixel stamps (the frame counter) go up; a frame not
         # recorded is reported (test_the_summary_counts_frames_and_missed; how many a loaded
-        # machine loses: bench/observer_cost.py prints the recorder's report)
+        # machine loses: bench/costs/observers.py prints the recorder's report)
         ids = [read_stamp(rosmsgs.image_array(m.msg)) for m in messages]
         assert all(b > a for a, b in zip(ids, ids[1:])), ids
         # log times are wall-clock: the stamp plus one offset, written in the metadata

@@ -1,37 +1,25 @@
-"""bench/network.py's verdict pieces (pure): paired differences between configurations, the
+"""bench/network/remote.py's verdict pieces (pure): paired differences between configurations, the
 rounds a busy machine spoilt, the travel part's check against the clock uncertainty, and the
 flattening of targets for --strict."""
 
 import importlib
-import pathlib
-import sys
 
 import pytest
-
-BENCH = pathlib.Path(__file__).resolve().parents[2] / "bench"
-
-
-def _bench_module(name):
-    sys.path.insert(0, str(BENCH))
-    try:
-        return importlib.import_module(name)
-    finally:
-        sys.path.remove(str(BENCH))
 
 
 @pytest.fixture(scope="module")
 def network():
-    return _bench_module("network")
+    return importlib.import_module("bench.network.remote")
 
 
 @pytest.fixture(scope="module")
 def table2():
-    return _bench_module("_network_table2")
+    return importlib.import_module("bench.network.table2")
 
 
 @pytest.fixture(scope="module")
 def travel():
-    return _bench_module("_network_travel")
+    return importlib.import_module("bench.network.travel")
 
 
 def _record(k, eps_ms, tau_ms, miss_ms=0.0, error=None):

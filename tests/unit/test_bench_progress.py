@@ -10,7 +10,7 @@ BENCH = pathlib.Path(__file__).resolve().parents[2] / "bench"
 def _common():
     sys.path.insert(0, str(BENCH))
     try:
-        spec = importlib.util.spec_from_file_location("bench_common_under_test", BENCH / "_common.py")
+        spec = importlib.util.spec_from_file_location("bench_common_under_test", BENCH / "shared" / "common.py")
         module = importlib.util.module_from_spec(spec)
         spec.loader.exec_module(module)
         return module

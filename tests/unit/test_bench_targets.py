@@ -1,24 +1,15 @@
-"""The benches' verdicts: local wake-up times and compare.py's target ratios (pure functions)."""
-
-import pathlib
-import sys
+"""The benches' verdicts: local wake-up times and bench/compare/peers.py's target ratios (pure functions)."""
 
 import pytest
 
-BENCH = pathlib.Path(__file__).resolve().parents[2] / "bench"
+from bench.compare import ours, report, rivals
+from bench.latency import wake
+from bench.scale import scaling
 
 
 @pytest.fixture(scope="module")
 def bench_modules():
-    sys.path.insert(0, str(BENCH))
-    try:
-        import compare_report
-        import latency_wake
-        import scaling
-
-        yield {"compare_report": compare_report, "latency_wake": latency_wake, "scaling": scaling}
-    finally:
-        sys.path.remove(str(BENCH))
+    return {"compare_report": report, "latency_wake": wake, "scaling": scaling}
 
 
 def test_a_request_waited_only_if_a_frame_it_returns_was_stored_after_it_was_made(bench_modules):
@@ -77,7 +68,7 @@ def result(median_ms):
 
 def test_compare_targets_are_ratios_of_medians_against_their_limits(bench_modules):
     report = bench_modules["compare_report"]
-    fx, rv = sys.modules["compare_fxis"], sys.modules["compare_rivals"]
+    fx, rv = ours, rivals
     res = {
         fx.LOCAL: result(1.2),
         rv.COPY: result(1.0),
@@ -97,7 +88,7 @@ def test_compare_targets_are_ratios_of_medians_against_their_limits(bench_module
 
 
 def test_compare_targets_judge_the_interleaved_medians_and_show_the_hot_loops_beside(bench_modules):
-    report, fx = bench_modules["compare_report"], sys.modules["compare_fxis"]
+    report, fx = bench_modules["compare_report"], ours
     res = {
         fx.LOCAL_VIEW: {**result(0.05), "hot_ms": {"median": 0.01}},
         fx.LATEST_VIEW: {**result(0.05), "hot_ms": {"median": 0.01}},

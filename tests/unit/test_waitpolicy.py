@@ -179,7 +179,7 @@ def test_joint_does_not_wait_for_frames_it_would_not_use():
 
 
 def test_no_wait_for_a_tuple_that_only_looks_less_skewed():
-    # Seen in bench/latency.py (phases 0, 10, 30 ms, jitter 0.3 ms), t* = 1026.4:
+    # Seen in bench/latency/paper.py (phases 0, 10, 30 ms, jitter 0.3 ms), t* = 1026.4:
     # stored {c0 999.7, c10 1009.6, c30 1030.2} (skew 30.5, 26.7 from t*) against
     # predicted {c30 1030.2, c0 1049.7, c10 1059.6} (skew 29.4 without jitter, 33.2 from t*).
     t_star = 1026_400_000

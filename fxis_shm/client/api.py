@@ -1,0 +1,262 @@
+"""What every client answers, declared once: ``Client(endpoint)`` (fxis_shm.client.single) and
+``Client([a, b])`` (fxis_shm.client.multiclient) take their public surface from ``ClientApi``,
+signatures and docs alike. The operations that take parameters are written here and may not be
+redefined (a subclass that tries is refused when its class is made), so a parameter added for
+one kind of client is there for the other; each kind fills in how a request is answered
+(``_answer``) and what it has of its own (status, clocks, streams)."""
+
+from __future__ import annotations
+
+from abc import ABC, abstractmethod
+from collections.abc import Callable
+from typing import Any
+
+from fxis_shm.client import snapshot as snapshots
+from fxis_shm.client.fastreads import FastReads
+from fxis_shm.client.frames import Frame, FrameTuple, frames_of, sequence_of, tuple_of
+from fxis_shm.core.clockmap import ClockEstimate
+from fxis_shm.wire import encoding as codec
+
+# The operations written once, here: ClientApi refuses a subclass that redefines one.
+SHARED_OPERATIONS = ("image", "tuple", "latest", "sequence", "snapshot", "subscribe", "frame_times")
+
+
+class ClientApi(ABC):
+    """The methods every client has; every time given or returned is in the caller's clock."""
+
+    clock: Callable[[], int]
+    _clock_name: str | None  # the caller's clock by name (a snapshot's metadata says it), None: a callable
+    # A compiled read of the common requests, where a client has one (a single service's rings
+    # read here, fxis_shm.client.fastreads): tried first, ``_compiled`` gives its answer or None.
+    _fast: FastReads | None = None
+    _compiled: Callable[[Any], Any]
+
+    def __init_subclass__(cls, **kwargs: Any) -> None:
+        super().__init_subclass__(**kwargs)
+        redefined = [name for name in SHARED_OPERATIONS if name in vars(cls)]
+        if redefined:
+            raise TypeError(f"{cls.__name__} redefines {redefined}: they are ClientApi's, the same for every client")
+
+    # ---- operations ----
+
+    def image(
+        self,
+        camera: str,
+        *,
+        at: int | None = None,
+        wait: str | None = None,
+        timeout: float | None = None,
+        copy: bool = True,
+        encoding: str | None = None,
+        quality: int | None = None,
+        timeout_ms: float | None = None,
+    ) -> Frame:
+        """The frame of ``camera`` nearest to ``at`` (ns of the caller's clock; default: the
+        moment of this call).
+
+        ``timeout``: seconds the service may wait for frames (default: its setting).
+        ``copy=False`` (local path only): the image is a read-only view of the ring slot,
+        with no copy at all; check ``frame.still_valid()`` after using it.
+        ``encoding``/``quality``: as the client's, for this request."""
+        if self._fast is not None and encoding is quality is timeout is timeout_ms is None:
+            frame = self._compiled(self._fast.image(camera, at, wait, copy))
+            if frame is not None:
+                return frame
+        return frames_of(
+            *self._answer("image", timeout, timeout_ms, copy, encoding, quality, camera=camera, at=at, wait=wait)
+        )[0]
+
+    def tuple(
+        self,
+        cameras: list[str] | None = None,
+        *,
+        at: int | None = None,
+        sync: str | None = None,
+        wait: str | None = None,
+        max_skew_ms: float | None = None,
+        timeout: float | None = None,
+        partial: bool = False,
+        copy: bool = True,
+        encoding: str | None = None,
+        quality: int | None = None,
+        timeout_ms: float | None = None,
+    ) -> FrameTuple:
+        """One frame per camera (default: all), nearest to ``at`` (ns of the caller's clock;
+        default: the moment of this call) and to each other. With ``partial``, cameras
+        that are down are left out (``.missing`` names them) instead of failing the request
+        with CameraDown."""
+        if self._fast is not None and encoding is quality is timeout is timeout_ms is max_skew_ms is None:
+            tuple_ = self._compiled(self._fast.tuple(cameras, at, sync, wait, copy))
+            if tuple_ is not None:
+                return tuple_
+        return tuple_of(
+            *self._answer(
+                "tuple",
+                timeout,
+                timeout_ms,
+                copy,
+                encoding,
+                quality,
+                cameras=cameras,
+                at=at,
+                sync=sync,
+                wait=wait,
+                max_skew_ms=max_skew_ms,
+                partial=partial or None,
+            )
+        )
+
+    def latest(
+        self,
+        cameras: list[str] | None = None,
+        *,
+        copy: bool = True,
+        encoding: str | None = None,
+        quality: int | None = None,
+    ) -> FrameTuple:
+        """The newest stored frame of each camera, without waiting."""
+        if self._fast is not None and encoding is quality is None:
+            tuple_ = self._compiled(self._fast.latest(cameras, copy))
+            if tuple_ is not None:
+                return tuple_
+        return tuple_of(*self._answer("latest", None, None, copy, encoding, quality, cameras=cameras))
+
+    def sequence(
+        self,
+        kind: str,
+        *,
+        camera: str | None = None,
+        cameras: list[str] | None = None,
+        count: int | None = None,
+        direction: str = "before",
+        interval_ms: float | None = None,
+        start: int | None = None,
+        end: int | None = None,
+        at: int | None = None,
+        sync: str | None = None,
+        timeout: float | None = None,
+        copy: bool = True,
+        encoding: str | None = None,
+        quality: int | None = None,
+        timeout_ms: float | None = None,
+    ) -> list:
+        """Several frames of one ``camera`` (a list of Frame) or tuples of ``cameras``
+        (default all; a list of FrameTuple):
+
+        - ``kind="consecutive"``: ``count`` frames ``before``, ``after`` or ``around`` t*;
+        - ``kind="interval"``: the frames nearest to t* + i*interval_ms, i = 0..count-1;
+        - ``kind="range"``: every frame captured in [start, end] (ns of the caller's clock).
+        """
+        header, images, check = self._answer(
+            "sequence",
+            timeout,
+            timeout_ms,
+            copy,
+            encoding,
+            quality,
+            camera=camera,
+            cameras=cameras,
+            kind=kind,
+            count=count,
+            direction=direction,
+            interval_ms=interval_ms,
+            start=start,
+            end=end,
+            at=at,
+            sync=sync,
+        )
+        return sequence_of(header, images, check, single=camera is not None)
+
+    def snapshot(
+        self,
+        at: int | None = None,
+        before: float = 2.0,
+        after: float = 1.0,
+        out: str = "snapshot",
+        cameras: list[str] | None = None,
+        encoding: str = codec.RAW,
+        quality: int | None = None,
+    ) -> dict:
+        """Every frame of ``cameras`` (default all) captured in [at - before, at + after]
+        (``at``: ns of the caller's clock, default now; seconds) into the rosbag2/MCAP bag
+        ``out``, stamps in the caller's clock; returns per camera the frames kept and the ids
+        of any missing (fxis_shm.client.snapshot). Blocks until ``at + after`` has passed."""
+        owners = self._owners(cameras)
+        return snapshots.take(owners, self.clock, out, at, before, after, encoding, quality, self._clock_name)
+
+    def subscribe(self, timeout: float = 2.0, queue: int = 16) -> Any:
+        """A subscriber of the streams (``frames(camera)``, and joint ``tuples(rate_hz)``), every
+        time in this client's clock; a context manager like the client."""
+        return self._subscriber(timeout, queue)
+
+    def frame_times(self, cameras: list[str] | None = None) -> dict:
+        """Each camera's frames without pixels (the ``frames`` op): liveness, period and a row
+        per valid frame with the fields named in ``columns``, times in the clock of the camera's
+        service."""
+        return self._frame_times(cameras)
+
+    @abstractmethod
+    def events(self) -> Any:
+        """An event publisher whose ``at``, ``start`` and ``end`` are in this client's clock, t*
+        the moment of the call without ``at``. Answers arrive on ``subscribe()``'s subscriber,
+        ``topic(reply_topic)``."""
+
+    # ---- the services ----
+
+    @abstractmethod
+    def status(self) -> dict:
+        """The service's status: its cameras, endpoints and clock."""
+
+    @abstractmethod
+    def time(self) -> Any:
+        """The service's clock now (int ns of the clock its status names; CLOCK_MONOTONIC by default)."""
+
+    @property
+    @abstractmethod
+    def clocks(self) -> dict[str, ClockEstimate]:
+        """Each service's clock against the caller's, by endpoint: offset (service minus caller),
+        drift, uncertainty and how it is known ("same clock", "shared", "estimated")."""
+
+    @abstractmethod
+    def clock_estimate(self) -> ClockEstimate:
+        """The current mapping of the caller's clock onto the service's (see ``clocks``)."""
+
+    @property
+    @abstractmethod
+    def local_unavailable(self) -> str | None:
+        """Why the last request could not use the local path (None: it could, or was not asked to)."""
+
+    @abstractmethod
+    def close(self) -> None:
+        """Closes the client's sockets and stops its threads."""
+
+    def __enter__(self) -> Any:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+    # ---- what each kind of client fills in ----
+
+    @abstractmethod
+    def _answer(
+        self,
+        op: str,
+        timeout: float | None,
+        timeout_ms: float | None,
+        copy: bool,
+        encoding: str | None,
+        quality: int | None,
+        **fields: Any,
+    ) -> tuple[dict, list, Callable | None]:
+        """A frame request's reply header (times in the caller's clock), images and validity check."""
+
+    @abstractmethod
+    def _owners(self, cameras: list[str] | None) -> dict[str, Any]:
+        """The single-service client that serves each of ``cameras`` (default: all)."""
+
+    @abstractmethod
+    def _subscriber(self, timeout: float, queue: int) -> Any: ...
+
+    @abstractmethod
+    def _frame_times(self, cameras: list[str] | None) -> dict: ...

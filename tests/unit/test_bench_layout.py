@@ -1,0 +1,23 @@
+"""bench/ is grouped by question (issue 37): bench/README.md names every bench and every module
+beside them, and no folder tells groups of files apart by a name prefix alone."""
+
+from collections import Counter
+from pathlib import Path
+
+ROOT = Path(__file__).resolve().parents[2]
+MODULES = sorted(p.relative_to(ROOT) for p in ROOT.glob("bench/*/*.py"))
+
+
+def test_the_readme_names_every_file_of_bench():
+    readme = (ROOT / "bench/README.md").read_text()
+    assert len(MODULES) >= 30
+    assert [str(m) for m in MODULES if f"`{m.relative_to('bench')}`" not in readme and str(m) not in readme] == []
+
+
+def test_no_folder_groups_files_by_a_name_prefix():
+    prefixes = Counter((m.parent, m.stem.split("_")[0]) for m in MODULES if "_" in m.stem)
+    assert [f"{folder}/{prefix}_*" for (folder, prefix), n in prefixes.items() if n > 1] == []
+
+
+def test_bench_has_folders_only():
+    assert sorted(p.name for p in (ROOT / "bench").iterdir() if p.suffix == ".py") == []
