@@ -52,7 +52,7 @@ def test_wake_limits_add_this_machines_copy_and_scheduler_delay_and_say_so(bench
 
 
 def test_the_demo_ends_on_a_verdict_a_newcomer_can_read(bench_modules):
-    import latency
+    from bench.latency import paper as latency
 
     met = [{"target": "x", "passed": True, "value_ms": 0.1, "limit_ms": 0.5}]
     assert latency.verdict_line(met, (1.0, 1.0, 1.0), []).startswith("verdict: all 1 targets met (")
