@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import contextlib
 import itertools
+import os
 import shutil
 import signal
 import socket
@@ -158,11 +159,13 @@ _serials = itertools.count(1)
 @pytest.fixture
 def emulator(aravis_available, tmp_path):
     """Start emulators: ``emulator(address="127.0.0.1", loss_per_thousand=0)``; each gets
-    a serial of its own (GV01, GV02, ... over the session) and is killed at teardown."""
+    a serial of its own (G, this process's id, then 01, 02, ... over the session: a pytest worker's
+    camera must never share a device id with another worker's, which Aravis would open instead
+    of the one a test killed) and is killed at teardown."""
     started: list[Emulator] = []
 
     def start(address: str = "127.0.0.1", loss_per_thousand: int = 0) -> Emulator:
-        serial = f"GV{next(_serials):02d}"
+        serial = f"G{os.getpid() % 100000:05d}{next(_serials):02d}"
         emu = Emulator(address, serial, loss_per_thousand, str(tmp_path / f"emulator-{serial}.log"))
         started.append(emu)
         return emu.start()
