@@ -1,11 +1,37 @@
-"""What a test peer reports of a message it received, as JSON fields: shared by our own Cyclone
-peer (tests/dds_peer) and the real rclpy node (tests/rclpy_peer.py), whose messages have the same
-attribute names. Standard library only: the ROS venvs hold nothing of ours.
+"""What the two test peers share, our own Cyclone peer (tests/dds_peer) and the real rclpy node
+(tests/rclpy_peer.py): their command line, their run until told to stop, and what they report of
+a message they received as JSON fields (their messages have the same attribute names). Standard
+library only: the ROS venvs hold nothing of ours.
 """
 
+import argparse
 import base64
 import hashlib
+import signal
 from typing import Any
+
+
+def peer_parser(prog: str, description: str) -> argparse.ArgumentParser:
+    """The options every peer takes (docs: tests/dds_peer/__main__.py)."""
+    parser = argparse.ArgumentParser(prog=prog, description=description)
+    parser.add_argument("--domain", type=int, required=True)
+    parser.add_argument("--sub", action="append", default=[], metavar="TOPIC:TYPE:PROFILE")
+    parser.add_argument("--pub-header", action="append", default=[], metavar="TOPIC[:PROFILE]")
+    parser.add_argument("--data", action="store_true", help="samples carry their data, base64")
+    parser.add_argument("--timeout", type=float, default=300.0, help="seconds before the peer ends anyway")
+    return parser
+
+
+def run_peer(node: Any, lifetime: float) -> int:
+    """Run ``node`` (its ``run(lifetime)``) until stdin closes, SIGTERM or ``lifetime`` s."""
+
+    def stop(*_: object) -> None:
+        node.stopping = True
+
+    signal.signal(signal.SIGTERM, stop)
+    node.run(lifetime)
+    return 0
+
 
 HEADER = "std_msgs/msg/Header"
 

@@ -20,14 +20,13 @@ import argparse
 import importlib
 import json
 import queue
-import signal
 import sys
 import threading
 import time
 from typing import Any
 
 import rclpy
-from peer_fields import describe  # tests/, this script's folder
+from peer_fields import describe, peer_parser, run_peer  # tests/, this script's folder
 from rclpy.event_handler import PublisherEventCallbacks, SubscriptionEventCallbacks
 from rclpy.executors import SingleThreadedExecutor
 from rclpy.qos import DurabilityPolicy, HistoryPolicy, QoSProfile, ReliabilityPolicy
@@ -179,23 +178,11 @@ class PeerNode:
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(prog="rclpy_peer.py", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--domain", type=int, required=True)
+    parser = peer_parser("rclpy_peer.py", __doc__.split("\n\n")[0])
     parser.add_argument("--name", default="fxis_test_peer", help="the node's name")
-    parser.add_argument("--sub", action="append", default=[], metavar="TOPIC:TYPE:PROFILE")
-    parser.add_argument("--pub-header", action="append", default=[], metavar="TOPIC[:PROFILE]")
     parser.add_argument("--pub-string", action="append", default=[], metavar="TOPIC")
-    parser.add_argument("--data", action="store_true", help="samples carry their data, base64")
-    parser.add_argument("--timeout", type=float, default=300.0, help="seconds before the peer ends anyway")
     args = parser.parse_args()
-    node = PeerNode(args)
-
-    def stop(*_: object) -> None:
-        node.stopping = True
-
-    signal.signal(signal.SIGTERM, stop)
-    node.run(args.timeout)
-    return 0
+    return run_peer(PeerNode(args), args.timeout)
 
 
 if __name__ == "__main__":

@@ -24,7 +24,6 @@ SIGTERM or after ``--timeout`` seconds.
 import argparse
 import json
 import queue
-import signal
 import sys
 import threading
 import time
@@ -39,7 +38,7 @@ from cyclonedds.sub import DataReader
 from cyclonedds.topic import Topic
 from cyclonedds.util import duration
 
-from ..peer_fields import describe
+from ..peer_fields import describe, peer_parser, run_peer
 from .config import loopback_config
 from .types import BY_ROS_NAME, Header, Time
 
@@ -233,21 +232,8 @@ class PeerNode:
 
 
 def main() -> int:
-    parser = argparse.ArgumentParser(prog="python -m tests.dds_peer", description=__doc__.split("\n\n")[0])
-    parser.add_argument("--domain", type=int, required=True)
-    parser.add_argument("--sub", action="append", default=[], metavar="TOPIC:TYPE:PROFILE")
-    parser.add_argument("--pub-header", action="append", default=[], metavar="TOPIC[:PROFILE]")
-    parser.add_argument("--data", action="store_true", help="samples carry their data, base64")
-    parser.add_argument("--timeout", type=float, default=300.0, help="seconds before the peer ends anyway")
-    args = parser.parse_args()
-    node = PeerNode(args)
-
-    def stop(*_: object) -> None:
-        node.stopping = True
-
-    signal.signal(signal.SIGTERM, stop)
-    node.run(args.timeout)
-    return 0
+    args = peer_parser("python -m tests.dds_peer", __doc__.split("\n\n")[0]).parse_args()
+    return run_peer(PeerNode(args), args.timeout)
 
 
 if __name__ == "__main__":
