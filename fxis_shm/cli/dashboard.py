@@ -6,6 +6,7 @@ and "Save tuple" across hosts. It runs here, in the foreground, until Ctrl-C."""
 from __future__ import annotations
 
 import asyncio
+import faulthandler
 import signal
 import sys
 import threading
@@ -61,6 +62,9 @@ def dashboard_command(args) -> int:
     except OSError as exc:
         raise ConfigError(f"--http {args.http}: {exc.strerror or exc}") from None
     finally:
+        # a look still waiting on a service that went away must not keep Ctrl-C from ending it:
+        # past 10 s, the threads' stacks go to stderr (why it hung) and the process exits
+        faulthandler.dump_traceback_later(10, exit=True)
         feed.close()
     return 0
 

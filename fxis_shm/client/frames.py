@@ -18,7 +18,10 @@ from fxis_shm.errors import FxisError, ProtocolError
 from fxis_shm.shm.bufferpool import release as release_buffer
 
 LOCAL, NETWORK = "local", "network"
-_TIMES = ("t_capture", "t_stored", "t_available")
+_TIMES = ("t_capture", "t_stored", "t_available", "t_target")
+# how a frame came to be captured (Frame.capture): on its own (free-running, or triggered by a
+# request for "now"), triggered for a moment a caller named, or on the service's lockstep grid
+FREE, SCHEDULED, LOCKSTEP = "free", "scheduled", "lockstep"
 
 
 @dataclass(slots=True)
@@ -40,6 +43,13 @@ class Frame:
     service_t_capture: int = field(default=0, repr=False)
     service_t_stored: int = field(default=0, repr=False)
     service_t_available: int | None = field(default=None, repr=False)
+    capture: str = FREE  # FREE, SCHEDULED or LOCKSTEP
+    t_target: int | None = None  # the moment a SCHEDULED or LOCKSTEP frame was to be captured at
+
+    @property
+    def residual_ns(self) -> int | None:
+        """How far the capture missed its target (t_capture - t_target); None for a FREE frame."""
+        return None if self.t_target is None else self.t_capture - self.t_target
 
     def still_valid(self) -> bool:
         """False once a zero-copy view's slot has been overwritten (then discard what you
@@ -161,6 +171,8 @@ def frames_of(header: dict, images: list[np.ndarray], still_valid: Callable | No
                     meta.get("service_t_capture", t_capture),
                     meta.get("service_t_stored", t_stored),
                     meta.get("service_t_available", t_available),
+                    meta.get("capture", FREE),
+                    meta.get("t_target"),
                 )
             )
     except KeyError as exc:

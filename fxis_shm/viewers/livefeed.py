@@ -88,8 +88,8 @@ class LiveFeed:
             self.cameras = known
 
     def close(self) -> None:
-        for pool in (self._pictures, self._sampler):
-            pool.shutdown(wait=True)
+        for pool in (self._pictures, self._sampler):  # queued looks are dropped: each may wait out a timeout
+            pool.shutdown(wait=True, cancel_futures=True)
         if self.cell:
             for closing in (self._probe, self._picture_cell, self._sample_cell):
                 closing.close()
