@@ -31,6 +31,7 @@ import os
 import queue
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -57,7 +58,6 @@ class _Camera:
     end: int
     last_t: int | None = None  # the newest capture time looked at
     last: tuple[int, int] | None = None  # (generation, frame id) of the newest frame looked at
-    taken: int = 0
     missing: list[int] = field(default_factory=list)
     gone_ms: float = 0.0  # the window's start the ring no longer held
     period_ns: int = 0
@@ -130,7 +130,7 @@ def take(
         stopped = exc
     try:
         writer.finish()
-        summary = _summary(cameras)
+        summary = _summary(cameras, writer.written)
         bag.custom_data.update({key: json.dumps({n: s[key] for n, s in summary.items()}) for key in KEYS})
         bag.custom_data["ended"] = _ended(stopped)
         bag.close()
@@ -141,7 +141,7 @@ def take(
         raise Interrupted(
             f"interrupted while the bag was being closed: it stays unfinished in {partial}; "
             f"fxis snapshot --recover {partial} makes it the bag {out}",
-            {"out": None, "event_ns": t, "window_ns": window, "cameras": _summary(cameras)},
+            {"out": None, "event_ns": t, "window_ns": window, "cameras": _summary(cameras, writer.written)},
         ) from None
     except BaseException as exc:
         os.close(lock)
@@ -149,7 +149,7 @@ def take(
             f"the snapshot's bag {partial} could not be finished ({exc!r}): "
             f"fxis snapshot --recover {partial} keeps what it holds"
         ) from exc
-    kept = sum(c.taken for c in cameras.values())
+    kept = sum(writer.written.values())
     _release(lock, partial, remove=not kept)
     if kept:
         _move(partial, out)
@@ -201,10 +201,10 @@ def _follow(cameras: dict[str, _Camera], writer: _Writer, clock: Callable[[], in
         time.sleep(max(0.0, _poll_s(cameras) - (time.monotonic() - began)))
 
 
-def _summary(cameras: dict[str, _Camera]) -> dict:
+def _summary(cameras: dict[str, _Camera], written: Counter) -> dict:
     return {
         name: {
-            "frames": c.taken,
+            "frames": written[name],
             "missing": sorted(c.missing),
             "gone_before_ms": round(c.gone_ms, 3),
             "complete": c.past_end,
@@ -314,6 +314,8 @@ class _Writer:
         self.bag, self.to_realtime, self.encoding, self.quality = bag, to_realtime, encoding, quality
         self._frames: queue.Queue = queue.Queue()
         self._error: BaseException | None = None
+        # counted here, once in the bag: a frame put just before Ctrl-C is still written, and counted
+        self.written: Counter = Counter()
         self._thread = threading.Thread(target=self._run, name="snapshot-writer", daemon=True)
         self._thread.start()
 
@@ -339,6 +341,7 @@ class _Writer:
                         frame, frame.t_capture, self.encoding, self.quality
                     )
                     self.bag.write(topic, msgtype, message, frame.t_capture + self.to_realtime, size)
+                self.written[frame.camera] += 1
             except BaseException as exc:  # a full disk: the snapshot stops and says so
                 self._error = exc
 
@@ -371,4 +374,3 @@ def _poll(cam: _Camera, writer: _Writer) -> None:
         for frame in frames:
             if frame.frame_id in got:
                 writer.put(frame)
-                cam.taken += 1
