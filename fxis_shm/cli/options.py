@@ -12,14 +12,17 @@ from __future__ import annotations
 import argparse
 import math
 import os
+from typing import TYPE_CHECKING
 
 from fxis_shm.cli import exitcodes
-from fxis_shm.client.client import Client
 from fxis_shm.errors import ConfigError
 from fxis_shm.service.config import load_toml
 from fxis_shm.wire import defaults
 from fxis_shm.wire.endpoints import check_endpoint, check_host_known
 from fxis_shm.wire.security import ClientKeys
+
+if TYPE_CHECKING:
+    from fxis_shm.client.client import Client
 
 EXIT_USAGE = exitcodes.USAGE
 ENV_SERVER_KEY, ENV_CLIENT_KEY = "FXIS_SERVER_KEY", "FXIS_CLIENT_KEY"
@@ -71,6 +74,8 @@ def add_key_options(sp) -> None:
 
 
 def client_for(args) -> Client:
+    from fxis_shm.client.client import Client  # here: `fxis run` and --help need no client
+
     """A client as the command's options, the environment and the config file say."""
     file_values = load_toml(args.config) if args.config else {}
     endpoint = args.endpoint or file_values.get("endpoint") or defaults.ENDPOINT
