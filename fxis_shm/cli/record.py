@@ -78,8 +78,8 @@ def record_command(args) -> int:
 
 
 def video_settings(args):
-    """--codec and its flags (fxis_shm.record.videotracks), checked before a service is asked."""
-    from fxis_shm.record.videotracks import VideoSettings, check_flags
+    """--codec and its flags (fxis_shm.formats.videotracks), checked before a service is asked."""
+    from fxis_shm.formats.videotracks import VideoSettings, check_flags
 
     given = [f for f, v in (("--encoder", args.encoder), ("--crf", args.crf), ("--preset", args.preset)) if v]
     given += ["--gop"] if args.gop is not None else []

@@ -6,12 +6,11 @@ import numpy as np
 import pytest
 
 from fxis_shm import read_stamp
-from fxis_shm.formats import rosmsgs
-from fxis_shm.record import videochoice
-from fxis_shm.record.videoencoder import CameraEncoder
+from fxis_shm.formats import rosmsgs, videochoice
+from fxis_shm.formats.videoencoder import CameraEncoder
 
 from ..conftest import fxis
-from .bags import read_bag, record, record_until_ctrl_c, two_cameras
+from .bags import read_bag, record, record_across_a_size_change, record_until_ctrl_c, two_cameras
 from .conftest import mounted_tmpfs
 
 pytestmark = pytest.mark.integration
@@ -222,3 +221,60 @@ def test_a_camera_video_cannot_carry_is_refused_at_start(start_service, tmp_path
     assert result.returncode == 2, result.stderr
     assert "camera odd is 161x120; 4:2:0 video needs an even width and height" in result.stderr
     assert not (tmp_path / "x").exists()
+
+
+def test_a_size_change_mid_recording_goes_on_in_the_same_track_from_a_keyframe(start_service, tmp_path):
+    """The camera restarted at 320x240 (a new generation) one second into the recording: the
+    bag stays one file, /left/video one track that one decoder plays through (each keyframe
+    carries its SPS/PPS, from which a player sizes its picture). The sizes switch exactly at
+    the generation boundary and the first frame at the new size is a keyframe."""
+    svc = start_service("--camera", "left=synthetic:fps=20,width=160,height=120")
+    out = tmp_path / "resized"
+    code, stdout, stderr = record_across_a_size_change(
+        svc, out, "left", {"width": 320, "height": 240}, "--seconds", "4", "--codec", "h264"
+    )
+    assert code == 0, stderr
+    assert "left: generation 2, 320x240: the same track /left/video goes on with a keyframe at the new size" in stderr
+    bag = read_bag(out)
+    assert len(list(out.glob("*.mcap"))) == 1
+    video, frames = bag.messages["/left/video"], bag.messages["/left/video/frames"]
+    assert len(video) == len(frames)
+    generations = [f.msg.generation for f in frames]
+    boundary = generations.index(2)
+    assert generations == [1] * boundary + [2] * (len(frames) - boundary) and boundary >= 10
+    assert len(frames) - boundary >= 20
+    stamps = [stamp_ns(m.msg) for m in video]
+    assert all(b > a for a, b in zip(stamps, stamps[1:]))
+    for i, (f, (_, image)) in enumerate(zip(frames, decoded(video, "gray"))):
+        assert image.shape == ((120, 160) if i < boundary else (240, 320)), i
+        assert read_stamp(image) == f.msg.frame_id, i
+        assert stamps[i] == rosmsgs.stamp_ns(f.msg.header.stamp)
+    first_new = bytes(video[boundary].msg.data)
+    assert frames[boundary].msg.keyframe and nal_types(first_new)[:2] == [7, 8] and 5 in nal_types(first_new)
+
+
+def test_a_size_change_mid_raw_recording_goes_on(start_service, tmp_path):
+    """A raw recording across the same restart: each image message carries its own size."""
+    svc = start_service("--camera", "left=synthetic:fps=20,width=160,height=120")
+    out = tmp_path / "raw"
+    code, _, stderr = record_across_a_size_change(svc, out, "left", {"width": 320, "height": 240}, "--seconds", "3")
+    assert code == 0, stderr
+    images = read_bag(out).messages["/left/image_raw"]
+    sizes = [(m.msg.width, m.msg.height) for m in images]
+    boundary = sizes.index((320, 240))
+    assert sizes == [(160, 120)] * boundary + [(320, 240)] * (len(sizes) - boundary) and boundary >= 10
+    ids = [read_stamp(rosmsgs.image_array(m.msg)) for m in images]
+    assert all(b > a for a, b in zip(ids[:boundary], ids[1:boundary])), ids
+    assert all(b > a for a, b in zip(ids[boundary:], ids[boundary + 1 :])), ids
+
+
+def test_a_restart_at_a_size_video_cannot_carry_stops_the_recording_in_one_line(start_service, tmp_path):
+    svc = start_service("--camera", "left=synthetic:fps=20,width=160,height=120")
+    out = tmp_path / "odd"
+    code, _, stderr = record_across_a_size_change(svc, out, "left", {"width": 161}, "--seconds", "4", "--codec", "h264")
+    assert code == 4, stderr
+    assert "camera left is 161x120; 4:2:0 video needs an even width and height" in stderr.strip().splitlines()[-1]
+    bag = read_bag(out)  # closed valid, with the frames before the restart
+    assert bag.custom_data["ended"].startswith("stopped by an error")
+    frames = bag.messages["/left/video/frames"]
+    assert len(frames) >= 10 and {f.msg.generation for f in frames} == {1}
