@@ -180,14 +180,14 @@ class CameraEncoder:
     from the recorder's thread; ``ready()`` the packets encoded since; ``finish()`` flushes and
     returns the last ones."""
 
-    def __init__(self, camera: str, choice: Choice, crf: int, preset: str | None, gop_s: float, fps: float):
-        self.camera, self.choice = camera, choice
-        self._stream = StreamEncoder(camera, choice, crf, preset, gop_s, fps)
+    def __init__(self, stream: StreamEncoder):
+        self.camera, self.choice = stream.camera, stream.choice
+        self._stream = stream
         self._inbox: queue.Queue = queue.Queue(maxsize=QUEUE_FRAMES)
         self._outbox: queue.SimpleQueue[Packet] = queue.SimpleQueue()
         self.offered = self.skipped = 0
         self.error: BaseException | None = None
-        self._thread = threading.Thread(target=self._run, name=f"encode-{camera}", daemon=True)
+        self._thread = threading.Thread(target=self._run, name=f"encode-{self.camera}", daemon=True)
         self._thread.start()
 
     def offer(self, image: np.ndarray, t_ns: int, frame_id: int, generation: int) -> bool:

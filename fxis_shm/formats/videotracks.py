@@ -15,7 +15,7 @@ from dataclasses import dataclass
 
 from fxis_shm.errors import FxisError
 from fxis_shm.formats import rosmsgs, videochoice
-from fxis_shm.formats.videoencoder import CameraEncoder, encoding_of, opens, require_av
+from fxis_shm.formats.videoencoder import CameraEncoder, StreamEncoder, encoding_of, opens, require_av
 
 
 @dataclass
@@ -61,6 +61,9 @@ class VideoPlan:
             {name: float(info.get("fps") or 0.0) for name, info in cameras.items()},
         )
 
+    def stream_encoder(self, camera: str) -> StreamEncoder:
+        return StreamEncoder(camera, self.choice, self.crf, self.preset, self.gop_s, self.fps.get(camera, 0.0))
+
     def describe(self) -> str:
         preset = f", preset {self.preset}" if self.preset else ""
         return f"video: {self.choice.describe()}, CRF {self.crf}{preset}, a keyframe at least every {self.gop_s:g} s"
@@ -73,10 +76,7 @@ def _as(video: VideoSettings, encoder: str) -> videochoice.Choice:
 class VideoTracks:
     def __init__(self, plan: VideoPlan, cameras: list[str]):
         self.plan = plan
-        self.encoders = {
-            cam: CameraEncoder(cam, plan.choice, plan.crf, plan.preset, plan.gop_s, plan.fps.get(cam, 0.0))
-            for cam in cameras
-        }
+        self.encoders = {cam: CameraEncoder(plan.stream_encoder(cam)) for cam in cameras}
         self.behind: set[str] = set()  # cameras whose encoder has skipped frames (said once)
         self._generations: dict[str, int] = {}
 

@@ -7,7 +7,7 @@ import pytest
 
 from fxis_shm import read_stamp
 from fxis_shm.formats import rosmsgs, videochoice
-from fxis_shm.formats.videoencoder import CameraEncoder
+from fxis_shm.formats.videoencoder import CameraEncoder, StreamEncoder
 
 from ..conftest import fxis
 from .bags import read_bag, record, record_across_a_size_change, record_until_ctrl_c, two_cameras
@@ -155,7 +155,7 @@ def test_an_encoder_that_falls_behind_skips_frames_and_counts_them():
     """Frames offered faster than x264 encodes them: the queue fills, offer() returns False at
     once instead of waiting, and every frame is either encoded, in order, or counted as skipped."""
     choice = videochoice.Choice("h264", "libx264", hardware=False)
-    encoder = CameraEncoder("cam", choice, crf=23, preset="veryfast", gop_s=2.0, fps=30.0)
+    encoder = CameraEncoder(StreamEncoder("cam", choice, crf=23, preset="veryfast", gop_s=2.0, fps=30.0))
     image = np.random.default_rng(1).integers(0, 256, (480, 640), np.uint8)
     taken = [i for i in range(200) if encoder.offer(image, 1_000_000_000 + i * 33_000_000, i, 1)]
     packets = encoder.finish()
