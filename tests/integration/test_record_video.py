@@ -1,6 +1,9 @@
 """``fxis record --codec`` against a real service: the bag read back with rosbags and every
 frame decoded with PyAV (FFmpeg's own decoders, not the encoder's)."""
 
+import csv
+from fractions import Fraction
+
 import av
 import numpy as np
 import pytest
@@ -21,9 +24,14 @@ START_CODE = b"\x00\x00\x01"
 
 
 @pytest.fixture(scope="module")
-def h264_bag(cell, tmp_path_factory):
+def h264_folder(cell, tmp_path_factory):
     out = tmp_path_factory.mktemp("bags") / "h264"
-    result = record(cell, out, "--seconds", str(SECONDS), "--codec", "h264", "--gop", str(GOP))
+    return out, record(cell, out, "--seconds", str(SECONDS), "--codec", "h264", "--gop", str(GOP))
+
+
+@pytest.fixture(scope="module")
+def h264_bag(h264_folder):
+    out, result = h264_folder
     return read_bag(out), result
 
 
@@ -69,6 +77,12 @@ def obu_types(data: bytes) -> list[int]:
         types.append((header >> 3) & 0x0F)
         i += size
     return types
+
+
+def length_prefixed(annex_b: bytes) -> bytes:
+    """The NAL units of an Annex B access unit as MP4 keeps them: each after its 4-byte length."""
+    units = [unit.rstrip(b"\x00") for unit in annex_b.split(START_CODE)[1:]]  # (a 4-byte start code's 0)
+    return b"".join(len(unit).to_bytes(4, "big") + unit for unit in units if unit)
 
 
 # What Foxglove asks of each keyframe message (foxglove.CompressedVideo, the foxglove SDK's docs)
@@ -251,6 +265,11 @@ def test_a_size_change_mid_recording_goes_on_in_the_same_track_from_a_keyframe(s
         assert stamps[i] == rosmsgs.stamp_ns(f.msg.header.stamp)
     first_new = bytes(video[boundary].msg.data)
     assert frames[boundary].msg.keyframe and nal_types(first_new)[:2] == [7, 8] and 5 in nal_types(first_new)
+    # exported to MP4, the track still switches size at the boundary (the new SPS is in its sample)
+    assert fxis("export", str(out), "--camera", "left", "--out", str(tmp_path / "left.mp4")).returncode == 0
+    with av.open(str(tmp_path / "left.mp4")) as mp4:
+        shapes = [picture.to_ndarray(format="gray").shape for picture in mp4.decode(video=0)]
+    assert shapes == [(120, 160)] * boundary + [(240, 320)] * (len(frames) - boundary)
 
 
 def test_a_size_change_mid_raw_recording_goes_on(start_service, tmp_path):
@@ -278,3 +297,41 @@ def test_a_restart_at_a_size_video_cannot_carry_stops_the_recording_in_one_line(
     assert bag.custom_data["ended"].startswith("stopped by an error")
     frames = bag.messages["/left/video/frames"]
     assert len(frames) >= 10 and {f.msg.generation for f in frames} == {1}
+
+
+def test_fxis_export_remuxes_a_camera_track_into_a_vfr_mp4_at_its_capture_times(h264_folder, h264_bag, tmp_path):
+    """No re-encoding: the MP4's packets are the bag's, each at its capture time; PyAV reads
+    them back (demuxed and decoded) as the frames their ids name."""
+    (bag, _), (bag_path, _) = h264_bag, h264_folder
+    out = tmp_path / "left.mp4"
+    result = fxis("export", str(bag_path), "--camera", "left", "--out", str(out))
+    assert result.returncode == 0, result.stderr
+    video, frames = bag.messages["/left/video"], bag.messages["/left/video/frames"]
+    stamps = [stamp_ns(m.msg) for m in video]
+    assert f"{out}: {len(video)} frames of /left/video (h264)" in result.stdout
+    with av.open(str(out)) as mp4:
+        stream = mp4.streams.video[0]
+        assert (stream.frames, stream.time_base, stream.codec_context.name) == (len(video), Fraction(1, 10**6), "h264")
+        packets = [p for p in mp4.demux(stream) if p.size]
+        assert [bytes(p) for p in packets] == [length_prefixed(bytes(m.msg.data)) for m in video]  # as they were
+        assert [p.pts for p in packets] == [(t - stamps[0]) // 1000 for t in stamps]
+        assert [p.is_keyframe for p in packets] == [f.msg.keyframe for f in frames]
+    with av.open(str(out)) as mp4:
+        read = [read_stamp(picture.to_ndarray(format="gray")) for picture in mp4.decode(video=0)]
+    assert read == [f.msg.frame_id for f in frames]
+    with open(tmp_path / "left.frames.csv") as side:
+        rows = list(csv.DictReader(side))
+    assert [int(r["capture_ns"]) for r in rows] == stamps
+    assert [int(r["frame_id"]) for r in rows] == [f.msg.frame_id for f in frames]
+
+
+def test_fxis_export_of_a_bag_without_that_cameras_video_exits_2_in_one_line(h264_folder, cell, tmp_path):
+    bag_path, _ = h264_folder
+    result = fxis("export", str(bag_path), "--camera", "centre", "--out", str(tmp_path / "c.mp4"))
+    assert result.returncode == 2, result.stderr
+    assert "no video track of camera centre (/centre/video); its video cameras: left, right" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1 and not list(tmp_path.iterdir())
+    record(cell, tmp_path / "raw", "--frames", "3")
+    result = fxis("export", str(tmp_path / "raw"), "--camera", "left", "--out", str(tmp_path / "r.mp4"))
+    assert result.returncode == 2 and "it holds no video (record with --codec h264)" in result.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["raw"]
