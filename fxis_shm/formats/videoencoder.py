@@ -1,7 +1,8 @@
-"""One camera's video encoder for ``fxis record --codec``: a PyAV (FFmpeg) encoder in a thread
-of its own, fed frames copied out of the ring, so a slow encoder never holds up the recorder's
-reading of the rings or the other cameras. A full queue means the encoder fell behind: the
-frame is skipped and counted, never waited for.
+"""One camera's video encoder: a PyAV (FFmpeg) encoder of its stream (``StreamEncoder``, which
+a snapshot runs in its writer's thread) and, for ``fxis record --codec``, the same in a thread
+of its own (``CameraEncoder``), fed frames copied out of the ring, so a slow encoder never holds
+up the recorder's reading of the rings or the other cameras. A full queue means the encoder
+fell behind: the frame is skipped and counted, never waited for.
 
 The stream is what Foxglove plays: one frame per packet, in capture order, no B-frames, Annex B
 with the parameter sets (SPS/PPS) repeated on every keyframe, and a keyframe forced on the first
@@ -119,7 +120,8 @@ class StreamEncoder:
         self._options = encoder_options(choice, crf, preset, max(1, round(gop_s * (fps or 30))))
         self._fps = fps
         self._context = None
-        self._generation: int | None = None
+        self._generation: int | None = None  # of the frames the open encoder takes
+        self._size: tuple[int, int] | None = None  # (height, width), likewise
         self._pending: dict[int, tuple[int, int, int]] = {}  # pts -> (t_ns, frame id, generation)
         self._t0: int | None = None
         self._last_key: int | None = None

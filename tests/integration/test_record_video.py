@@ -179,6 +179,22 @@ def test_an_encoder_that_falls_behind_skips_frames_and_counts_them():
     assert [p.t_ns for p in packets] == [1_000_000_000 + i * 33_000_000 for i in taken]
 
 
+def test_a_new_generation_in_another_size_and_pixel_format_starts_from_a_keyframe():
+    """StreamEncoder alone: five mono8 frames of generation 1, then five bgr8 frames of
+    generation 2 at another size; one decoder reads the ten packets as the ten frames."""
+    encoder = StreamEncoder("cam", videochoice.Choice("h264", "libx264", False), 23, "veryfast", 2.0, 20.0)
+    shapes = [(120, 160)] * 5 + [(64, 96, 3)] * 5
+    packets = []
+    for i, shape in enumerate(shapes):
+        packets += encoder.encode(np.full(shape, 20 * i, np.uint8), 10**9 + i * 50_000_000, i, 1 + i // 5)
+    packets += encoder.finish()
+    assert [(p.frame_id, p.generation) for p in packets] == [(i, 1 + i // 5) for i in range(10)]
+    assert [i for i, p in enumerate(packets) if p.keyframe] == [0, 5]
+    decoder = av.CodecContext.create("h264", "r")
+    pictures = [picture for p in packets for picture in decoder.decode(av.Packet(p.data))]
+    assert [(picture.height, picture.width) for picture in pictures] == [s[:2] for s in shapes]
+
+
 def test_ctrl_c_during_a_video_recording_leaves_a_valid_bag_that_decodes(cell, tmp_path):
     out = tmp_path / "c"
     returncode, stdout, stderr = record_until_ctrl_c(cell, out, 30_000, "--codec", "h264")
