@@ -20,6 +20,10 @@ frame copied until then. A snapshot killed outright leaves ``OUT.partial``, whic
 no bag (``out`` None): an empty one would say nothing more than the result does. Any number
 of snapshots may run at once (each reads the rings like any client), also while the service
 serves at full rate.
+
+With ``video`` (``client.snapshot(codec="h264")``) each camera's frames are encoded by the
+recorder's encoders (fxis_shm.formats.videoencoder) in the writer's thread, the window's
+first frame a keyframe: the clip starts exactly at t - before.
 """
 
 from __future__ import annotations
@@ -41,6 +45,8 @@ from fxis_shm.errors import CameraDown, DiskFull, FxisError, InvalidArgument, Ov
 from fxis_shm.formats import rosmsgs
 from fxis_shm.formats.bagfile import BagWriter
 from fxis_shm.formats.outfolder import check_out_folder
+from fxis_shm.formats.videoencoder import StreamEncoder
+from fxis_shm.formats.videotracks import VideoPlan, VideoSettings, write_packets
 from fxis_shm.wire import encoding as codec
 
 ID, T_CAPTURE, GENERATION = 0, 1, 4  # columns of a ``frames`` row
@@ -102,13 +108,17 @@ def take(
     encoding: str = codec.RAW,
     quality: int | None = None,
     clock_name: str | None = None,
+    video: VideoSettings | None = None,
 ) -> dict:
     """The snapshot of the cameras ``owners`` names (camera -> the client of its service)
     around ``at`` (ns of ``clock``, whose name ``clock_name`` is; default now) into the bag
     ``out``; what it holds. ``out`` is None if the rings held no frame of the window (no
-    bag is written then: an empty bag would say nothing and reads badly)."""
+    bag is written then: an empty bag would say nothing and reads badly). ``video``: each
+    camera's frames as video instead (as ``fxis record --codec`` writes it), the window's
+    first frame a keyframe."""
     t = clock() if at is None else at
-    _check(at, before, after, out, encoding)
+    _check(at, before, after, out, encoding, quality, video)
+    plan = _video_plan(owners, video)  # before anything is made: bad settings leave nothing behind
     out = os.path.normpath(out)
     partial = out + ".partial"
     lock = _claim(partial, out)
@@ -117,12 +127,13 @@ def take(
         cameras = {name: _Camera(name, c, *map(c.clock_estimate().to_service, window)) for name, c in owners.items()}
         custom = {"clock": _clock_words(clock_name), "stamps": "header.stamp: capture time in that clock"}
         custom.update(event_ns=t, before_s=before, after_s=after, window_ns=f"{window[0]} {window[1]}")
-        custom.update(cameras=",".join(cameras), encoding=encoding, missing="", gone_before_ms="", ended="")
+        custom.update(cameras=",".join(cameras), encoding=video.codec if video else encoding)
+        custom.update(missing="", gone_before_ms="", ended="")
         bag = BagWriter(partial, custom, file_stem=os.path.basename(out))
     except BaseException:
         _release(lock, partial, remove=True)  # nothing written yet: the folder made in this run goes
         raise
-    writer = _Writer(bag, time.time_ns() - clock(), encoding, quality)  # MCAP log times: wall-clock
+    writer = _Writer(bag, time.time_ns() - clock(), encoding, quality, plan)  # MCAP log times: wall-clock
     stopped: BaseException | None = None
     try:
         _follow(cameras, writer, clock, window[1] + round(GRACE_S * 1e9))
@@ -286,7 +297,13 @@ def _disk_full(exc: DiskFull, lock, partial: str, out: str) -> DiskFull:
 DISK_FULL_FIELDS = ("folder", "reason", "kept", "seconds", "file_bytes", "valid")
 
 
-def _check(at, before, after, out, encoding) -> None:
+def _video_plan(owners: dict[str, Any], video: VideoSettings | None) -> VideoPlan | None:
+    if video is None:
+        return None
+    return VideoPlan.make(video, {name: c.status()["cameras"][name] for name, c in owners.items()})
+
+
+def _check(at, before, after, out, encoding, quality, video) -> None:
     for name, value in (("before", before), ("after", after)):
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
             raise InvalidArgument(f"{name} must be seconds >= 0, got {value!r}")
@@ -296,6 +313,8 @@ def _check(at, before, after, out, encoding) -> None:
         raise InvalidArgument(f"at must be int ns of the caller's clock, got {at!r}")
     if encoding not in (codec.RAW, codec.JPEG):
         raise InvalidArgument(f"encoding must be raw or jpeg, got {encoding!r}")
+    if video is not None and (encoding != codec.RAW or quality is not None):
+        raise InvalidArgument(f"codec {video.codec} writes video: it takes no encoding {encoding} or quality")
     check_out_folder(out)
 
 
@@ -307,11 +326,15 @@ def _poll_s(cameras: dict[str, _Camera]) -> float:
 
 class _Writer:
     """Writes the copied frames into the bag in a thread of its own, so that copying the
-    window's past out of every camera's ring never waits for the disk: each ring is emptied
-    of the window's frames within milliseconds, long before it comes round."""
+    window's past out of every camera's ring never waits for the disk (or an encoder): each
+    ring is emptied of the window's frames within milliseconds, long before it comes round.
+    With a video ``plan``, each camera's frames go through an encoder of its own, every one
+    of them (a snapshot skips none), its first a keyframe."""
 
-    def __init__(self, bag: BagWriter, to_realtime: int, encoding: str, quality: int | None):
+    def __init__(self, bag: BagWriter, to_realtime: int, encoding: str, quality: int | None, plan: VideoPlan | None):
         self.bag, self.to_realtime, self.encoding, self.quality = bag, to_realtime, encoding, quality
+        self.plan = plan
+        self._encoders: dict[str, StreamEncoder] = {}
         self._frames: queue.Queue = queue.Queue()
         self._error: BaseException | None = None
         # counted here, once in the bag: a frame put just before Ctrl-C is still written, and counted
@@ -337,13 +360,26 @@ class _Writer:
                 continue  # drain: the error is raised to the caller
             try:
                 with frame:
-                    topic, msgtype, message, size = rosmsgs.frame_message(
-                        frame, frame.t_capture, self.encoding, self.quality
-                    )
-                    self.bag.write(topic, msgtype, message, frame.t_capture + self.to_realtime, size)
+                    self._write(frame)
                 self.written[frame.camera] += 1
             except BaseException as exc:  # a full disk: the snapshot stops and says so
                 self._error = exc
+        if self.plan is not None and self._error is None:
+            try:  # the encoders' last frames
+                for cam, encoder in self._encoders.items():
+                    write_packets(self.bag, cam, self.plan.choice.codec, encoder.finish(), self.to_realtime)
+            except BaseException as exc:
+                self._error = exc
+
+    def _write(self, frame) -> None:
+        if self.plan is None:
+            topic, msgtype, message, size = rosmsgs.frame_message(frame, frame.t_capture, self.encoding, self.quality)
+            self.bag.write(topic, msgtype, message, frame.t_capture + self.to_realtime, size)
+            return
+        if frame.camera not in self._encoders:
+            self._encoders[frame.camera] = self.plan.stream_encoder(frame.camera)
+        packets = self._encoders[frame.camera].encode(frame.image, frame.t_capture, frame.frame_id, frame.generation)
+        write_packets(self.bag, frame.camera, self.plan.choice.codec, packets, self.to_realtime)
 
 
 def _poll(cam: _Camera, writer: _Writer) -> None:
