@@ -6,6 +6,7 @@ import json
 
 from fxis_shm.cli.options import add_client_options, client_for, nanoseconds
 from fxis_shm.cli.stopsignals import as_interrupts, interrupted
+from fxis_shm.cli.table import aligned
 from fxis_shm.shm.cameras import RATE_WINDOW_NS
 
 
@@ -65,9 +66,7 @@ def status_command(args) -> int:
             ]
         )
     cells = [columns] + [["-" if v is None else str(v) for v in r] for r in rows]
-    widths = [max(len(row[i]) for row in cells) for i in range(len(columns))]
-    for row in cells:
-        print("  ".join(v.ljust(w) for v, w in zip(row, widths)).rstrip())
+    print("\n".join(aligned(cells)))
     for name, cam in status["cameras"].items():
         if not cam["alive"] and cam.get("reason"):
             print(f"  {name}: {cam['reason']}")
