@@ -44,6 +44,7 @@ def status_command(args) -> int:
         "history_s",
         "gen",
         "torn",
+        "ptp",
     ]
     rows = []
     for name, cam in status["cameras"].items():
@@ -63,6 +64,7 @@ def status_command(args) -> int:
                 cam.get("history_s"),
                 cam.get("generation"),
                 cam.get("torn_reads"),
+                ptp_text(cam.get("ptp")),
             ]
         )
     cells = [columns] + [["-" if v is None else str(v) for v in r] for r in rows]
@@ -73,6 +75,19 @@ def status_command(args) -> int:
     if status.get("ros2"):
         print("\n".join(_ros2_lines(status["ros2"])))
     return 0
+
+
+def ptp_text(state: dict | None) -> str:
+    """A camera's PTP state as its status gives it (fxis_shm.core.ptp.PtpState.as_status): "-"
+    for a camera that cannot say (synthetic), "none" for one without PTP features."""
+    if state is None:
+        return "-"
+    if not state.get("available"):
+        return "none"
+    if not state.get("enabled"):
+        return "disabled"
+    offset = "" if state.get("offset_ns") is None else f", offset {state['offset_ns']} ns"
+    return f"{state.get('status') or 'unknown'}{' (locked)' if state.get('locked') else ''}{offset}"
 
 
 def _fixed(value, decimals: int, kind: str = "f") -> str | None:

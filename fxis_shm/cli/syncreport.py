@@ -10,6 +10,7 @@ import os
 
 from fxis_shm.cli import exitcodes
 from fxis_shm.cli.options import add_client_options, client_for, percent, positive_number, positive_seconds
+from fxis_shm.cli.query import ptp_text
 from fxis_shm.cli.stopsignals import as_interrupts, interrupted
 from fxis_shm.cli.table import aligned
 from fxis_shm.core import syncstats
@@ -27,7 +28,7 @@ def sync_report_command(args) -> int:
     if args.plot is not None and not args.plot.lower().endswith(".png"):
         raise InvalidArgument(f"--plot {args.plot}: the plot is a PNG; give a path ending in .png")
     thresholds = syncstats.Thresholds(args.threshold_ms, args.max_p95_ms, args.min_synced_pct, args.max_dropped_pct)
-    endpoints = list(args.endpoints) + ([args.endpoint] if args.endpoint else [])
+    endpoints = [*args.endpoints, *([args.endpoint] if args.endpoint else [])] if args.endpoints else None
     with as_interrupts(), client_for(args, endpoints) as client:
         status = client.status()
         cameras = _chosen(args.cameras, status["cameras"])
@@ -105,14 +106,6 @@ def report_lines(
     lines += [f"  no tuple ({count}x): {why}" for why, count in errors.items()]
     lines.append(f"{'PASS' if figures.passed else 'FAIL'}: {'; '.join(map(str, figures.checks))}")
     return lines
-
-
-def ptp_text(state: dict | None) -> str:
-    """A camera's PTP state as its status gives it (fxis_shm.core.ptp.PtpState.as_status)."""
-    if not state or not state.get("available"):
-        return "none"
-    offset = "" if state.get("offset_ns") is None else f", offset {state['offset_ns']} ns"
-    return f"{state.get('status') or 'unknown'}{' (locked)' if state.get('locked') else ''}{offset}"
 
 
 def _write_json(path, args, rate, thresholds, figures, ptp, services, taken) -> None:
