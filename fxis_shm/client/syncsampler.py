@@ -48,20 +48,17 @@ def take(
     (``interrupted``), the slots not reached left out."""
     n = max(1, round(seconds * rate_hz))
     interval = round(1e9 / rate_hz)
-    columns = {name: c for c, name in enumerate(cameras)}
     slots = client.clock() + LEAD_NS + np.arange(n, dtype=np.int64) * interval
-    shape = (n, len(cameras))
-    frame_id, t_capture, generation = (np.zeros(shape, dtype=np.int64) for _ in range(3))
-    capture = np.full(shape, ABSENT, dtype=np.int64)
-    residual = np.full(shape, np.nan)
+    rows: list[Row | None] = []
     errors: Counter[str] = Counter()
     end = int(slots[-1]) + round(grace_s * 1e9)
-    reached, k = n, 0
+    interrupted = False
     try:
         for k, t_k in enumerate(slots.tolist()):
             now = client.clock()
             if now > end:
                 errors[f"no time left to ask (the schedule ended {grace_s:g} s after its last slot)"] += n - k
+                rows += [None] * (n - k)
                 break
             if now < t_k:
                 sleep((t_k - now) / 1e9)
@@ -69,25 +66,41 @@ def take(
                 tuple_ = client.tuple(cameras, at=t_k, partial=True)
             except FxisError as exc:
                 errors[" ".join(str(exc).split())] += 1
+                rows.append(None)
                 continue
             with tuple_:
-                _keep(tuple_, k, columns, frame_id, t_capture, generation, capture, residual)
+                rows.append(row_of(tuple_))
     except KeyboardInterrupt:
-        reached = k
-    samples = Samples(
-        cameras, slots[:reached], frame_id[:reached], t_capture[:reached], generation[:reached],
-        capture[:reached], residual[:reached],
-    )  # fmt: skip
-    return Taken(samples, errors, reached < n)
+        interrupted = True
+    return Taken(samples_of(cameras, slots[: len(rows)], rows), errors, interrupted)
 
 
-def _keep(tuple_: FrameTuple, k: int, columns: dict[str, int], *arrays: np.ndarray) -> None:
-    frame_id, t_capture, generation, capture, residual = arrays
-    for name, frame in tuple_.items():
-        c = columns.get(name)
-        if c is None:
-            continue
-        frame_id[k, c], t_capture[k, c], generation[k, c] = frame.frame_id, frame.t_capture, frame.generation
-        capture[k, c] = CAPTURE_METHODS.index(frame.capture)  # frames.py's FREE, SCHEDULED, LOCKSTEP
-        if frame.residual_ns is not None:
-            residual[k, c] = frame.residual_ns
+# what a tuple says of each camera's frame: frame id, t_capture, generation, capture method (an
+# index into CAPTURE_METHODS) and residual (ns, NaN for a frame without a target)
+Row = dict[str, tuple[int, int, int, int, float]]
+
+
+def row_of(tuple_: FrameTuple) -> Row:
+    return {
+        name: (
+            frame.frame_id,
+            frame.t_capture,
+            frame.generation,
+            CAPTURE_METHODS.index(frame.capture),  # frames.py's FREE, SCHEDULED, LOCKSTEP
+            float("nan") if frame.residual_ns is None else float(frame.residual_ns),
+        )
+        for name, frame in tuple_.items()
+    }
+
+
+def samples_of(cameras: list[str], slots: np.ndarray, rows: list[Row | None]) -> Samples:
+    """The arrays of ``cameras`` from one row per slot (None: no tuple came for it)."""
+    shape = (len(rows), len(cameras))
+    frame_id, t_capture, generation = (np.zeros(shape, dtype=np.int64) for _ in range(3))
+    capture = np.full(shape, ABSENT, dtype=np.int64)
+    residual = np.full(shape, np.nan)
+    for k, row in enumerate(rows):
+        for c, name in enumerate(cameras):
+            if row is not None and name in row:
+                frame_id[k, c], t_capture[k, c], generation[k, c], capture[k, c], residual[k, c] = row[name]
+    return Samples(cameras, np.asarray(slots, dtype=np.int64), frame_id, t_capture, generation, capture, residual)

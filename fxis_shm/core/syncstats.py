@@ -12,12 +12,13 @@ The definitions, per slot k of the schedule (one tuple asked for at t_k, every 1
   are over complete tuples only (numpy's linear interpolation).
 - synced: complete, and its gap <= the threshold; the percentage is of all slots.
 - dropped: slot k is dropped when no tuple came, a camera is missing from it, or a camera's frame
-  id did not advance as its period says since the slot it was last in: ``e = round((t_k - t_j) /
-  period)`` frames were due between that slot j and k; an advance below e is a *repeat* (the same
-  frame again when a new one was due), above e a *skip* (advance - e frames lost). When slots come
-  faster than frames (e = 0) an advance of 0 or 1 is right. Ids of different generations (a camera
-  restarted) are not compared. The percentage is of all slots. At the default rate (the slowest
-  camera's) e = 1 for that camera: librealsense's "frame number did not advance by 1".
+  id did not advance as its period says since the slot j it was last in: ``r = (t_k - t_j) /
+  period`` periods passed, so when r is a whole number exactly r new frames were due, and
+  otherwise floor(r) or ceil(r) (the frame nearest t_k is one or the other, as the phases fall).
+  Fewer is a *repeat* (the same frame again when a new one was due), more a *skip* (the frames
+  beyond ceil(r) lost). Ids of different generations (a camera restarted) are not compared. The
+  percentage is of all slots. At the default rate (the slowest camera's) r = 1 for that camera:
+  librealsense's "frame number did not advance by 1".
 
 Pure: arrays in, figures out; no I/O.
 """
@@ -42,6 +43,9 @@ CAPTURE_METHODS = ("free", "scheduled", "lockstep")
 ABSENT = -1
 
 Ints = npt.NDArray[np.int64]
+# a slot interval within this share of a period of a whole number of periods counts as that
+# whole number (rounded rates: 1e9 / 30 ns is not a whole number of ns)
+WHOLE = 1e-3
 
 
 @dataclass(frozen=True)
@@ -161,14 +165,17 @@ def advance_faults(
     if period_ns is None or period_ns <= 0 or len(where) < 2:
         return faulty, 0, 0
     now, before = where[1:], where[:-1]
-    due = np.rint((slots[now] - slots[before]) / period_ns).astype(np.int64)
+    periods = (slots[now] - slots[before]) / period_ns
+    # a whole number of periods: exactly that many new frames; between two whole numbers, either
+    # (the frame nearest to t_k is the next or the one after, as the phases fall)
+    fewest = np.floor(periods + WHOLE).astype(np.int64)
+    most = np.ceil(periods - WHOLE).astype(np.int64)
     advance = frame_id[now] - frame_id[before]
     judged = generation[now] == generation[before]
-    allowed_high = np.maximum(due, 1)  # e = 0: 0 or 1 new frames are both right
-    repeat = judged & (advance < due)
-    skip = judged & (advance > allowed_high)
+    repeat = judged & (advance < fewest)
+    skip = judged & (advance > most)
     faulty[now[repeat | skip]] = True
-    return faulty, int(repeat.sum()), int(np.where(skip, advance - allowed_high, 0).sum())
+    return faulty, int(repeat.sum()), int(np.where(skip, advance - most, 0).sum())
 
 
 def figures(

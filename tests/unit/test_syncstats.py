@@ -102,6 +102,26 @@ def test_ids_are_judged_by_the_nominal_period_when_given():
     assert judged.cameras["a"].skipped == 19 and judged.dropped_pct == 95.0
 
 
+def test_slots_at_a_rate_that_does_not_divide_the_frames_take_either_nearest_frame_without_fault():
+    parts = schedule(70, [0.0, 7.0], interval=round(1e9 / 7))  # 2.857 periods a slot: ids advance 2 or 3
+    steps = set(np.diff(parts["frame_id"][:, 0]).tolist())
+    assert steps == {2, 3}
+    assert figures(samples(parts)).dropped_pct == 0.0
+    parts["frame_id"][30:, 0] += 1  # a fourth frame in one step: one lost
+    parts["frame_id"][50, 1] = parts["frame_id"][49, 1] + 1  # one new frame where 2 or 3 were due
+    report = figures(samples(parts))
+    assert (report.cameras["a"].skipped, report.cameras["a"].repeated) == (1, 0)
+    assert report.cameras["b"].repeated == 1 and report.dropped_pct == pytest.approx(100 * 3 / 70, abs=0.01)
+
+
+def test_a_rate_rounded_to_whole_ns_is_still_judged_strictly():
+    period = 1e9 / 30  # 30 fps: the slot interval round(1e9 / 30) is not a whole number of periods
+    slots = np.arange(6, dtype=np.int64) * round(period)
+    ids = np.array([0, 1, 1, 3, 4, 5])  # a repeat at slot 2, then the frame after the one it missed
+    faulty, repeated, skipped = advance_faults(slots, ids, np.zeros(6, dtype=np.int64), np.ones(6, dtype=bool), period)
+    assert faulty.tolist() == [False, False, True, True, False, False] and (repeated, skipped) == (1, 1)
+
+
 def test_slots_faster_than_frames_repeat_ids_without_fault():
     parts = schedule(40, [0.0, 1.0], interval=PERIOD // 4)
     report = figures(samples(parts))
