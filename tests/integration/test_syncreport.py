@@ -101,6 +101,30 @@ def test_a_camera_that_goes_down_during_the_report_is_dropped_not_a_traceback(st
     assert "dropped" in out.splitlines()[-1] and "not met" in out.splitlines()[-1]
 
 
+@pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
+def test_ctrl_c_ends_the_report_with_the_figures_of_the_slots_so_far(start_service, tmp_path, sig):
+    svc = start_service(*_cameras(0, 0))
+    json_path = tmp_path / "r.json"
+    command = [sys.executable, "-m", "fxis_shm.cli", "sync-report", svc.endpoint, "--seconds", "60", "--json",
+               str(json_path)]  # fmt: skip
+    with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as report:
+        try:
+            assert report.stdout.readline().startswith("sync report:")
+            with Client(svc.endpoint) as client:
+                start = client.status()["cameras"]["a"]["frames_stored"]
+                wait_until(lambda: client.status()["cameras"]["a"]["frames_stored"] >= start + FPS // 2,
+                           what="half a second of the report")  # fmt: skip
+            report.send_signal(sig)
+            out, err = report.communicate(timeout=30)
+        finally:
+            report.kill()
+    assert report.returncode == exitcodes.INTERRUPTED, out + err
+    figures = json.loads(json_path.read_text())
+    assert figures["interrupted"] and 0 < figures["slots"] < 60 * FPS
+    assert err.strip() == f"fxis sync-report: interrupted: the figures above are of the first {figures['slots']} slots"
+    assert out.splitlines()[-1].startswith("PASS")  # the slots it took were in phase
+
+
 def test_a_cell_of_two_hosts_is_judged_in_the_callers_clock(emulated_hosts, tmp_path):
     a = emulated_hosts.host(clock_offset_s=1000)
     b = emulated_hosts.host(clock_offset_s=2000)
