@@ -16,9 +16,11 @@ The definitions, per slot k of the schedule (one tuple asked for at t_k, every 1
   period`` periods passed, so when r is a whole number exactly r new frames were due, and
   otherwise floor(r) or ceil(r) (the frame nearest t_k is one or the other, as the phases fall).
   Fewer is a *repeat* (the same frame again when a new one was due), more a *skip* (the frames
-  beyond ceil(r) lost). Ids of different generations (a camera restarted) are not compared. The
-  percentage is of all slots. At the default rate (the slowest camera's) r = 1 for that camera:
-  librealsense's "frame number did not advance by 1".
+  beyond ceil(r) lost). A camera faster than the slowest is allowed ceil(slowest period / its
+  period) - 1 frames more or fewer: the joint selection matches its frame to the slowest
+  camera's. Ids of different generations (a camera restarted) are not compared. The percentage
+  is of all slots. At the default rate (the slowest camera's) r = 1 for the slowest camera and
+  every camera of its rate: librealsense's "frame number did not advance by 1".
 
 Pure: arrays in, figures out; no I/O.
 """
@@ -156,10 +158,15 @@ def estimated_period_ns(frame_id: Ints, t_capture: Ints, generation: Ints) -> fl
 
 
 def advance_faults(
-    slots: Ints, frame_id: Ints, generation: Ints, present: npt.NDArray[np.bool_], period_ns: float | None
+    slots: Ints,
+    frame_id: Ints,
+    generation: Ints,
+    present: npt.NDArray[np.bool_],
+    period_ns: float | None,
+    slack: int = 0,
 ) -> tuple[npt.NDArray[np.bool_], int, int]:
     """One camera's frame-id faults (see the module's text): a bool per slot (a repeat or a skip
-    ends there), the repeats and the frames skipped."""
+    ends there), the repeats and the frames skipped; ``slack`` frames more or fewer allowed."""
     faulty = np.zeros(len(slots), dtype=bool)
     where = np.flatnonzero(present)
     if period_ns is None or period_ns <= 0 or len(where) < 2:
@@ -168,8 +175,8 @@ def advance_faults(
     periods = (slots[now] - slots[before]) / period_ns
     # a whole number of periods: exactly that many new frames; between two whole numbers, either
     # (the frame nearest to t_k is the next or the one after, as the phases fall)
-    fewest = np.floor(periods + WHOLE).astype(np.int64)
-    most = np.ceil(periods - WHOLE).astype(np.int64)
+    fewest = np.floor(periods + WHOLE).astype(np.int64) - slack
+    most = np.ceil(periods - WHOLE).astype(np.int64) + slack
     advance = frame_id[now] - frame_id[before]
     judged = generation[now] == generation[before]
     repeat = judged & (advance < fewest)
@@ -192,12 +199,18 @@ def figures(
     complete = ~np.isnan(gaps)
     dropped = ~present.all(axis=1) if len(samples.cameras) else np.ones(n, dtype=bool)
     cameras = {}
+    periods: dict[str, float | None] = {}
     for c, name in enumerate(samples.cameras):
         mine = present[:, c]
         ids, times, gens = samples.frame_id[mine, c], samples.t_capture[mine, c], samples.generation[mine, c]
-        period = (nominal_period_ns or {}).get(name) or estimated_period_ns(ids, times, gens)
+        periods[name] = (nominal_period_ns or {}).get(name) or estimated_period_ns(ids, times, gens)
+    slowest = max((p for p in periods.values() if p), default=None)
+    for c, name in enumerate(samples.cameras):
+        mine, period = present[:, c], periods[name]
+        # a joint tuple matches a faster camera's frame to the slowest one's: it may be that many off
+        slack = 0 if not (period and slowest) else int(np.ceil(slowest / period - WHOLE)) - 1
         faulty, repeated, skipped = advance_faults(
-            samples.slots, samples.frame_id[:, c], samples.generation[:, c], mine, period
+            samples.slots, samples.frame_id[:, c], samples.generation[:, c], mine, period, slack
         )
         dropped |= faulty
         methods = samples.capture[mine, c]

@@ -122,6 +122,21 @@ def test_a_rate_rounded_to_whole_ns_is_still_judged_strictly():
     assert faulty.tolist() == [False, False, True, True, False, False] and (repeated, skipped) == (1, 1)
 
 
+def test_a_faster_cameras_frames_matched_to_the_slowest_ones_are_no_fault():
+    """a at 20 fps, b at 10; joint tuples at 20 Hz hold a's frame at b's moment: a's ids go 0, 2, 2, 4 ..."""
+    parts = schedule(40, [0.0, 0.0], period=PERIOD)
+    b_ids = np.rint((parts["slots"] - parts["slots"][0] + 1) / (2 * PERIOD)).astype(np.int64)
+    parts["frame_id"][:, 1] = b_ids
+    parts["frame_id"][:, 0] = 2 * b_ids  # matched to b's frame, not the nearest of a's own
+    parts["t_capture"][:, 0] = parts["t_capture"][:, 1] = b_ids * 2 * PERIOD
+    report = figures(samples(parts), nominal_period_ns={"a": PERIOD, "b": 2 * PERIOD})
+    assert report.dropped_pct == 0.0 and report.gap_ms["max"] == 0.0
+    assert parts["frame_id"][20, 0] == parts["frame_id"][19, 0]  # a repeat, explained by the matching
+    parts["frame_id"][20:, 0] += 4  # four of a's frames lost there: two beyond what matching explains
+    lost = figures(samples(parts), nominal_period_ns={"a": PERIOD, "b": 2 * PERIOD})
+    assert lost.cameras["a"].skipped == 2 and lost.dropped_pct == 2.5
+
+
 def test_slots_faster_than_frames_repeat_ids_without_fault():
     parts = schedule(40, [0.0, 1.0], interval=PERIOD // 4)
     report = figures(samples(parts))
