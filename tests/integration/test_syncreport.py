@@ -74,26 +74,38 @@ def test_cameras_20_ms_apart_fail_with_that_gap(start_service, tmp_path):
     assert out.returncode == exitcodes.DONE and report["synced_pct"] == 100.0, out.stdout
 
 
-def test_a_camera_that_goes_down_during_the_report_is_dropped_not_a_traceback(start_service, tmp_path):
-    svc = start_service(*_cameras(0, 0), "--restart-limit", "0")  # once killed, b stays down
-    json_path = tmp_path / "r.json"
-    command = [sys.executable, "-m", "fxis_shm.cli", "sync-report", svc.endpoint, "--seconds", "4", "--json",
-               str(json_path)]  # fmt: skip
+def _running_report(svc, json_path, seconds: int, during) -> tuple[int, str, str]:
+    """``fxis sync-report`` of ``svc`` as a process: once it has taken half a second of tuples
+    (its first line printed, camera a's frames grown by FPS / 2), ``during(process, client)``;
+    then (exit code, stdout, stderr)."""
+    command = [sys.executable, "-m", "fxis_shm.cli", "sync-report", svc.endpoint, "--seconds", str(seconds),
+               "--json", str(json_path)]  # fmt: skip
     with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as report:
         try:
-            assert report.stdout.readline().startswith("sync report: 2 camera(s) (a, b)")
+            first = report.stdout.readline()
+            assert first.startswith("sync report: 2 camera(s) (a, b)"), first
             with Client(svc.endpoint) as client:
-                start = client.status()["cameras"]["b"]["frames_stored"]
-                wait_until(lambda: client.status()["cameras"]["b"]["frames_stored"] >= start + FPS, timeout=30,
-                           what="a second of the report with both cameras")  # fmt: skip
-                os.kill(client.status()["cameras"]["b"]["writer_pid"], signal.SIGKILL)
-                wait_until(lambda: not client.status()["cameras"]["b"]["alive"], what="camera b down")
+                start = client.status()["cameras"]["a"]["frames_stored"]
+                wait_until(lambda: client.status()["cameras"]["a"]["frames_stored"] >= start + FPS // 2,
+                           timeout=30, what="half a second of the report")  # fmt: skip
+                during(report, client)
             out, err = report.communicate(timeout=60)
         finally:
             report.kill()
-    assert report.returncode == exitcodes.SYNC_FAILED, out + err
-    assert "Traceback" not in err and err == ""
-    figures = json.loads(json_path.read_text())
+    return report.returncode, first + out, err
+
+
+def test_a_camera_that_goes_down_during_the_report_is_dropped_not_a_traceback(start_service, tmp_path):
+    svc = start_service(*_cameras(0, 0), "--restart-limit", "0")  # once killed, b stays down
+
+    def kill_b(report, client):
+        os.kill(client.status()["cameras"]["b"]["writer_pid"], signal.SIGKILL)
+        wait_until(lambda: not client.status()["cameras"]["b"]["alive"], what="camera b down")
+
+    code, out, err = _running_report(svc, tmp_path / "r.json", 4, kill_b)
+    assert code == exitcodes.SYNC_FAILED, out + err
+    assert err == ""  # no traceback, no error: a camera down is a figure of the report
+    figures = json.loads((tmp_path / "r.json").read_text())
     b = figures["cameras"]["b"]
     assert 0 < b["missing"] < figures["slots"] and figures["cameras"]["a"]["missing"] == 0
     assert figures["dropped_pct"] >= 100.0 * b["missing"] / figures["slots"]
@@ -104,22 +116,9 @@ def test_a_camera_that_goes_down_during_the_report_is_dropped_not_a_traceback(st
 @pytest.mark.parametrize("sig", [signal.SIGINT, signal.SIGTERM])
 def test_ctrl_c_ends_the_report_with_the_figures_of_the_slots_so_far(start_service, tmp_path, sig):
     svc = start_service(*_cameras(0, 0))
-    json_path = tmp_path / "r.json"
-    command = [sys.executable, "-m", "fxis_shm.cli", "sync-report", svc.endpoint, "--seconds", "60", "--json",
-               str(json_path)]  # fmt: skip
-    with subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True) as report:
-        try:
-            assert report.stdout.readline().startswith("sync report:")
-            with Client(svc.endpoint) as client:
-                start = client.status()["cameras"]["a"]["frames_stored"]
-                wait_until(lambda: client.status()["cameras"]["a"]["frames_stored"] >= start + FPS // 2,
-                           what="half a second of the report")  # fmt: skip
-            report.send_signal(sig)
-            out, err = report.communicate(timeout=30)
-        finally:
-            report.kill()
-    assert report.returncode == exitcodes.INTERRUPTED, out + err
-    figures = json.loads(json_path.read_text())
+    code, out, err = _running_report(svc, tmp_path / "r.json", 60, lambda report, client: report.send_signal(sig))
+    assert code == exitcodes.INTERRUPTED, out + err
+    figures = json.loads((tmp_path / "r.json").read_text())
     assert figures["interrupted"] and 0 < figures["slots"] < 60 * FPS
     assert err.strip() == f"fxis sync-report: interrupted: the figures above are of the first {figures['slots']} slots"
     assert out.splitlines()[-1].startswith("PASS")  # the slots it took were in phase
