@@ -56,6 +56,13 @@ def pytest_terminal_summary(terminalreporter):
     terminalreporter.section(
         f"time per file: {len(timed)} files, the suite's wall time {wall:.1f} s, {cpu:.0f} CPU-s in all"
     )
+    groups: dict[str, list[float]] = defaultdict(lambda: [0.0, 0.0])
+    for path, seconds in timed:  # per folder of tests (unit, integration, backends, ...)
+        group = groups[path.rsplit("/", 1)[0] + "/" if "/" in path else "docs"]  # README.md, docs/*.md at the root
+        group[0] += seconds
+        group[1] += _FILE_CPU[path]
+    for folder, (seconds, group_cpu) in sorted(groups.items(), key=lambda item: -item[1][0]):
+        terminalreporter.write_line(f"{seconds:8.1f} s {group_cpu:7.1f} CPU-s  {folder} (all of it)")
     for path, seconds in shown:
         terminalreporter.write_line(f"{seconds:8.1f} s {_FILE_CPU[path]:7.1f} CPU-s  {path}")
     if len(shown) < len(timed):
