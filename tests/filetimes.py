@@ -58,7 +58,7 @@ def pytest_terminal_summary(terminalreporter):
     )
     groups: dict[str, list[float]] = defaultdict(lambda: [0.0, 0.0])
     for path, seconds in timed:  # per folder of tests (unit, integration, backends, ...)
-        group = groups[path.rsplit("/", 1)[0] + "/" if "/" in path else "docs"]  # README.md, docs/*.md at the root
+        group = groups[path.rsplit("/", 1)[0] + "/" if "/" in path else path]  # README.md: a group of its own
         group[0] += seconds
         group[1] += _FILE_CPU[path]
     for folder, (seconds, group_cpu) in sorted(groups.items(), key=lambda item: -item[1][0]):
