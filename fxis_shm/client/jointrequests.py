@@ -183,6 +183,8 @@ class JointRequests:
                 frame.image,
                 k,
                 frame.t_available,
+                frame.t_target,
+                frame.capture,
             )
             frames.append(
                 {

@@ -24,6 +24,7 @@ from collections.abc import Callable
 from fxis_shm.client.fastreads import FastReads
 from fxis_shm.core import timebase
 from fxis_shm.core.engine import Failure, Reply, RequestEngine
+from fxis_shm.core.snapshot import CAPTURES
 from fxis_shm.errors import RequestTimeout, service_error
 from fxis_shm.shm import fastpick, slotio
 from fxis_shm.shm.bufferpool import BufferPool
@@ -165,6 +166,8 @@ class LocalReads:
                     "t_stored": meta.t_stored,
                     "generation": meta.generation,
                     "t_available": meta.t_available,
+                    "capture": CAPTURES[meta.capture],
+                    "t_target": meta.t_target or None,
                 }
             )
             held.append((cam, reader, slot, seq))

@@ -2,11 +2,12 @@
 
 Layout of the segment ``/fxis.<service>.<camera>.ring``:
 
-    [header, 1 KiB][slot table: slots x 48 bytes][pad to 4 KiB][slot 0 data][slot 1 data]...
+    [header, 1 KiB][slot table: slots x 64 bytes][pad to 4 KiB][slot 0 data][slot 1 data]...
 
 Each slot record holds ``seq``, ``frame_id``, ``t_capture``, ``t_stored``,
-``t_available`` and ``generation``. ``seq`` encodes the global write index w
-of the frame in the slot: ``2w+1`` while the writer fills it, ``2w+2`` once it
+``t_available``, ``generation``, ``t_target`` and ``capture`` (how the frame was captured:
+free, or triggered for the moment ``t_target``, fxis_shm.core.snapshot.CAPTURES).
+``seq`` encodes the global write index w of the frame in the slot: ``2w+1`` while the writer fills it, ``2w+2`` once it
 is complete. A reader therefore knows from ``seq`` alone which frame a slot
 holds, and a copy is valid only if ``seq`` had the expected value both before
 and after it (a seqlock); a torn copy is detected and never returned.
@@ -32,13 +33,13 @@ import numpy as np
 import posix_ipc
 
 from fxis_shm.core import timebase
-from fxis_shm.core.snapshot import SLOT, SlotMeta, Snapshot
+from fxis_shm.core.snapshot import CAPTURE_FREE, SLOT, SlotMeta, Snapshot
 from fxis_shm.core.timesearch import Timeline
 from fxis_shm.errors import Overwritten, RingError
 from fxis_shm.shm import history, naming, ordering, slotio
 
 MAGIC = b"FXISRNG1"
-LAYOUT_VERSION = 2
+LAYOUT_VERSION = 3  # 3: the slot record holds t_target and capture (64 bytes)
 HEADER_BYTES = 1024
 PAGE = 4096
 STATE_INIT, STATE_LIVE, STATE_RETIRED = 0, 1, 2
@@ -74,7 +75,7 @@ HEADER = np.dtype(
         ("status_text", "S256"),
     ]
 )
-assert HEADER.itemsize <= HEADER_BYTES and SLOT.itemsize == 48
+assert HEADER.itemsize <= HEADER_BYTES and SLOT.itemsize == 64
 WRITE_COUNT_AT = HEADER.fields["write_count"][1]  # byte offsets of the ordered words
 # the header's numbers, read in place (a numpy field read costs ten times as much)
 _STRUCTS = {"<u4": "<I", "<u8": "<Q", "<i8": "<q"}
@@ -268,8 +269,17 @@ class RingWriter(_Mapping):
         h["magic"] = MAGIC
         self._views()
 
-    def write(self, image: np.ndarray, frame_id: int, t_capture: int, t_available: int | None = None) -> int:
-        """Store one frame; returns its t_stored. Never blocks on readers."""
+    def write(
+        self,
+        image: np.ndarray,
+        frame_id: int,
+        t_capture: int,
+        t_available: int | None = None,
+        t_target: int = 0,
+        capture: int = CAPTURE_FREE,
+    ) -> int:
+        """Store one frame (``capture``: how, for the moment ``t_target`` if triggered for one);
+        returns its t_stored. Never blocks on readers."""
         w = self._count
         slot = w % self.slots
         ordering.store_release(self._mm, _seq_at(slot), 2 * w + 1)
@@ -280,6 +290,7 @@ class RingWriter(_Mapping):
         rec["frame_id"], rec["t_capture"], rec["t_stored"] = frame_id, t_capture, t_stored
         rec["t_available"] = t_capture if t_available is None else t_available
         rec["generation"] = self.generation
+        rec["t_target"], rec["capture"] = t_target, capture
         ordering.store_release(self._mm, _seq_at(slot), 2 * w + 2)  # after every byte of the frame
         self._count = w + 1
         ordering.store_release(self._mm, WRITE_COUNT_AT, self._count)
