@@ -90,7 +90,10 @@ class LocalReads:
         return FastReads(list(self.cameras), readers, self.engine.settings, self.clock)
 
     def serves(self, op: str, fields: dict) -> bool:
-        """False for requests only the coordinator can answer: those that fire software triggers."""
+        """False for requests only the coordinator can answer: those that fire software triggers,
+        now or for a capture at T."""
+        if fields.get("capture"):
+            return False
         if op not in ("image", "tuple") or fields.get("at") is not None:
             return True
         names = [fields["camera"]] if fields.get("camera") else fields.get("cameras") or list(self.cameras)

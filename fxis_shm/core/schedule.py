@@ -63,17 +63,19 @@ def learn_latency(old_ns: int, sample_ns: int, samples: int) -> int:
     return sample_ns if samples <= 1 else old_ns + (sample_ns - old_ns) // weight
 
 
-def answered_trigger(fired: list[int], t_capture: int, slack_ns: int = MATCH_SLACK_NS) -> int | None:
-    """Which of the triggers fired at ``fired`` (oldest first, not yet answered) a frame captured at
-    ``t_capture`` answers: the newest fired before it (within ``slack_ns``); the older ones got no
-    frame. None: the frame came before any of them (it answers a trigger not kept here)."""
-    found = None
+def answered_trigger(fired: list[int], t_capture: int, latency_ns: int, slack_ns: int = MATCH_SLACK_NS) -> int | None:
+    """Which of the triggers fired at ``fired`` (oldest first, not yet answered) a frame captured
+    at ``t_capture`` answers: of those fired before it (within ``slack_ns``), the one whose
+    expected capture (fired + the learned latency) is nearest; the older ones got no frame.
+    None: the frame came before any of them (a trigger not kept here)."""
+    best, best_miss = None, 0
     for k, t_fired in enumerate(fired):
-        if t_fired - slack_ns <= t_capture:
-            found = k
-        else:
+        if t_fired - slack_ns > t_capture:
             break
-    return found
+        miss = abs(t_fired + latency_ns - t_capture)
+        if best is None or miss < best_miss:
+            best, best_miss = k, miss
+    return best
 
 
 def parse_lockstep(text: str) -> tuple[float, int]:

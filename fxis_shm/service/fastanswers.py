@@ -50,7 +50,7 @@ class FastAnswers:
         op = _OPS.get(request["op"])
         if op is None or request.get("encoding") not in (None, RAW) or self.engine.busy(client):
             return None
-        if request.get("max_skew_ms") is not None:
+        if request.get("max_skew_ms") is not None or request.get("capture"):  # (a capture: the engine schedules)
             return None
         picker = self._picker()
         if picker is None:

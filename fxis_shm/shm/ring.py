@@ -73,8 +73,23 @@ HEADER = np.dtype(
         ("frames_dropped", "<u8"),
         ("hook_errors", "<u8"),
         ("status_text", "S256"),
+        # triggers for a moment (workers/triggers.py): the learned latency trigger -> t_capture and
+        # its samples, the frames captured for a trigger_at or on the lockstep grid, the triggers
+        # that got no frame; the grid (mHz, 0: none) and the lockstep residuals' p50 and p99
+        ("trigger_latency_ns", "<i8"),
+        ("trigger_samples", "<u8"),
+        ("frames_scheduled", "<u8"),
+        ("frames_lockstep", "<u8"),
+        ("triggers_missed", "<u8"),
+        ("lockstep_mhz", "<u8"),
+        ("lockstep_phase_ns", "<i8"),
+        ("residual_p50_ns", "<i8"),
+        ("residual_p99_ns", "<i8"),
+        ("timer_late_p50_ns", "<i8"),  # how late the worker's timer fired (its jitter), p50 and p99
+        ("timer_late_p99_ns", "<i8"),
     ]
 )
+SYNC_FIELDS = HEADER.names[HEADER.names.index("trigger_latency_ns") :]
 assert HEADER.itemsize <= HEADER_BYTES and SLOT.itemsize == 64
 WRITE_COUNT_AT = HEADER.fields["write_count"][1]  # byte offsets of the ordered words
 # the header's numbers, read in place (a numpy field read costs ten times as much)
@@ -336,6 +351,11 @@ class RingWriter(_Mapping):
 
     def set_flags(self, flags: int) -> None:
         self.header["flags"] = flags
+
+    def set_sync(self, figures: dict[str, int]) -> None:
+        """The trigger figures (SYNC_FIELDS, by name) for ``status``."""
+        for name, value in figures.items():
+            self.header[name] = value
 
     def set_status(self, text: str) -> None:
         self.header["status_text"] = text.encode()[:255]
