@@ -67,20 +67,8 @@ class ClientApi(ABC):
             frame = self._compiled(self._fast.image(camera, at, wait, copy))
             if frame is not None:
                 return frame
-        return frames_of(
-            *self._answer(
-                "image",
-                timeout,
-                timeout_ms,
-                copy,
-                encoding,
-                quality,
-                camera=camera,
-                at=at,
-                wait=wait,
-                capture=capture or None,
-            )
-        )[0]
+        fields = {"camera": camera, "at": at, "wait": wait, "capture": capture or None}
+        return frames_of(*self._answer("image", timeout, timeout_ms, copy, encoding, quality, **fields))[0]
 
     def tuple(
         self,
