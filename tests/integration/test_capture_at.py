@@ -11,7 +11,7 @@ from concurrent.futures import ThreadPoolExecutor
 
 import pytest
 
-from fxis_shm import Client, read_stamp
+from fxis_shm import Client, handshake, read_stamp
 from fxis_shm.errors import ProtocolError, ServiceError
 
 from ..conftest import wait_until
@@ -89,6 +89,17 @@ def test_a_moment_that_cannot_be_kept_gets_a_clear_error_and_the_service_runs_on
         at = time.monotonic_ns() + AHEAD_NS
         assert client.image("trig", at=at, capture=True).t_target == at  # still serving
         assert client.status()["cameras"]["trig"]["alive"]
+
+
+def test_an_event_request_captures_at_t_too(start_service):
+    svc = start_service("--camera", f"trig={TRIGGERED}")
+    with svc.client() as client, client.events() as events, client.subscribe(timeout=10) as answers:
+        answers.topic("robot")
+        handshake(events, answers, "robot", timeout=20)
+        at = time.monotonic_ns() + AHEAD_NS
+        events.request("image", "robot", camera="trig", at=at, capture=True)
+        frame = answers.receive().frames[0]
+    assert (frame.capture, frame.t_target) == ("scheduled", at) and frame.residual_ns >= -LATENCY_NOISE_NS
 
 
 def test_two_requests_for_one_moment_share_its_frame(start_service):
