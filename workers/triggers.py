@@ -197,7 +197,7 @@ class TriggerTimer:
         now = timebase.now()
         if self._planned is not None and now - self._planned[0] < 5e8 / hz:
             return self._planned
-        offset = time.clock_gettime_ns(time.CLOCK_REALTIME) - now  # realtime minus service clock
+        offset = _realtime_offset()
         # the first point whose trigger is still ahead
         point = schedule.next_grid_point(now + offset, hz, phase, self.log.latency_ns + _MARGIN_NS)
         t_target = point - offset
@@ -246,3 +246,19 @@ class TriggerTimer:
             self._stop = True
             self._wake.notify()
         self._thread.join(1.0)
+
+
+def _realtime_offset(tries: int = 3, good_ns: int = 20_000) -> int:
+    """CLOCK_REALTIME minus the service's clock, from the read whose two service-clock reads
+    around the realtime one were nearest: a thread preempted between them would move every grid
+    point by the preemption."""
+    best: tuple[int, int] | None = None
+    for _ in range(tries):
+        before = timebase.now()
+        realtime = time.clock_gettime_ns(time.CLOCK_REALTIME)
+        after = timebase.now()
+        if best is None or after - before < best[0]:
+            best = (after - before, realtime - (before + after) // 2)
+        if after - before <= good_ns:
+            break
+    return best[1]

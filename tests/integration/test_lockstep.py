@@ -101,10 +101,9 @@ def test_lockstep_across_hosts_skews_by_the_trigger_jitter_not_by_the_phase(emul
     # the free cameras: their phase, the same in every tuple (a camera's jitter is 0 here)
     phase = statistics.median(free)
     assert all(abs(s - phase) <= uncertainty for s in free)
-    # lockstep: the two timers' lateness and the latencies' noise, whatever the phase
-    late_p50 = sum(s["timer_late_p50_ms"] for s in syncs) * MS
+    # lockstep: the two timers' lateness and the latencies' noise, whatever the phase (two frames
+    # of one grid point are apart by at most the sum of their triggers' lateness)
     late_p99 = sum(s["timer_late_p99_ms"] for s in syncs) * MS
-    assert statistics.median(lockstep) <= late_p50 + 2 * LATENCY_NOISE_NS
     within = sum(s <= late_p99 + 2 * LATENCY_NOISE_NS for s in lockstep)
     assert within >= 0.9 * len(lockstep), (lockstep, late_p99)
     if phase > late_p99 + 2 * LATENCY_NOISE_NS + uncertainty:  # (17 ms apart, unless the origins met)
