@@ -72,6 +72,11 @@ class TriggerLog:
                 self.scheduled += 1
             return t_target, capture
 
+    def skipped(self, points: int) -> None:
+        """Lockstep grid points the timer gave up (it woke too late for them)."""
+        with self._lock:
+            self.missed += points
+
     def figures(self) -> dict[str, int]:
         """What the ring's header shows of it (fxis_shm.shm.ring.SYNC_FIELDS)."""
         with self._lock:
@@ -233,7 +238,7 @@ class TriggerTimer:
         if capture == CAPTURE_LOCKSTEP and self.lockstep is not None:
             if self._last_point is not None:  # grid points passed unfired (the thread was held up)
                 skipped = round((t_target - self._last_point) * self.lockstep[0] / 1e9) - 1
-                self.log.missed += max(0, skipped)
+                self.log.skipped(max(0, skipped))
             self._last_point = t_target
         self.log.fired(timebase.now(), t_target, capture, late_ns)
         try:
