@@ -13,7 +13,7 @@ import pytest
 
 from fxis_shm import Client
 
-from ..conftest import wait_until
+from ..conftest import fxis, wait_until
 from .conftest import SMALL
 
 pytestmark = pytest.mark.integration
@@ -36,6 +36,8 @@ def test_a_lockstep_camera_captures_on_the_realtime_grid_and_says_so(start_servi
         wait_until(lambda: client.status()["cameras"]["trig"]["frames_stored"] >= 20, what="a second of frames")
         frames = [client.tuple(["trig"]).values() for _ in range(5)]  # no extra trigger: the grid's frames
         status = client.status()["cameras"]["trig"]
+    shown = fxis("status", "--endpoint", svc.endpoint).stdout
+    assert "trig: trigger latency" in shown and "lockstep 20 Hz + 5 ms" in shown
     sync = status["sync"]
     assert status["trigger"] == "free"  # its frames come on their own: a request does not trigger it
     assert sync["lockstep"]["hz"] == HZ and sync["lockstep"]["phase_ms"] == 5.0
