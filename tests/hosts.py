@@ -382,6 +382,8 @@ class Lab:
             os.makedirs(self.allowed, mode=0o700)
             shutil.copy(client_public, self.allowed)
             self.client_keys = ClientKeys.from_files(os.path.join(keys, "server.key"), client_secret)
+            # the same keys as files, for a command line (fxis ... --server-key, --client-key)
+            self.key_files = (os.path.join(keys, "server.key"), client_secret)
         except BaseException:
             self.closing.close()
             raise

@@ -45,6 +45,7 @@ def handle(stream: Stream, command: dict) -> dict:
         "limits": {key: {k: v for k, v in entry.items() if k != "value"} for key, entry in described.items()},
         "generation": stream.ring.generation,
     }
+    answer["ptp"] = _ptp(camera)
     if asked:
         answer.update(changed={key: described[key]["value"] for key in asked}, cost=cost)
         log.info("camera %s: set %s (%s), took %s", camera.name, asked, cost, answer["changed"])
@@ -52,6 +53,16 @@ def handle(stream: Stream, command: dict) -> dict:
     if command.get("features"):
         answer["features"] = camera.features()
     return answer
+
+
+def _ptp(camera) -> dict | None:
+    """The camera's PTP state for status, read with its settings (at start, for each new
+    generation, on each change); None for a camera that cannot say, or cannot now (lost)."""
+    try:
+        state = camera.ptp()
+    except RuntimeError:  # not open: lost, being reopened
+        return None
+    return None if state is None else state.as_status()
 
 
 # ---- kept while the service runs: a worker restarted after a crash starts with them ----

@@ -5,7 +5,6 @@ and "Save tuple" across hosts. It runs here, in the foreground, until Ctrl-C."""
 
 from __future__ import annotations
 
-import asyncio
 import faulthandler
 import signal
 import sys
@@ -35,6 +34,8 @@ def access_for(args) -> ViewerAccess:
 def dashboard_command(args) -> int:
     # here, not at the top: every `fxis` command (and each service, `fxis run`) would import
     # aiohttp and the page's server, a third of a second, for this one command
+    import asyncio
+
     from fxis_shm.viewers.dashboard import serve
     from fxis_shm.viewers.livefeed import LiveFeed
 

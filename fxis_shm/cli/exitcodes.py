@@ -22,6 +22,7 @@ MISSING = 1  # done, but some of what was asked is missing (frames gone, a camer
 USAGE = 2  # bad usage or settings (a flag, a path, a key file, a config): change the command
 NO_SERVICE = 3  # a service did not answer (down, wrong endpoint, wrong keys)
 FAILED = 4  # anything else went wrong at run time (a full disk, a refusal by the service)
+SYNC_FAILED = 5  # done, measured, and the figures missed a limit (fxis sync-report's FAIL)
 INTERRUPTED = 130  # Ctrl-C or SIGTERM: stopped, with what was kept said on screen (128 + SIGINT)
 
 DISK_FULL = (errno.ENOSPC, errno.EDQUOT, errno.EFBIG)

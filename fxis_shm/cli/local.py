@@ -7,6 +7,7 @@ import subprocess
 import sys
 
 from fxis_shm.cli.options import positive_seconds
+from fxis_shm.cli.table import aligned
 from fxis_shm.errors import ConfigError, FxisError
 from fxis_shm.shm import naming
 from fxis_shm.wire import defaults
@@ -51,9 +52,7 @@ def cameras_command(args) -> int:
         rows = [["kind", "id (device=...)", "model", "format"]] + [
             [c["kind"], str(c["id"]), str(c.get("model", "-")), str(c.get("format", "-"))] for c in found
         ]
-        widths = [max(len(r[i]) for r in rows) for i in range(4)]
-        for row in rows:
-            print("  ".join(v.ljust(w) for v, w in zip(row, widths)).rstrip())
+        print("\n".join(aligned(rows)))
     else:
         print("no cameras found")
     for kind, why in unavailable.items():

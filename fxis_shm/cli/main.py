@@ -13,7 +13,7 @@ import threading
 import traceback
 from typing import NoReturn
 
-from fxis_shm.cli import dashboard, exitcodes, local, query, record, run, snapshot, tune
+from fxis_shm.cli import dashboard, exitcodes, export, local, query, record, run, snapshot, syncreport, tune
 
 DEBUG_ENV = "FXIS_DEBUG"
 
@@ -35,6 +35,8 @@ def parser() -> argparse.ArgumentParser:
     query.add_parsers(sub)
     record.add_parser(sub)
     snapshot.add_parser(sub)
+    export.add_parser(sub)
+    syncreport.add_parser(sub)
     dashboard.add_parser(sub)
     local.add_parsers(sub)
     tune.add_parsers(sub)

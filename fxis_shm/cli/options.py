@@ -12,14 +12,17 @@ from __future__ import annotations
 import argparse
 import math
 import os
+from typing import TYPE_CHECKING
 
 from fxis_shm.cli import exitcodes
-from fxis_shm.client.client import Client
 from fxis_shm.errors import ConfigError
 from fxis_shm.service.config import load_toml
 from fxis_shm.wire import defaults
 from fxis_shm.wire.endpoints import check_endpoint, check_host_known
 from fxis_shm.wire.security import ClientKeys
+
+if TYPE_CHECKING:
+    from fxis_shm.client.client import Client
 
 EXIT_USAGE = exitcodes.USAGE
 ENV_SERVER_KEY, ENV_CLIENT_KEY = "FXIS_SERVER_KEY", "FXIS_CLIENT_KEY"
@@ -46,6 +49,18 @@ def positive_seconds(text: str) -> float:
     return _number(text, float, 0, "seconds > 0", above=True)
 
 
+def positive_number(text: str) -> float:
+    return _number(text, float, 0, "a number > 0", above=True)
+
+
+def percent(text: str) -> float:
+    """A share in %, 0 to 100."""
+    value = _number(text, float, 0, "a percentage from 0 to 100")
+    if value > 100:
+        raise argparse.ArgumentTypeError(f"must be a percentage from 0 to 100, got {text!r}")
+    return value
+
+
 def nanoseconds(text: str) -> int:
     """A time in ns of a clock such as CLOCK_MONOTONIC (its count since boot), >= 0."""
     return int(_number(text, int, 0, "a whole number of ns >= 0"))
@@ -70,9 +85,17 @@ def add_key_options(sp) -> None:
     )
 
 
-def client_for(args) -> Client:
-    """A client as the command's options, the environment and the config file say."""
+def client_for(args, endpoints: list[str] | None = None) -> Client:
+    """A client as the command's options, the environment and the config file say; with
+    ``endpoints`` (a command's ENDPOINT arguments), of those services (one client over them all)."""
+    from fxis_shm.client.client import Client  # here: `fxis run` and --help need no client
+
     file_values = load_toml(args.config) if args.config else {}
+    if endpoints:
+        for endpoint in endpoints:
+            check_host_known(check_endpoint(endpoint, "ENDPOINT"), "ENDPOINT")
+        target = endpoints[0] if len(endpoints) == 1 else list(endpoints)
+        return Client(target, timeout=args.timeout, keys=client_keys_for(args, file_values))
     endpoint = args.endpoint or file_values.get("endpoint") or defaults.ENDPOINT
     setting = "--endpoint" if args.endpoint else f"--config {args.config}: endpoint" if args.config else "endpoint"
     check_host_known(check_endpoint(endpoint, setting), setting)  # a mistyped one: a line now, not a time-out

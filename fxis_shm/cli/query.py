@@ -6,6 +6,7 @@ import json
 
 from fxis_shm.cli.options import add_client_options, client_for, nanoseconds
 from fxis_shm.cli.stopsignals import as_interrupts, interrupted
+from fxis_shm.cli.table import aligned
 from fxis_shm.shm.cameras import RATE_WINDOW_NS
 
 
@@ -43,6 +44,7 @@ def status_command(args) -> int:
         "history_s",
         "gen",
         "torn",
+        "ptp",
     ]
     rows = []
     for name, cam in status["cameras"].items():
@@ -62,12 +64,11 @@ def status_command(args) -> int:
                 cam.get("history_s"),
                 cam.get("generation"),
                 cam.get("torn_reads"),
+                ptp_text(cam.get("ptp")),
             ]
         )
     cells = [columns] + [["-" if v is None else str(v) for v in r] for r in rows]
-    widths = [max(len(row[i]) for row in cells) for i in range(len(columns))]
-    for row in cells:
-        print("  ".join(v.ljust(w) for v, w in zip(row, widths)).rstrip())
+    print("\n".join(aligned(cells)))
     for name, cam in status["cameras"].items():
         if not cam["alive"] and cam.get("reason"):
             print(f"  {name}: {cam['reason']}")
@@ -95,6 +96,19 @@ def _sync_line(sync: dict | None) -> str | None:
             f"p50 {grid['residual_p50_ms']:.3f} p99 {grid['residual_p99_ms']:.3f} ms"
         )
     return line
+
+
+def ptp_text(state: dict | None) -> str:
+    """A camera's PTP state as its status gives it (fxis_shm.core.ptp.PtpState.as_status): "-"
+    for a camera that cannot say (synthetic), "none" for one without PTP features."""
+    if state is None:
+        return "-"
+    if not state.get("available"):
+        return "none"
+    if not state.get("enabled"):
+        return "disabled"
+    offset = "" if state.get("offset_ns") is None else f", offset {state['offset_ns']} ns"
+    return f"{state.get('status') or 'unknown'}{' (locked)' if state.get('locked') else ''}{offset}"
 
 
 def _fixed(value, decimals: int, kind: str = "f") -> str | None:

@@ -7,6 +7,7 @@ import sys
 from fxis_shm.cli import exitcodes
 from fxis_shm.cli.options import EXIT_USAGE, add_client_options, client_for
 from fxis_shm.cli.stopsignals import as_interrupts, interrupted
+from fxis_shm.cli.videoflags import add_video_options, video_settings
 from fxis_shm.errors import ConfigError
 from fxis_shm.formats.outfolder import check_out_folder
 
@@ -75,23 +76,6 @@ def record_command(args) -> int:
     if summary["interrupted_by"]:
         return interrupted("record", f"interrupted by {summary['interrupted_by']}: {kept_line(summary)}")
     return exitcodes.DONE
-
-
-def video_settings(args):
-    """--codec and its flags (fxis_shm.record.videotracks), checked before a service is asked."""
-    from fxis_shm.record.videotracks import VideoSettings, check_flags
-
-    given = [f for f, v in (("--encoder", args.encoder), ("--crf", args.crf), ("--preset", args.preset)) if v]
-    given += ["--gop"] if args.gop is not None else []
-    if args.codec is None:
-        if given:
-            raise ConfigError(f"{', '.join(given)} apply to video only: give --codec h264, h265 or av1")
-        return None
-    if args.encoding != "raw" or args.quality is not None:
-        raise ConfigError("--codec records video: it takes no --encoding jpeg or --quality")
-    video = VideoSettings(args.codec, args.encoder or "auto", args.crf, args.preset, args.gop)
-    check_flags(video)
-    return video
 
 
 def kept_line(summary: dict) -> str:
@@ -175,19 +159,5 @@ def add_parser(sub) -> None:
         help="raw: sensor_msgs/Image (default); jpeg: sensor_msgs/CompressedImage",
     )
     record.add_argument("--quality", type=int, metavar="Q", help="JPEG quality 1-100 (default 90)")
-    record.add_argument(
-        "--codec",
-        metavar="C",
-        help="record video instead: h264, h265 or av1, as foxglove_msgs/CompressedVideo on /NAME/video "
-        "(one frame per message, stamped with its capture time) and each frame's id on /NAME/video/frames",
-    )
-    record.add_argument(
-        "--encoder",
-        metavar="E",
-        help="auto (default: a hardware encoder, NVENC, VAAPI or QSV, if one opens, else software), "
-        "software, or an FFmpeg encoder's name (libx264, h264_nvenc, ...)",
-    )
-    record.add_argument("--crf", type=int, metavar="N", help="quality: lower is better and bigger (default per codec)")
-    record.add_argument("--preset", metavar="P", help="the encoder's speed preset (default veryfast for libx264)")
-    record.add_argument("--gop", type=float, metavar="S", help="a keyframe at least every S seconds (default 2)")
+    add_video_options(record, "record the frames")
     record.set_defaults(func=record_command)

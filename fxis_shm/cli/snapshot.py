@@ -9,7 +9,8 @@ import sys
 from fxis_shm.cli import exitcodes
 from fxis_shm.cli.options import add_client_options, client_for, nanoseconds, seconds
 from fxis_shm.cli.stopsignals import as_interrupts, interrupted
-from fxis_shm.errors import FxisError, InvalidArgument
+from fxis_shm.cli.videoflags import add_video_options, video_settings
+from fxis_shm.errors import ConfigError, FxisError, InvalidArgument
 from fxis_shm.formats.outfolder import check_out_folder
 
 
@@ -21,9 +22,24 @@ def snapshot_command(args) -> int:
     check_out_folder(args.out, "--out")  # before a service is asked (issue 33)
     cameras = [c.strip() for c in args.cameras.split(",") if c.strip()] if args.cameras else None
     try:
+        video = video_settings(args)
         with as_interrupts(), client_for(args) as client:
-            result = client.snapshot(args.at, args.before, args.after, args.out, cameras, args.encoding)
-    except InvalidArgument as exc:
+            if video is None:
+                result = client.snapshot(args.at, args.before, args.after, args.out, cameras, args.encoding)
+            else:
+                result = client.snapshot(
+                    args.at,
+                    args.before,
+                    args.after,
+                    args.out,
+                    cameras,
+                    codec=video.codec,
+                    encoder=video.encoder,
+                    crf=video.crf,
+                    preset=video.preset,
+                    gop_s=video.gop_s,
+                )
+    except (InvalidArgument, ConfigError) as exc:
         print(f"fxis snapshot: {exc}", file=sys.stderr)
         return exitcodes.USAGE
     except FxisError as exc:  # said by the command's error handler; what the bag kept, here
@@ -102,4 +118,5 @@ def add_parser(sub) -> None:
     )
     snapshot.add_argument("--cameras", metavar="A,B", help="comma-separated cameras (default all)")
     snapshot.add_argument("--encoding", choices=("raw", "jpeg"), default="raw", help="raw Image or JPEG (default raw)")
+    add_video_options(snapshot, "each camera's frames of the window (its first a keyframe)")
     snapshot.set_defaults(func=snapshot_command)

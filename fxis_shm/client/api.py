@@ -15,7 +15,8 @@ from fxis_shm.client import snapshot as snapshots
 from fxis_shm.client.fastreads import FastReads
 from fxis_shm.client.frames import Frame, FrameTuple, frames_of, sequence_of, tuple_of
 from fxis_shm.core.clockmap import ClockEstimate
-from fxis_shm.wire import encoding as codec
+from fxis_shm.formats.videotracks import VideoSettings
+from fxis_shm.wire import encoding as image_encoding
 
 # The operations written once, here: ClientApi refuses a subclass that redefines one.
 SHARED_OPERATIONS = ("image", "tuple", "latest", "sequence", "snapshot", "subscribe", "frame_times")
@@ -182,15 +183,23 @@ class ClientApi(ABC):
         after: float = 1.0,
         out: str = "snapshot",
         cameras: list[str] | None = None,
-        encoding: str = codec.RAW,
+        encoding: str = image_encoding.RAW,
         quality: int | None = None,
+        codec: str | None = None,
+        encoder: str = "auto",
+        crf: int | None = None,
+        preset: str | None = None,
+        gop_s: float | None = None,
     ) -> dict:
         """Every frame of ``cameras`` (default all) captured in [at - before, at + after]
         (``at``: ns of the caller's clock, default now; seconds) into the rosbag2/MCAP bag
         ``out``, stamps in the caller's clock; returns per camera the frames kept and the ids
-        of any missing (fxis_shm.client.snapshot). Blocks until ``at + after`` has passed."""
+        of any missing (fxis_shm.client.snapshot). Blocks until ``at + after`` has passed.
+        ``codec`` (h264, h265, av1): each camera as video, the window's first frame a keyframe,
+        with ``encoder``, ``crf``, ``preset``, ``gop_s`` as ``fxis record --codec`` takes them."""
         owners = self._owners(cameras)
-        return snapshots.take(owners, self.clock, out, at, before, after, encoding, quality, self._clock_name)
+        settings = VideoSettings(codec, encoder, crf, preset, gop_s) if codec is not None else None
+        return snapshots.take(owners, self.clock, out, at, before, after, encoding, quality, self._clock_name, settings)
 
     def subscribe(self, timeout: float = 2.0, queue: int = 16) -> Any:
         """A subscriber of the streams (``frames(camera)``, and joint ``tuples(rate_hz)``), every

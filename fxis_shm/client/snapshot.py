@@ -20,6 +20,10 @@ frame copied until then. A snapshot killed outright leaves ``OUT.partial``, whic
 no bag (``out`` None): an empty one would say nothing more than the result does. Any number
 of snapshots may run at once (each reads the rings like any client), also while the service
 serves at full rate.
+
+With ``video`` (``client.snapshot(codec="h264")``) each camera's frames are encoded by the
+recorder's encoders (fxis_shm.formats.videoencoder) in the writer's thread, the window's
+first frame a keyframe: the clip starts exactly at t - before.
 """
 
 from __future__ import annotations
@@ -31,6 +35,7 @@ import os
 import queue
 import threading
 import time
+from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
@@ -40,6 +45,8 @@ from fxis_shm.errors import CameraDown, DiskFull, FxisError, InvalidArgument, Ov
 from fxis_shm.formats import rosmsgs
 from fxis_shm.formats.bagfile import BagWriter
 from fxis_shm.formats.outfolder import check_out_folder
+from fxis_shm.formats.videoencoder import StreamEncoder
+from fxis_shm.formats.videotracks import VideoPlan, VideoSettings, write_packets
 from fxis_shm.wire import encoding as codec
 
 ID, T_CAPTURE, GENERATION = 0, 1, 4  # columns of a ``frames`` row
@@ -57,7 +64,6 @@ class _Camera:
     end: int
     last_t: int | None = None  # the newest capture time looked at
     last: tuple[int, int] | None = None  # (generation, frame id) of the newest frame looked at
-    taken: int = 0
     missing: list[int] = field(default_factory=list)
     gone_ms: float = 0.0  # the window's start the ring no longer held
     period_ns: int = 0
@@ -102,13 +108,17 @@ def take(
     encoding: str = codec.RAW,
     quality: int | None = None,
     clock_name: str | None = None,
+    video: VideoSettings | None = None,
 ) -> dict:
     """The snapshot of the cameras ``owners`` names (camera -> the client of its service)
     around ``at`` (ns of ``clock``, whose name ``clock_name`` is; default now) into the bag
     ``out``; what it holds. ``out`` is None if the rings held no frame of the window (no
-    bag is written then: an empty bag would say nothing and reads badly)."""
+    bag is written then: an empty bag would say nothing and reads badly). ``video``: each
+    camera's frames as video instead (as ``fxis record --codec`` writes it), the window's
+    first frame a keyframe."""
     t = clock() if at is None else at
-    _check(at, before, after, out, encoding)
+    _check(at, before, after, out, encoding, quality, video)
+    plan = _video_plan(owners, video)  # before anything is made: bad settings leave nothing behind
     out = os.path.normpath(out)
     partial = out + ".partial"
     lock = _claim(partial, out)
@@ -117,12 +127,13 @@ def take(
         cameras = {name: _Camera(name, c, *map(c.clock_estimate().to_service, window)) for name, c in owners.items()}
         custom = {"clock": _clock_words(clock_name), "stamps": "header.stamp: capture time in that clock"}
         custom.update(event_ns=t, before_s=before, after_s=after, window_ns=f"{window[0]} {window[1]}")
-        custom.update(cameras=",".join(cameras), encoding=encoding, missing="", gone_before_ms="", ended="")
+        custom.update(cameras=",".join(cameras), encoding=video.codec if video else encoding)
+        custom.update(missing="", gone_before_ms="", ended="")
         bag = BagWriter(partial, custom, file_stem=os.path.basename(out))
     except BaseException:
         _release(lock, partial, remove=True)  # nothing written yet: the folder made in this run goes
         raise
-    writer = _Writer(bag, time.time_ns() - clock(), encoding, quality)  # MCAP log times: wall-clock
+    writer = _Writer(bag, time.time_ns() - clock(), encoding, quality, plan)  # MCAP log times: wall-clock
     stopped: BaseException | None = None
     try:
         _follow(cameras, writer, clock, window[1] + round(GRACE_S * 1e9))
@@ -130,7 +141,7 @@ def take(
         stopped = exc
     try:
         writer.finish()
-        summary = _summary(cameras)
+        summary = _summary(cameras, writer.written)
         bag.custom_data.update({key: json.dumps({n: s[key] for n, s in summary.items()}) for key in KEYS})
         bag.custom_data["ended"] = _ended(stopped)
         bag.close()
@@ -141,7 +152,7 @@ def take(
         raise Interrupted(
             f"interrupted while the bag was being closed: it stays unfinished in {partial}; "
             f"fxis snapshot --recover {partial} makes it the bag {out}",
-            {"out": None, "event_ns": t, "window_ns": window, "cameras": _summary(cameras)},
+            {"out": None, "event_ns": t, "window_ns": window, "cameras": _summary(cameras, writer.written)},
         ) from None
     except BaseException as exc:
         os.close(lock)
@@ -149,7 +160,7 @@ def take(
             f"the snapshot's bag {partial} could not be finished ({exc!r}): "
             f"fxis snapshot --recover {partial} keeps what it holds"
         ) from exc
-    kept = sum(c.taken for c in cameras.values())
+    kept = sum(writer.written.values())
     _release(lock, partial, remove=not kept)
     if kept:
         _move(partial, out)
@@ -201,10 +212,10 @@ def _follow(cameras: dict[str, _Camera], writer: _Writer, clock: Callable[[], in
         time.sleep(max(0.0, _poll_s(cameras) - (time.monotonic() - began)))
 
 
-def _summary(cameras: dict[str, _Camera]) -> dict:
+def _summary(cameras: dict[str, _Camera], written: Counter) -> dict:
     return {
         name: {
-            "frames": c.taken,
+            "frames": written[name],
             "missing": sorted(c.missing),
             "gone_before_ms": round(c.gone_ms, 3),
             "complete": c.past_end,
@@ -286,7 +297,13 @@ def _disk_full(exc: DiskFull, lock, partial: str, out: str) -> DiskFull:
 DISK_FULL_FIELDS = ("folder", "reason", "kept", "seconds", "file_bytes", "valid")
 
 
-def _check(at, before, after, out, encoding) -> None:
+def _video_plan(owners: dict[str, Any], video: VideoSettings | None) -> VideoPlan | None:
+    if video is None:
+        return None
+    return VideoPlan.make(video, {name: c.status()["cameras"][name] for name, c in owners.items()})
+
+
+def _check(at, before, after, out, encoding, quality, video) -> None:
     for name, value in (("before", before), ("after", after)):
         if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
             raise InvalidArgument(f"{name} must be seconds >= 0, got {value!r}")
@@ -296,6 +313,8 @@ def _check(at, before, after, out, encoding) -> None:
         raise InvalidArgument(f"at must be int ns of the caller's clock, got {at!r}")
     if encoding not in (codec.RAW, codec.JPEG):
         raise InvalidArgument(f"encoding must be raw or jpeg, got {encoding!r}")
+    if video is not None and (encoding != codec.RAW or quality is not None):
+        raise InvalidArgument(f"codec {video.codec} writes video: it takes no encoding {encoding} or quality")
     check_out_folder(out)
 
 
@@ -307,13 +326,19 @@ def _poll_s(cameras: dict[str, _Camera]) -> float:
 
 class _Writer:
     """Writes the copied frames into the bag in a thread of its own, so that copying the
-    window's past out of every camera's ring never waits for the disk: each ring is emptied
-    of the window's frames within milliseconds, long before it comes round."""
+    window's past out of every camera's ring never waits for the disk (or an encoder): each
+    ring is emptied of the window's frames within milliseconds, long before it comes round.
+    With a video ``plan``, each camera's frames go through an encoder of its own, every one
+    of them (a snapshot skips none), its first a keyframe."""
 
-    def __init__(self, bag: BagWriter, to_realtime: int, encoding: str, quality: int | None):
+    def __init__(self, bag: BagWriter, to_realtime: int, encoding: str, quality: int | None, plan: VideoPlan | None):
         self.bag, self.to_realtime, self.encoding, self.quality = bag, to_realtime, encoding, quality
+        self.plan = plan
+        self._encoders: dict[str, StreamEncoder] = {}
         self._frames: queue.Queue = queue.Queue()
         self._error: BaseException | None = None
+        # counted here, once in the bag: a frame put just before Ctrl-C is still written, and counted
+        self.written: Counter = Counter()
         self._thread = threading.Thread(target=self._run, name="snapshot-writer", daemon=True)
         self._thread.start()
 
@@ -335,12 +360,26 @@ class _Writer:
                 continue  # drain: the error is raised to the caller
             try:
                 with frame:
-                    topic, msgtype, message, size = rosmsgs.frame_message(
-                        frame, frame.t_capture, self.encoding, self.quality
-                    )
-                    self.bag.write(topic, msgtype, message, frame.t_capture + self.to_realtime, size)
+                    self._write(frame)
+                self.written[frame.camera] += 1
             except BaseException as exc:  # a full disk: the snapshot stops and says so
                 self._error = exc
+        if self.plan is not None and self._error is None:
+            try:  # the encoders' last frames
+                for cam, encoder in self._encoders.items():
+                    write_packets(self.bag, cam, self.plan.choice.codec, encoder.finish(), self.to_realtime)
+            except BaseException as exc:
+                self._error = exc
+
+    def _write(self, frame) -> None:
+        if self.plan is None:
+            topic, msgtype, message, size = rosmsgs.frame_message(frame, frame.t_capture, self.encoding, self.quality)
+            self.bag.write(topic, msgtype, message, frame.t_capture + self.to_realtime, size)
+            return
+        if frame.camera not in self._encoders:
+            self._encoders[frame.camera] = self.plan.stream_encoder(frame.camera)
+        packets = self._encoders[frame.camera].encode(frame.image, frame.t_capture, frame.frame_id, frame.generation)
+        write_packets(self.bag, frame.camera, self.plan.choice.codec, packets, self.to_realtime)
 
 
 def _poll(cam: _Camera, writer: _Writer) -> None:
@@ -371,4 +410,3 @@ def _poll(cam: _Camera, writer: _Writer) -> None:
         for frame in frames:
             if frame.frame_id in got:
                 writer.put(frame)
-                cam.taken += 1

@@ -26,23 +26,13 @@ from typing import Any, Protocol
 
 from fxis_shm.core import sequences
 from fxis_shm.core.decisions import Context, Plan, Reject, Wait, check_size, decide, newest_frames, sequence_spec
+from fxis_shm.core.requestdefaults import REQUEST_DEFAULTS
 from fxis_shm.core.snapshot import Snapshot
 from fxis_shm.core.waitpolicy import CameraState
 from fxis_shm.errors import Code
 
 log = logging.getLogger("engine")
 
-REQUEST_DEFAULTS: dict[str, Any] = {
-    "sync": "joint",
-    "wait": "auto",
-    "timeout_ms": 1000.0,
-    "max_skew_ms": None,
-    "horizon_ms": 10_000.0,
-    "sync_tolerance_ms": 2.0,  # above cameras' jitter range, far below a frame period
-    "max_pending": 1000,
-    "max_pending_per_client": 100,
-    "max_sequence_frames": 500,
-}
 LIVENESS_CHECK_NS = 100_000_000  # waiting requests notice a dead camera this fast
 COPY_ATTEMPTS = 3  # plans made again after a chosen slot was overwritten during the copy
 OVERRUN_MESSAGE = (

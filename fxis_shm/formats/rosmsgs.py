@@ -84,7 +84,7 @@ def video_frames_topic(camera: str) -> str:
 
 
 def video_messages(packet, camera: str, codec_name: str) -> tuple[dict, dict]:
-    """The CompressedVideo message of one encoded frame (fxis_shm.record.videoencoder's
+    """The CompressedVideo message of one encoded frame (fxis_shm.formats.videoencoder's
     ``Packet``) and its VideoFrame beside it, both stamped with the frame's capture time."""
     video = {"timestamp": stamp(packet.t_ns), "frame_id": camera, "data": packet.data, "format": codec_name}
     info = {

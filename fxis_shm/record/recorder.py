@@ -28,8 +28,8 @@ from fxis_shm.core import timebase
 from fxis_shm.errors import CameraDown, ConfigError, DiskFull, Overwritten, ServiceError
 from fxis_shm.formats import rosmsgs
 from fxis_shm.formats.bagfile import BagWriter
+from fxis_shm.formats.videotracks import VideoPlan, VideoSettings, VideoTracks
 from fxis_shm.record.recording import Follower, Steps
-from fxis_shm.record.videotracks import VideoPlan, VideoSettings, VideoTracks
 from fxis_shm.wire import encoding as codec
 
 _MAX_TUPLES_PER_REQUEST = 16  # bounds a reply's size (and the service's sequence limit)
@@ -52,7 +52,7 @@ class RecordSettings:
     tuples: bool = False
     encoding: str = codec.RAW
     quality: int = codec.DEFAULT_JPEG_QUALITY
-    video: VideoSettings | None = None  # --codec: video instead of images (fxis_shm.record.videotracks)
+    video: VideoSettings | None = None  # --codec: video instead of images (fxis_shm.formats.videotracks)
 
 
 class Recorder:
@@ -325,7 +325,9 @@ class Recorder:
 
     def _write_image(self, frame, t_stamp: int) -> None:
         if self.video is not None:
-            self.video.offer(frame, t_stamp)  # copied: the encoder's thread writes it later
+            restarted = self.video.offer(frame, t_stamp)  # copied: the encoder's thread writes it later
+            if restarted:
+                self.progress.stage(restarted)
             return
         image = frame.image
         if self.s.encoding == codec.JPEG:

@@ -120,7 +120,7 @@ class CoordinatorSpec(ChildSpec):
     pub: str
     events: str
     cameras: dict[str, str]  # camera name -> kind
-    settings: dict[str, Any]  # request defaults the config changed (engine.REQUEST_DEFAULTS)
+    settings: dict[str, Any]  # request defaults the config changed (core.requestdefaults)
     curve_secret: str | None = None
     curve_clients: str | None = None
     curve_operators: str | None = None  # the keys that may change camera settings (None: every client)

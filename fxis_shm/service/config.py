@@ -14,7 +14,7 @@ import sys
 from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
-from fxis_shm.core.engine import REQUEST_DEFAULTS
+from fxis_shm.core.requestdefaults import REQUEST_DEFAULTS
 from fxis_shm.core.schedule import parse_lockstep
 from fxis_shm.errors import ConfigError
 from fxis_shm.service.camerakinds import camera_options

@@ -144,6 +144,7 @@ class Coordinator:
         self.time_namespace = time_namespace()
         # per camera, (generation, values) its worker last reported (values None: asked, not answered yet)
         self.camera_settings: dict[str, tuple[int, dict | None]] = {}
+        self.camera_ptp: dict[str, dict | None] = {}  # per camera, its PTP state read with those values
         self.links: WorkerLinks | None = None
 
     # ---- the loop ----
@@ -393,6 +394,7 @@ class Coordinator:
         for name, info in cameras.items():
             info["restarts"] = processes.get(f"camera:{name}", {}).get("restarts")
             info["settings"] = self._settings_of(name, info.get("generation"))
+            info["ptp"] = self.camera_ptp.get(name)  # None: the camera cannot say (or not yet asked)
         return cameras
 
     def _settings_of(self, camera: str, generation: int | None) -> dict | None:
@@ -446,6 +448,7 @@ class Coordinator:
                     del self.camera_settings[camera]  # asked again by the next status
                 return
             self.camera_settings[camera] = (result["generation"], result["values"])
+            self.camera_ptp[camera] = result.get("ptp")
             if "changed" in result:
                 log.info("camera %s changed %s (%s)", camera, result["changed"], result["cost"])
                 event = {k: result[k] for k in ("changed", "cost", "values", "generation")}

@@ -15,11 +15,14 @@ import io
 import logging
 import time
 import zipfile
+from collections import deque
 from collections.abc import Callable
 from concurrent.futures import ThreadPoolExecutor
 from typing import Any, TypeVar
 
 from fxis_shm.client.client import Client
+from fxis_shm.client.syncsampler import Row, row_of, samples_of
+from fxis_shm.core import syncstats
 from fxis_shm.errors import CameraDown, Code, FxisError, UnknownCamera
 from fxis_shm.formats.tuplefiles import tuple_files
 from fxis_shm.service.childspec import ViewerSpec
@@ -32,6 +35,8 @@ log = logging.getLogger("dashboard")
 SAMPLE_PERIOD_S = 0.5  # status, rates and plots refresh this often
 REQUEST_TIMEOUT_S = 1.5  # a service silent this long is shown as gone
 INTERVALS_SHOWN = 60  # frame intervals plotted per camera
+SYNC_WINDOW = 120  # the sampled tuples the live sync figures are of: a minute at two a second
+GRID_LAG_NS = 5_000_000  # a sampled tuple's t* is a period and this far back: its frames are stored
 T = TypeVar("T")
 
 
@@ -71,6 +76,8 @@ class LiveFeed:
                 self._learn(self._probe.status()["cameras"])
         self.cache = EncodedCache()
         self._skews = SkewHistory()
+        self._tuples: deque[tuple[int, Row | None]] = deque(maxlen=SYNC_WINDOW)  # (t*, its row or None)
+        self._grid_origin: int | None = None  # where the sampled tuples' grid of t* starts
         self.started = time.monotonic()
         self.view: dict = {"service_ok": False, "error": "not sampled yet", "status": None}
 
@@ -198,9 +205,15 @@ class LiveFeed:
             times = client.frame_times(list(cameras)) if cameras else {"cameras": {}}  # of services that answer
             for name, info in times["cameras"].items():
                 cameras[name]["intervals_ms"] = frame_intervals_ms(info["frames"], times["columns"], INTERVALS_SHOWN)
-            with client.tuple(partial=True, copy=False) as tup:
-                if len(tup) > 1:  # one camera has no skew to show
-                    self._skews.add(time.monotonic() - self.started, tup.skew_ns)
+            asked = self._sample_time(client.clock())
+            try:
+                with client.tuple(partial=True, copy=False, at=asked) as tup:
+                    if len(tup) > 1:  # one camera has no skew to show
+                        self._skews.add(time.monotonic() - self.started, tup.skew_ns)
+                    self._tuples.append((tup.t_request, row_of(tup)))
+            except FxisError:
+                self._tuples.append((asked, None))  # no tuple: dropped, in the sync figures
+                raise
         except FxisError as exc:  # e.g. every camera down: the status still says why
             log.debug("sampling frames failed: %s", exc)
         view = {
@@ -209,11 +222,37 @@ class LiveFeed:
             "status": status,
             "cameras": cameras,
             "skew_ms": self._skews.points(),
+            "sync": self._sync_view(list(status["cameras"])),
             "sampled": time.time(),
         }
         if self.cell:
             view["services"] = services_view(status, self._probe.clocks)
         return view
+
+    def _sample_time(self, now: int) -> int:
+        """The t* of the sampled tuple: a point of a grid of the slowest camera's period, one period
+        back (its frames are stored: no wait). Samples a whole number of periods apart are what
+        the sync figures judge frame ids by (fxis_shm.core.syncstats: a whole number of periods
+        between two tuples, that many new frames), whenever the sampler's thread gets to run."""
+        periods = [1e9 / cam["fps"] for cam in self.cameras.values() if cam.get("fps")]
+        if not periods:
+            return now
+        slowest = max(periods)
+        if self._grid_origin is None:
+            self._grid_origin = now
+        return self._grid_origin + int((now - self._grid_origin - slowest - GRID_LAG_NS) // slowest * slowest)
+
+    def _sync_view(self, cameras: list[str]) -> dict | None:
+        """``fxis sync-report``'s figures (librealsense's criteria, default limits) over the
+        tuples sampled in the last minute: the skew of each, and whether one was missing a
+        camera or repeated or skipped a frame (fxis_shm.core.syncstats)."""
+        tuples = list(self._tuples)
+        if not tuples or not cameras:
+            return None
+        slots = [t for t, _ in tuples]
+        periods = {n: 1e9 / fps for n in cameras if (fps := self.cameras.get(n, {}).get("fps"))}
+        figures = syncstats.figures(samples_of(cameras, slots, [row for _, row in tuples]), None, periods)
+        return {"window_s": round((slots[-1] - slots[0]) / 1e9, 1), **figures.as_dict()}
 
 
 def services_view(status: dict, clocks: dict) -> dict:

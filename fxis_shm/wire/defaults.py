@@ -1,6 +1,6 @@
 """The defaults of the service and of its clients, written once: the config,
 the command line's help, the client and the subscriber refer to these (the
-request defaults a config may change are engine.REQUEST_DEFAULTS)."""
+request defaults a config may change are core.requestdefaults)."""
 
 from __future__ import annotations
 

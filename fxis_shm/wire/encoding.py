@@ -8,7 +8,6 @@ mono8 and bgr8 frames; ``png`` is lossless and also takes 16-bit mono.
 
 from __future__ import annotations
 
-import cv2
 import numpy as np
 
 from fxis_shm.errors import ProtocolError
@@ -43,6 +42,8 @@ def encode(image: np.ndarray, encoding: str, quality: int = DEFAULT_JPEG_QUALITY
     if encoding == RAW:
         return np.ascontiguousarray(image).tobytes()
     _check_encodable(image, encoding)
+    import cv2  # here: a process that never encodes (a camera worker, `fxis run`) is spared its import
+
     params = [cv2.IMWRITE_JPEG_QUALITY, quality] if encoding == JPEG else [cv2.IMWRITE_PNG_COMPRESSION, 1]
     ok, data = cv2.imencode("." + encoding, image, params)
     if not ok:
@@ -56,6 +57,8 @@ def decode(data: bytes | memoryview, encoding: str, shape: tuple[int, ...] | Non
     if encoding == RAW:
         image = np.frombuffer(data, dtype=dtype)
     else:
+        import cv2
+
         decoded = cv2.imdecode(np.frombuffer(data, np.uint8), cv2.IMREAD_UNCHANGED)
         if decoded is None:
             raise ProtocolError(f"the {encoding} data of a frame could not be decoded")

@@ -175,3 +175,22 @@ def kill_9_once_written(proc, mcap: Path, size: int) -> None:
         if proc.poll() is None:
             proc.kill()
             proc.wait()
+
+
+def record_across_a_size_change(svc: ServiceProcess, out: Path, camera: str, size: dict, *args) -> tuple[int, str, str]:
+    """``fxis record ARGS`` (which must end by itself: --seconds or --frames) during which
+    ``camera`` is restarted at ``size`` (``client.configure``, a new generation) once the
+    recording has taken about 20 of its frames: (exit code, stdout, stderr)."""
+    command = [sys.executable, "-m", "fxis_shm.cli", "record", "--endpoint", svc.endpoint, "--out", str(out), *args]
+    proc = subprocess.Popen(command, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        with svc.client(timeout=5) as client:
+            wait_until(lambda: Path(out, f"{out.name}_0.mcap").exists(), timeout=30, what="the recording's bag")
+            first = client.image(camera).frame_id
+            wait_until(lambda: client.image(camera).frame_id >= first + 20, timeout=30, what="20 frames recorded")
+            assert client.configure(camera, **size)["cost"] == "restart"
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+        proc.wait()
+    return proc.returncode, stdout, stderr

@@ -3,10 +3,11 @@ import subprocess
 
 import pytest
 
+from fxis_shm import Client
 from fxis_shm.service.launch import ServiceProcess
 from fxis_shm.shm import procstat
 
-from ..conftest import assert_nothing_left, start_service  # noqa: F401  (shared fixtures)
+from ..conftest import assert_nothing_left, start_service, wait_until  # noqa: F401  (shared fixtures)
 
 SMALL = "width=64,height=48"
 
@@ -31,6 +32,19 @@ def module_services(*arg_lists: list[str], **options):
 def module_service(args: list[str]):
     """A service shared by a module's tests (yield from it in a module-scoped fixture)."""
     for (svc,) in module_services(args):
+        yield svc
+
+
+def module_service_with_full_rings(args: list[str]):
+    """``module_service``, yielded once every camera's ring is full (as after a while): its
+    history is all there."""
+    for svc in module_service(args):
+        with Client(svc.endpoint) as client:
+            wait_until(
+                lambda: all(c["frames_stored"] >= c["ring_slots"] for c in client.status()["cameras"].values()),
+                timeout=20,
+                what="full rings",
+            )
         yield svc
 
 

@@ -92,7 +92,8 @@ def files_under(folder) -> list[str]:
 
 # ---- the table: command x bad input ----
 
-CLIENT_COMMANDS = ["status", "grab", "record", "snapshot", "get", "set"]  # they take --endpoint, --timeout and keys
+# they take --endpoint, --timeout and keys
+CLIENT_COMMANDS = ["status", "grab", "record", "snapshot", "get", "set", "sync-report"]
 OUT_COMMANDS = ["grab", "record", "snapshot"]  # they take --out, a folder to create
 
 
@@ -138,6 +139,9 @@ def table() -> list[tuple[list[str], int, tuple[str, ...]]]:
         (["record", "--out", NEW, "--rate", "nan"], USAGE, ("--rate", "> 0")),
         (["record", "--out", NEW, "--encoding", "jpeg", "--quality", "0"], USAGE, ("--quality",)),
         (["record", "--recover", f"{TMP}/nobag"], USAGE, ("nobag",)),
+        (["snapshot", "--out", NEW, "--codec", "vp8"], USAGE, ("--codec vp8: unknown", "h264, h265, av1")),
+        (["snapshot", "--out", NEW, "--crf", "20"], USAGE, ("--crf", "give --codec")),
+        (["export", f"{TMP}/nobag", "--camera", "a", "--out", f"{TMP}/a.mp4"], USAGE, ("no bag at", "nobag")),
         (["keys", "--out", "/proc/x"], USAGE, ("/proc/x", "give a folder")),
         (["cameras", "--timeout", "-1"], USAGE, ("--timeout", "seconds > 0")),
         (["cameras", "--timeout", "nan"], USAGE, ("--timeout", "seconds > 0")),
@@ -157,6 +161,15 @@ def table() -> list[tuple[list[str], int, tuple[str, ...]]]:
         (["run", "--endpoint", "tcp://127.0.0.1:99999"], USAGE, ("port from 0 to 65535",)),
         (["no-such-command"], USAGE, ("invalid choice",)),
         (["set", "cam0", "gain"], USAGE, ("KEY=VALUE",)),
+        (["sync-report", "--seconds", "-1"], USAGE, ("--seconds", "seconds > 0", "'-1'")),
+        (["sync-report", "--rate", "nan"], USAGE, ("--rate", "a number > 0", "'nan'")),
+        (["sync-report", "--threshold-ms", "0"], USAGE, ("--threshold-ms", "a number > 0")),
+        (["sync-report", "--min-synced-pct", "150"], USAGE, ("--min-synced-pct", "percentage from 0 to 100")),
+        (["sync-report", "--max-dropped-pct", "-1"], USAGE, ("--max-dropped-pct", "percentage from 0 to 100")),
+        (["sync-report", NOWHERE, "--plot", f"{TMP}/out.jpg"], USAGE, ("--plot", "a path ending in .png")),
+        (["sync-report", NOWHERE, "--json", "/proc/x/r.json"], USAGE, ("--json /proc/x/r.json", "cannot write")),
+        (["sync-report", "127.0.0.1:6500"], USAGE, ("ENDPOINT", "expected tcp://HOST:PORT")),
+        (["sync-report", UNKNOWN_HOST], USAGE, ("not known here",)),
     ]
     rows += [(["dashboard", endpoint], USAGE, ("expected tcp://HOST:PORT",)) for endpoint in NO_SCHEME]
     rows += [(["dashboard", endpoint], USAGE, ("port from 1 to 65535",)) for endpoint in BAD_PORTS]

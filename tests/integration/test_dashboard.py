@@ -87,6 +87,21 @@ def test_the_page_and_status_are_served(dashboard):
     assert reply["supervisor"]["processes"]["dashboard"]["state"] == "running"
 
 
+def test_the_sync_figures_are_shown_live(dashboard, wait):
+    """fxis sync-report's figures over the tuples the dashboard samples: the two cameras share a
+    time origin (a at 20 fps, b at 10), so every tuple's frames are of one moment."""
+    svc, base = dashboard
+    sync = wait(lambda: (v := view(base).get("sync")) and v["slots"] >= 6 and v, timeout=30, what="6 sampled tuples")
+    assert sync["verdict"] == "PASS" and sync["gap_ms"]["max"] == 0.0 and sync["synced_pct"] == 100.0
+    assert sync["dropped_pct"] <= 5.0 and sync["window_s"] > 0
+    for name in ("a", "b"):
+        cam = sync["cameras"][name]
+        assert cam["captures"]["free"] == sync["slots"] - cam["missing"] and cam["repeated"] == 0
+    assert sync["cameras"]["a"]["period_ms"] == 50.0 and sync["cameras"]["b"]["period_ms"] == 100.0
+    page = get(base + "/")[2]
+    assert b'id="sync"' in page and b"function drawSync" in page and b"function ptpText" in page
+
+
 def test_pictures_are_the_newest_frames_scaled_down(dashboard, wait):
     svc, base = dashboard
     status, headers, body = get(base + "/cameras/a/latest.jpg?width=160")

@@ -25,6 +25,9 @@ TILES_JS = """Array.from(document.querySelectorAll('.camera')).map(tile => {
           loaded: img.complete && img.naturalWidth > 0, natural: [img.naturalWidth, img.naturalHeight],
           box: {x: box.left + scrollX, y: box.top + scrollY, width: box.width, height: box.height}};
 })"""
+SYNC_JS = "document.getElementById('sync').textContent"
+PTP_JS = """Array.from(document.querySelectorAll('.camera table tr'))
+  .filter(tr => tr.cells[0].textContent === 'ptp').map(tr => tr.cells[1].textContent)"""
 PAGE_WIDTH = 480  # the page's default picture width: wider cameras are scaled down to it
 SIZES = {"a": (320, 240), "b": (64, 48)}  # CAMERAS' sizes, narrower than PAGE_WIDTH: as they are
 
@@ -66,6 +69,12 @@ def test_the_page_shows_every_camera_live_and_a_killed_one_down(browser, start_s
         assert tuple(tile["natural"]) == SIZES[name], (name, tile)
         assert tile["state"] == "up" and tile["badge"] == "live", tile
         assert tile["box"]["width"] == SIZES[name][0]  # drawn at its own size, not stretched
+    # the live sync figures (fxis sync-report's): the two cameras share a time origin, so PASS;
+    # each tile shows its PTP state (a synthetic camera cannot say: "-")
+    sync = wait(lambda: (t := browser.evaluate(SYNC_JS)).startswith("sync PASS") and t, timeout=30, interval=0.2,
+                what="the sync figures on the page")  # fmt: skip
+    assert "gap p50 0.000" in sync and "synced 100.0 %" in sync, sync
+    assert browser.evaluate(PTP_JS) == ["-", "-"]
     (tmp_path / "dashboard-live.png").write_bytes(browser.screenshot())
 
     # what the browser draws of each camera is a picture (not a blank box) and it changes
@@ -102,3 +111,7 @@ def test_the_page_shows_every_camera_live_and_a_killed_one_down(browser, start_s
         what="camera a's picture to keep changing",
     )
     assert get(base + "/cameras/b/latest.jpg")[0] == 503
+    # its tuples come without b from now on: dropped, until the figures fail
+    failed = wait(lambda: (t := browser.evaluate(SYNC_JS)).startswith("sync FAIL") and t, timeout=30, interval=0.2,
+                  what="the sync figures to fail")  # fmt: skip
+    assert "dropped" in failed

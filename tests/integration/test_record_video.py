@@ -1,17 +1,19 @@
 """``fxis record --codec`` against a real service: the bag read back with rosbags and every
 frame decoded with PyAV (FFmpeg's own decoders, not the encoder's)."""
 
+import csv
+from fractions import Fraction
+
 import av
 import numpy as np
 import pytest
 
 from fxis_shm import read_stamp
-from fxis_shm.formats import rosmsgs
-from fxis_shm.record import videochoice
-from fxis_shm.record.videoencoder import CameraEncoder
+from fxis_shm.formats import rosmsgs, videochoice
+from fxis_shm.formats.videoencoder import CameraEncoder, StreamEncoder
 
 from ..conftest import fxis
-from .bags import read_bag, record, record_until_ctrl_c, two_cameras
+from .bags import read_bag, record, record_across_a_size_change, record_until_ctrl_c, two_cameras
 from .conftest import mounted_tmpfs
 
 pytestmark = pytest.mark.integration
@@ -22,9 +24,14 @@ START_CODE = b"\x00\x00\x01"
 
 
 @pytest.fixture(scope="module")
-def h264_bag(cell, tmp_path_factory):
+def h264_folder(cell, tmp_path_factory):
     out = tmp_path_factory.mktemp("bags") / "h264"
-    result = record(cell, out, "--seconds", str(SECONDS), "--codec", "h264", "--gop", str(GOP))
+    return out, record(cell, out, "--seconds", str(SECONDS), "--codec", "h264", "--gop", str(GOP))
+
+
+@pytest.fixture(scope="module")
+def h264_bag(h264_folder):
+    out, result = h264_folder
     return read_bag(out), result
 
 
@@ -70,6 +77,12 @@ def obu_types(data: bytes) -> list[int]:
         types.append((header >> 3) & 0x0F)
         i += size
     return types
+
+
+def length_prefixed(annex_b: bytes) -> bytes:
+    """The NAL units of an Annex B access unit as MP4 keeps them: each after its 4-byte length."""
+    units = [unit.rstrip(b"\x00") for unit in annex_b.split(START_CODE)[1:]]  # (a 4-byte start code's 0)
+    return b"".join(len(unit).to_bytes(4, "big") + unit for unit in units if unit)
 
 
 # What Foxglove asks of each keyframe message (foxglove.CompressedVideo, the foxglove SDK's docs)
@@ -156,7 +169,7 @@ def test_an_encoder_that_falls_behind_skips_frames_and_counts_them():
     """Frames offered faster than x264 encodes them: the queue fills, offer() returns False at
     once instead of waiting, and every frame is either encoded, in order, or counted as skipped."""
     choice = videochoice.Choice("h264", "libx264", hardware=False)
-    encoder = CameraEncoder("cam", choice, crf=23, preset="veryfast", gop_s=2.0, fps=30.0)
+    encoder = CameraEncoder(StreamEncoder("cam", choice, crf=23, preset="veryfast", gop_s=2.0, fps=30.0))
     image = np.random.default_rng(1).integers(0, 256, (480, 640), np.uint8)
     taken = [i for i in range(200) if encoder.offer(image, 1_000_000_000 + i * 33_000_000, i, 1)]
     packets = encoder.finish()
@@ -164,6 +177,22 @@ def test_an_encoder_that_falls_behind_skips_frames_and_counts_them():
     assert encoder.skipped > 0 and encoder.offered == 200 == len(taken) + encoder.skipped
     assert [p.frame_id for p in packets] == taken
     assert [p.t_ns for p in packets] == [1_000_000_000 + i * 33_000_000 for i in taken]
+
+
+def test_a_new_generation_in_another_size_and_pixel_format_starts_from_a_keyframe():
+    """StreamEncoder alone: five mono8 frames of generation 1, then five bgr8 frames of
+    generation 2 at another size; one decoder reads the ten packets as the ten frames."""
+    encoder = StreamEncoder("cam", videochoice.Choice("h264", "libx264", False), 23, "veryfast", 2.0, 20.0)
+    shapes = [(120, 160)] * 5 + [(64, 96, 3)] * 5
+    packets = []
+    for i, shape in enumerate(shapes):
+        packets += encoder.encode(np.full(shape, 20 * i, np.uint8), 10**9 + i * 50_000_000, i, 1 + i // 5)
+    packets += encoder.finish()
+    assert [(p.frame_id, p.generation) for p in packets] == [(i, 1 + i // 5) for i in range(10)]
+    assert [i for i, p in enumerate(packets) if p.keyframe] == [0, 5]
+    decoder = av.CodecContext.create("h264", "r")
+    pictures = [picture for p in packets for picture in decoder.decode(av.Packet(p.data))]
+    assert [(picture.height, picture.width) for picture in pictures] == [s[:2] for s in shapes]
 
 
 def test_ctrl_c_during_a_video_recording_leaves_a_valid_bag_that_decodes(cell, tmp_path):
@@ -222,3 +251,103 @@ def test_a_camera_video_cannot_carry_is_refused_at_start(start_service, tmp_path
     assert result.returncode == 2, result.stderr
     assert "camera odd is 161x120; 4:2:0 video needs an even width and height" in result.stderr
     assert not (tmp_path / "x").exists()
+
+
+def test_a_size_change_mid_recording_goes_on_in_the_same_track_from_a_keyframe(start_service, tmp_path):
+    """The camera restarted at 320x240 (a new generation) one second into the recording: the
+    bag stays one file, /left/video one track that one decoder plays through (each keyframe
+    carries its SPS/PPS, from which a player sizes its picture). The sizes switch exactly at
+    the generation boundary and the first frame at the new size is a keyframe."""
+    svc = start_service("--camera", "left=synthetic:fps=20,width=160,height=120")
+    out = tmp_path / "resized"
+    code, stdout, stderr = record_across_a_size_change(
+        svc, out, "left", {"width": 320, "height": 240}, "--seconds", "4", "--codec", "h264"
+    )
+    assert code == 0, stderr
+    assert "left: generation 2, 320x240: the same track /left/video goes on with a keyframe at the new size" in stderr
+    bag = read_bag(out)
+    assert len(list(out.glob("*.mcap"))) == 1
+    video, frames = bag.messages["/left/video"], bag.messages["/left/video/frames"]
+    assert len(video) == len(frames)
+    generations = [f.msg.generation for f in frames]
+    boundary = generations.index(2)
+    assert generations == [1] * boundary + [2] * (len(frames) - boundary) and boundary >= 10
+    assert len(frames) - boundary >= 20
+    stamps = [stamp_ns(m.msg) for m in video]
+    assert all(b > a for a, b in zip(stamps, stamps[1:]))
+    for i, (f, (_, image)) in enumerate(zip(frames, decoded(video, "gray"))):
+        assert image.shape == ((120, 160) if i < boundary else (240, 320)), i
+        assert read_stamp(image) == f.msg.frame_id, i
+        assert stamps[i] == rosmsgs.stamp_ns(f.msg.header.stamp)
+    first_new = bytes(video[boundary].msg.data)
+    assert frames[boundary].msg.keyframe and nal_types(first_new)[:2] == [7, 8] and 5 in nal_types(first_new)
+    # exported to MP4, the track still switches size at the boundary (the new SPS is in its sample)
+    assert fxis("export", str(out), "--camera", "left", "--out", str(tmp_path / "left.mp4")).returncode == 0
+    with av.open(str(tmp_path / "left.mp4")) as mp4:
+        shapes = [picture.to_ndarray(format="gray").shape for picture in mp4.decode(video=0)]
+    assert shapes == [(120, 160)] * boundary + [(240, 320)] * (len(frames) - boundary)
+
+
+def test_a_size_change_mid_raw_recording_goes_on(start_service, tmp_path):
+    """A raw recording across the same restart: each image message carries its own size."""
+    svc = start_service("--camera", "left=synthetic:fps=20,width=160,height=120")
+    out = tmp_path / "raw"
+    code, _, stderr = record_across_a_size_change(svc, out, "left", {"width": 320, "height": 240}, "--seconds", "3")
+    assert code == 0, stderr
+    images = read_bag(out).messages["/left/image_raw"]
+    sizes = [(m.msg.width, m.msg.height) for m in images]
+    boundary = sizes.index((320, 240))
+    assert sizes == [(160, 120)] * boundary + [(320, 240)] * (len(sizes) - boundary) and boundary >= 10
+    ids = [read_stamp(rosmsgs.image_array(m.msg)) for m in images]
+    assert all(b > a for a, b in zip(ids[:boundary], ids[1:boundary])), ids
+    assert all(b > a for a, b in zip(ids[boundary:], ids[boundary + 1 :])), ids
+
+
+def test_a_restart_at_a_size_video_cannot_carry_stops_the_recording_in_one_line(start_service, tmp_path):
+    svc = start_service("--camera", "left=synthetic:fps=20,width=160,height=120")
+    out = tmp_path / "odd"
+    code, _, stderr = record_across_a_size_change(svc, out, "left", {"width": 161}, "--seconds", "4", "--codec", "h264")
+    assert code == 4, stderr
+    assert "camera left is 161x120; 4:2:0 video needs an even width and height" in stderr.strip().splitlines()[-1]
+    bag = read_bag(out)  # closed valid, with the frames before the restart
+    assert bag.custom_data["ended"].startswith("stopped by an error")
+    frames = bag.messages["/left/video/frames"]
+    assert len(frames) >= 10 and {f.msg.generation for f in frames} == {1}
+
+
+def test_fxis_export_remuxes_a_camera_track_into_a_vfr_mp4_at_its_capture_times(h264_folder, h264_bag, tmp_path):
+    """No re-encoding: the MP4's packets are the bag's, each at its capture time; PyAV reads
+    them back (demuxed and decoded) as the frames their ids name."""
+    (bag, _), (bag_path, _) = h264_bag, h264_folder
+    out = tmp_path / "left.mp4"
+    result = fxis("export", str(bag_path), "--camera", "left", "--out", str(out))
+    assert result.returncode == 0, result.stderr
+    video, frames = bag.messages["/left/video"], bag.messages["/left/video/frames"]
+    stamps = [stamp_ns(m.msg) for m in video]
+    assert f"{out}: {len(video)} frames of /left/video (h264)" in result.stdout
+    with av.open(str(out)) as mp4:
+        stream = mp4.streams.video[0]
+        assert (stream.frames, stream.time_base, stream.codec_context.name) == (len(video), Fraction(1, 10**6), "h264")
+        packets = [p for p in mp4.demux(stream) if p.size]
+        assert [bytes(p) for p in packets] == [length_prefixed(bytes(m.msg.data)) for m in video]  # as they were
+        assert [p.pts for p in packets] == [(t - stamps[0]) // 1000 for t in stamps]
+        assert [p.is_keyframe for p in packets] == [f.msg.keyframe for f in frames]
+    with av.open(str(out)) as mp4:
+        read = [read_stamp(picture.to_ndarray(format="gray")) for picture in mp4.decode(video=0)]
+    assert read == [f.msg.frame_id for f in frames]
+    with open(tmp_path / "left.frames.csv") as side:
+        rows = list(csv.DictReader(side))
+    assert [int(r["capture_ns"]) for r in rows] == stamps
+    assert [int(r["frame_id"]) for r in rows] == [f.msg.frame_id for f in frames]
+
+
+def test_fxis_export_of_a_bag_without_that_cameras_video_exits_2_in_one_line(h264_folder, cell, tmp_path):
+    bag_path, _ = h264_folder
+    result = fxis("export", str(bag_path), "--camera", "centre", "--out", str(tmp_path / "c.mp4"))
+    assert result.returncode == 2, result.stderr
+    assert "no video track of camera centre (/centre/video); its video cameras: left, right" in result.stderr
+    assert len(result.stderr.strip().splitlines()) == 1 and not list(tmp_path.iterdir())
+    record(cell, tmp_path / "raw", "--frames", "3")
+    result = fxis("export", str(tmp_path / "raw"), "--camera", "left", "--out", str(tmp_path / "r.mp4"))
+    assert result.returncode == 2 and "it holds no video (record with --codec h264)" in result.stderr
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["raw"]

@@ -22,7 +22,7 @@ from fxis_shm.formats.stamp import read_stamp
 
 from ..conftest import fxis, run_in_threads, wait_until
 from .bags import read_bag
-from .conftest import SMALL, module_service
+from .conftest import SMALL, module_service_with_full_rings
 
 pytestmark = pytest.mark.integration
 
@@ -33,14 +33,7 @@ CAMERAS = ("a", "b")
 def history3():
     """A service with three seconds of history per camera, its rings full (as after a while)."""
     args = ["--camera", f"a=synthetic:fps=25,{SMALL}", "--camera", f"b=synthetic:fps=20,phase_ms=7,{SMALL}"]
-    for svc in module_service([*args, "--history", "3"]):
-        with Client(svc.endpoint) as client:
-            wait_until(
-                lambda: all(c["frames_stored"] >= c["ring_slots"] for c in client.status()["cameras"].values()),
-                timeout=20,
-                what="full rings",
-            )
-        yield svc
+    yield from module_service_with_full_rings([*args, "--history", "3"])
 
 
 def images(bag, camera: str) -> list:

@@ -21,3 +21,13 @@ def test_no_folder_groups_files_by_a_name_prefix():
 
 def test_bench_has_folders_only():
     assert sorted(p.name for p in (ROOT / "bench").iterdir() if p.suffix == ".py") == []
+
+
+def test_every_bench_path_the_docs_name_exists():
+    # a bench moved or renamed leaves no command in the README or docs/ that can no longer run
+    import re
+
+    texts = [ROOT / "README.md", *sorted((ROOT / "docs").glob("*.md")), ROOT / "bench/README.md"]
+    named = {(t.name, m) for t in texts for m in re.findall(r"\bbench/[\w/.-]+\.py\b", t.read_text())}
+    gone = [(doc, path) for doc, path in named if not (ROOT / path).is_file() and "FOLDER/" not in path]
+    assert sorted(gone) == []  # (bench/FOLDER/NAME.py: the README's pattern)

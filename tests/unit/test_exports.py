@@ -2,6 +2,8 @@
 
 import pathlib
 import re
+import subprocess
+import sys
 
 import fxis_shm
 
@@ -34,6 +36,8 @@ def test_module_paths_keep_working():
 
 
 def test_no_public_name_outside_all():
+    for name in fxis_shm.__all__:  # the names imported on first use are there once used
+        getattr(fxis_shm, name)
     public = {n for n, v in vars(fxis_shm).items() if not n.startswith("_") and not isinstance(v, type(fxis_shm))}
     assert public == set(fxis_shm.__all__)
 
@@ -52,3 +56,10 @@ def test_bad_arguments_to_the_public_api_raise_fxis_errors(tmp_path):
         fxis_shm.ClientKeys.from_files(str(tmp_path / "missing.key"), str(tmp_path / "me.key_secret"))
     with pytest.raises(fxis_shm.FxisError, match="cannot hold a stamp"):
         write_stamp(np.zeros((4, 2), np.uint8), 7)
+
+
+def test_importing_the_package_leaves_the_client_unimported():
+    # every process of a service imports fxis_shm: the client's modules wait for first use
+    code = "import sys, fxis_shm; print(sorted(m for m in sys.modules if m.startswith('fxis_shm.client')))"
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    assert out.strip() == "[]"

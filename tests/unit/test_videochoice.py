@@ -1,10 +1,10 @@
-"""Which encoder ``fxis record --codec`` uses, and the settings it refuses (fxis_shm.record.videochoice).
+"""Which encoder ``fxis record --codec`` uses, and the settings it refuses (fxis_shm.formats.videochoice).
 Hardware is absent here, so which encoders open is a parameter of the choice."""
 
 import pytest
 
 from fxis_shm.errors import ConfigError
-from fxis_shm.record import videochoice as vc
+from fxis_shm.formats import videochoice as vc
 
 EVERYTHING = {"libx264", "libx265", "libsvtav1", "h264_nvenc", "h264_vaapi", "h264_qsv", "hevc_nvenc", "av1_qsv"}
 

@@ -9,6 +9,7 @@ from typing import Any, ClassVar
 
 import numpy as np
 
+from fxis_shm.core.ptp import PtpState
 from fxis_shm.service.camerakinds import camera_options
 from fxis_shm.shm.ring import FrameLayout
 
@@ -82,6 +83,11 @@ class Camera(ABC):
     def trigger(self) -> None:
         """Capture one frame now; called from another thread than ``grab``."""
         raise NotImplementedError(f"camera {self.name!r} is not software-triggered")
+
+    def ptp(self) -> PtpState | None:
+        """The camera's PTP (IEEE 1588) state, as its features say (fxis_shm/core/ptp.py); None
+        for a camera that has no way to say (synthetic, a video file, a bag)."""
+        return None
 
     # ---- settings at run time (workers/tuning.py applies them between two frames) ----
 

@@ -13,12 +13,9 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-import numpy as np
-
-from fxis_shm.errors import FxisError, InvalidArgument
-from fxis_shm.formats import rosmsgs
-from fxis_shm.record import videochoice
-from fxis_shm.record.videoencoder import CameraEncoder, opens, require_av
+from fxis_shm.errors import FxisError
+from fxis_shm.formats import rosmsgs, videochoice
+from fxis_shm.formats.videoencoder import CameraEncoder, StreamEncoder, encoding_of, opens, require_av
 
 
 @dataclass
@@ -53,7 +50,7 @@ class VideoPlan:
         check_flags(video)
         for name, info in cameras.items():
             shape = list(info.get("shape") or [0, 0])
-            videochoice.check_camera(video.codec, name, _encoding(shape, info.get("dtype")), shape[1], shape[0])
+            videochoice.check_camera(video.codec, name, encoding_of(shape, info.get("dtype")), shape[1], shape[0])
         av = require_av()
         choice = videochoice.choose(video.codec, video.encoder, av.codecs_available, lambda n: opens(_as(video, n)))
         return cls(
@@ -64,6 +61,9 @@ class VideoPlan:
             {name: float(info.get("fps") or 0.0) for name, info in cameras.items()},
         )
 
+    def stream_encoder(self, camera: str) -> StreamEncoder:
+        return StreamEncoder(camera, self.choice, self.crf, self.preset, self.gop_s, self.fps.get(camera, 0.0))
+
     def describe(self) -> str:
         preset = f", preset {self.preset}" if self.preset else ""
         return f"video: {self.choice.describe()}, CRF {self.crf}{preset}, a keyframe at least every {self.gop_s:g} s"
@@ -73,25 +73,26 @@ def _as(video: VideoSettings, encoder: str) -> videochoice.Choice:
     return videochoice.Choice(video.codec, encoder, encoder not in videochoice.SOFTWARE_ENCODERS[video.codec])
 
 
-def _encoding(shape: list[int], dtype: str | None) -> str:
-    channels = shape[2] if len(shape) == 3 else 1
-    try:
-        return rosmsgs.ros_encoding(np.empty((1, 1, channels), np.dtype(dtype or "uint8")))
-    except InvalidArgument:
-        return f"{channels}-channel {dtype}"
-
-
 class VideoTracks:
     def __init__(self, plan: VideoPlan, cameras: list[str]):
         self.plan = plan
-        self.encoders = {
-            cam: CameraEncoder(cam, plan.choice, plan.crf, plan.preset, plan.gop_s, plan.fps.get(cam, 0.0))
-            for cam in cameras
-        }
+        self.encoders = {cam: CameraEncoder(plan.stream_encoder(cam)) for cam in cameras}
         self.behind: set[str] = set()  # cameras whose encoder has skipped frames (said once)
+        self._generations: dict[str, int] = {}
 
-    def offer(self, frame, t_stamp: int) -> None:
+    def offer(self, frame, t_stamp: int) -> str | None:
+        """Hand the frame to its camera's encoder; the words for a new generation (a camera
+        restarted, maybe at a new size), which its encoder begins with a keyframe."""
         self.encoders[frame.camera].offer(frame.image, t_stamp, frame.frame_id, frame.generation)
+        before = self._generations.get(frame.camera)
+        self._generations[frame.camera] = frame.generation
+        if before is None or before == frame.generation:
+            return None
+        height, width = frame.image.shape[:2]
+        return (
+            f"{frame.camera}: generation {frame.generation}, {width}x{height}: the same track "
+            f"{rosmsgs.video_topic(frame.camera)} goes on with a keyframe at the new size"
+        )
 
     def newly_behind(self) -> list[str]:
         """Cameras whose encoder began skipping frames since the last call."""
@@ -101,18 +102,21 @@ class VideoTracks:
 
     def write_ready(self, bag, to_realtime: int) -> None:
         for cam, encoder in self.encoders.items():
-            self._write(bag, cam, encoder.ready(), to_realtime)
+            write_packets(bag, cam, self.plan.choice.codec, encoder.ready(), to_realtime)
             if encoder.error is not None:
                 raise FxisError(f"{cam}: the {self.plan.choice.encoder} encoder failed: {encoder.error}")
 
     def finish(self, bag, to_realtime: int) -> None:
         """Flush every encoder and write what it still held."""
         for cam, encoder in self.encoders.items():
-            self._write(bag, cam, encoder.finish(), to_realtime)
+            write_packets(bag, cam, self.plan.choice.codec, encoder.finish(), to_realtime)
 
-    def _write(self, bag, cam: str, packets, to_realtime: int) -> None:
-        for packet in packets:
-            video, info = rosmsgs.video_messages(packet, cam, self.plan.choice.codec)
-            log_time = packet.t_ns + to_realtime
-            bag.write(rosmsgs.video_topic(cam), rosmsgs.VIDEO, video, log_time, len(packet.data))
-            bag.write(rosmsgs.video_frames_topic(cam), rosmsgs.VIDEO_FRAME, info, log_time)
+
+def write_packets(bag, cam: str, codec: str, packets, to_realtime: int) -> None:
+    """A camera's encoded frames into the bag: /NAME/video and /NAME/video/frames, message for
+    message, logged at the capture time moved to the wall clock (``to_realtime``)."""
+    for packet in packets:
+        video, info = rosmsgs.video_messages(packet, cam, codec)
+        log_time = packet.t_ns + to_realtime
+        bag.write(rosmsgs.video_topic(cam), rosmsgs.VIDEO, video, log_time, len(packet.data))
+        bag.write(rosmsgs.video_frames_topic(cam), rosmsgs.VIDEO_FRAME, info, log_time)

@@ -1,7 +1,8 @@
-"""One camera's video encoder for ``fxis record --codec``: a PyAV (FFmpeg) encoder in a thread
-of its own, fed frames copied out of the ring, so a slow encoder never holds up the recorder's
-reading of the rings or the other cameras. A full queue means the encoder fell behind: the
-frame is skipped and counted, never waited for.
+"""One camera's video encoder: a PyAV (FFmpeg) encoder of its stream (``StreamEncoder``, which
+a snapshot runs in its writer's thread) and, for ``fxis record --codec``, the same in a thread
+of its own (``CameraEncoder``), fed frames copied out of the ring, so a slow encoder never holds
+up the recorder's reading of the rings or the other cameras. A full queue means the encoder
+fell behind: the frame is skipped and counted, never waited for.
 
 The stream is what Foxglove plays: one frame per packet, in capture order, no B-frames, Annex B
 with the parameter sets (SPS/PPS) repeated on every keyframe, and a keyframe forced on the first
@@ -19,8 +20,9 @@ from fractions import Fraction
 
 import numpy as np
 
-from fxis_shm.errors import ConfigError
-from fxis_shm.record.videochoice import Choice
+from fxis_shm.errors import ConfigError, InvalidArgument
+from fxis_shm.formats import rosmsgs
+from fxis_shm.formats.videochoice import Choice, check_camera
 
 QUEUE_FRAMES = 16  # frames waiting for an encoder; more and the camera's frames are skipped
 _PTS_NS = 1000  # pts in microseconds of capture time
@@ -101,9 +103,15 @@ def opens(encoder: Choice) -> bool:
         return False
 
 
-class CameraEncoder:
-    """``offer(image, t_ns, frame_id, generation)`` from the recorder's thread; ``ready()``
-    the packets encoded since; ``finish()`` flushes and returns the last ones."""
+class StreamEncoder:
+    """One camera's stream, encoded in the caller's thread: ``encode(image, t_ns, frame_id,
+    generation)`` returns the packets ready so far, ``finish()`` flushes the last ones.
+
+    A new generation (the camera restarted, maybe at a new size or pixel format: docs/design.md,
+    "Commands to a camera worker") closes the encoder, flushing its frames, and opens a new one
+    for the new layout, whose first frame is a keyframe with its parameter sets: the stream stays
+    one track, and a player (which sizes its picture from each keyframe's SPS) goes on across the
+    boundary."""
 
     def __init__(self, camera: str, choice: Choice, crf: int, preset: str | None, gop_s: float, fps: float):
         self.camera, self.choice = camera, choice
@@ -112,14 +120,76 @@ class CameraEncoder:
         self._options = encoder_options(choice, crf, preset, max(1, round(gop_s * (fps or 30))))
         self._fps = fps
         self._context = None
-        self._inbox: queue.Queue = queue.Queue(maxsize=QUEUE_FRAMES)
-        self._outbox: queue.SimpleQueue[Packet] = queue.SimpleQueue()
+        self._generation: int | None = None  # of the frames the open encoder takes
+        self._size: tuple[int, int] | None = None  # (height, width), likewise
         self._pending: dict[int, tuple[int, int, int]] = {}  # pts -> (t_ns, frame id, generation)
         self._t0: int | None = None
         self._last_key: int | None = None
+
+    def encode(self, image: np.ndarray, t_ns: int, frame_id: int, generation: int) -> list[Packet]:
+        av = self._av
+        packets = []
+        if self._context is not None and (generation != self._generation or image.shape[:2] != self._size):
+            packets = self.finish()  # the old layout's last frames, before the new one starts
+        if self._context is None:
+            check_image(self.choice.codec, self.camera, image)
+            height, width = image.shape[:2]
+            self._context = open_context(av, self.choice, width, height, self._fps, self._options)
+            self._size, self._generation, self._last_key = (height, width), generation, None
+            self._t0 = t_ns if self._t0 is None else self._t0
+        channels = 1 if image.ndim == 2 else image.shape[2]
+        frame = av.VideoFrame.from_ndarray(image, format=_INPUT_FORMATS[channels]).reformat(format="yuv420p")
+        frame.pts = (t_ns - self._t0) // _PTS_NS
+        if self._last_key is None or t_ns - self._last_key >= self.gop_ns:
+            frame.pict_type = av.video.frame.PictureType.I
+            self._last_key = t_ns
+        self._pending[frame.pts] = (t_ns, frame_id, generation)
+        return packets + self._packets(self._context.encode(frame))
+
+    def finish(self) -> list[Packet]:
+        """Flush and close the encoder (the next frame opens a new one): its last packets."""
+        if self._context is None:
+            return []
+        context, self._context = self._context, None
+        return self._packets(context.encode(None))
+
+    def _packets(self, encoded) -> list[Packet]:
+        packets = []
+        for packet in encoded:
+            t_ns, frame_id, generation = self._pending.pop(packet.pts)
+            packets.append(Packet(t_ns, frame_id, generation, bytes(packet), bool(packet.is_keyframe)))
+        return packets
+
+
+def check_image(codec: str, camera: str, image: np.ndarray) -> None:
+    """ConfigError if ``image`` (the first of a camera's generation) is not what 8-bit 4:2:0
+    video carries: a camera restarted at an odd size or in a 16-bit format, say."""
+    height, width = image.shape[:2]
+    check_camera(codec, camera, encoding_of(list(image.shape), image.dtype.name), width, height)
+
+
+def encoding_of(shape: list[int], dtype: str | None) -> str:
+    """The ROS encoding name of frames of this shape and dtype (as a camera's status gives them)."""
+    channels = shape[2] if len(shape) == 3 else 1
+    try:
+        return rosmsgs.ros_encoding(np.empty((1, 1, channels), np.dtype(dtype or "uint8")))
+    except InvalidArgument:
+        return f"{channels}-channel {dtype}"
+
+
+class CameraEncoder:
+    """A StreamEncoder in a thread of its own: ``offer(image, t_ns, frame_id, generation)``
+    from the recorder's thread; ``ready()`` the packets encoded since; ``finish()`` flushes and
+    returns the last ones."""
+
+    def __init__(self, stream: StreamEncoder):
+        self.camera, self.choice = stream.camera, stream.choice
+        self._stream = stream
+        self._inbox: queue.Queue = queue.Queue(maxsize=QUEUE_FRAMES)
+        self._outbox: queue.SimpleQueue[Packet] = queue.SimpleQueue()
         self.offered = self.skipped = 0
         self.error: BaseException | None = None
-        self._thread = threading.Thread(target=self._run, name=f"encode-{camera}", daemon=True)
+        self._thread = threading.Thread(target=self._run, name=f"encode-{self.camera}", daemon=True)
         self._thread.start()
 
     def offer(self, image: np.ndarray, t_ns: int, frame_id: int, generation: int) -> bool:
@@ -156,28 +226,11 @@ class CameraEncoder:
                 image, t_ns, frame_id, generation = self._inbox.get()
                 if image is None:
                     break
-                self._encode(image, t_ns, frame_id, generation)
-            if self._context is not None:
-                self._deliver(self._context.encode(None))
+                self._deliver(self._stream.encode(image, t_ns, frame_id, generation))
+            self._deliver(self._stream.finish())
         except BaseException as exc:  # noqa: BLE001 (kept for the recorder to report)
             self.error = exc
 
-    def _encode(self, image: np.ndarray, t_ns: int, frame_id: int, generation: int) -> None:
-        av = self._av
-        height, width = image.shape[:2]
-        if self._context is None:
-            self._context = open_context(av, self.choice, width, height, self._fps, self._options)
-            self._t0 = t_ns
-        channels = 1 if image.ndim == 2 else image.shape[2]
-        frame = av.VideoFrame.from_ndarray(image, format=_INPUT_FORMATS[channels]).reformat(format="yuv420p")
-        frame.pts = (t_ns - self._t0) // _PTS_NS
-        if self._last_key is None or t_ns - self._last_key >= self.gop_ns:
-            frame.pict_type = av.video.frame.PictureType.I
-            self._last_key = t_ns
-        self._pending[frame.pts] = (t_ns, frame_id, generation)
-        self._deliver(self._context.encode(frame))
-
-    def _deliver(self, packets) -> None:
+    def _deliver(self, packets: list[Packet]) -> None:
         for packet in packets:
-            t_ns, frame_id, generation = self._pending.pop(packet.pts)
-            self._outbox.put(Packet(t_ns, frame_id, generation, bytes(packet), bool(packet.is_keyframe)))
+            self._outbox.put(packet)

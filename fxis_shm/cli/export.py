@@ -1,0 +1,35 @@
+"""``fxis export BAG --camera NAME --out FILE.mp4``: a camera's video track of a bag into an
+MP4 file, without re-encoding (fxis_shm.record.mp4export)."""
+
+from __future__ import annotations
+
+from fxis_shm.cli import exitcodes
+
+
+def export_command(args) -> int:
+    from fxis_shm.record.mp4export import export_mp4
+
+    done = export_mp4(args.bag, args.camera, args.out)
+    skipped = f"; {done.skipped} messages before its first keyframe left out" if done.skipped else ""
+    print(
+        f"{done.out}: {done.frames} frames of {done.topic} ({done.codec}), {done.seconds:.3f} s, variable frame rate: "
+        f"pts = capture time - {done.t0_ns} ns{skipped}; each frame's capture time and id in {done.sidecar}"
+    )
+    return exitcodes.DONE
+
+
+def add_parser(sub) -> None:
+    export = sub.add_parser(
+        "export",
+        help="a camera's video track of a bag (fxis record --codec) into an MP4 file, without re-encoding",
+        description="Copy the packets of BAG's /NAME/video (foxglove_msgs/CompressedVideo: h264, h265 or av1) "
+        "into an MP4 file as they are, each frame presented at its capture time (a variable frame rate: pts "
+        "in microseconds from the first frame's capture time, which the file's metadata names), and write "
+        "FILE.frames.csv beside it: each frame's pts, capture time (ns), frame id and generation. Exit status 2, "
+        "in one line, for a bag without that camera's video (the line names the cameras that have some), "
+        "or an --out that exists.",
+    )
+    export.add_argument("bag", metavar="BAG", help="the bag folder, or its .mcap file")
+    export.add_argument("--camera", required=True, metavar="NAME", help="the camera whose /NAME/video to export")
+    export.add_argument("--out", required=True, metavar="FILE.mp4", help="the MP4 file to write (a new one)")
+    export.set_defaults(func=export_command)

@@ -1,0 +1,106 @@
+"""The joint tuples ``fxis sync-report`` judges: one asked for at each t_k of a schedule (every
+1/rate from a moment just ahead, in the caller's clock), from one service or a cell
+(``Client([a, b])``), as ``client.tuple(at=t_k, partial=True)`` would give it. Only the
+frames' identities and times are kept (fxis_shm.core.syncstats.Samples); the pixels are
+released at once.
+
+A slot whose tuple does not come (a service down, a refusal) stays empty and the next is asked;
+slots the schedule has no time left for (a request that waited for its time-out) are empty too.
+Either way they count as dropped, never as an error of the report.
+"""
+
+from __future__ import annotations
+
+import time
+from collections import Counter
+from collections.abc import Callable
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from fxis_shm.client.api import ClientApi
+from fxis_shm.client.frames import FrameTuple
+from fxis_shm.core.syncstats import ABSENT, CAPTURE_METHODS, Samples
+from fxis_shm.errors import FxisError
+
+LEAD_NS = 50_000_000  # the first slot: this far ahead of the moment the schedule is made
+
+
+@dataclass
+class Taken:
+    """What the schedule gave: the samples, and why slots stayed empty (message -> count)."""
+
+    samples: Samples
+    errors: Counter[str] = field(default_factory=Counter)
+    interrupted: bool = False
+
+
+def take(
+    client: ClientApi,
+    cameras: list[str],
+    seconds: float,
+    rate_hz: float,
+    grace_s: float = 5.0,
+    sleep: Callable[[float], None] = time.sleep,
+) -> Taken:
+    """``seconds * rate_hz`` slots (at least one) of joint tuples of ``cameras``. Ends by the last
+    slot's time plus ``grace_s``, whatever the services do; Ctrl-C ends it early with what came
+    (``interrupted``), the slots not reached left out."""
+    n = max(1, round(seconds * rate_hz))
+    interval = round(1e9 / rate_hz)
+    slots = client.clock() + LEAD_NS + np.arange(n, dtype=np.int64) * interval
+    rows: list[Row | None] = []
+    errors: Counter[str] = Counter()
+    end = int(slots[-1]) + round(grace_s * 1e9)
+    interrupted = False
+    try:
+        for k, t_k in enumerate(slots.tolist()):
+            now = client.clock()
+            if now > end:
+                errors[f"no time left to ask (the schedule ended {grace_s:g} s after its last slot)"] += n - k
+                rows += [None] * (n - k)
+                break
+            if now < t_k:
+                sleep((t_k - now) / 1e9)
+            try:
+                tuple_ = client.tuple(cameras, at=t_k, partial=True)
+            except FxisError as exc:
+                errors[" ".join(str(exc).split())] += 1
+                rows.append(None)
+                continue
+            with tuple_:
+                rows.append(row_of(tuple_))
+    except KeyboardInterrupt:
+        interrupted = True
+    return Taken(samples_of(cameras, slots[: len(rows)], rows), errors, interrupted)
+
+
+# what a tuple says of each camera's frame: frame id, t_capture, generation, capture method (an
+# index into CAPTURE_METHODS) and residual (ns, NaN for a frame without a target)
+Row = dict[str, tuple[int, int, int, int, float]]
+
+
+def row_of(tuple_: FrameTuple) -> Row:
+    return {
+        name: (
+            frame.frame_id,
+            frame.t_capture,
+            frame.generation,
+            CAPTURE_METHODS.index(frame.capture),  # frames.py's FREE, SCHEDULED, LOCKSTEP
+            float("nan") if frame.residual_ns is None else float(frame.residual_ns),
+        )
+        for name, frame in tuple_.items()
+    }
+
+
+def samples_of(cameras: list[str], slots: np.ndarray, rows: list[Row | None]) -> Samples:
+    """The arrays of ``cameras`` from one row per slot (None: no tuple came for it)."""
+    shape = (len(rows), len(cameras))
+    frame_id, t_capture, generation = (np.zeros(shape, dtype=np.int64) for _ in range(3))
+    capture = np.full(shape, ABSENT, dtype=np.int64)
+    residual = np.full(shape, np.nan)
+    for k, row in enumerate(rows):
+        for c, name in enumerate(cameras):
+            if row is not None and name in row:
+                frame_id[k, c], t_capture[k, c], generation[k, c], capture[k, c], residual[k, c] = row[name]
+    return Samples(cameras, np.asarray(slots, dtype=np.int64), frame_id, t_capture, generation, capture, residual)
