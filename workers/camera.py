@@ -15,12 +15,14 @@ from fxis_shm.core import timebase
 from fxis_shm.service.childspec import CameraWorkerSpec
 from fxis_shm.shm import history, naming
 from fxis_shm.shm.ring import FLAG_TRIGGERED, FrameLayout, RingWriter, segment_size
+from fxis_shm.wire import commands
 
 from . import processing, tuning
 from ._child import Ready, child_main
 from .backends import backend_class
 from .backends.base import CameraLost
 from .commands import CommandServer, serve_pending
+from .triggers import TriggerLog, TriggerTimer
 
 log = logging.getLogger("camera")
 _GRAB_TIMEOUT_S = 0.1  # also the heartbeat interval while no frames come
@@ -42,6 +44,9 @@ class Stream:
         self.ring: RingWriter | None = None
         self.commands: CommandServer | None = None
         self.first = None  # the first frame to store, if finding the layout took one
+        # triggers for a moment (capture at T, lockstep), fired by a timer thread of their own
+        self.triggers = TriggerLog()
+        self.timer: TriggerTimer | None = None
 
     def start(self) -> None:
         try:
@@ -67,11 +72,17 @@ class Stream:
                 "camera %s: with the settings changed at run time %s", self.spec.camera, {**self.kept, **self.named}
             )
         self.first, layout, hook_errors = _layout(self.camera, self.process, self.stop)
+        spec = self.spec
+        lockstep = None if spec.lockstep_hz is None else (spec.lockstep_hz, spec.lockstep_phase_ns)
+        self.timer = TriggerTimer(
+            lambda: self.camera.trigger(), lambda: self.camera.supports_trigger, self.triggers, lockstep, self.timed
+        )
+        direct = {commands.TRIGGER_AT: self.timer.trigger_at, commands.LOCKSTEP: self.timer.set_lockstep}
         # before the ring: a coordinator that sees the ring's new generation finds the commands
-        self.commands = CommandServer(self.spec.service, self.spec.camera, threading.Event())
+        self.commands = CommandServer(self.spec.service, self.spec.camera, threading.Event(), direct)
         self.ring = self._ring(layout)
         self.ring.count("hook_errors", hook_errors)
-        self.ring.set_flags(FLAG_TRIGGERED if self.camera.supports_trigger else 0)
+        self.timed()
 
     def _ring(self, layout: FrameLayout) -> RingWriter:
         spec, period = self.spec, self.camera.nominal_period_ns
@@ -119,12 +130,25 @@ class Stream:
             for counter in ("frames_captured", "frames_dropped", "hook_errors"):
                 self.ring.count(counter, ring.field(counter) - self.ring.field(counter))
             ring.close()
-        self.ring.set_flags(FLAG_TRIGGERED if camera.supports_trigger else 0)  # read by the next request
+        self.timed()  # read by the next request
         log.info("camera %s restarted its stream (generation %d)", self.spec.camera, self.ring.generation)
+
+    def timed(self) -> None:
+        """Tell readers how the camera's frames come: on triggers of the requests (FLAG_TRIGGERED),
+        or on their own, free-running or on the lockstep grid (whose period the ring then shows)."""
+        ring, lockstep = self.ring, self.timer.lockstep if self.timer is not None else None
+        if ring is None:
+            return
+        triggered = self.camera.supports_trigger
+        ring.set_flags(FLAG_TRIGGERED if triggered and lockstep is None else 0)
+        if triggered:
+            ring.set_period(0 if lockstep is None else round(1e9 / lockstep[0]))
 
     def close(self) -> None:
         if self.commands is not None:
             self.commands.close()
+        if self.timer is not None:
+            self.timer.close()
         if self.ring is not None:
             self.ring.close()
         self.process.close()
@@ -180,7 +204,7 @@ def _stream(stream: Stream) -> None:
             camera, process, ring, generation = stream.camera, stream.process, stream.ring, stream.ring.generation
             dropped, note = camera.frames_dropped, ""
             if stream.first is not None:
-                _store(ring, stream.first)
+                _store(stream, stream.first)
                 stream.first = None
         try:
             capture = camera.grab(_RESULT_POLL_S if process.in_flight else _GRAB_TIMEOUT_S)
@@ -196,7 +220,7 @@ def _stream(stream: Stream) -> None:
             if not process.submit(capture, timebase.now()):
                 ring.count("frames_dropped")  # every processing process is busy
         for item in process.ready():
-            _store(ring, item)
+            _store(stream, item)
         if camera.frames_dropped != dropped:
             ring.count("frames_dropped", camera.frames_dropped - dropped)
             dropped = camera.frames_dropped
@@ -237,7 +261,8 @@ def _sleep_heartbeating(ring: RingWriter, stop: threading.Event, seconds: float)
         stop.wait(min(_GRAB_TIMEOUT_S, max(0.0, deadline - time.monotonic())))
 
 
-def _store(ring: RingWriter, item: processing.Processed) -> None:
+def _store(stream: Stream, item: processing.Processed) -> None:
+    ring = stream.ring
     if item.error is None and item.image is not None and FrameLayout.of(item.image) != ring.layout:
         item.error = f"returned {FrameLayout.of(item.image)}, but the ring holds {ring.layout}"
     if item.error is not None:
@@ -245,7 +270,10 @@ def _store(ring: RingWriter, item: processing.Processed) -> None:
         ring.set_status(f"process hook: {item.error}")
         log.warning("frame %d not stored: process hook %s", item.frame_id, item.error)
     elif item.image is not None:  # None: the hook skipped the frame
-        ring.write(item.image, item.frame_id, item.t_capture, item.t_available)
+        t_target, capture = stream.triggers.answer(item.t_capture) if stream.camera.supports_trigger else (0, 0)
+        ring.write(item.image, item.frame_id, item.t_capture, item.t_available, t_target, capture)
+        if stream.camera.supports_trigger:
+            ring.set_sync(stream.triggers.figures())
 
 
 class _TriggerListener:
@@ -268,6 +296,7 @@ class _TriggerListener:
                 continue
             try:
                 if stream.camera.supports_trigger:  # (a post racing a change to trigger=free)
+                    stream.triggers.fired(timebase.now())  # for "now": its frame is free
                     stream.camera.trigger()
             except Exception:
                 log.exception("software trigger of camera %r failed", stream.spec.camera)

@@ -50,7 +50,17 @@ def private_folder(path: str) -> None:
 
 
 class CommandServer:
-    def __init__(self, service: str, camera: str, stop: threading.Event):
+    """``direct``: the commands this thread answers itself, at once (trigger_at, lockstep: a
+    timer's business, not the capture loop's, which may sit in ``grab``); the others are queued."""
+
+    def __init__(
+        self,
+        service: str,
+        camera: str,
+        stop: threading.Event,
+        direct: dict[str, Callable[[dict], dict]] | None = None,
+    ):
+        self._direct = direct or {}
         self.endpoint = naming.command_endpoint(service, camera)
         path = self.endpoint[len("ipc://") :]
         private_folder(os.path.dirname(path))
@@ -127,7 +137,18 @@ class CommandServer:
         except ProtocolError as exc:
             self._router.send_multipart([*envelope, commands.encode_failure(None, exc.code, exc.message)])
             return
-        self._inbox.put(Command(self, envelope, command))
+        handle = self._direct.get(command["cmd"])
+        if handle is None:
+            self._inbox.put(Command(self, envelope, command))
+            return
+        try:
+            reply = commands.encode_result(command["id"], handle(command))
+        except ProtocolError as exc:
+            reply = commands.encode_failure(command["id"], exc.code, exc.message)
+        except Exception as exc:  # a bug must not stop the commands
+            log.exception("command %s failed", command["cmd"])
+            reply = commands.encode_failure(command["id"], Code.INTERNAL, f"{type(exc).__name__}: {exc}")
+        self._router.send_multipart([*envelope, reply])
 
 
 def serve_pending(server: CommandServer | None, handle: Callable[[Command], dict]) -> None:

@@ -72,9 +72,30 @@ def status_command(args) -> int:
     for name, cam in status["cameras"].items():
         if not cam["alive"] and cam.get("reason"):
             print(f"  {name}: {cam['reason']}")
+        line = _sync_line(cam.get("sync"))
+        if line:
+            print(f"  {name}: {line}")
     if status.get("ros2"):
         print("\n".join(_ros2_lines(status["ros2"])))
     return 0
+
+
+def _sync_line(sync: dict | None) -> str | None:
+    """How a camera was triggered for moments (docs/sync.md), once it has been."""
+    if not sync or not (sync["latency_samples"] or sync["lockstep"]):
+        return None
+    line = (
+        f"trigger latency {sync['trigger_latency_ms']:.3f} ms ({sync['latency_samples']} frames), "
+        f"{sync['frames_scheduled']} captured at T, timer late p50 {sync['timer_late_p50_ms']:.3f} "
+        f"p99 {sync['timer_late_p99_ms']:.3f} ms, {sync['triggers_missed']} missed"
+    )
+    grid = sync["lockstep"]
+    if grid:
+        line += (
+            f"; lockstep {grid['hz']:g} Hz + {grid['phase_ms']:g} ms: {grid['frames']} frames, residual "
+            f"p50 {grid['residual_p50_ms']:.3f} p99 {grid['residual_p99_ms']:.3f} ms"
+        )
+    return line
 
 
 def ptp_text(state: dict | None) -> str:

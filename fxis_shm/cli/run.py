@@ -53,6 +53,7 @@ def run_command(args) -> int:
             "ros2_python": args.ros2_python,
             "port_base": args.port_base,
             "history": args.history,
+            "lockstep": args.lockstep,
         },
     )
     if service_running(config.name):  # its ports are in use too: say the more useful thing
@@ -166,6 +167,12 @@ def add_parser(sub) -> None:
         metavar="SECONDS",
         help="seconds of frames each ring holds, sized from its camera's rate (instead of --slots; a camera's "
         "history= key wins)",
+    )
+    run.add_argument(
+        "--lockstep",
+        metavar="HZ[,PHASE_MS]",
+        help="trigger every camera that can be triggered (trigger=software) on the grid k/HZ + PHASE_MS of "
+        "CLOCK_REALTIME, the cell's common clock: services on several hosts then capture together (docs/sync.md)",
     )
     run.add_argument(
         "--port-base",

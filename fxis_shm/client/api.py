@@ -51,21 +51,25 @@ class ClientApi(ABC):
         encoding: str | None = None,
         quality: int | None = None,
         timeout_ms: float | None = None,
+        capture: bool = False,
     ) -> Frame:
         """The frame of ``camera`` nearest to ``at`` (ns of the caller's clock; default: the
         moment of this call).
+
+        ``capture=True`` with ``at`` in the future: a camera that can be triggered is triggered
+        to capture at ``at`` (its frame says ``capture == "scheduled"``, ``t_target`` and
+        ``residual_ns``); one that cannot answers with its frame nearest ``at`` (``"free"``).
 
         ``timeout``: seconds the service may wait for frames (default: its setting).
         ``copy=False`` (local path only): the image is a read-only view of the ring slot,
         with no copy at all; check ``frame.still_valid()`` after using it.
         ``encoding``/``quality``: as the client's, for this request."""
-        if self._fast is not None and encoding is quality is timeout is timeout_ms is None:
+        if self._fast is not None and not capture and encoding is quality is timeout is timeout_ms is None:
             frame = self._compiled(self._fast.image(camera, at, wait, copy))
             if frame is not None:
                 return frame
-        return frames_of(
-            *self._answer("image", timeout, timeout_ms, copy, encoding, quality, camera=camera, at=at, wait=wait)
-        )[0]
+        fields = {"camera": camera, "at": at, "wait": wait, "capture": capture or None}
+        return frames_of(*self._answer("image", timeout, timeout_ms, copy, encoding, quality, **fields))[0]
 
     def tuple(
         self,
@@ -81,12 +85,15 @@ class ClientApi(ABC):
         encoding: str | None = None,
         quality: int | None = None,
         timeout_ms: float | None = None,
+        capture: bool = False,
     ) -> FrameTuple:
         """One frame per camera (default: all), nearest to ``at`` (ns of the caller's clock;
         default: the moment of this call) and to each other. With ``partial``, cameras
         that are down are left out (``.missing`` names them) instead of failing the request
-        with CameraDown."""
-        if self._fast is not None and encoding is quality is timeout is timeout_ms is max_skew_ms is None:
+        with CameraDown. ``capture=True`` with ``at`` in the future: every camera that can be
+        triggered captures at ``at`` (as for ``image``), on every service of the client."""
+        fast = not capture and encoding is quality is timeout is timeout_ms is max_skew_ms is None
+        if self._fast is not None and fast:
             tuple_ = self._compiled(self._fast.tuple(cameras, at, sync, wait, copy))
             if tuple_ is not None:
                 return tuple_
@@ -104,6 +111,7 @@ class ClientApi(ABC):
                 wait=wait,
                 max_skew_ms=max_skew_ms,
                 partial=partial or None,
+                capture=capture or None,
             )
         )
 

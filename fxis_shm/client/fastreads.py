@@ -19,6 +19,7 @@ from functools import partial
 from typing import Any
 
 from fxis_shm.client.frames import LOCAL, Frame, FrameTuple
+from fxis_shm.core.snapshot import CAPTURES
 from fxis_shm.shm import fastpick
 from fxis_shm.shm.ring import RingReader
 
@@ -71,9 +72,10 @@ class FastReads:
             "cameras": ready,
         }
         frames = {}
-        for k, name, (slot, seq, frame_id, t_capture, t_stored, t_available, generation, ready_at, image) in zip(
-            indices, names, picked
-        ):
+        for k, name, picked_frame in zip(indices, names, picked):
+            slot, seq, frame_id, t_capture, t_stored, t_available, generation, t_target, capture, ready_at, image = (
+                picked_frame
+            )
             ready[name] = {"waited": ready_at}
             still_valid = None
             if not copy:
@@ -94,5 +96,7 @@ class FastReads:
                 t_capture,
                 t_stored,
                 t_available,
+                CAPTURES[capture],
+                t_target or None,
             )
         return frames, timing

@@ -56,6 +56,8 @@ class JointRequests:
     ) -> tuple[dict, list, Callable | None]:
         """The reply header (times in the caller's clock), images and validity check of one request."""
         request = protocol.request_of(op, id=None, **fields)
+        if request.get("capture"):
+            return self._captured(request, copy, encoding, quality)
         asked = self.clock()  # "now" is when the caller asked, not when the services answered
         names = self._names(request)
         self._describe(names)  # bounded by each client's timeout; a silent service is down
@@ -170,41 +172,42 @@ class JointRequests:
                 by_client.setdefault(self.owner[cam], []).append((cam, row))
         for group in self._pool.map(fetch.chosen, by_client, by_client.values()):
             fetch.kept.update(group)
-        frames, images, chosen = [], [], []
-        for k, (cam, i) in enumerate(picks):
-            frame = fetch.kept[cam, self.cameras[cam].service_row(i)["frame_id"]]
-            chosen.append(frame)
-            meta = protocol.frame_meta(
-                cam,
-                frame.frame_id,
-                frame.t_capture,
-                frame.t_stored,
-                frame.generation,
-                frame.image,
-                k,
-                frame.t_available,
-            )
-            frames.append(
-                {
-                    **meta,
-                    "encoding": frame.encoding,
-                    "service_t_capture": frame.service_t_capture,
-                    "service_t_stored": frame.service_t_stored,
-                    "service_t_available": frame.service_t_available,
-                }
-            )
-            images.append(frame.image)
+        chosen = [fetch.kept[cam, self.cameras[cam].service_row(i)["frame_id"]] for cam, i in picks]
         position = {pick: k for k, pick in enumerate(picks)}
         header = {
             **reply.plan.body,
-            "frames": frames,
-            "path": LOCAL if chosen and all(f.path == LOCAL for f in chosen) else NETWORK,
             "timing": {"received": reply.pending.t_received, "waited": reply.t_decided},
         }
         if reply.plan.groups is not None:
             header["groups"] = [[position[pick] for pick in group] for group in reply.plan.groups]
-        views = [f for f in chosen if f._still_valid is not None]
-        return header, images, (lambda: all(f.still_valid() for f in views)) if views else None
+        return _joined(header, chosen)
+
+    def _captured(
+        self, request: dict, copy: bool, encoding: str | None, quality: int | None
+    ) -> tuple[dict, list, Callable | None]:
+        """A capture at T (``request["at"]``, the caller's clock) on several services: each service
+        triggers its cameras that can be triggered for T, in its own clock, and answers for the
+        others with their frames nearest T; the services are asked at once."""
+        asked = self.clock()
+        names = self._names(request)
+        by_client: dict[SingleClient, list[str]] = {}
+        for name in names:
+            by_client.setdefault(self.owner[name], []).append(name)
+        options = {"copy": copy, "encoding": encoding, "quality": quality, "timeout_ms": request.get("timeout_ms")}
+        tuples = list(
+            self._pool.map(
+                lambda client, cams: client.tuple(cams, at=request["at"], capture=True, **options),
+                by_client,
+                by_client.values(),
+            )
+        )
+        frames = [t[name] for t, cams in zip(tuples, by_client.values()) for name in cams]
+        header: dict = {"op": request["op"], "t_request": request["at"]}
+        if request["op"] == "tuple":
+            times = [f.t_capture for f in frames]
+            header.update(skew_ns=max(times) - min(times), sync=request.get("sync") or "joint")
+        header["timing"] = {"received": asked, "waited": self.clock()}
+        return _joined(header, frames)
 
 
 class _Fetch:
@@ -258,3 +261,38 @@ def _probe(twin: SingleClient) -> bool:
     except FxisError:
         return False
     return True
+
+
+def _joined(header: dict, chosen: list[Frame]) -> tuple[dict, list, Callable | None]:
+    """The reply of frames fetched from their services: ``header`` with each frame's metadata (the
+    caller's clock, the service's own times kept), the images, and a validity check for views."""
+    frames = []
+    for k, frame in enumerate(chosen):
+        meta = protocol.frame_meta(
+            frame.camera,
+            frame.frame_id,
+            frame.t_capture,
+            frame.t_stored,
+            frame.generation,
+            frame.image,
+            k,
+            frame.t_available,
+            frame.t_target,
+            frame.capture,
+        )
+        frames.append(
+            {
+                **meta,
+                "encoding": frame.encoding,
+                "service_t_capture": frame.service_t_capture,
+                "service_t_stored": frame.service_t_stored,
+                "service_t_available": frame.service_t_available,
+            }
+        )
+    header = {
+        **header,
+        "frames": frames,
+        "path": LOCAL if chosen and all(f.path == LOCAL for f in chosen) else NETWORK,
+    }
+    views = [f for f in chosen if f._still_valid is not None]
+    return header, [f.image for f in chosen], (lambda: all(f.still_valid() for f in views)) if views else None

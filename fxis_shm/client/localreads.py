@@ -24,6 +24,7 @@ from collections.abc import Callable
 from fxis_shm.client.fastreads import FastReads
 from fxis_shm.core import timebase
 from fxis_shm.core.engine import Failure, Reply, RequestEngine
+from fxis_shm.core.snapshot import CAPTURES
 from fxis_shm.errors import RequestTimeout, service_error
 from fxis_shm.shm import fastpick, slotio
 from fxis_shm.shm.bufferpool import BufferPool
@@ -89,7 +90,10 @@ class LocalReads:
         return FastReads(list(self.cameras), readers, self.engine.settings, self.clock)
 
     def serves(self, op: str, fields: dict) -> bool:
-        """False for requests only the coordinator can answer: those that fire software triggers."""
+        """False for requests only the coordinator can answer: those that fire software triggers,
+        now or for a capture at T."""
+        if fields.get("capture"):
+            return False
         if op not in ("image", "tuple") or fields.get("at") is not None:
             return True
         names = [fields["camera"]] if fields.get("camera") else fields.get("cameras") or list(self.cameras)
@@ -165,6 +169,8 @@ class LocalReads:
                     "t_stored": meta.t_stored,
                     "generation": meta.generation,
                     "t_available": meta.t_available,
+                    "capture": CAPTURES[meta.capture],
+                    "t_target": meta.t_target or None,
                 }
             )
             held.append((cam, reader, slot, seq))

@@ -34,7 +34,8 @@ class RequestPaths:
         reads = self._local_reads()
         if reads is not None and reads.serves(op, fields):
             return self._read_locally(op, extra_wait, copy, fields)
-        if self._local_usable():
+        # a capture at T is asked once: asked again (a local reply whose rings are not here) its T has passed
+        if self._local_usable() and not fields.get("capture"):
             for _ in range(_LOCAL_ATTEMPTS):
                 header, images = self._call(op, extra_wait, local=self._boot_id, **fields)
                 if header.get("delivery") != protocol.LOCAL:  # the service is on another kernel

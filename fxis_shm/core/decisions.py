@@ -17,7 +17,7 @@ from typing import Any, Protocol
 
 from fxis_shm.core import sequences
 from fxis_shm.core.selection import INDEPENDENT, Selection, radius_for, select, tolerance_for
-from fxis_shm.core.snapshot import Snapshot
+from fxis_shm.core.snapshot import CAPTURE_SCHEDULED, Snapshot
 from fxis_shm.core.timesearch import Timeline
 from fxis_shm.core.waitpolicy import AUTO, NEXT, CameraState, waiting_for, waiting_for_selection
 from fxis_shm.errors import Code
@@ -78,6 +78,7 @@ class Request(Protocol):
     missing: list[str]
     triggered: frozenset[str]
     t_trigger: int | None
+    scheduled: frozenset[str]
 
     @property
     def op(self) -> str: ...
@@ -118,7 +119,10 @@ def _near(
     timelines = {c: u[0] for c, u in usable.items() if u is not None}
     first = {c: u[1] for c, u in usable.items() if u is not None}
     stored: Selection | None = None
-    if p.triggered:  # the triggered frames, and the others' frames around the trigger
+    if p.scheduled:  # the frames captured for t* (a capture at T), and the others' around t*
+        waits = waiting_for(AUTO, p.t_star, now, {c: s for c, s in states.items() if c not in p.scheduled})
+        waits.update({c: None for c, u in usable.items() if u is None})
+    elif p.triggered:  # the triggered frames, and the others' frames around the trigger
         free = {c: s for c, s in states.items() if c not in p.triggered}
         waits = waiting_for(AUTO, p.t_star, now, free)
         waits.update(waiting_for(NEXT, p.t_star, now, {c: states[c] for c in p.triggered}, t_arrival=p.t_trigger or 0))
@@ -149,7 +153,7 @@ def _near(
     check_not_empty(snaps)
     if p.request.get("at") is not None:  # "now" is never too old: the ring moved on
         for cam in p.cameras:
-            if cam not in p.triggered:
+            if cam not in p.triggered and cam not in p.scheduled:
                 check_history(cam, snaps[cam], p.t_star, p.t_received, ctx.periods[cam])
     sel = stored or choose(timelines, p.t_star)
     limit = None if ctx.max_skew_ms is None else ctx.max_skew_ms * 1e6
@@ -173,8 +177,17 @@ def _near(
 
 def _usable(p: Request, cam: str, snap: Snapshot) -> tuple[Timeline, int] | None:
     """The camera's frames the request may use, and the snapshot index of the first:
-    for a camera the request triggered, only those stored after the trigger (None: none yet)."""
+    for a camera the request triggered, only those stored after the trigger, and for one it
+    scheduled, only the frame captured for t* (None: none yet)."""
     tl = snap.timeline
+    if cam in p.scheduled:
+        for i in range(len(tl) - 1, -1, -1):
+            meta = snap.frame_meta(i)
+            if meta.t_stored < p.t_received:  # stored before the request came: not its frame
+                break
+            if meta.capture == CAPTURE_SCHEDULED and meta.t_target == p.t_star:
+                return Timeline(tl.times, tl.physical(i), 1), i
+        return None
     if cam not in p.triggered:
         return tl, 0
     first = len(tl)

@@ -78,6 +78,7 @@ class Pending:
     missing: list[str] = field(default_factory=list)  # cameras down, left out of a partial tuple
     triggered: frozenset[str] = frozenset()  # software-triggered cameras this request triggered
     t_trigger: int | None = None
+    scheduled: frozenset[str] = frozenset()  # cameras triggered for a capture at t* (capture=True)
     attempts: int = 0  # plans made for it
 
     @property
@@ -92,6 +93,15 @@ class Pending:
 @dataclass(frozen=True)
 class Trigger:
     cameras: tuple[str, ...]
+
+
+@dataclass(frozen=True)
+class Schedule:
+    """Have ``cameras`` triggered for a capture at ``t`` (service clock); a refusal fails ``pending``."""
+
+    pending: Pending
+    cameras: tuple[str, ...]
+    t: int
 
 
 @dataclass(frozen=True)
@@ -111,7 +121,7 @@ class Reply:
     t_decided: int
 
 
-Action = Trigger | Failure | Reply
+Action = Trigger | Schedule | Failure | Reply
 
 
 class RequestEngine:
@@ -162,6 +172,13 @@ class RequestEngine:
             self.pending.append(p)
         return actions
 
+    def fail(self, p: Pending, code: str, message: str) -> list[Action]:
+        """Fail a waiting request (its capture could not be scheduled); nothing if it was answered."""
+        if not any(q is p for q in self.pending):
+            return []
+        self.pending = [q for q in self.pending if q is not p]
+        return [Failure(p, code, message)]
+
     def cancel_all(self) -> None:
         """Forget every waiting request (their caller gave up on them)."""
         self.pending.clear()
@@ -211,12 +228,27 @@ class RequestEngine:
         if p.op == "sequence":
             self._check_sequence(p)
         p.deadline = max(now, latest) + int(self.setting(request, "timeout_ms") * 1e6)
-        if p.op in ("image", "tuple") and request.get("at") is None:
+        if request.get("capture"):
+            self._schedule(p, now, actions)
+        elif p.op in ("image", "tuple") and request.get("at") is None:
             triggered = tuple(c for c in p.cameras if self.cameras[c].slots and self.cameras[c].triggered)
             if triggered:  # t* is the trigger: now
                 p.t_trigger = p.t_star = now
                 p.triggered = frozenset(triggered)
                 actions.append(Trigger(triggered))
+
+    def _schedule(self, p: Pending, now: int, actions: list[Action]) -> None:
+        """A capture at t*: the cameras that can be triggered are, for t*; the others answer
+        with their frames nearest t*."""
+        if p.t_star < now:
+            raise Reject(
+                Code.OUT_OF_RANGE,
+                f"T is {(now - p.t_star) / 1e6:.1f} ms in the past: a capture can only be scheduled ahead",
+            )
+        scheduled = tuple(c for c in p.cameras if self.cameras[c].triggered)
+        if scheduled:
+            p.scheduled = frozenset(scheduled)
+            actions.append(Schedule(p, scheduled, p.t_star))
 
     def _cameras_of(self, request: dict[str, Any]) -> list[str]:
         if request.get("camera") is not None:

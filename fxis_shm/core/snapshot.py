@@ -23,8 +23,14 @@ SLOT = np.dtype(
         ("t_stored", "<i8"),
         ("t_available", "<i8"),
         ("generation", "<u8"),
+        ("t_target", "<i8"),  # the moment the frame was triggered for (service clock), 0 if none
+        ("capture", "<u8"),  # how it was captured: an index of CAPTURES
     ]
 )
+# Slot record ``capture`` values, by index: free-running (or triggered for "now"), triggered
+# for a moment a caller named (trigger_at), triggered on the service's lockstep grid.
+CAPTURES = ("free", "scheduled", "lockstep")
+CAPTURE_FREE, CAPTURE_SCHEDULED, CAPTURE_LOCKSTEP = range(3)
 
 
 @dataclass(frozen=True)
@@ -34,6 +40,8 @@ class SlotMeta:
     t_stored: int
     t_available: int
     generation: int
+    t_target: int = 0  # 0: not captured for a target moment (capture free)
+    capture: int = CAPTURE_FREE
 
 
 @dataclass(frozen=True)
@@ -57,6 +65,8 @@ class Snapshot:
                 int(rec["t_stored"]),
                 int(rec["t_available"]),
                 int(rec["generation"]),
+                int(rec["t_target"]),
+                int(rec["capture"]),
             )
         return cls(timeline, first_write, rows)
 

@@ -109,6 +109,11 @@ SYNTHETIC = CameraKind(
             "free",
             "free-running, or one frame per software trigger, captured at the trigger",
         ),
+        "trigger_latency_ms": Option(
+            number(float, 0, 1000),
+            0.0,
+            "with trigger=software: the time from a trigger to the exposure (t_capture), as a real camera's",
+        ),
     },
     "synthetic:SyntheticCamera",
 )

@@ -15,6 +15,7 @@ from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 from fxis_shm.core.requestdefaults import REQUEST_DEFAULTS
+from fxis_shm.core.schedule import parse_lockstep
 from fxis_shm.errors import ConfigError
 from fxis_shm.service.camerakinds import camera_options
 from fxis_shm.service.options import split_key_values
@@ -56,6 +57,7 @@ class ServiceConfig:
     events: str = defaults.EVENTS
     slots: int = defaults.SLOTS
     history: float | None = None  # seconds each ring holds, sized from its camera's rate (else slots)
+    lockstep: tuple[float, int] | None = None  # (hz, phase_ns): trigger on the grid k/hz + phase of CLOCK_REALTIME
     cameras: tuple[CameraSpec, ...] = ()
     settings: dict[str, Any] = field(default_factory=dict)
     restart_limit: int = defaults.RESTART_LIMIT
@@ -300,6 +302,7 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
         "viewer_tls_key",
         "port_base",
         "history",
+        "lockstep",
         *ROS2_KEYS,
         *SERVICE_SETTINGS,
     }
@@ -356,6 +359,11 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
         config = replace(config, slots=_check_int("slots", values["slots"], 2))
     if values.get("history") is not None:
         config = replace(config, history=_setting("history", float, values["history"]))
+    if values.get("lockstep") is not None:
+        try:
+            config = replace(config, lockstep=parse_lockstep(str(values["lockstep"])))
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
     if "restart_limit" in values:
         config = replace(config, restart_limit=_check_int("restart_limit", values["restart_limit"], 0))
     config = _security(config, values)

@@ -23,7 +23,7 @@ from zmq.auth.certs import load_certificates
 from zmq.auth.thread import ThreadAuthenticator
 
 from fxis_shm.core import timebase
-from fxis_shm.core.engine import FRAME_OPS, Action, Failure, Reply, RequestEngine, Trigger
+from fxis_shm.core.engine import FRAME_OPS, Action, Failure, Pending, Reply, RequestEngine, Schedule, Trigger
 from fxis_shm.errors import Code, ConfigError, ProtocolError
 from fxis_shm.service.childspec import CoordinatorSpec
 from fxis_shm.service.fastanswers import FastAnswers
@@ -331,10 +331,28 @@ class Coordinator:
             if isinstance(action, Trigger):
                 for cam in action.cameras:
                     self.cameras[cam].fire_trigger()
+            elif isinstance(action, Schedule):
+                self._schedule(action)
             elif isinstance(action, Failure):
                 action.pending.ticket(protocol.encode_error(action.pending.id, action.code, action.message))
             else:
                 self._answer(action)
+
+    def _schedule(self, action: Schedule) -> None:
+        """Have each camera's worker trigger it for a capture at ``action.t``; the first refusal
+        fails the request (the engine waits for the frames captured for T meanwhile)."""
+        assert self.links is not None
+        for cam in action.cameras:
+            self.links.send(
+                cam, commands.TRIGGER_AT, commands.TRIGGER_TIMEOUT_S, self._scheduled(action.pending, cam), t=action.t
+            )
+
+    def _scheduled(self, pending: Pending, camera: str):
+        def done(result: dict | None, code: str | None, message: str | None) -> None:
+            if result is None:
+                self._carry_out(self.engine.fail(pending, code or Code.INTERNAL, f"camera {camera!r}: {message}"))
+
+        return done
 
     def _answer(self, reply: Reply) -> None:
         try:

@@ -16,6 +16,7 @@ from typing import Any
 
 from fxis_shm.core import timebase
 from fxis_shm.core.engine import RequestEngine
+from fxis_shm.core.snapshot import CAPTURES
 from fxis_shm.shm import fastpick
 from fxis_shm.shm.cameras import CameraHandle
 from fxis_shm.shm.copyout import CopyOut, copied_by
@@ -49,7 +50,7 @@ class FastAnswers:
         op = _OPS.get(request["op"])
         if op is None or request.get("encoding") not in (None, RAW) or self.engine.busy(client):
             return None
-        if request.get("max_skew_ms") is not None:
+        if request.get("max_skew_ms") is not None or request.get("capture"):  # (a capture: the engine schedules)
             return None
         picker = self._picker()
         if picker is None:
@@ -61,9 +62,10 @@ class FastAnswers:
             return None
         _, t_decided, _, skew_ns, picked, indices, names = got
         frames, images, waited = [], [], []
-        for k, name, (slot, seq, frame_id, t_capture, t_stored, t_available, generation, ready_at, _) in zip(
-            indices, names, picked
-        ):
+        for k, name, picked_frame in zip(indices, names, picked):
+            slot, seq, frame_id, t_capture, t_stored, t_available, generation, t_target, capture, ready_at, _ = (
+                picked_frame
+            )
             reader = picker.readers[k]
             if reader.layout.nbytes > self.message_max:
                 return None
@@ -73,7 +75,11 @@ class FastAnswers:
                 self.cameras[name].torn_reads += 1
                 return None
             header = self.copyout.header(name)
-            frames.append(header.frame_json(frame_id, t_capture, t_stored, generation, t_available, len(frames)))
+            frames.append(
+                header.frame_json(
+                    frame_id, t_capture, t_stored, generation, t_available, len(frames), t_target, CAPTURES[capture]
+                )
+            )
             waited.append((header.name_json, ready_at))
         t_copied = timebase.now()
         tuple_ = op == fastpick.TUPLE

@@ -250,6 +250,8 @@ class Supervisor:
                     slots=config.slots,
                     time_origin_ns=origin,
                     history_s=history_of(c, config),
+                    lockstep_hz=config.lockstep[0] if config.lockstep else None,
+                    lockstep_phase_ns=config.lockstep[1] if config.lockstep else 0,
                 ),
                 f"camera {c.name!r}",
                 key=f"camera:{c.name}",

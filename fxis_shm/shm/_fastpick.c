@@ -14,7 +14,7 @@
  *       2 latest (each camera's newest frame). With `copy` the chosen slots are copied into
  *       arrays of the pool under the seqlock, the GIL let go. Returns (t_received, t_decided,
  *       t_copied, skew_ns, frames), each frame (slot, seq, frame_id, t_capture, t_stored,
- *       t_available, generation, ready_at, array or None), or an int: why the Python
+ *       t_available, generation, t_target, capture, ready_at, array or None), or an int: why the Python
  *       engine must answer instead (FALLBACK_*, a camera down, a wait, an error to word).
  *       `now`: when the request arrived, in the service's clock (0: read the clock).
  *   decide_near(cams, t_star, now, tuple, joint, wait_auto, check_history, tolerance_ns,   (plainpick.c)
@@ -39,7 +39,6 @@
 #include "plainpick.h"
 #include "seqlock.h"
 
-#define RECORD 48 /* seq, frame_id, t_capture, t_stored, t_available, generation: 8 bytes each */
 
 enum { FALLBACK_RETIRED = 5, FALLBACK_DOWN = 6, FALLBACK_TORN = 7 };
 enum { OP_IMAGE = 0, OP_TUPLE = 1, OP_LATEST = 2 };
@@ -369,11 +368,12 @@ static PyObject *rings_pick(Rings *self, PyObject *args) {
     for (int k = 0; k < n; k++) {
         const Record *rec = &records[k];
         int64_t ready = newest_stored[k] > t_received ? newest_stored[k] : t_received;
-        PyObject *frame = Py_BuildValue("(nKKLLLKLO)", (Py_ssize_t)((uint64_t)writes[k] % (uint64_t)rings[k]->slots),
+        PyObject *frame = Py_BuildValue("(nKKLLLKLKLO)", (Py_ssize_t)((uint64_t)writes[k] % (uint64_t)rings[k]->slots),
                                         (unsigned long long)(2 * (uint64_t)writes[k] + 2),
                                         (unsigned long long)rec->frame_id, (long long)rec->t_capture,
                                         (long long)rec->t_stored, (long long)rec->t_available,
-                                        (unsigned long long)rec->generation, (long long)ready,
+                                        (unsigned long long)rec->generation, (long long)rec->t_target,
+                                        (unsigned long long)rec->capture, (long long)ready,
                                         outs ? PyList_GET_ITEM(outs, k) : Py_None);
         if (frame == NULL) {
             Py_DECREF(frames);

@@ -6,7 +6,8 @@
  *
  *   records(buffer, table, slots, lo, hi)  the slot records of writes lo..hi-1 that were
  *                                          whole while read: a list of (w, frame_id,
- *                                          t_capture, t_stored, t_available, generation)
+ *                                          t_capture, t_stored, t_available, generation,
+ *                                          t_target, capture)
  *   copy(buffer, seq_at, seq, src, nbytes, out)  memcpy of a slot into `out` (the GIL let
  *                                          go) if `seq` held before and after: 0, else 1
  *                                          (overwritten before) or 2 (during)
@@ -15,7 +16,7 @@
  *                                          frame not whole (the later ones are left)
  *   holds(buffer, seq_at, seq)             an acquire fence, then: does the slot still show seq?
  *
- * The layout (offsets, the 48-byte record) is the ring's (fxis_shm/shm/ring.py); every
+ * The layout (offsets, the 64-byte record) is the ring's (fxis_shm/shm/ring.py); every
  * offset is checked against the buffer's length. Errors raise ValueError.
  */
 #define PY_SSIZE_T_CLEAN
@@ -25,7 +26,6 @@
 
 #include "seqlock.h"
 
-#define RECORD 48 /* seq, frame_id, t_capture, t_stored, t_available, generation: 8 bytes each */
 
 static int in_bounds(Py_buffer *view, Py_ssize_t offset, Py_ssize_t len) {
     if (offset < 0 || len < 0 || offset > view->len - len || ((uintptr_t)view->buf + offset) % 8 != 0) {
@@ -60,9 +60,10 @@ static PyObject *records(PyObject *self, PyObject *args) {
         Record r;
         if (read_record(rec, 2 * w + 2, &r))
             continue;
-        PyObject *item = Py_BuildValue("(KKLLLK)", w, (unsigned long long)r.frame_id, (long long)r.t_capture,
+        PyObject *item = Py_BuildValue("(KKLLLKLK)", w, (unsigned long long)r.frame_id, (long long)r.t_capture,
                                        (long long)r.t_stored, (long long)r.t_available,
-                                       (unsigned long long)r.generation);
+                                       (unsigned long long)r.generation, (long long)r.t_target,
+                                       (unsigned long long)r.capture);
         if (item == NULL || PyList_Append(out, item) < 0) {
             Py_XDECREF(item);
             Py_CLEAR(out);

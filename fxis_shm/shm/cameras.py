@@ -11,7 +11,7 @@ from fxis_shm.core.waitpolicy import CameraState
 from fxis_shm.errors import RingError
 from fxis_shm.shm import naming, procstat
 from fxis_shm.shm.history import held_seconds
-from fxis_shm.shm.ring import FLAG_TRIGGERED, STATE_RETIRED, RingReader
+from fxis_shm.shm.ring import FLAG_TRIGGERED, STATE_RETIRED, SYNC_FIELDS, RingReader
 
 # The columns of the ``frames`` op's rows, one row per frame.
 FRAME_FIELDS = ("frame_id", "t_capture", "t_stored", "t_available", "generation")
@@ -155,6 +155,7 @@ class CameraHandle:
             trigger="software" if self.triggered else "free",
             hook_errors=ring.field("hook_errors"),
             note=ring.header["status_text"].item().decode(errors="replace"),
+            sync=sync_status(ring),
         )
         held = info["history_s"]
         if self.history_s and held is not None and held < self.history_s * 0.98:
@@ -188,3 +189,28 @@ class CameraHandle:
         if self.reader is not None:
             self.reader.close()
             self.reader = None
+
+
+def sync_status(ring: RingReader) -> dict:
+    """How the camera was triggered for moments (docs/sync.md): its learned trigger latency, the
+    frames captured for a trigger_at and on the lockstep grid, the triggers that got no frame, and
+    the grid with the residuals t_capture - grid point (None while there is no grid)."""
+    f = {name: ring.field(name) for name in SYNC_FIELDS}
+    lockstep = None
+    if f["lockstep_mhz"]:
+        lockstep = {
+            "hz": f["lockstep_mhz"] / 1000,
+            "phase_ms": f["lockstep_phase_ns"] / 1e6,
+            "frames": f["frames_lockstep"],
+            "residual_p50_ms": round(f["residual_p50_ns"] / 1e6, 4),
+            "residual_p99_ms": round(f["residual_p99_ns"] / 1e6, 4),
+        }
+    return {
+        "trigger_latency_ms": round(f["trigger_latency_ns"] / 1e6, 4),
+        "latency_samples": f["trigger_samples"],
+        "frames_scheduled": f["frames_scheduled"],
+        "triggers_missed": f["triggers_missed"],
+        "timer_late_p50_ms": round(f["timer_late_p50_ns"] / 1e6, 4),
+        "timer_late_p99_ms": round(f["timer_late_p99_ns"] / 1e6, 4),
+        "lockstep": lockstep,
+    }

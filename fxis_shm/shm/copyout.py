@@ -12,7 +12,7 @@ from fxis_shm.core import timebase
 from fxis_shm.core.decisions import Reject, check_not_empty
 from fxis_shm.core.engine import Reply
 from fxis_shm.core.selection import Selection, radius_for, select, tolerance_for
-from fxis_shm.core.snapshot import Snapshot
+from fxis_shm.core.snapshot import CAPTURES, Snapshot
 from fxis_shm.core.timesearch import Timeline
 from fxis_shm.errors import Code
 from fxis_shm.shm import ordering
@@ -170,7 +170,9 @@ class CopyOut:
 
     def _meta(self, cam: str, snap: Snapshot, i: int, **more) -> dict:
         m = snap.frame_meta(i)
-        return self.header(cam).frame(m.frame_id, m.t_capture, m.t_stored, m.generation, m.t_available, **more)
+        return self.header(cam).frame(
+            m.frame_id, m.t_capture, m.t_stored, m.generation, m.t_available, m.t_target, CAPTURES[m.capture], **more
+        )
 
     def encode(self, meta: dict, image, encoding: str, quality: int | None) -> tuple[dict, bytes]:
         """A copied frame (checked whole) in ``encoding``, encoded once for every reply and stream."""

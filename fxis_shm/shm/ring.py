@@ -2,11 +2,12 @@
 
 Layout of the segment ``/fxis.<service>.<camera>.ring``:
 
-    [header, 1 KiB][slot table: slots x 48 bytes][pad to 4 KiB][slot 0 data][slot 1 data]...
+    [header, 1 KiB][slot table: slots x 64 bytes][pad to 4 KiB][slot 0 data][slot 1 data]...
 
 Each slot record holds ``seq``, ``frame_id``, ``t_capture``, ``t_stored``,
-``t_available`` and ``generation``. ``seq`` encodes the global write index w
-of the frame in the slot: ``2w+1`` while the writer fills it, ``2w+2`` once it
+``t_available``, ``generation``, ``t_target`` and ``capture`` (how the frame was captured:
+free, or triggered for the moment ``t_target``, fxis_shm.core.snapshot.CAPTURES).
+``seq`` encodes the global write index w of the frame in the slot: ``2w+1`` while the writer fills it, ``2w+2`` once it
 is complete. A reader therefore knows from ``seq`` alone which frame a slot
 holds, and a copy is valid only if ``seq`` had the expected value both before
 and after it (a seqlock); a torn copy is detected and never returned.
@@ -25,88 +26,35 @@ from __future__ import annotations
 
 import mmap
 import os
-import struct
 from dataclasses import dataclass
 
 import numpy as np
 import posix_ipc
 
 from fxis_shm.core import timebase
-from fxis_shm.core.snapshot import SLOT, SlotMeta, Snapshot
+from fxis_shm.core.snapshot import CAPTURE_FREE, SLOT, SlotMeta, Snapshot
 from fxis_shm.core.timesearch import Timeline
 from fxis_shm.errors import Overwritten, RingError
 from fxis_shm.shm import history, naming, ordering, slotio
-
-MAGIC = b"FXISRNG1"
-LAYOUT_VERSION = 2
-HEADER_BYTES = 1024
-PAGE = 4096
-STATE_INIT, STATE_LIVE, STATE_RETIRED = 0, 1, 2
-FLAG_TRIGGERED = 1  # the camera captures when triggered (trigger=software), not free-running
-_PERIOD_SMOOTHING = 16  # EWMA weight 1/16: follows rate changes within a second at 20 fps
-
-HEADER = np.dtype(
-    [
-        ("magic", "S8"),
-        ("version", "<u4"),
-        ("state", "<u4"),
-        ("flags", "<u4"),
-        ("_pad", "<u4"),
-        ("height", "<u4"),
-        ("width", "<u4"),
-        ("channels", "<u4"),
-        ("slots", "<u4"),
-        ("dtype", "S8"),
-        ("slot_stride", "<u8"),
-        ("data_offset", "<u8"),
-        ("generation", "<u8"),
-        ("writer_pid", "<u8"),
-        ("write_count", "<u8"),
-        ("instance", "<u8"),  # random, drawn when the segment is created: names this very segment
-        ("heartbeat_ns", "<i8"),
-        ("generation_started_ns", "<i8"),
-        ("period_ns", "<i8"),
-        ("nominal_period_ns", "<i8"),
-        ("delay_ns", "<i8"),
-        ("frames_captured", "<u8"),
-        ("frames_dropped", "<u8"),
-        ("hook_errors", "<u8"),
-        ("status_text", "S256"),
-    ]
+from fxis_shm.shm.ringheader import (  # noqa: F401 (readers import the header's names from here)
+    FLAG_TRIGGERED,
+    HEADER,
+    HEADER_BYTES,
+    LAYOUT_VERSION,
+    LIVENESS,
+    MAGIC,
+    NUMBERS,
+    STATE_INIT,
+    STATE_LIVE,
+    STATE_RETIRED,
+    SYNC_FIELDS,
+    TIMING,
+    WRITE_COUNT_AT,
+    align_to_page,
+    seq_at,
 )
-assert HEADER.itemsize <= HEADER_BYTES and SLOT.itemsize == 48
-WRITE_COUNT_AT = HEADER.fields["write_count"][1]  # byte offsets of the ordered words
-# the header's numbers, read in place (a numpy field read costs ten times as much)
-_STRUCTS = {"<u4": "<I", "<u8": "<Q", "<i8": "<q"}
-_NUMBERS = {
-    name: (struct.Struct(_STRUCTS[dtype.str]).unpack_from, offset)
-    for name, (dtype, offset) in HEADER.fields.items()
-    if dtype.str in _STRUCTS
-}
 
-
-def _gather(fields: list[str]):
-    """One unpack of header ``fields`` (in order of offset), in place, skipping the bytes between."""
-    start = at = HEADER.fields[fields[0]][1]
-    fmt = "<"
-    for name in fields:
-        dtype, offset = HEADER.fields[name]
-        fmt += f"{offset - at}x{_STRUCTS[dtype.str][1:]}"
-        at = offset + dtype.itemsize
-    unpack = struct.Struct(fmt).unpack_from
-    return lambda buffer: unpack(buffer, start)
-
-
-_LIVENESS = _gather(["state", "writer_pid", "write_count", "heartbeat_ns"])
-_TIMING = _gather(["period_ns", "delay_ns"])
-
-
-def _seq_at(slot: int) -> int:
-    return HEADER_BYTES + slot * SLOT.itemsize  # seq is a slot record's first field
-
-
-def _align(n: int, to: int = PAGE) -> int:
-    return (n + to - 1) // to * to
+_PERIOD_SMOOTHING = 16  # EWMA weight 1/16: follows rate changes within a second at 20 fps
 
 
 @dataclass(frozen=True)
@@ -173,17 +121,17 @@ class _Mapping:
     def field(self, name: str) -> int:
         if name == "write_count":  # the word that publishes frames: read it ordered
             return ordering.load_acquire(self._mm, WRITE_COUNT_AT)
-        unpack, offset = _NUMBERS[name]
+        unpack, offset = NUMBERS[name]
         return unpack(self._mm, offset)[0]
 
     def liveness(self) -> tuple[int, int, int, int]:
         """(state, writer_pid, write_count, heartbeat_ns) in one read: the signs of life (the
         write count read plainly, as a sign of life, not to read the frames it publishes)."""
-        return _LIVENESS(self._mm)
+        return LIVENESS(self._mm)
 
     def timing(self) -> tuple[int, int]:
         """(period_ns, delay_ns) in one read."""
-        return _TIMING(self._mm)
+        return TIMING(self._mm)
 
     def _unmap(self) -> None:
         for attr in ("header", "table", "seq", "data", "_views_ro"):
@@ -198,8 +146,8 @@ class _Mapping:
 
 def segment_size(layout: FrameLayout, slots: int) -> tuple[int, int, int]:
     """(total size, data offset, slot stride) of a ring."""
-    data_offset = _align(HEADER_BYTES + slots * SLOT.itemsize)
-    stride = _align(layout.nbytes)
+    data_offset = align_to_page(HEADER_BYTES + slots * SLOT.itemsize)
+    stride = align_to_page(layout.nbytes)
     return data_offset + slots * stride, data_offset, stride
 
 
@@ -268,11 +216,20 @@ class RingWriter(_Mapping):
         h["magic"] = MAGIC
         self._views()
 
-    def write(self, image: np.ndarray, frame_id: int, t_capture: int, t_available: int | None = None) -> int:
-        """Store one frame; returns its t_stored. Never blocks on readers."""
+    def write(
+        self,
+        image: np.ndarray,
+        frame_id: int,
+        t_capture: int,
+        t_available: int | None = None,
+        t_target: int = 0,
+        capture: int = CAPTURE_FREE,
+    ) -> int:
+        """Store one frame (``capture``: how, for the moment ``t_target`` if triggered for one);
+        returns its t_stored. Never blocks on readers."""
         w = self._count
         slot = w % self.slots
-        ordering.store_release(self._mm, _seq_at(slot), 2 * w + 1)
+        ordering.store_release(self._mm, seq_at(slot), 2 * w + 1)
         ordering.fence_release()  # the slot reads as being written before any of its new bytes show
         np.copyto(self.slot_image(slot), image, casting="no")
         rec = self.table[slot]
@@ -280,7 +237,8 @@ class RingWriter(_Mapping):
         rec["frame_id"], rec["t_capture"], rec["t_stored"] = frame_id, t_capture, t_stored
         rec["t_available"] = t_capture if t_available is None else t_available
         rec["generation"] = self.generation
-        ordering.store_release(self._mm, _seq_at(slot), 2 * w + 2)  # after every byte of the frame
+        rec["t_target"], rec["capture"] = t_target, capture
+        ordering.store_release(self._mm, seq_at(slot), 2 * w + 2)  # after every byte of the frame
         self._count = w + 1
         ordering.store_release(self._mm, WRITE_COUNT_AT, self._count)
         self.header["heartbeat_ns"] = t_stored
@@ -325,6 +283,11 @@ class RingWriter(_Mapping):
 
     def set_flags(self, flags: int) -> None:
         self.header["flags"] = flags
+
+    def set_sync(self, figures: dict[str, int]) -> None:
+        """The trigger figures (SYNC_FIELDS, by name) for ``status``."""
+        for name, value in figures.items():
+            self.header[name] = value
 
     def set_status(self, text: str) -> None:
         self.header["status_text"] = text.encode()[:255]
@@ -403,7 +366,7 @@ class RingReader(_Mapping):
             read = {rec[0] for rec in fresh}
             first = max(first, max(w for w in range(start, count) if w not in read) + 1)
         # the writer may have begun to overwrite the oldest frame (write count's slot)
-        while first < count and first == count - n and not slotio.holds(self._mm, _seq_at(first % n), 2 * first + 2):
+        while first < count and first == count - n and not slotio.holds(self._mm, seq_at(first % n), 2 * first + 2):
             first += 1
         if not fresh and first == self._first and self._last is not None:
             return self._last
@@ -444,7 +407,7 @@ class RingReader(_Mapping):
         ``expected_seq`` names) into ``out``."""
         if not 0 <= slot < self.slots:
             raise Overwritten(f"{self.name} has no slot {slot}")
-        return self._mm, _seq_at(slot), expected_seq, self._data_at + slot * self._stride, self.layout.nbytes, out
+        return self._mm, seq_at(slot), expected_seq, self._data_at + slot * self._stride, self.layout.nbytes, out
 
     def overwritten(self, slot: int, torn: int) -> Overwritten:
         """The error of a copy ``slotio`` found torn (1: overwritten before it, 2: during it)."""
@@ -477,12 +440,12 @@ class RingReader(_Mapping):
 
     def slot_holds(self, slot: int, expected_seq: int) -> bool:
         """True while the slot still holds that frame; what was read of it before is valid."""
-        return slotio.holds(self._mm, _seq_at(slot), expected_seq)
+        return slotio.holds(self._mm, seq_at(slot), expected_seq)
 
     def check_slot(self, slot: int, expected_seq: int, when: str) -> None:
         if not 0 <= slot < self.slots:
             raise Overwritten(f"{self.name} has no slot {slot}")
-        if ordering.load_acquire(self._mm, _seq_at(slot)) != expected_seq:
+        if ordering.load_acquire(self._mm, seq_at(slot)) != expected_seq:
             raise Overwritten(f"slot {slot} of {self.name} was overwritten {when} the copy")
 
     def wait_for_frame(self, timeout: float) -> bool:

@@ -43,10 +43,11 @@ static inline void copy_bytes(char *dst, const char *src, size_t n, int stream) 
     memcpy(dst, src, n);
 }
 
-/* A slot record (48 bytes: seq, then these), as a reader takes it. */
+/* A slot record (64 bytes: seq, then these), as a reader takes it. */
+#define RECORD 64 /* seq, frame_id, t_capture, t_stored, t_available, generation, t_target, capture: 8 bytes each */
 typedef struct {
-    uint64_t frame_id, generation;
-    int64_t t_capture, t_stored, t_available;
+    uint64_t frame_id, generation, capture;
+    int64_t t_capture, t_stored, t_available, t_target;
 } Record;
 
 /* The record at `rec` if it showed `expected` (2w+2: write w, whole) before and after the read:
@@ -59,6 +60,8 @@ static inline int read_record(const char *rec, uint64_t expected, Record *out) {
     out->t_stored = load_plain(rec + 24);
     out->t_available = load_plain(rec + 32);
     out->generation = (uint64_t)load_plain(rec + 40);
+    out->t_target = load_plain(rec + 48);
+    out->capture = (uint64_t)load_plain(rec + 56);
     atomic_thread_fence(memory_order_acquire); /* the fields were read before seq is read again */
     return load_acquire(rec) != expected;
 }

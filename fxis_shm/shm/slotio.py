@@ -4,7 +4,8 @@ order (tests/unit/test_slotio.py checks that they answer alike); FXIS_PURE_PYTHO
 the Python ones (fxis_shm._compiled).
 
 - ``records(buffer, table, slots, lo, hi)``: the slot records of writes lo..hi-1 that were
-  whole while read, as (w, frame_id, t_capture, t_stored, t_available, generation), oldest first;
+  whole while read, as (w, frame_id, t_capture, t_stored, t_available, generation, t_target,
+  capture), oldest first;
 - ``copy(buffer, seq_at, seq, src, nbytes, out)``: the slot's bytes into ``out`` if the slot
   showed ``seq`` before and after: 0, else 1 (overwritten before) or 2 (during);
 - ``copies(items)``: ``copy`` of each (buffer, seq_at, seq, src, nbytes, out) in order, up to
@@ -22,7 +23,7 @@ import numpy as np
 
 from fxis_shm.shm import ordering
 
-_RECORD = struct.Struct("<QQqqqQ")  # the ring's slot record (fxis_shm.core.snapshot.SLOT)
+_RECORD = struct.Struct("<QQqqqQqQ")  # the ring's slot record (fxis_shm.core.snapshot.SLOT)
 
 
 def py_records(buffer, table: int, slots: int, lo: int, hi: int) -> list[tuple[int, ...]]:

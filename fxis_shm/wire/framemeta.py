@@ -8,7 +8,10 @@ import json
 
 import numpy as np
 
+from fxis_shm.core.snapshot import CAPTURES
 from fxis_shm.wire import encoding as codec
+
+_CAPTURE_JSON = {name: json.dumps(name) for name in CAPTURES}  # each ``capture`` as JSON text
 
 
 def _literal(value) -> str:
@@ -29,7 +32,7 @@ class CameraFrames:
             '{"camera": '
             + self.name_json.replace("%", "%%")
             + ', "frame_id": %d, "t_capture": %d, "t_available": %d, "t_stored": %d, '
-            '"generation": %d, "shape": '
+            '"generation": %d, "capture": %s, "t_target": %s, "shape": '
             + _literal(list(self.shape))
             + ', "dtype": '
             + _literal(self.dtype)
@@ -37,15 +40,45 @@ class CameraFrames:
         )
 
     def frame_json(
-        self, frame_id: int, t_capture: int, t_stored: int, generation: int, t_available, buffer: int
+        self,
+        frame_id: int,
+        t_capture: int,
+        t_stored: int,
+        generation: int,
+        t_available,
+        buffer: int,
+        t_target: int | None = None,
+        capture: str = CAPTURES[0],
     ) -> str:
         """``frame(..., buffer=buffer)`` as the JSON text the codec writes of it, without making
         the dict (see fxis_shm.wire.replytext)."""
         t_available = t_capture if t_available is None else t_available
-        return self._frame_json % (frame_id, t_capture, t_available, t_stored, generation, buffer)
+        target = f"{t_target:d}" if t_target else "null"
+        return self._frame_json % (
+            frame_id,
+            t_capture,
+            t_available,
+            t_stored,
+            generation,
+            _CAPTURE_JSON[capture],
+            target,
+            buffer,
+        )
 
-    def frame(self, frame_id: int, t_capture: int, t_stored: int, generation: int, t_available, **more) -> dict:
-        """One frame's metadata (ints as they are), then ``more`` (its buffer, or where it is)."""
+    def frame(
+        self,
+        frame_id: int,
+        t_capture: int,
+        t_stored: int,
+        generation: int,
+        t_available,
+        t_target: int | None = None,
+        capture: str = CAPTURES[0],
+        **more,
+    ) -> dict:
+        """One frame's metadata (ints as they are), then ``more`` (its buffer, or where it is):
+        ``capture`` free, scheduled or lockstep, ``t_target`` the moment it was triggered for
+        (None or 0: none; a ring's slot record says 0)."""
         return {
             "camera": self.camera,
             "frame_id": frame_id,
@@ -53,15 +86,34 @@ class CameraFrames:
             "t_available": t_capture if t_available is None else t_available,
             "t_stored": t_stored,
             "generation": generation,
+            "capture": capture,
+            "t_target": t_target or None,
             "shape": list(self.shape),
             "dtype": self.dtype,
             **more,
         }
 
 
-def described(camera, frame_id, t_capture, t_stored, generation, shape, dtype: str, t_available) -> dict:
+def described(
+    camera,
+    frame_id,
+    t_capture,
+    t_stored,
+    generation,
+    shape,
+    dtype: str,
+    t_available,
+    t_target: int | None = None,
+    capture: str = CAPTURES[0],
+) -> dict:
     return CameraFrames(camera, shape, dtype).frame(
-        int(frame_id), int(t_capture), int(t_stored), int(generation), None if t_available is None else int(t_available)
+        int(frame_id),
+        int(t_capture),
+        int(t_stored),
+        int(generation),
+        None if t_available is None else int(t_available),
+        None if t_target is None else int(t_target),
+        capture,
     )
 
 
@@ -74,10 +126,23 @@ def frame_meta(
     image: np.ndarray,
     buffer: int,
     t_available: int | None = None,
+    t_target: int | None = None,
+    capture: str = CAPTURES[0],
 ) -> dict:
     """A frame whose pixels travel in buffer frame number ``buffer`` of the reply."""
     return {
-        **described(camera, frame_id, t_capture, t_stored, generation, image.shape, image.dtype.name, t_available),
+        **described(
+            camera,
+            frame_id,
+            t_capture,
+            t_stored,
+            generation,
+            image.shape,
+            image.dtype.name,
+            t_available,
+            t_target,
+            capture,
+        ),
         "buffer": buffer,
     }
 

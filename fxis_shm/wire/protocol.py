@@ -180,18 +180,21 @@ _WAITING: dict[str, tuple[Check, Any]] = {
     "wait": (_optional(_choice(WAIT_MODES)), None),  # None: the service's default
     "timeout_ms": (_optional(_timeout), None),
 }
+# with "at": trigger the cameras that can be triggered for a capture at that moment (docs/sync.md)
+_CAPTURE: dict[str, tuple[Check, Any]] = {"capture": (_optional(_boolean), None)}
 # op -> {field: (check, default)}; a default of ... marks a required field
 # "local": the client's kernel boot id; a service on the same kernel then replies
 # with where the frames are instead of their pixels (the local fast path).
 _LOCAL: dict[str, tuple[Check, Any]] = {"local": (_optional(_boot_id), None)}
 OPS: dict[str, dict[str, tuple[Check, Any]]] = {
-    "image": {"camera": (_name, ...), **_WAITING, **_LOCAL, **_ENCODED},
+    "image": {"camera": (_name, ...), **_WAITING, **_CAPTURE, **_LOCAL, **_ENCODED},
     "tuple": {
         "cameras": (_optional(_names), None),
         "sync": (_optional(_choice(SYNC_MODES)), None),
         "max_skew_ms": (_optional(_number), None),
         "partial": (_optional(_boolean), None),
         **_WAITING,
+        **_CAPTURE,
         **_LOCAL,
         **_ENCODED,
     },
@@ -259,7 +262,12 @@ def _check_sequence(req: dict) -> None:
         raise ProtocolError(f"'start' ({req['start']}) is after 'end' ({req['end']})")
 
 
-CROSS_CHECKS = {"sequence": _check_sequence}
+def _check_capture(req: dict) -> None:
+    if req.get("capture") and req["at"] is None:
+        raise ProtocolError("'capture' needs 'at': the moment the cameras are to capture at")
+
+
+CROSS_CHECKS = {"sequence": _check_sequence, "image": _check_capture, "tuple": _check_capture}
 
 
 def decode_request(frames: Sequence[bytes], max_header_bytes: int = MAX_HEADER_BYTES) -> dict:

@@ -10,6 +10,7 @@ import numpy as np
 import pytest
 
 from fxis_shm import read_stamp
+from fxis_shm.core.snapshot import CAPTURE_LOCKSTEP, CAPTURE_SCHEDULED, CAPTURES
 from fxis_shm.errors import RingError
 from fxis_shm.formats.stamp import write_stamp
 from fxis_shm.shm import naming
@@ -42,6 +43,21 @@ def test_reader_sees_frames_in_order_across_the_wrap(service):
     assert [snap.timeline.at(i) for i in range(len(snap.timeline))] == [7000, 8000, 9000, 10000]
     for i in range(4):
         assert read_stamp(reader.copy(snap, i)) == snap.frame_meta(i).frame_id == 7 + i
+    reader.close()
+    writer.close()
+
+
+def test_each_frame_keeps_how_it_was_captured(service):
+    """A frame triggered for a moment keeps that moment and how (scheduled, lockstep) in its slot
+    record; a free one says free with no target. Readers see it through every path."""
+    writer = RingWriter(service, "c", LAYOUT, 4)
+    reader = RingReader(service, "c")
+    writer.write(frame(0), 0, 1000)
+    writer.write(frame(1), 1, 2000, None, 1990, CAPTURE_SCHEDULED)
+    writer.write(frame(2), 2, 3000, None, 3003, CAPTURE_LOCKSTEP)
+    snap = reader.snapshot()
+    got = [(m.t_target, CAPTURES[m.capture]) for m in (snap.frame_meta(i) for i in range(3))]
+    assert got == [(0, "free"), (1990, "scheduled"), (3003, "lockstep")]
     reader.close()
     writer.close()
 

@@ -52,7 +52,7 @@ def edited(spec, **changes) -> str:
 @pytest.mark.parametrize(
     "text, words",
     [
-        (edited(CAMERA, version=2), ["version 2", "reads version 1", "different installs"]),
+        (edited(CAMERA, version=3), ["version 3", "reads version 2", "different installs"]),
         (edited(CAMERA, version=None), ["version None"]),
         (edited(CAMERA, role="coordinator"), ["camera process", "'coordinator'"]),
         (edited(CAMERA, slots="4"), ["'slots'", "int", "'4'"]),

@@ -22,6 +22,7 @@ SYNTHETIC_DEFAULTS = {
     "pattern": "stripes",
     "shift_px": 0,
     "trigger": "free",
+    "trigger_latency_ms": 0.0,
     "process": None,
     "process_workers": 1,  # generic to every kind (camerakinds.COMMON_OPTIONS)
     "history": None,
@@ -424,3 +425,11 @@ def test_an_exposed_endpoint_needs_curve_keys_or_insecure_bind():
     assert build_config({"pub": "tcp://0.0.0.0:7001", "insecure_bind": True}).exposed == ["tcp://0.0.0.0:7001"]
     with pytest.raises(ConfigError, match="go together"):
         build_config({"curve_secret": "server.key_secret"})
+
+
+def test_lockstep_is_a_rate_and_a_phase_from_the_flag_or_the_file():
+    assert build_config(flags={"lockstep": "20,5"}).lockstep == (20.0, 5_000_000)
+    assert build_config({"lockstep": 30}).lockstep == (30.0, 0)
+    assert build_config().lockstep is None
+    with pytest.raises(ConfigError, match="above 0"):
+        build_config(flags={"lockstep": "0"})

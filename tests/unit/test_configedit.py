@@ -58,8 +58,10 @@ def test_worker_commands_are_checked():
         "set": {"gain": 1},
     }
     with pytest.raises(ProtocolError) as unknown:
-        commands.decode_command(b'{"id": 1, "cmd": "trigger_at"}')
-    assert unknown.value.code == "UNKNOWN_OP" and "known: ['settings']" in unknown.value.message
+        commands.decode_command(b'{"id": 1, "cmd": "restart_stream"}')
+    assert (
+        unknown.value.code == "UNKNOWN_OP" and "known: ['settings', 'trigger_at', 'lockstep']" in unknown.value.message
+    )
     for bad in (b"[]", b'{"cmd": "settings"}', b"not json"):
         with pytest.raises(ProtocolError):
             commands.decode_command(bad)

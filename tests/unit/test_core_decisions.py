@@ -53,7 +53,7 @@ def snap(times, stored=None) -> Snapshot:
     stored = [t + DELAY for t in times] if stored is None else stored
     meta = np.zeros(max(1, len(times)), dtype=SLOT)
     for w, (t, s) in enumerate(zip(times, stored)):
-        meta[w] = (2 * w + 2, w, t, s, t, 1)
+        meta[w] = (2 * w + 2, w, t, s, t, 1, 0, 0)
     return Snapshot.of_table(Timeline(list(times), 0, len(times)), 0, meta)
 
 

@@ -11,8 +11,8 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fxis_shm.core.engine import COPY_ATTEMPTS, LIVENESS_CHECK_NS, Failure, Reply, RequestEngine, Trigger
-from fxis_shm.core.snapshot import SLOT, Snapshot
+from fxis_shm.core.engine import COPY_ATTEMPTS, LIVENESS_CHECK_NS, Failure, Reply, RequestEngine, Schedule, Trigger
+from fxis_shm.core.snapshot import CAPTURE_SCHEDULED, SLOT, Snapshot
 from fxis_shm.core.timesearch import Timeline
 from fxis_shm.core.waitpolicy import CameraState
 from fxis_shm.wire.protocol import decode_request, encode_request
@@ -30,12 +30,13 @@ class TableCamera:
         self.slots = slots
         self.period_ns = period_ns
         self.triggered = triggered
-        self.frames: list[tuple[int, int, int]] = []  # (t_capture, t_stored, generation), all written
+        self.frames: list[tuple[int, ...]] = []  # (t_capture, t_stored, generation, t_target, capture), all written
         self.down: str | None = None
         self.generation = 1
 
-    def add(self, t_capture: int, t_stored: int | None = None) -> TableCamera:
-        self.frames.append((t_capture, t_capture + DELAY if t_stored is None else t_stored, self.generation))
+    def add(self, t_capture: int, t_stored: int | None = None, t_target: int = 0, capture: int = 0) -> TableCamera:
+        stored = t_capture + DELAY if t_stored is None else t_stored
+        self.frames.append((t_capture, stored, self.generation, t_target, capture))
         return self
 
     def add_periodic(self, first: int, count: int, phase: int = 0) -> TableCamera:
@@ -51,8 +52,8 @@ class TableCamera:
         first = max(0, count - self.slots)
         meta = np.zeros(self.slots, dtype=SLOT)
         for w in range(first, count):
-            t_capture, t_stored, generation = self.frames[w]
-            meta[w % self.slots] = (2 * w + 2, w, t_capture, t_stored, t_capture, generation)
+            t_capture, t_stored, generation, t_target, capture = self.frames[w]
+            meta[w % self.slots] = (2 * w + 2, w, t_capture, t_stored, t_capture, generation, t_target, capture)
         times = [self.frames[w][0] for w in range(first, count)]  # oldest first, as RingReader gives
         return Snapshot.of_table(Timeline(times, 0, len(times)), first, meta)
 
@@ -363,3 +364,42 @@ def test_the_coordinator_and_same_host_clients_decide_with_this_one_engine():
         assert caller.RequestEngine is engine.RequestEngine
         own = [name for name, value in vars(caller).items() if getattr(value, "__module__", None) in deciding]
         assert own == [], f"{caller.__name__} decides by itself with {own}"
+
+
+# ---- capture at T ----
+
+
+def test_a_capture_at_t_schedules_the_triggered_cameras_and_waits_for_their_frames_for_t():
+    trig, free = TableCamera(triggered=True).add(5 * MS), TableCamera().add_periodic(0, 20)
+    engine = engine_with(trig=trig, free=free)
+    now, at = 19 * PERIOD + DELAY, 22 * PERIOD + 7 * MS
+    actions = engine.submit(request("tuple", at=at, capture=True), now, "ticket")
+    schedule = only(actions, Schedule)
+    assert (schedule.cameras, schedule.t) == (("trig",), at) and schedule.pending is engine.pending[0]
+    free.add_periodic(20, 4)  # the free camera passes T
+    trig.add(at - 40 * MS, t_stored=now + 1)  # a frame triggered "now" meanwhile: not the one for T
+    trig.add(at + 20_000, t_stored=now + 2, t_target=at - 1, capture=CAPTURE_SCHEDULED)  # another T's
+    assert engine.on_frames({"trig", "free"}, at + 10 * MS) == []
+    trig.add(at + 30_000, t_target=at, capture=CAPTURE_SCHEDULED)
+    reply = only(engine.on_frames({"trig"}, at + DELAY + 30_000), Reply)
+    assert picked_times(reply) == {"trig": at + 30_000, "free": 22 * PERIOD}  # free: its frame nearest T
+
+
+def test_a_capture_with_no_camera_to_trigger_answers_with_the_frames_nearest_t():
+    free = TableCamera().add_periodic(0, 20)
+    engine = engine_with(free=free)
+    at = 21 * PERIOD + 3 * MS
+    assert engine.submit(request("image", camera="free", at=at, capture=True), 19 * PERIOD + DELAY, 1) == []
+    free.add_periodic(20, 3)
+    assert picked_times(only(engine.on_frames({"free"}, 22 * PERIOD + DELAY), Reply)) == {"free": 21 * PERIOD}
+
+
+def test_a_capture_in_the_past_is_refused_and_a_refused_schedule_fails_its_request():
+    trig = TableCamera(triggered=True).add(5 * MS)
+    engine = engine_with(trig=trig)
+    failure = only(engine.submit(request("image", camera="trig", at=10 * MS, capture=True), 20 * MS, 1), Failure)
+    assert failure.code == "OUT_OF_RANGE" and "10.0 ms in the past" in failure.message
+    schedule = only(engine.submit(request("image", camera="trig", at=500 * MS, capture=True), 20 * MS, 2), Schedule)
+    failed = only(engine.fail(schedule.pending, "OUT_OF_RANGE", "too near"), Failure)
+    assert (failed.pending.ticket, failed.message) == (2, "too near") and engine.pending == []
+    assert engine.fail(schedule.pending, "OUT_OF_RANGE", "again") == []  # answered once

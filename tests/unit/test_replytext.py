@@ -5,6 +5,7 @@ writes CameraFrames.frame."""
 from hypothesis import given, settings, strategies as st
 
 from fxis_shm.core.selection import SYNC_MODES
+from fxis_shm.core.snapshot import CAPTURES
 from fxis_shm.wire import fastjson, protocol, replytext
 from fxis_shm.wire.framemeta import CameraFrames
 
@@ -25,6 +26,14 @@ FRAMES = st.tuples(
 @given(CAMERAS, FRAMES, st.integers(min_value=0, max_value=64))
 def test_a_frame_is_written_as_the_codec_writes_its_dict(camera, frame, buffer):
     assert camera.frame_json(*frame, buffer) == fastjson.dumps(camera.frame(*frame, buffer=buffer)).decode()
+
+
+@settings(max_examples=200)
+@given(CAMERAS, FRAMES, st.integers(min_value=0, max_value=64), st.none() | NS, st.sampled_from(CAPTURES))
+def test_how_a_frame_was_captured_is_written_as_the_codec_writes_it(camera, frame, buffer, t_target, capture):
+    written = camera.frame_json(*frame, buffer, t_target, capture)
+    assert written == fastjson.dumps(camera.frame(*frame, t_target, capture, buffer=buffer)).decode()
+    assert f'"capture": "{capture}", "t_target": {t_target or "null"}' in written  # 0 and None: no target
 
 
 @settings(max_examples=300)

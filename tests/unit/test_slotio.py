@@ -12,15 +12,16 @@ from hypothesis import given, settings, strategies as st
 from fxis_shm.shm import _slotio, slotio
 
 TABLE = 64  # the table's offset in the test buffer (the ring's is 1024)
-DATA = 4096
+DATA = 8192  # after the table (the batch test's 84 records)
+RECORD = 64  # the ring's slot record (fxis_shm.core.snapshot.SLOT)
 
 
 def buffer_with(slots: int, records: list[tuple[int, ...]], data: bytes = b"") -> np.ndarray:
-    """An 8-byte aligned buffer holding ``records`` (seq and five fields each) from TABLE on."""
+    """An 8-byte aligned buffer holding ``records`` (seq and seven fields each) from TABLE on."""
     words = np.zeros((DATA + len(data) + 7) // 8 + 1, dtype=np.uint64)
     raw = words.view(np.uint8)
-    table = np.array(records, dtype=np.uint64).reshape(slots, 6) if records else np.zeros((slots, 6), np.uint64)
-    raw[TABLE : TABLE + slots * 48] = table.view(np.uint8).reshape(-1)
+    table = np.array(records, dtype=np.uint64).reshape(slots, 8) if records else np.zeros((slots, 8), np.uint64)
+    raw[TABLE : TABLE + slots * RECORD] = table.view(np.uint8).reshape(-1)
     raw[DATA : DATA + len(data)] = np.frombuffer(data, dtype=np.uint8)
     return raw
 
@@ -35,7 +36,7 @@ def tables(draw):
     for s in range(slots):
         w = max((v for v in range(count) if v % slots == s), default=s)
         seq = draw(st.sampled_from([2 * w + 2, 2 * w + 1, 2 * w, 0, draw(st.integers(0, 2**64 - 1))]))
-        fields = draw(st.lists(st.integers(0, 2**63 - 1), min_size=5, max_size=5))
+        fields = draw(st.lists(st.integers(0, 2**63 - 1), min_size=7, max_size=7))
         records.append((seq, *fields))
     lo = draw(st.integers(0, count))
     hi = draw(st.integers(lo, count + slots))
@@ -52,17 +53,17 @@ def test_records_are_read_alike(table):
 
 def test_records_keep_only_the_whole_ones():
     slots = 4
-    records = [(2 * w + 2, w, 1000 * w, 1000 * w + 5, 1000 * w, 1) for w in range(4, 8)]
+    records = [(2 * w + 2, w, 1000 * w, 1000 * w + 5, 1000 * w, 1, 1000 * w - 3, w % 3) for w in range(4, 8)]
     records[2] = (2 * 6 + 1, *records[2][1:])  # write 6 is being written
     buf = buffer_with(slots, records)
     assert [r[0] for r in slotio.records(buf, TABLE, slots, 4, 8)] == [4, 5, 7]
-    assert slotio.records(buf, TABLE, slots, 5, 6) == [(5, 5, 5000, 5005, 5000, 1)]
+    assert slotio.records(buf, TABLE, slots, 5, 6) == [(5, 5, 5000, 5005, 5000, 1, 4997, 2)]
 
 
 @settings(max_examples=200, deadline=None)
 @given(st.integers(0, 2**64 - 1), st.booleans(), st.binary(min_size=1, max_size=300))
 def test_copies_and_checks_agree(seq, matches, data):
-    buf = buffer_with(2, [(seq, 0, 0, 0, 0, 0), (0, 0, 0, 0, 0, 0)], data)
+    buf = buffer_with(2, [(seq, *[0] * 7), (0,) * 8], data)
     expected = seq if matches else (seq + 1) % 2**64
     outs = [np.zeros(len(data), np.uint8) for _ in range(2)]
     results = [f(buf, TABLE, expected, DATA, len(data), out) for f, out in zip((_slotio.copy, slotio.py_copy), outs)]
@@ -97,7 +98,7 @@ def frames(draw):
 def jobs_of(buf: np.ndarray, seqs: list[int], whole: list[bool], lengths: list[int]) -> list[tuple]:
     offsets = np.cumsum([0, *lengths])
     return [
-        (buf, TABLE + 48 * k, seq if ok else seq + 1, DATA + int(offsets[k]), n, np.zeros(n, np.uint8))
+        (buf, TABLE + RECORD * k, seq if ok else seq + 1, DATA + int(offsets[k]), n, np.zeros(n, np.uint8))
         for k, (seq, ok, n) in enumerate(zip(seqs, whole, lengths))
     ]
 
@@ -106,7 +107,7 @@ def jobs_of(buf: np.ndarray, seqs: list[int], whole: list[bool], lengths: list[i
 @given(frames())
 def test_several_copies_at_once_agree(drawn):
     seqs, whole, lengths, data = drawn
-    buf = buffer_with(len(seqs), [(seq, 0, 0, 0, 0, 0) for seq in seqs], data)
+    buf = buffer_with(len(seqs), [(seq, *[0] * 7) for seq in seqs], data)
     jobs = [jobs_of(buf, seqs, whole, lengths) for _ in range(2)]
     results = [_slotio.copies(jobs[0]), slotio.py_copies(jobs[1])]
     first_torn = next((k for k, ok in enumerate(whole) if not ok), None)
@@ -123,7 +124,7 @@ def test_more_frames_than_one_c_call_takes_are_copied_in_batches(torn_at):
     seqs, lengths = [2 * k + 2 for k in range(n)], [8] * n
     whole = [k != torn_at for k in range(n)]
     data = bytes(range(256)) * 5
-    buf = buffer_with(n, [(seq, 0, 0, 0, 0, 0) for seq in seqs], data[: sum(lengths)])
+    buf = buffer_with(n, [(seq, *[0] * 7) for seq in seqs], data[: sum(lengths)])
     jobs = [jobs_of(buf, seqs, whole, lengths) for _ in range(2)]
     assert slotio.copies(jobs[0]) == slotio.py_copies(jobs[1]) == (None if torn_at is None else (torn_at, 1))
     for k in range(n if torn_at is None else torn_at):
@@ -136,7 +137,7 @@ def test_a_frame_of_megabytes_is_copied_whole_into_any_alignment(impl, offset):
     """Frames from 512 KiB on are streamed past the caches (C): every byte still arrives."""
     copies = _slotio.copies if impl == "c" else slotio.py_copies
     data = np.random.default_rng(5).integers(0, 256, (1 << 20) + 77, dtype=np.uint8).tobytes()
-    buf = buffer_with(1, [(10, 0, 0, 0, 0, 0)], data)
+    buf = buffer_with(1, [(10, *[0] * 7)], data)
     out = np.zeros(len(data) + offset, np.uint8)[offset:]  # a target not aligned to 16 bytes
     assert copies([(buf, TABLE, 10, DATA, len(data), out)]) is None
     assert out.tobytes() == data

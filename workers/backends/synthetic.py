@@ -70,6 +70,7 @@ class SyntheticCamera(Camera):
         self._rng = random.Random(o["seed"] or None)
         self._k = 0
         self._triggers: queue.SimpleQueue[int] = queue.SimpleQueue()  # trigger times, ns
+        self._latency_ns = round(o["trigger_latency_ms"] * 1e6)  # trigger -> exposure
         if o["pattern"] == "chessboard":
             self._check_board_fits()
 
@@ -228,7 +229,11 @@ class SyntheticCamera(Camera):
         self._start()
         k = self._k
         self._k += 1
-        return Capture(self._render(k), k, t_trigger)
+        t_capture = t_trigger + self._latency_ns
+        wait_ns = t_capture - timebase.now()
+        if wait_ns > 0:  # a frame is there only after its exposure
+            time.sleep(wait_ns / 1e9)
+        return Capture(self._render(k), k, t_capture)
 
     def _start(self) -> None:
         """Frame numbers start with the first grab, at the frame due then."""

@@ -1,0 +1,149 @@
+"""Capture at a future T (issue 34): a service triggers its cameras that can be triggered for a
+moment the caller names, in the caller's clock, and every frame says how it was captured.
+
+No bound here is a speed: a scheduled frame's residual is held to what the worker's own timer
+measured of its lateness on this machine (its status, ``timer_late_p99_ms``) plus the noise of
+the learned trigger latency; a free camera's frame to half its period. bench/sync/ measures."""
+
+import statistics
+import time
+from concurrent.futures import ThreadPoolExecutor
+
+import pytest
+
+from fxis_shm import Client, handshake, read_stamp
+from fxis_shm.errors import ProtocolError, ServiceError
+
+from ..conftest import wait_until
+from .conftest import SMALL
+
+pytestmark = pytest.mark.integration
+
+MS = 1_000_000
+LATENCY_MS = 3.0  # the synthetic camera's modelled trigger latency (trigger -> exposure)
+FREE_FPS = 20
+AHEAD_NS = 300 * MS  # far enough that a loaded machine still delivers the command in time
+# what a learned latency may miss by: the trigger call's own time varies between triggers
+# (the worker stamps the trigger, then calls the camera, which stamps it again)
+LATENCY_NOISE_NS = MS // 2
+TRIGGERED = f"synthetic:trigger=software,trigger_latency_ms={LATENCY_MS},{SMALL}"
+
+
+def _capture_tuples(client, n: int, cameras=None) -> list:
+    tuples = []
+    for _ in range(n):
+        at = time.monotonic_ns() + AHEAD_NS
+        tuples.append((at, client.tuple(cameras, at=at, capture=True)))
+    return tuples
+
+
+def test_a_capture_at_t_triggers_the_camera_for_t_and_a_free_camera_answers_nearest(start_service):
+    svc = start_service("--camera", f"trig={TRIGGERED}", "--camera", f"free=synthetic:fps={FREE_FPS},{SMALL}")
+    with svc.client() as client:
+        _capture_tuples(client, 3)  # the worker learns the camera's latency from these
+        tuples = _capture_tuples(client, 20)
+        sync = client.status()["cameras"]["trig"]["sync"]
+    assert abs(sync["trigger_latency_ms"] - LATENCY_MS) * MS <= LATENCY_NOISE_NS
+    assert sync["frames_scheduled"] == 23 and sync["triggers_missed"] == 0
+    late_p50, late_max = sync["timer_late_p50_ms"] * MS, sync["timer_late_p99_ms"] * MS  # (p99 of 23: the max)
+    residuals = []
+    for at, pair in tuples:
+        trig, free = pair["trig"], pair["free"]
+        assert (trig.capture, trig.t_target) == ("scheduled", at)  # the caller's clock: this host's
+        assert read_stamp(trig.image) == trig.frame_id
+        # never early beyond the latency's noise; late by at most what the timer was late
+        assert -LATENCY_NOISE_NS <= trig.residual_ns <= late_max + LATENCY_NOISE_NS
+        residuals.append(abs(trig.residual_ns))
+        assert (free.capture, free.t_target, free.residual_ns) == ("free", None, None)
+        assert abs(free.t_capture - at) <= 10**9 // FREE_FPS // 2 + MS  # its frame nearest T
+        assert pair.skew_ns == abs(free.t_capture - trig.t_capture)
+    assert statistics.median(residuals) <= late_p50 + LATENCY_NOISE_NS
+
+
+def test_an_image_captured_at_t_and_a_free_cameras_image(start_service):
+    svc = start_service("--camera", f"trig={TRIGGERED}", "--camera", f"free=synthetic:fps={FREE_FPS},{SMALL}")
+    with svc.client() as client:
+        at = time.monotonic_ns() + AHEAD_NS
+        frame = client.image("trig", at=at, capture=True)
+        assert (frame.capture, frame.t_target) == ("scheduled", at) and frame.residual_ns >= -LATENCY_NOISE_NS
+        at = time.monotonic_ns() + AHEAD_NS
+        free = client.image("free", at=at, capture=True)
+        assert (free.capture, free.t_target) == ("free", None)
+        assert abs(free.t_capture - at) <= 10**9 // FREE_FPS // 2 + MS
+        now = client.image("trig")  # a trigger for "now" is not a capture for a moment
+        assert (now.capture, now.t_target) == ("free", None)
+
+
+def test_a_moment_that_cannot_be_kept_gets_a_clear_error_and_the_service_runs_on(start_service):
+    svc = start_service("--camera", f"trig={TRIGGERED}")
+    with svc.client() as client:
+        with pytest.raises(ServiceError, match="in the past: a capture can only be scheduled ahead") as past:
+            client.image("trig", at=time.monotonic_ns() - 10 * MS, capture=True)
+        with pytest.raises(ServiceError, match=r"only .* ms ahead: the nearest T this camera can be") as near:
+            client.image("trig", at=time.monotonic_ns() + MS, capture=True)
+        with pytest.raises(ServiceError, match="the horizon is 10000.0 ms") as far:
+            client.image("trig", at=time.monotonic_ns() + 20 * 10**9, capture=True)
+        assert past.value.code == near.value.code == far.value.code == "OUT_OF_RANGE"
+        with pytest.raises((ProtocolError, ServiceError), match="'capture' needs 'at'"):
+            client.image("trig", capture=True)
+        at = time.monotonic_ns() + AHEAD_NS
+        assert client.image("trig", at=at, capture=True).t_target == at  # still serving
+        assert client.status()["cameras"]["trig"]["alive"]
+
+
+def test_an_event_request_captures_at_t_too(start_service):
+    svc = start_service("--camera", f"trig={TRIGGERED}")
+    with svc.client() as client, client.events() as events, client.subscribe(timeout=10) as answers:
+        answers.topic("robot")
+        handshake(events, answers, "robot", timeout=20)
+        at = time.monotonic_ns() + AHEAD_NS
+        events.request("image", "robot", camera="trig", at=at, capture=True)
+        frame = answers.receive().frames[0]
+    assert (frame.capture, frame.t_target) == ("scheduled", at) and frame.residual_ns >= -LATENCY_NOISE_NS
+
+
+def test_two_requests_for_one_moment_share_its_frame(start_service):
+    svc = start_service("--camera", f"trig={TRIGGERED}")
+    with svc.client() as first, svc.client() as second, ThreadPoolExecutor(1) as pool:
+        at = time.monotonic_ns() + 300 * MS
+        other = pool.submit(second.image, "trig", at=at, capture=True)
+        frame = first.image("trig", at=at, capture=True)
+        shared = other.result(timeout=10)
+        assert shared.frame_id == frame.frame_id and shared.t_target == frame.t_target == at
+        assert first.status()["cameras"]["trig"]["frames_stored"] == 1  # one trigger for the two requests
+
+
+# ---- across emulated hosts: each its own CLOCK_MONOTONIC ----------------------------------------
+
+HOSTS_TIMEOUT_S = 15.0  # CurveZMQ handshakes on a loaded machine
+MARGIN_NS = 500_000  # beyond a clock estimate's stated uncertainty (tests/integration/test_hosts.py)
+
+
+def test_a_capture_at_t_across_two_hosts_with_their_own_clocks(emulated_hosts):
+    """T in the caller's clock reaches each host in its own clock: both cameras capture at T,
+    as the namespaces' exact offsets tell, within the clock estimates and the timers' lateness."""
+    hosts = [emulated_hosts.host(clock_offset_s=1000), emulated_hosts.host(clock_offset_s=2000)]
+    services = [host.service("--camera", f"{name}={TRIGGERED}") for host, name in zip(hosts, ("left", "right"))]
+    endpoints = [svc.endpoint for svc in services]
+    with Client(endpoints, timeout=HOSTS_TIMEOUT_S, keys=emulated_hosts.client_keys) as client:
+
+        def estimated():
+            estimates = [client.clocks.get(e) for e in endpoints]
+            return all(e is not None and e.method == "estimated" for e in estimates) and estimates
+
+        wait_until(estimated, timeout=30, what="clock estimates for both hosts")
+        _capture_tuples(client, 3)  # each worker learns its camera's latency
+        tuples = _capture_tuples(client, 10)
+        syncs = [client.status()["cameras"][name]["sync"] for name in ("left", "right")]
+        estimates = [client.clocks[e] for e in endpoints]
+    late_max = max(s["timer_late_p99_ms"] for s in syncs) * MS
+    for at, pair in tuples:
+        true = {}
+        for (name, frame), host, estimate in zip(pair.items(), hosts, estimates):
+            assert frame.capture == "scheduled" and frame.path == "network"
+            assert abs(frame.t_target - at) <= 1_000  # T went there and back in one mapping
+            true[name] = frame.service_t_capture - host.clock_offset_ns  # exact: the namespace's offset
+            bound = estimate.uncertainty_ns + MARGIN_NS
+            assert -bound - LATENCY_NOISE_NS <= true[name] - at <= bound + late_max + LATENCY_NOISE_NS
+        bound = sum(e.uncertainty_ns for e in estimates) + 2 * MARGIN_NS
+        assert abs(true["left"] - true["right"]) <= bound + late_max + 2 * LATENCY_NOISE_NS
