@@ -4,7 +4,7 @@ import cv2
 import numpy as np
 import pytest
 
-from fxis_shm import read_stamp
+from fxis_shm import Client, read_stamp
 from fxis_shm.formats import rosmsgs
 from fxis_shm.workers.backends.bag import BagCamera
 
@@ -167,3 +167,64 @@ def test_a_bad_bag_camera_stops_start_up_with_the_reason(recorded):
     assert "camera 'v'" in result.stderr and "/left/image_raw" in result.stderr
     result = fxis("run", "--camera", "v=bag:path=x,speed=0")
     assert result.returncode == 2 and "'speed'" in result.stderr
+
+
+@pytest.fixture(scope="module")
+def video_bags(tmp_path_factory):
+    """A recording in h264 (20 frames a camera) and a one-second h264 snapshot of the same cell,
+    each with the stamps and ids its /NAME/video/frames topics give."""
+    tmp = tmp_path_factory.mktemp("video")
+    svc = start_cameras(tmp / "service.log")
+    try:
+        record(svc, tmp / "rec", "--frames", "20", "--codec", "h264", "--gop", "0.3")
+        with Client(svc.endpoint) as client:
+            client.snapshot(before=1.0, after=0.0, out=str(tmp / "snap"), codec="h264", cameras=["left"])
+    finally:
+        stop(svc)
+    return {name: (str(tmp / name), read_bag(tmp / name)) for name in ("rec", "snap")}
+
+
+def recorded_ids(bag, cam) -> dict[int, int]:
+    """Recorded capture stamp -> frame id, from /NAME/video/frames."""
+    return {rosmsgs.stamp_ns(m.msg.header.stamp): m.msg.frame_id for m in bag.messages[f"/{cam}/video/frames"]}
+
+
+def test_a_video_bag_replays_its_frames_decoded_with_their_ids_at_the_recorded_spacing(start_service, video_bags):
+    path, bag = video_bags["rec"]
+    ids = {cam: recorded_ids(bag, cam) for cam in ("left", "right")}
+    stamp_of = {cam: {i: t for t, i in ids[cam].items()} for cam in ids}
+    cameras = [
+        "--camera",
+        f"left=bag:path={path},topic=/left/video",
+        "--camera",
+        f"right=bag:path={path},topic=/right/video",
+    ]
+    svc = start_service(*cameras, "--slots", "64")
+    with svc.client(timeout=5) as client:
+        replayed(client, 12)
+        tuples = client.sequence("consecutive", cameras=["left", "right"], count=10)
+    for t in tuples:
+        assert t["left"].image.shape == (120, 160) and t["right"].image.shape == (120, 160, 3)  # mono8, bgr8 again
+        shown = {cam: read_stamp(f.image) for cam, f in t.items()}
+        assert shown["left"] in stamp_of["left"] and shown["left"] == shown["right"]  # each a recorded frame
+    for a, b in zip(tuples, tuples[1:]):
+        first, then = read_stamp(a["left"].image), read_stamp(b["left"].image)
+        gap = stamp_of["left"][then] - stamp_of["left"][first]
+        assert abs((b["left"].t_capture - a["left"].t_capture) - gap) <= 1_000  # ns: rounding only
+
+
+def test_a_video_snapshot_replays_with_its_recorded_stamps_and_ids(start_service, video_bags):
+    path, bag = video_bags["snap"]
+    ids = recorded_ids(bag, "left")
+    svc = start_service("--camera", f"v=bag:path={path},stamps=recorded,loop=false", "--slots", "64")
+    with svc.client(timeout=5) as client:
+        status = wait_until(
+            lambda: "end of bag" in (s := client.status()["cameras"]["v"])["note"] and s,
+            timeout=30,
+            what="the end of the bag",
+        )
+        frames = client.sequence("range", camera="v", start=min(ids), end=max(ids))  # by the recorded times
+    assert status["frames_stored"] + status["frames_dropped"] == len(ids)
+    assert len(frames) == status["frames_stored"] > 0
+    for f in frames:  # each frame at its recorded stamp, its pixels the frame /v/video/frames names
+        assert ids[f.t_capture] == read_stamp(f.image)
