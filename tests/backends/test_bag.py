@@ -5,8 +5,9 @@ import numpy as np
 import pytest
 
 from fxis_shm import Client, read_stamp
+from fxis_shm.core import timebase
 from fxis_shm.formats import rosmsgs
-from fxis_shm.workers.backends.bag import BagCamera
+from fxis_shm.workers.backends.bag import LEAD_NS, BagCamera
 
 from ..conftest import fxis, fxis_run_alone, wait_until
 from ..integration.bags import read_bag, record, start_cameras, stop
@@ -228,3 +229,27 @@ def test_a_video_snapshot_replays_with_its_recorded_stamps_and_ids(start_service
     assert len(frames) == status["frames_stored"] > 0
     for f in frames:  # each frame at its recorded stamp, its pixels the frame /v/video/frames names
         assert ids[f.t_capture] == read_stamp(f.image)
+
+
+def test_a_video_camera_joining_part_way_decodes_from_the_keyframe_before(video_bags):
+    """A camera that opens (or restarts) mid-playback starts with a frame that is not a
+    keyframe: it plays right only if the decoder began at the keyframe before it."""
+    path, bag = video_bags["rec"]
+    frames = [(m.log_time, m.msg) for m in bag.messages["/left/video/frames"]]
+    k = next(i for i, (_, f) in enumerate(frames) if f.keyframe and i > 0)  # the second keyframe
+    join_log, join = frames[k + 1]  # the frame after it: decodes only from that keyframe
+    assert not join.keyframe
+    camera = BagCamera("v", {"path": path, "topic": "/left/video", "loop": False, "stamps": "recorded"}, 0)
+    # the playback's origin put so that the camera joins 25 ms (half a frame) before that frame is due
+    camera.time_origin_ns = timebase.now() - LEAD_NS - (join_log - frames[0][0]) + 25_000_000
+    camera.open()
+    try:
+        played = []
+        while (capture := camera.grab(timeout=1.0)) is not None:
+            played.append((capture.t_capture, read_stamp(capture.image)))
+    finally:
+        camera.close()
+    ids = recorded_ids(bag, "left")
+    assert played and played[0] == (rosmsgs.stamp_ns(join.header.stamp), join.frame_id), played[:3]
+    assert all(ids[t] == shown for t, shown in played)  # every frame after it decodes as the one it is
+    assert len(played) + camera.frames_dropped == len(frames) - (k + 1)
