@@ -7,6 +7,10 @@ import pytest
 from fxis_shm import Client, read_stamp
 from fxis_shm.core import timebase
 from fxis_shm.formats import rosmsgs
+from fxis_shm.formats.stamp import write_stamp
+from fxis_shm.formats.videochoice import DEFAULT_CRF, Choice
+from fxis_shm.formats.videodecoder import COLOUR, MONO, TrackDecoder, pixels_of
+from fxis_shm.formats.videoencoder import StreamEncoder
 from fxis_shm.workers.backends.bag import LEAD_NS, BagCamera
 
 from ..conftest import fxis, fxis_run_alone, wait_until
@@ -253,3 +257,21 @@ def test_a_video_camera_joining_part_way_decodes_from_the_keyframe_before(video_
     assert played and played[0] == (rosmsgs.stamp_ns(join.header.stamp), join.frame_id), played[:3]
     assert all(ids[t] == shown for t, shown in played)  # every frame after it decodes as the one it is
     assert len(played) + camera.frames_dropped == len(frames) - (k + 1)
+
+
+@pytest.mark.parametrize("codec, encoder", [("h264", "libx264"), ("h265", "libx265"), ("av1", "libsvtav1")])
+def test_the_video_decoder_tells_mono_from_colour_and_keeps_the_stamps_in_each_codec(codec, encoder):
+    """What the bag camera plays of a track of each codec: mono8 frames back as mono8, bgr8 as
+    bgr8 (by the first picture's chroma), each frame the one it was."""
+    for shape, pixels in (((120, 160), MONO), ((120, 160, 3), COLOUR)):
+        stream = StreamEncoder("c", Choice(codec, encoder, False), DEFAULT_CRF[codec], None, 2.0, 20.0)
+        packets = []
+        for i in range(3):
+            image = np.random.default_rng(i).integers(0, 256, shape, dtype=np.uint8)  # noise: no easy chroma
+            write_stamp(image, 7 + i)
+            packets += stream.encode(image, i * 50_000_000, 7 + i, 0)
+        packets += stream.finish()
+        assert pixels_of(TrackDecoder(codec).picture(packets[0].data)) == pixels
+        decoder = TrackDecoder(codec, pixels)
+        images = [decoder.decode(p.data) for p in packets]
+        assert [(i.shape, read_stamp(i)) for i in images] == [(shape, 7), (shape, 8), (shape, 9)]
