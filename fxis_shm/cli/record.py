@@ -7,7 +7,7 @@ import sys
 from fxis_shm.cli import exitcodes
 from fxis_shm.cli.options import EXIT_USAGE, add_client_options, client_for
 from fxis_shm.cli.stopsignals import as_interrupts, interrupted
-from fxis_shm.cli.videoflags import add_video_options, video_settings
+from fxis_shm.cli.videoflags import add_encoding_option, add_video_options, video_settings
 from fxis_shm.errors import ConfigError
 from fxis_shm.formats.outfolder import check_out_folder
 
@@ -53,7 +53,7 @@ def record_command(args) -> int:
         frames=args.frames,
         rate_hz=args.rate,
         tuples=args.tuples,
-        encoding=args.encoding,
+        encoding=encoding.RAW if video else args.encoding,  # (--encoding h264 is video: --codec h264)
         quality=args.quality or encoding.DEFAULT_JPEG_QUALITY,
         video=video,
     )
@@ -152,12 +152,7 @@ def add_parser(sub) -> None:
         help="one synchronized tuple per step: its images share the step's stamp, "
         "and /fxis/tuples lists their frame ids",
     )
-    record.add_argument(
-        "--encoding",
-        choices=("raw", "jpeg"),
-        default="raw",
-        help="raw: sensor_msgs/Image (default); jpeg: sensor_msgs/CompressedImage",
-    )
+    add_encoding_option(record, "raw: sensor_msgs/Image (default); jpeg: sensor_msgs/CompressedImage")
     record.add_argument("--quality", type=int, metavar="Q", help="JPEG quality 1-100 (default 90)")
     add_video_options(record, "record the frames")
     record.set_defaults(func=record_command)

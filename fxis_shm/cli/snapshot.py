@@ -9,7 +9,7 @@ import sys
 from fxis_shm.cli import exitcodes
 from fxis_shm.cli.options import add_client_options, client_for, nanoseconds, seconds
 from fxis_shm.cli.stopsignals import as_interrupts, interrupted
-from fxis_shm.cli.videoflags import add_video_options, video_settings
+from fxis_shm.cli.videoflags import add_encoding_option, add_video_options, video_settings
 from fxis_shm.errors import ConfigError, FxisError, InvalidArgument
 from fxis_shm.formats.outfolder import check_out_folder
 
@@ -117,6 +117,6 @@ def add_parser(sub) -> None:
         "--at", type=nanoseconds, metavar="NS", help="t in ns of this host's CLOCK_MONOTONIC (default now)"
     )
     snapshot.add_argument("--cameras", metavar="A,B", help="comma-separated cameras (default all)")
-    snapshot.add_argument("--encoding", choices=("raw", "jpeg"), default="raw", help="raw Image or JPEG (default raw)")
+    add_encoding_option(snapshot, "raw Image or JPEG (default raw)")
     add_video_options(snapshot, "each camera's frames of the window (its first a keyframe)")
     snapshot.set_defaults(func=snapshot_command)

@@ -4,6 +4,16 @@
 from __future__ import annotations
 
 from fxis_shm.errors import ConfigError
+from fxis_shm.formats.videochoice import CODECS, split_encoding
+
+ENCODINGS = ("raw", "jpeg", *CODECS)  # --encoding: images, or a video codec as --codec names it
+
+
+def add_encoding_option(parser, images: str) -> None:
+    """--encoding: ``images`` says what raw and jpeg write; a codec's name is --codec's."""
+    parser.add_argument(
+        "--encoding", choices=ENCODINGS, default="raw", help=f"{images}; h264, h265, av1: video, as --codec"
+    )
 
 
 def add_video_options(parser, what: str) -> None:
@@ -31,12 +41,13 @@ def video_settings(args):
 
     given = [f for f, v in (("--encoder", args.encoder), ("--crf", args.crf), ("--preset", args.preset)) if v]
     given += ["--gop"] if args.gop is not None else []
-    if args.codec is None:
+    image_encoding, codec = split_encoding(args.encoding, args.codec, "--")
+    if codec is None:
         if given:
             raise ConfigError(f"{', '.join(given)} apply to video only: give --codec h264, h265 or av1")
         return None
-    if args.encoding != "raw" or getattr(args, "quality", None) is not None:
-        raise ConfigError("--codec records video: it takes no --encoding jpeg or --quality")
-    video = VideoSettings(args.codec, args.encoder or "auto", args.crf, args.preset, args.gop)
+    if image_encoding != "raw" or getattr(args, "quality", None) is not None:
+        raise ConfigError(f"--codec {codec} records video: it takes no --encoding {image_encoding} or --quality")
+    video = VideoSettings(codec, args.encoder or "auto", args.crf, args.preset, args.gop)
     check_flags(video)
     return video

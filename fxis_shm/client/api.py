@@ -15,6 +15,7 @@ from fxis_shm.client import snapshot as snapshots
 from fxis_shm.client.fastreads import FastReads
 from fxis_shm.client.frames import Frame, FrameTuple, frames_of, sequence_of, tuple_of
 from fxis_shm.core.clockmap import ClockEstimate
+from fxis_shm.formats.videochoice import split_encoding
 from fxis_shm.formats.videotracks import VideoSettings
 from fxis_shm.wire import encoding as image_encoding
 
@@ -195,8 +196,10 @@ class ClientApi(ABC):
         (``at``: ns of the caller's clock, default now; seconds) into the rosbag2/MCAP bag
         ``out``, stamps in the caller's clock; returns per camera the frames kept and the ids
         of any missing (fxis_shm.client.snapshot). Blocks until ``at + after`` has passed.
-        ``codec`` (h264, h265, av1): each camera as video, the window's first frame a keyframe,
-        with ``encoder``, ``crf``, ``preset``, ``gop_s`` as ``fxis record --codec`` takes them."""
+        ``codec`` (h264, h265, av1; or ``encoding="h264"``, the same): each camera as video, the
+        window's first frame a keyframe, with ``encoder``, ``crf``, ``preset``, ``gop_s`` as
+        ``fxis record --codec`` takes them."""
+        encoding, codec = split_encoding(encoding, codec)
         owners = self._owners(cameras)
         settings = VideoSettings(codec, encoder, crf, preset, gop_s) if codec is not None else None
         return snapshots.take(owners, self.clock, out, at, before, after, encoding, quality, self._clock_name, settings)

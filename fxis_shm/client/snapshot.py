@@ -312,7 +312,7 @@ def _check(at, before, after, out, encoding, quality, video) -> None:
     if at is not None and (isinstance(at, bool) or not isinstance(at, int)):
         raise InvalidArgument(f"at must be int ns of the caller's clock, got {at!r}")
     if encoding not in (codec.RAW, codec.JPEG):
-        raise InvalidArgument(f"encoding must be raw or jpeg, got {encoding!r}")
+        raise InvalidArgument(f"encoding must be raw or jpeg (images) or h264, h265, av1 (video), got {encoding!r}")
     if video is not None and (encoding != codec.RAW or quality is not None):
         raise InvalidArgument(f"codec {video.codec} writes video: it takes no encoding {encoding} or quality")
     check_out_folder(out)

@@ -14,6 +14,7 @@ from collections.abc import Callable, Iterable
 from dataclasses import dataclass
 
 from fxis_shm.errors import ConfigError
+from fxis_shm.wire.encoding import RAW
 
 CODECS = ("h264", "h265", "av1")  # the `format` names foxglove.CompressedVideo uses
 AUTO, SOFTWARE = "auto", "software"
@@ -45,6 +46,20 @@ class Choice:
     def describe(self) -> str:
         kind = "hardware" if self.hardware else "software"
         return f"{self.codec} with {self.encoder} ({kind})"
+
+
+def split_encoding(encoding: str, codec: str | None, flag: str = "") -> tuple[str, str | None]:
+    """(image encoding, video codec) of an ``encoding`` and ``codec`` given together: an
+    encoding that names a video codec (``encoding="h264"``, the issue's spelling) is that codec,
+    as ``codec="h264"`` is. ConfigError if the two name different codecs. ``flag``: "--" for
+    the command line's words."""
+    if encoding not in CODECS:
+        return encoding, codec
+    if codec is not None and codec != encoding:
+        raise ConfigError(
+            f"{flag}encoding {encoding} and {flag}codec {codec} disagree: give one of them (both name the video codec)"
+        )
+    return RAW, encoding
 
 
 def candidates(codec: str, encoder: str) -> list[str]:

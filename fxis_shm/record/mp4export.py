@@ -20,10 +20,10 @@ from fractions import Fraction
 from fxis_shm.errors import ConfigError, InvalidArgument
 from fxis_shm.formats import rosmsgs
 from fxis_shm.formats.bagfile import RECORD, BagReader
+from fxis_shm.formats.videodecoder import DECODERS
 from fxis_shm.formats.videoencoder import require_av
 
 STREAMS = {"h264": "h264", "h265": "hevc", "av1": "av1"}  # the format field -> FFmpeg's codec name
-DECODERS = {"h264": "h264", "h265": "hevc", "av1": "libdav1d"}  # to read the picture's size
 TIME_BASE = Fraction(1, 1_000_000)  # pts in microseconds of capture time
 _US = 1000
 

@@ -4,9 +4,14 @@ import cv2
 import numpy as np
 import pytest
 
-from fxis_shm import read_stamp
+from fxis_shm import Client, read_stamp
+from fxis_shm.core import timebase
 from fxis_shm.formats import rosmsgs
-from fxis_shm.workers.backends.bag import BagCamera
+from fxis_shm.formats.stamp import write_stamp
+from fxis_shm.formats.videochoice import DEFAULT_CRF, Choice
+from fxis_shm.formats.videodecoder import COLOUR, MONO, TrackDecoder, pixels_of
+from fxis_shm.formats.videoencoder import StreamEncoder
+from fxis_shm.workers.backends.bag import LEAD_NS, BagCamera
 
 from ..conftest import fxis, fxis_run_alone, wait_until
 from ..integration.bags import read_bag, record, start_cameras, stop
@@ -167,3 +172,106 @@ def test_a_bad_bag_camera_stops_start_up_with_the_reason(recorded):
     assert "camera 'v'" in result.stderr and "/left/image_raw" in result.stderr
     result = fxis("run", "--camera", "v=bag:path=x,speed=0")
     assert result.returncode == 2 and "'speed'" in result.stderr
+
+
+@pytest.fixture(scope="module")
+def video_bags(tmp_path_factory):
+    """A recording in h264 (20 frames a camera) and a one-second h264 snapshot of the same cell,
+    each with the stamps and ids its /NAME/video/frames topics give."""
+    tmp = tmp_path_factory.mktemp("video")
+    svc = start_cameras(tmp / "service.log")
+    try:
+        record(svc, tmp / "rec", "--frames", "20", "--codec", "h264", "--gop", "0.3")
+        with Client(svc.endpoint) as client:
+            client.snapshot(before=1.0, after=0.0, out=str(tmp / "snap"), codec="h264", cameras=["left"])
+    finally:
+        stop(svc)
+    return {name: (str(tmp / name), read_bag(tmp / name)) for name in ("rec", "snap")}
+
+
+def recorded_ids(bag, cam) -> dict[int, int]:
+    """Recorded capture stamp -> frame id, from /NAME/video/frames."""
+    return {rosmsgs.stamp_ns(m.msg.header.stamp): m.msg.frame_id for m in bag.messages[f"/{cam}/video/frames"]}
+
+
+def test_a_video_bag_replays_its_frames_decoded_with_their_ids_at_the_recorded_spacing(start_service, video_bags):
+    path, bag = video_bags["rec"]
+    ids = {cam: recorded_ids(bag, cam) for cam in ("left", "right")}
+    stamp_of = {cam: {i: t for t, i in ids[cam].items()} for cam in ids}
+    cameras = [
+        "--camera",
+        f"left=bag:path={path},topic=/left/video",
+        "--camera",
+        f"right=bag:path={path},topic=/right/video",
+    ]
+    svc = start_service(*cameras, "--slots", "64")
+    with svc.client(timeout=5) as client:
+        replayed(client, 12)
+        tuples = client.sequence("consecutive", cameras=["left", "right"], count=10)
+    for t in tuples:
+        assert t["left"].image.shape == (120, 160) and t["right"].image.shape == (120, 160, 3)  # mono8, bgr8 again
+        shown = {cam: read_stamp(f.image) for cam, f in t.items()}
+        assert shown["left"] in stamp_of["left"] and shown["left"] == shown["right"]  # each a recorded frame
+    for a, b in zip(tuples, tuples[1:]):
+        first, then = read_stamp(a["left"].image), read_stamp(b["left"].image)
+        gap = stamp_of["left"][then] - stamp_of["left"][first]
+        assert abs((b["left"].t_capture - a["left"].t_capture) - gap) <= 1_000  # ns: rounding only
+
+
+def test_a_video_snapshot_replays_with_its_recorded_stamps_and_ids(start_service, video_bags):
+    path, bag = video_bags["snap"]
+    ids = recorded_ids(bag, "left")
+    svc = start_service("--camera", f"v=bag:path={path},stamps=recorded,loop=false", "--slots", "64")
+    with svc.client(timeout=5) as client:
+        status = wait_until(
+            lambda: "end of bag" in (s := client.status()["cameras"]["v"])["note"] and s,
+            timeout=30,
+            what="the end of the bag",
+        )
+        frames = client.sequence("range", camera="v", start=min(ids), end=max(ids))  # by the recorded times
+    assert status["frames_stored"] + status["frames_dropped"] == len(ids)
+    assert len(frames) == status["frames_stored"] > 0
+    for f in frames:  # each frame at its recorded stamp, its pixels the frame /v/video/frames names
+        assert ids[f.t_capture] == read_stamp(f.image)
+
+
+def test_a_video_camera_joining_part_way_decodes_from_the_keyframe_before(video_bags):
+    """A camera that opens (or restarts) mid-playback starts with a frame that is not a
+    keyframe: it plays right only if the decoder began at the keyframe before it."""
+    path, bag = video_bags["rec"]
+    frames = [(m.log_time, m.msg) for m in bag.messages["/left/video/frames"]]
+    k = next(i for i, (_, f) in enumerate(frames) if f.keyframe and i > 0)  # the second keyframe
+    join_log, join = frames[k + 1]  # the frame after it: decodes only from that keyframe
+    assert not join.keyframe
+    camera = BagCamera("v", {"path": path, "topic": "/left/video", "loop": False, "stamps": "recorded"}, 0)
+    # the playback's origin put so that the camera joins 25 ms (half a frame) before that frame is due
+    camera.time_origin_ns = timebase.now() - LEAD_NS - (join_log - frames[0][0]) + 25_000_000
+    camera.open()
+    try:
+        played = []
+        while (capture := camera.grab(timeout=1.0)) is not None:
+            played.append((capture.t_capture, read_stamp(capture.image)))
+    finally:
+        camera.close()
+    ids = recorded_ids(bag, "left")
+    assert played and played[0] == (rosmsgs.stamp_ns(join.header.stamp), join.frame_id), played[:3]
+    assert all(ids[t] == shown for t, shown in played)  # every frame after it decodes as the one it is
+    assert len(played) + camera.frames_dropped == len(frames) - (k + 1)
+
+
+@pytest.mark.parametrize("codec, encoder", [("h264", "libx264"), ("h265", "libx265"), ("av1", "libsvtav1")])
+def test_the_video_decoder_tells_mono_from_colour_and_keeps_the_stamps_in_each_codec(codec, encoder):
+    """What the bag camera plays of a track of each codec: mono8 frames back as mono8, bgr8 as
+    bgr8 (by the first picture's chroma), each frame the one it was."""
+    for shape, pixels in (((120, 160), MONO), ((120, 160, 3), COLOUR)):
+        stream = StreamEncoder("c", Choice(codec, encoder, False), DEFAULT_CRF[codec], None, 2.0, 20.0)
+        packets = []
+        for i in range(3):
+            image = np.random.default_rng(i).integers(0, 256, shape, dtype=np.uint8)  # noise: no easy chroma
+            write_stamp(image, 7 + i)
+            packets += stream.encode(image, i * 50_000_000, 7 + i, 0)
+        packets += stream.finish()
+        assert pixels_of(TrackDecoder(codec).picture(packets[0].data)) == pixels
+        decoder = TrackDecoder(codec, pixels)
+        images = [decoder.decode(p.data) for p in packets]
+        assert [(i.shape, read_stamp(i)) for i in images] == [(shape, 7), (shape, 8), (shape, 9)]

@@ -235,6 +235,8 @@ def test_a_full_disk_ends_a_video_recording_with_a_valid_bag_that_decodes(cell, 
         (["--crf", "20"], ["--crf", "give --codec"]),
         (["--codec", "h264", "--encoding", "jpeg"], ["--codec", "--encoding jpeg"]),
         (["--codec", "h264", "--tuples"], ["--codec", "--tuples"]),
+        (["--encoding", "h264", "--codec", "h265"], ["--encoding h264 and --codec h265 disagree"]),
+        (["--encoding", "h264", "--crf", "52"], ["--crf 52", "0 to 51"]),  # --encoding h264 is --codec h264
     ],
 )
 def test_bad_video_settings_exit_2_in_one_line_leaving_nothing(cell, tmp_path, args, words):
@@ -243,6 +245,13 @@ def test_bad_video_settings_exit_2_in_one_line_leaving_nothing(cell, tmp_path, a
     assert all(w in result.stderr for w in words), result.stderr
     assert len(result.stderr.strip().splitlines()) == 1, result.stderr
     assert not (tmp_path / "x").exists()
+
+
+def test_encoding_h264_records_video_as_codec_h264_does(cell, tmp_path):
+    record(cell, tmp_path / "e", "--frames", "5", "--encoding", "h264", "--cameras", "left")
+    bag = read_bag(tmp_path / "e")
+    assert set(bag.topics) == {"/left/video", "/left/video/frames"} and bag.custom_data["encoding"] == "h264"
+    assert [m.msg.format for m in bag.messages["/left/video"]] == ["h264"] * 5
 
 
 def test_a_camera_video_cannot_carry_is_refused_at_start(start_service, tmp_path):

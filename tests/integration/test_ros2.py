@@ -21,6 +21,7 @@ import pytest
 
 from fxis_shm import Client
 from fxis_shm.core import timebase
+from fxis_shm.formats import rosmsgs
 from fxis_shm.formats.stamp import read_stamp
 from fxis_shm.service.launch import ServiceProcess
 from tests.dds_peer import ROS_VENVS, Peer, domain_id, loopback_config, stamp_rows
@@ -435,3 +436,25 @@ def test_a_ros_node_reads_and_changes_a_cameras_settings_on_the_settings_topics(
     with bridge.svc.client() as client:  # the change took, in the service itself
         assert client.settings("cam0")["values"]["gain"] == 6.0
         client.configure("cam0", gain=0)  # the module's service, as the other tests found it
+
+
+@pytest.mark.parametrize("bridge", ["cyclone-node"], indirect=True)
+def test_a_snapshot_asked_for_on_a_codec_topic_keeps_the_window_as_video(bridge):
+    from .test_record_video import decoded
+
+    result, request = f"{NS}/snapshot/result", f"{NS}/snapshot/h264"
+    with bridge.svc.client() as client:  # the window starts 1.5 s back
+        wait_until(lambda: client.status()["cameras"]["cam1"]["frames_stored"] > 40, what="2 s of frames stored")
+    with requester(bridge, [(result, STRING)], request) as peer:
+        t = timebase.reader("realtime")() - 1_000_000_000  # an event a second ago, in ROS time
+        peer.publish_header(request, *divmod(t, 1_000_000_000), "grasp_18")
+        (answer,) = [json.loads(s["data"]) for s in peer.wait_for_samples(result, 1, timeout=20)]
+    assert answer["name"] == "grasp_18" and answer["encoding"] == "h264", answer
+    bag = read_bag(bridge.snapshots / "grasp_18")
+    assert bag.custom_data["encoding"] == "h264"
+    for cam, pixels in (("cam0", "gray"), ("cam1", "bgr24")):
+        video, frames = bag.messages[f"/{cam}/video"], bag.messages[f"/{cam}/video/frames"]
+        assert len(video) == answer["cameras"][cam]["frames"] > 0 and frames[0].msg.keyframe
+        stamps = [rosmsgs.stamp_ns(m.msg.timestamp) for m in video]
+        assert t - 2_000_000_000 <= stamps[0] and stamps[-1] <= t + 1_000_000_000  # the window, in ROS time
+        assert [read_stamp(image) for _, image in decoded(video, pixels)] == [f.msg.frame_id for f in frames]

@@ -100,6 +100,25 @@ def test_ctrl_c_during_a_video_snapshot_keeps_a_valid_bag_that_decodes(history3,
     assert f"a: {len(bag.messages['/a/video'])} frames" in stdout
 
 
+def test_encoding_h264_is_video_as_codec_h264(history3, tmp_path):
+    """``encoding="h264"`` (the issue's spelling) and ``fxis snapshot --encoding h264`` are
+    ``codec="h264"``; both given, they must agree."""
+    with Client(history3.endpoint) as client:
+        client.snapshot(before=0.3, after=0.0, out=str(tmp_path / "api"), cameras=["a"], encoding="h264")
+    command = ("snapshot", "--endpoint", history3.endpoint, "--before", "0.3", "--after", "0", "--cameras", "b")
+    result = fxis(*command, "--out", str(tmp_path / "cli"), "--encoding", "h264", "--codec", "h264")
+    assert result.returncode == 0, result.stderr
+    for folder, cam in (("api", "a"), ("cli", "b")):
+        bag = read_bag(tmp_path / folder)
+        assert bag.custom_data["encoding"] == "h264" and set(bag.topics) == {f"/{cam}/video", f"/{cam}/video/frames"}
+        check_video(bag, [cam])
+    result = fxis(*command, "--out", str(tmp_path / "no"), "--encoding", "h265", "--codec", "h264")
+    assert result.returncode == 2 and result.stderr.strip().splitlines() == [
+        "fxis snapshot: --encoding h265 and --codec h264 disagree: give one of them (both name the video codec)"
+    ]
+    assert not (tmp_path / "no").exists()
+
+
 @pytest.mark.parametrize(
     "kwargs, error",
     [
@@ -109,6 +128,7 @@ def test_ctrl_c_during_a_video_snapshot_keeps_a_valid_bag_that_decodes(history3,
             (InvalidArgument, "codec h264 writes video: it takes no encoding"),
         ),
         ({"codec": "h264", "crf": 60}, (ConfigError, "--crf 60: out of range")),
+        ({"encoding": "h264", "codec": "av1"}, (ConfigError, "encoding h264 and codec av1 disagree")),
     ],
 )
 def test_bad_video_settings_are_refused_before_anything_is_made(history3, tmp_path, kwargs, error):

@@ -91,3 +91,13 @@ def test_only_8_bit_frames_of_even_size_are_carried():
         vc.check_camera("h264", "depth", "mono16", 640, 480)
     with pytest.raises(ConfigError, match="camera odd is 161x120; 4:2:0 video needs an even width"):
         vc.check_camera("h265", "odd", "mono8", 161, 120)
+
+
+def test_an_encoding_that_names_a_codec_is_that_codec():
+    assert vc.split_encoding("h264", None) == ("raw", "h264")  # encoding="h264", the spelling
+    assert vc.split_encoding("av1", "av1") == ("raw", "av1")
+    assert vc.split_encoding("jpeg", None) == ("jpeg", None)
+    assert vc.split_encoding("raw", "h265") == ("raw", "h265")
+    assert vc.split_encoding("jpeg", "h264") == ("jpeg", "h264")  # refused later: video takes no jpeg
+    with pytest.raises(ConfigError, match="^--encoding h264 and --codec h265 disagree"):
+        vc.split_encoding("h264", "h265", "--")

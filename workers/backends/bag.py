@@ -4,6 +4,12 @@ Plays a rosbag2 bag with MCAP storage (``fxis record``'s, or any with
 sensor_msgs/msg/Image or CompressedImage topics) at the recorded spacing, so vision code
 runs against yesterday's cell as against the live one.
 
+A video track (``/NAME/video``, foxglove_msgs/msg/CompressedVideo: ``fxis record --codec``,
+``fxis snapshot --codec``) is decoded frame by frame (fxis_shm.formats.videodecoder), each
+frame at its recorded time. Playback that starts (or restarts) part-way decodes from the
+keyframe before (the keyframes are those ``/NAME/video/frames`` marks; a bag without that
+topic decodes from its start), playing only the frames from where it joins.
+
 Timing: a message logged at L plays at ``origin + (L - bag start + pass * loop) / speed``
 on CLOCK_MONOTONIC, where the origin is the service's (shared by all its cameras, as the
 synthetic cameras share it) plus ``LEAD_NS``, and bag start and the loop length are the
@@ -37,13 +43,14 @@ from fxis_shm.core import timebase
 from fxis_shm.errors import ConfigError, FxisError
 from fxis_shm.formats import rosmsgs
 from fxis_shm.formats.bagfile import BagReader
+from fxis_shm.formats.videodecoder import COLOUR, DECODERS, TrackDecoder, pixels_of
 from fxis_shm.shm.ring import FrameLayout
 from fxis_shm.wire import encoding as codec
 
 from .base import Camera, Capture
 
 log = logging.getLogger("camera")
-_IMAGE_TYPES = (rosmsgs.IMAGE, rosmsgs.COMPRESSED)
+_IMAGE_TYPES = (rosmsgs.IMAGE, rosmsgs.COMPRESSED, rosmsgs.VIDEO)
 _DEFAULT_INTERVAL_NS = 100_000_000  # the loop's gap for a topic of a single frame
 # The bag starts playing this long after the service's origin: time enough for every camera
 # worker to open, so that the first frame of the bag plays too (a worker that opens later
@@ -67,6 +74,11 @@ class BagCamera(Camera):
             raise ValueError(f"camera {name!r}: key 'path': {exc}") from None
         self._topic = self._choose_topic(self.options["topic"])
         self._compressed = self._bag.topics[self._topic] == rosmsgs.COMPRESSED
+        self._video = self._bag.topics[self._topic] == rosmsgs.VIDEO
+        self._keyframes = self._keyframe_times() if self._video else []
+        self._decoder: TrackDecoder | None = None  # of the video pass playing now
+        self._pixels = COLOUR  # a video track's layout, read from its first picture (open)
+        self._codec = self._video_codec() if self._video else ""
         self._start = self._bag.start_time
         counts = [self._bag.counts.get(t, 0) for t, kind in self._bag.topics.items() if kind in _IMAGE_TYPES]
         span = self._bag.end_time - self._start
@@ -109,12 +121,40 @@ class BagCamera(Camera):
             raise ValueError(f"camera {self.name!r}: key 'topic': {topic!r} has no messages")
         return topic
 
+    def _video_codec(self) -> str:
+        with closing(self._bag.messages(self._topic)) as messages:
+            _, first = next(messages)
+        if first.format not in DECODERS:
+            raise ValueError(
+                f"camera {self.name!r}: {self._topic} is {first.format!r} video; the bag camera plays "
+                + ", ".join(DECODERS)
+            )
+        return first.format
+
+    def _keyframe_times(self) -> list[int]:
+        """Log times of the video track's keyframes, from its /frames topic ([] if it has none)."""
+        frames = rosmsgs.video_frames_topic(self._topic.removeprefix("/").removesuffix("/video"))
+        if self._bag.topics.get(frames) != rosmsgs.VIDEO_FRAME:
+            return []
+        return [log_time for log_time, info in self._bag.messages(frames) if info.keyframe]
+
+    def _decode_from(self, start: int) -> int:
+        """A new video decoder, and the log time of the keyframe to decode ``start`` from."""
+        self._decoder = TrackDecoder(self._codec, self._pixels)
+        return max((t for t in self._keyframes if t <= start), default=self._start)
+
     # -- the Camera interface ------------------------------------------------------------
 
     def open(self) -> None:
         with closing(self._bag.messages(self._topic)) as messages:
             _, first = next(messages)
-        self._layout = FrameLayout.of(self._image(first))
+        if self._video:  # its layout: the first picture's size, mono or colour as its chroma says
+            picture = TrackDecoder(self._codec).picture(bytes(first.data))
+            self._pixels = pixels_of(picture)
+            image = picture.to_ndarray(format=self._pixels)
+        else:
+            image = self._image(first)
+        self._layout = FrameLayout.of(image)
         self._frames = self._play_from(timebase.now())
         self._next = None
 
@@ -130,10 +170,16 @@ class BagCamera(Camera):
         elapsed = max(0, int((now - origin) * speed))
         playback, within = divmod(elapsed, self._loop_ns)
         while self.options["loop"] or playback == 0:
-            for log_time, msg in self._bag.messages(self._topic, self._start + within):
+            joins = self._start + within
+            begin = self._decode_from(joins) if self._video else joins
+            for log_time, msg in self._bag.messages(self._topic, begin):
+                if log_time < joins:  # decoded for the frames after it, not played
+                    self._decode_quietly(msg)
+                    continue
                 offset = log_time - self._start + playback * self._loop_ns
                 due = origin + round(offset / speed)
-                recorded = rosmsgs.stamp_ns(msg.header.stamp) + playback * self._loop_ns
+                stamp = msg.timestamp if self._video else msg.header.stamp  # (CompressedVideo has no header)
+                recorded = rosmsgs.stamp_ns(stamp) + playback * self._loop_ns
                 yield due, due if self.options["stamps"] == "now" else recorded, msg
             within = 0
             playback += 1
@@ -141,7 +187,16 @@ class BagCamera(Camera):
             f"end of bag (loop=false); {self._damage}" if self._damage else f"end of bag {self._bag.path} (loop=false)"
         )
 
+    def _decode_quietly(self, msg) -> None:
+        try:
+            self._image(msg)
+        except FxisError:
+            pass  # a frame before the joining point: the frames that depend on it say so
+
     def _image(self, msg) -> np.ndarray:
+        if self._video:
+            assert self._decoder is not None
+            return self._decoder.decode(bytes(msg.data))
         if self._compressed:
             return codec.decode(bytes(msg.data), codec.JPEG if "jpeg" in msg.format.lower() else codec.PNG, None, None)
         return rosmsgs.image_array(msg)
