@@ -26,7 +26,8 @@ $(VENV)/.installed: pyproject.toml setup.py $(COMPILED_SOURCES) scripts/install-
 
 # Real ROS 2 nodes for the bridge's tests (tests/rclpy_peer.py), each distribution from its wheels in
 # a venv of its own (the wheels re-run Python to set their library path): Kilted also runs the bridge
-# itself on rclpy (fxis run --ros2-python .venv-ros/bin/python), so it holds fxis-shm too (its
+# itself on rclpy (fxis run --ros2-python .venv-ros/bin/python), so it holds fxis-shm too, with PyAV
+# for video snapshots (its
 # compiled parts are the checkout's own, built by setup: FXIS_PURE_PYTHON=1 skips building them again).
 ROS_KILTED := 'ros-kilted-rclpy[fastrtps]==9.1.2' ros-kilted-rmw-fastrtps-cpp==9.3.3 ros-kilted-sensor-msgs==5.5.1 \
               ros-kilted-std-msgs==5.5.1 ros-kilted-diagnostic-msgs==5.5.1
@@ -41,7 +42,7 @@ ros-venvs: $(ROS_VENVS)
 	$(PYTHON) -m venv .venv-ros
 	.venv-ros/bin/python -m pip install --quiet --upgrade pip
 	.venv-ros/bin/python -m pip install --quiet $(ROS_KILTED)
-	FXIS_PURE_PYTHON=1 .venv-ros/bin/python -m pip install --quiet -e ".[ros2,record]"
+	FXIS_PURE_PYTHON=1 .venv-ros/bin/python -m pip install --quiet -e ".[ros2,record,video]"
 	touch $@
 
 .venv-ros-jazzy/.installed:

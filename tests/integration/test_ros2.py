@@ -438,7 +438,7 @@ def test_a_ros_node_reads_and_changes_a_cameras_settings_on_the_settings_topics(
         client.configure("cam0", gain=0)  # the module's service, as the other tests found it
 
 
-@pytest.mark.parametrize("bridge", ["cyclone-node"], indirect=True)
+@pytest.mark.parametrize("bridge", ["cyclone-node", "fastdds-kilted-node,rclpy-bridge"], indirect=True)
 def test_a_snapshot_asked_for_on_a_codec_topic_keeps_the_window_as_video(bridge):
     from .test_record_video import decoded
 
