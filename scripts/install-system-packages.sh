@@ -12,6 +12,7 @@
 #   (_slotio.c) and the request engine mypyc compiles (setup.py), and python3-dev (Python.h) for them
 #   when this Python has no headers of its own;
 # - libturbojpeg0, the TurboJPEG library PyTurboJPEG loads (bench/compare/jpeg.py measures it);
+# - ffmpeg, the command line bench/video/anchor.py measures our H.264 encoder against;
 # - chromium, the headless browser the dashboard's browser test drives
 #   (tests/integration/test_dashboard_browser.py);
 # - g++, make, libzmq3-dev (libzmq), cppzmq-dev (its C++ header zmq.hpp) and nlohmann-json3-dev
@@ -20,7 +21,7 @@
 # Runs as root (or with sudo); does nothing when everything is present.
 set -euo pipefail
 
-wanted=(gir1.2-aravis-0.8 aravis-tools libgirepository1.0-dev libcairo2-dev pkg-config iproute2 util-linux gcc libturbojpeg0 chromium
+wanted=(gir1.2-aravis-0.8 aravis-tools libgirepository1.0-dev libcairo2-dev pkg-config iproute2 util-linux gcc libturbojpeg0 ffmpeg chromium
         g++ make libzmq3-dev cppzmq-dev nlohmann-json3-dev)
 python3 -c "import venv, ensurepip" 2>/dev/null || wanted+=(python3-venv)
 python3 -c "import os, sysconfig; assert os.path.isfile(os.path.join(sysconfig.get_paths()['include'], 'Python.h'))" \
