@@ -133,5 +133,5 @@ in_root sh -c 'cd /src && pip install --quiet -e ".[test]"'
 step "the helper's instructions and the ordering mode on the emulated CPU"
 in_root sh -c 'objdump -d /src/fxis_shm/shm/_ordered.*.so | grep -E "<(load_acquire|store_release|fence_acquire|fence_release)>:|ldar|stlr|dmb"'
 check_ordering aarch64 fenced in_root
-in_tree() { in_root sh -c 'cd /src && exec "$@"' sh "$@"; }
+in_tree() { in_root sh -c 'cd /src && exec env FXIS_EMULATED_CPU=1 "$@"' sh "$@"; }  # (test_compiledread.py)
 run_tests in_tree
