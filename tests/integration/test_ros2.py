@@ -65,11 +65,9 @@ SETUPS = {
 
 @pytest.fixture(scope="module", params=SETUPS)
 def bridge(request, tmp_path_factory):
-    peer_kind, via = SETUPS[request.param]
     snapshots = tmp_path_factory.mktemp("snapshots")
     calibration = tmp_path_factory.mktemp("calibration") / "cam0.yaml"
     calibration.write_text(CALIBRATION)
-    domain = domain_id()
     args = [
         "--camera",
         f"cam0=synthetic:width=640,height=480,fps=20,calibration={calibration},frame_id=cam0_optical",
@@ -77,11 +75,6 @@ def bridge(request, tmp_path_factory):
         "cam1=synthetic:width=320,height=240,fps=20,pixel_format=bgr8,phase_ms=7",
         "--slots",
         "100",
-        "--ros2",
-        "--ros2-domain",
-        str(domain),
-        "--ros2-namespace",
-        NS,
         "--ros2-tuples",
         "5",
         "--ros2-snapshots",
@@ -89,9 +82,19 @@ def bridge(request, tmp_path_factory):
         "--history",
         "5",  # the snapshot test's window reaches 3 s back: 2 s to spare when a loaded copy lags
     ]
+    with running_bridge(request.param, args, tmp_path_factory, snapshots=snapshots) as running:
+        yield running
+
+
+@contextlib.contextmanager
+def running_bridge(setup: str, args: list[str], tmp_path_factory, **facts):
+    """A service with ``args`` and its bridge as ``setup`` says, and a Peer factory for its node."""
+    peer_kind, via = SETUPS[setup]
+    domain = domain_id()
+    args = [*args, "--ros2", "--ros2-domain", str(domain), "--ros2-namespace", NS]
     if peer_kind == "cyclone":  # our own peer: Cyclone on 127.0.0.1, no multicast, no namespace
         with ServiceProcess(args, env={**os.environ, "CYCLONEDDS_URI": loopback_config()}) as svc:
-            yield SimpleNamespace(svc=svc, domain=domain, snapshots=snapshots, peer=peer_of(domain, "cyclone"))
+            yield SimpleNamespace(svc=svc, domain=domain, peer=peer_of(domain, "cyclone"), **facts)
         return
     args += ["--ros2-via", via]
     if via == "rclpy":
@@ -103,9 +106,9 @@ def bridge(request, tmp_path_factory):
         yield SimpleNamespace(
             svc=svc,
             domain=domain,
-            snapshots=snapshots,
             peer=peer_of(domain, peer_kind, host.wrapper()),
             udp_into_fastdds=via == "cyclone",  # datagrams into a Fast DDS node's default receive buffer
+            **facts,
         )
 
 
@@ -464,16 +467,14 @@ TRIGGER_LATENCY_NS = 3_000_000  # the synthetic camera's modelled trigger latenc
 LATENCY_NOISE_NS = 500_000  # what the learned latency may miss by (tests/integration/test_capture_at.py)
 
 
-@pytest.fixture
-def triggered_bridge():
-    """A service with a camera that can be triggered and a free-running one, its bridge on
-    Cyclone, read by our own peer (the module's cameras all run free)."""
-    domain = domain_id()
+@pytest.fixture(params=["cyclone-node", "fastdds-kilted-node,rclpy-bridge"])
+def triggered_bridge(request, tmp_path_factory):
+    """A service with a camera that can be triggered and a free-running one, and its bridge
+    (the module's cameras all run free)."""
     args = ["--camera", "trig=synthetic:trigger=software,trigger_latency_ms=3,width=64,height=48"]
     args += ["--camera", "free=synthetic:fps=20,width=64,height=48"]
-    args += ["--ros2", "--ros2-domain", str(domain), "--ros2-namespace", NS]
-    with ServiceProcess(args, env={**os.environ, "CYCLONEDDS_URI": loopback_config()}) as svc:
-        yield SimpleNamespace(svc=svc, domain=domain, peer=peer_of(domain, "cyclone"))
+    with running_bridge(request.param, args, tmp_path_factory) as running:
+        yield running
 
 
 def test_frames_at_capture_triggers_the_camera_for_t_star_and_says_how_each_frame_was_captured(triggered_bridge):
