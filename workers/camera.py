@@ -75,7 +75,12 @@ class Stream:
         spec = self.spec
         lockstep = None if spec.lockstep_hz is None else (spec.lockstep_hz, spec.lockstep_phase_ns)
         self.timer = TriggerTimer(
-            lambda: self.camera.trigger(), lambda: self.camera.supports_trigger, self.triggers, lockstep, self.timed
+            lambda: self.camera.trigger(),
+            lambda: self.camera.supports_trigger,
+            self.triggers,
+            lockstep,
+            self.timed,
+            spec.lockstep_clock,
         )
         direct = {commands.TRIGGER_AT: self.timer.trigger_at, commands.LOCKSTEP: self.timer.set_lockstep}
         # before the ring: a coordinator that sees the ring's new generation finds the commands

@@ -1,8 +1,8 @@
 """Triggers for a moment: a capture at T (``trigger_at``) and the lockstep grid (``lockstep``).
 
 A thread of its own (``TriggerTimer``) fires the camera's software trigger at T minus the
-camera's learned trigger latency, or on every point of the grid k/HZ + PHASE of CLOCK_REALTIME
-(the cell's common clock: emulated hosts share it, not CLOCK_MONOTONIC). It sleeps to 2 ms
+camera's learned trigger latency, or on every point of the grid k/HZ + PHASE of CLOCK_REALTIME or
+CLOCK_TAI (the cell's common clocks: emulated hosts share them, not CLOCK_MONOTONIC). It sleeps to 2 ms
 before the moment, then spins on the clock: a sleep alone wakes up to a scheduler tick late.
 Every trigger fired, also the coordinator's "now" triggers, goes into the ``TriggerLog``; each
 frame stored takes from it which trigger it answers (so its slot record says scheduled or
@@ -15,7 +15,6 @@ from __future__ import annotations
 import heapq
 import logging
 import threading
-import time
 from collections import deque
 from collections.abc import Callable
 
@@ -43,6 +42,7 @@ class TriggerLog:
         self.missed = 0  # lockstep and scheduled triggers that got no frame
         self.residuals: deque[int] = deque(maxlen=_KEPT)  # t_capture - t_target of lockstep frames
         self.grid: tuple[float, int] | None = None  # the lockstep grid (hz, phase_ns), for status
+        self.grid_clock = schedule.GRID_CLOCKS[0]  # the clock it is counted in
         self.lateness: deque[int] = deque(maxlen=_KEPT)  # how late the timer fired: its jitter here
 
     def fired(self, t_fired: int, t_target: int = 0, capture: int = CAPTURE_FREE, late_ns: int = 0) -> None:
@@ -90,17 +90,18 @@ class TriggerLog:
             "triggers_missed": self.missed,
             "lockstep_mhz": round(hz * 1000),
             "lockstep_phase_ns": phase,
+            "lockstep_clock": schedule.GRID_CLOCKS.index(self.grid_clock),
             "residual_p50_ns": schedule.percentile(residuals, 50) or 0,
             "residual_p99_ns": schedule.percentile(residuals, 99) or 0,
             "timer_late_p50_ns": schedule.percentile(lateness, 50) or 0,
             "timer_late_p99_ns": schedule.percentile(lateness, 99) or 0,
         }
 
-    def reset_lockstep(self, grid: tuple[float, int] | None) -> None:
+    def reset_lockstep(self, grid: tuple[float, int] | None, clock: str = schedule.GRID_CLOCKS[0]) -> None:
         with self._lock:
             self.residuals.clear()
             self.lockstep_frames = self.missed = 0
-            self.grid = grid
+            self.grid, self.grid_clock = grid, clock
 
 
 class TriggerTimer:
@@ -113,13 +114,16 @@ class TriggerTimer:
         triggers: TriggerLog,
         lockstep: tuple[float, int] | None = None,
         on_grid: Callable[[], None] = lambda: None,
+        lockstep_clock: str = schedule.GRID_CLOCKS[0],
     ):
-        """``on_grid``: called when the lockstep grid was set or stopped (the ring says so)."""
+        """``on_grid``: called when the lockstep grid was set or stopped (the ring says so);
+        ``lockstep_clock``: the clock the grid is counted in (schedule.GRID_CLOCKS)."""
         self._trigger, self._can_trigger, self.log = trigger, can_trigger, triggers
         self._on_grid = on_grid
         self._due: list[tuple[int, int]] = []  # heap of (t_fire, t_target), service clock
         self._targets: set[int] = set()
-        self.lockstep: tuple[float, int] | None = None  # (hz, phase_ns) of CLOCK_REALTIME
+        self.lockstep: tuple[float, int] | None = None  # (hz, phase_ns) of grid_clock
+        self.grid_clock = lockstep_clock
         self._last_point: int | None = None  # the last lockstep grid point fired for (service clock)
         self._planned: tuple[int, int] | None = None  # the next lockstep (t_fire, t_target)
         self._wake = threading.Condition()
@@ -127,7 +131,7 @@ class TriggerTimer:
         self._thread = threading.Thread(target=self._run, daemon=True, name="trigger-timer")
         if lockstep is not None:  # the service's --lockstep: fired whenever the camera is triggerable
             self.lockstep = lockstep
-            triggers.reset_lockstep(lockstep)
+            triggers.reset_lockstep(lockstep, lockstep_clock)
         self._thread.start()
 
     # ---- the commands (answered in the command thread) ----
@@ -150,7 +154,8 @@ class TriggerTimer:
         return {"fire_at": t_fire, "latency_ns": self.log.latency_ns}
 
     def set_lockstep(self, command: dict) -> dict:
-        """``{"hz": HZ, "phase_ns": P}``: fire on the grid from now on; ``{"hz": None}``: stop."""
+        """``{"hz": HZ, "phase_ns": P, "clock": "realtime" or "tai"}``: fire on the grid from now on
+        (the clock defaults to the one the service was started with); ``{"hz": None}``: stop."""
         hz = command.get("hz")
         if hz is None:
             with self._wake:
@@ -163,16 +168,17 @@ class TriggerTimer:
             raise ProtocolError("lockstep needs hz (a number) and phase_ns (an integer)")
         try:
             schedule.check_lockstep(float(hz))
+            clock = schedule.check_grid_clock(str(command.get("clock", self.grid_clock)))
         except ValueError as exc:
             raise ProtocolError(str(exc)) from None
         self._check_triggerable()
         grid = (float(hz), int(command.get("phase_ns", 0)))
-        self.log.reset_lockstep(grid)
+        self.log.reset_lockstep(grid, clock)
         with self._wake:
-            self.lockstep, self._last_point, self._planned = grid, None, None
+            self.lockstep, self.grid_clock, self._last_point, self._planned = grid, clock, None, None
             self._wake.notify()
         self._on_grid()
-        return {"lockstep": {"hz": float(hz), "phase_ns": self.lockstep[1]}}
+        return {"lockstep": {"hz": float(hz), "phase_ns": grid[1], "clock": clock}}
 
     def _check_triggerable(self) -> None:
         if not self._can_trigger():
@@ -202,10 +208,8 @@ class TriggerTimer:
         now = timebase.now()
         if self._planned is not None and now - self._planned[0] < 5e8 / hz:
             return self._planned
-        offset = _realtime_offset()
         # the first point whose trigger is still ahead
-        point = schedule.next_grid_point(now + offset, hz, phase, self.log.latency_ns + _MARGIN_NS)
-        t_target = point - offset
+        t_target = schedule.grid_target(now, _grid_offset(self.grid_clock), hz, phase, self.log.latency_ns + _MARGIN_NS)
         self._planned = (schedule.fire_time(t_target, self.log.latency_ns), t_target)
         return self._planned
 
@@ -253,17 +257,18 @@ class TriggerTimer:
         self._thread.join(1.0)
 
 
-def _realtime_offset(tries: int = 3, good_ns: int = 20_000) -> int:
-    """CLOCK_REALTIME minus the service's clock, from the read whose two service-clock reads
-    around the realtime one were nearest: a thread preempted between them would move every grid
-    point by the preemption."""
+def _grid_offset(clock: str, tries: int = 3, good_ns: int = 20_000) -> int:
+    """The grid's clock minus the service's clock, from the read whose two service-clock reads
+    around the grid clock's one were nearest: a thread preempted between them would move every
+    grid point by the preemption."""
     best: tuple[int, int] | None = None
+    read_grid = timebase.reader(clock)
     for _ in range(tries):
         before = timebase.now()
-        realtime = time.clock_gettime_ns(time.CLOCK_REALTIME)
+        grid_now = read_grid()
         after = timebase.now()
         if best is None or after - before < best[0]:
-            best = (after - before, realtime - (before + after) // 2)
+            best = (after - before, grid_now - (before + after) // 2)
         if after - before <= good_ns:
             break
     return best[1]

@@ -92,8 +92,8 @@ def _sync_line(sync: dict | None) -> str | None:
     grid = sync["lockstep"]
     if grid:
         line += (
-            f"; lockstep {grid['hz']:g} Hz + {grid['phase_ms']:g} ms: {grid['frames']} frames, residual "
-            f"p50 {grid['residual_p50_ms']:.3f} p99 {grid['residual_p99_ms']:.3f} ms"
+            f"; lockstep {grid['hz']:g} Hz + {grid['phase_ms']:g} ms of {grid['clock']}: {grid['frames']} frames, "
+            f"residual p50 {grid['residual_p50_ms']:.3f} p99 {grid['residual_p99_ms']:.3f} ms"
         )
     return line
 

@@ -54,6 +54,7 @@ def run_command(args) -> int:
             "port_base": args.port_base,
             "history": args.history,
             "lockstep": args.lockstep,
+            "lockstep_clock": args.lockstep_clock,
         },
     )
     if service_running(config.name):  # its ports are in use too: say the more useful thing
@@ -172,7 +173,14 @@ def add_parser(sub) -> None:
         "--lockstep",
         metavar="HZ[,PHASE_MS]",
         help="trigger every camera that can be triggered (trigger=software) on the grid k/HZ + PHASE_MS of "
-        "CLOCK_REALTIME, the cell's common clock: services on several hosts then capture together (docs/sync.md)",
+        "--lockstep-clock (CLOCK_REALTIME by default), the cell's common clock: services on several hosts then "
+        "capture together (docs/sync.md)",
+    )
+    run.add_argument(
+        "--lockstep-clock",
+        choices=("realtime", "tai"),
+        help="the clock the --lockstep grid is counted in: realtime (default) or tai (PTP's timescale: no leap "
+        "seconds; ptp4l + phc2sys keep it, with the kernel's TAI offset set)",
     )
     run.add_argument(
         "--port-base",

@@ -20,6 +20,9 @@ MAX_AHEAD_NS = 10_000 * MS  # the request engine's horizon: a T further ahead is
 LATENCY_SMOOTHING = 8  # EWMA weight 1/8 of the trigger latency, after a plain mean of the first 8
 MATCH_SLACK_NS = 2 * MS  # a frame up to this much before its trigger still answers it (clock mapping)
 MAX_LOCKSTEP_HZ = 1000.0
+# the clocks a lockstep grid may be counted in: the cell's common clocks (CLOCK_MONOTONIC is not
+# common to hosts); the index is what the ring's header says (lockstep_clock)
+GRID_CLOCKS = ("realtime", "tai")
 
 
 @dataclass(frozen=True)
@@ -97,6 +100,12 @@ def check_lockstep(hz: float) -> None:
         raise ValueError(f"lockstep rate {hz} Hz: it must be above 0 and at most {MAX_LOCKSTEP_HZ:.0f} Hz")
 
 
+def check_grid_clock(name: str) -> str:
+    if name not in GRID_CLOCKS:
+        raise ValueError(f"lockstep clock {name!r}: use {' or '.join(GRID_CLOCKS)} (a clock the hosts of a cell share)")
+    return name
+
+
 def grid_period(hz: float) -> Fraction:
     """The lockstep grid's period in ns, exact (a float period would drift on a grid counted from 1970)."""
     return Fraction(10**9) / Fraction(hz).limit_denominator(10**6)
@@ -107,6 +116,12 @@ def next_grid_point(now: int, hz: float, phase_ns: int, lead_ns: int = 0) -> int
     period = grid_period(hz)
     k = math.ceil((now + lead_ns - phase_ns) / period)
     return phase_ns + math.ceil(k * period)
+
+
+def grid_target(now: int, grid_offset: int, hz: float, phase_ns: int, lead_ns: int = 0) -> int:
+    """The next grid point at or after ``now + lead_ns``, ``now`` in the service's clock and the grid
+    counted in another clock (``grid_offset`` = that clock minus the service's): in the service's clock."""
+    return next_grid_point(now + grid_offset, hz, phase_ns, lead_ns) - grid_offset
 
 
 def percentile(values: list[int], q: float) -> int | None:

@@ -7,6 +7,7 @@ a plain DDS participant following ROS 2's wire conventions, with no ROS install.
                                    joint tuples at --ros2-tuples HZ (fxis_shm.ros2.tuples)
     NS/frames_at -> NS/frames_at/R/NAME/...
                                    frames at t* on request (fxis_shm.ros2.frames_at)
+    NS/frames_at/capture -> the same, captured at t* (and NS/frames_at/R/capture: how)
 
 It runs in a process of its own (workers/ros2_bridge.py), a client of the service like any
 other: its threads read the rings through ``Client`` on the local path, so the cameras

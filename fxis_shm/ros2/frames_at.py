@@ -9,12 +9,23 @@ reply to R. A request the bridge cannot answer (t* outside the history, a camera
 answered with a ``std_msgs/msg/String`` on ``NS/frames_at/R/error``; one whose R is not a
 ROS name, on ``NS/frames_at/error``. Either way it is logged and counted in the status.
 
+The same request on ``NS/frames_at/capture`` asks for a capture at a future t*
+(``Client.tuple(at=t*, capture=True)``): every camera that can be triggered is triggered to
+expose at t*, the others answer with their frame nearest t*. A topic rather than a convention
+in ``frame_id``, as the snapshot codecs are (``NS/snapshot/h264``): a Header has no field to
+spare, and the topic takes the same ``ros2 topic pub`` line. sensor_msgs/Image has no field for
+how a frame was captured, so after the images the bridge publishes a ``std_msgs/msg/String`` on
+``NS/frames_at/R/capture``: JSON ``{"t_target": T, "cameras": {NAME: {"capture": "scheduled"
+or "free" or "lockstep", "t_capture": ..., "residual_ns": ... or null}}}``, times in ROS ns.
+A t* in the past, or too near to schedule, is answered on ``NS/frames_at/R/error``.
+
 Requests are spread over a few workers by R, each with its own client, so a request that
 waits for the future holds up only the requests with the same reply name.
 """
 
 from __future__ import annotations
 
+import json
 import logging
 import queue
 import threading
@@ -24,6 +35,7 @@ from collections.abc import Callable
 from dataclasses import dataclass, field
 from typing import Any
 
+from fxis_shm.client.frames import FrameTuple
 from fxis_shm.client.single import SingleClient
 from fxis_shm.errors import FxisError
 from fxis_shm.formats import cdr, rosnames
@@ -80,9 +92,13 @@ class FramesAt(HeaderRequests):
         self._replies: dict[str, ReplyTopics] = {}
         self._lock = threading.Lock()  # guards _replies, made by the workers
         self._reader = participant.header_reader(rosnames.topic(namespace, "frames_at"))
+        self._capture_reader = participant.header_reader(rosnames.topic(namespace, "frames_at", "capture"))
         self._bad_names = participant.writer(rosnames.topic(namespace, "frames_at", "error"), STRING)
         self._queues = [queue.Queue(QUEUED_PER_WORKER) for _ in range(WORKERS)]
-        self.threads = [threading.Thread(target=self._listen, name="ros2-frames-at", daemon=True)]
+        self.threads = [
+            threading.Thread(target=self._listen, name="ros2-frames-at", daemon=True),
+            threading.Thread(target=self._listen_captures, name="ros2-frames-at-capture", daemon=True),
+        ]
         self.threads += [
             threading.Thread(target=self._work, args=(q, make_client()), name=f"ros2-frames-at-{i}", daemon=True)
             for i, q in enumerate(self._queues)
@@ -91,7 +107,12 @@ class FramesAt(HeaderRequests):
     def status(self) -> dict:
         return {**self.counts.as_dict(), "refused": self.refused}
 
-    def _dispatch(self, header: cdr.Header) -> None:
+    def _listen_captures(self) -> None:
+        while not self.stop.is_set():
+            for request in self._capture_reader.wait(0.1):
+                self._dispatch(request.header, capture=True)
+
+    def _dispatch(self, header: cdr.Header, capture: bool = False) -> None:
         name = header.frame_id
         try:
             rosnames.check_relative(name)
@@ -99,7 +120,7 @@ class FramesAt(HeaderRequests):
             self._refuse(None, f"reply name {name!r} in frame_id is not a ROS name: {exc}")
             return
         try:
-            self._queues[zlib.crc32(name.encode()) % WORKERS].put_nowait((name, header))
+            self._queues[zlib.crc32(name.encode()) % WORKERS].put_nowait((name, header, capture))
         except queue.Full:
             self._refuse(name, f"busy: {QUEUED_PER_WORKER} requests of this reply name's worker are waiting already")
 
@@ -107,17 +128,17 @@ class FramesAt(HeaderRequests):
         try:
             while not self.stop.is_set():
                 try:
-                    name, header = requests.get(timeout=0.1)
+                    name, header, capture = requests.get(timeout=0.1)
                 except queue.Empty:
                     continue
-                self._answer(client, name, header)
+                self._answer(client, name, header, capture)
         finally:
             client.close()
 
-    def _answer(self, client: SingleClient, name: str, header: cdr.Header) -> None:
+    def _answer(self, client: SingleClient, name: str, header: cdr.Header, capture: bool) -> None:
         t_star = self.ros_time.to_service(header.sec * 1_000_000_000 + header.nanosec)
         try:
-            frames = client.tuple(at=t_star, timeout=REQUEST_TIMEOUT_S, copy=False)
+            frames = client.tuple(at=t_star, timeout=REQUEST_TIMEOUT_S, copy=False, capture=capture)
         except FxisError as exc:  # a service error says its code first: "OUT_OF_RANGE: ..."
             self._refuse(name, str(exc))
             return
@@ -129,7 +150,18 @@ class FramesAt(HeaderRequests):
         reply.wait_for_readers([reply.cameras[c].image for c in frames], self.stop)
         for camera, serialized in messages.items():
             reply.cameras[camera].write(serialized)
+        if capture:
+            reply.wait_for_readers([reply.captured], self.stop)
+            reply.captured.write(cdr.encode_string(json.dumps(self._how_captured(header, frames))))
         self.counts.published += 1
+
+    def _how_captured(self, header: cdr.Header, frames: FrameTuple) -> dict:
+        """What the Image messages cannot carry: each frame's capture method and residual."""
+        cameras = {
+            c: {"capture": f.capture, "t_capture": self.ros_time.to_ros(f.t_capture), "residual_ns": f.residual_ns}
+            for c, f in frames.items()
+        }
+        return {"t_target": header.stamp_ns, "cameras": cameras}
 
     def _reply(self, name: str) -> ReplyTopics:
         """The topics of reply name ``name``, made on its first request."""
@@ -140,7 +172,8 @@ class FramesAt(HeaderRequests):
                     self._replies.pop(next(iter(self._replies)))  # the oldest name's writers go
                 base = rosnames.topic(self.namespace, "frames_at", *name.split("/"))
                 error = self.participant.writer(rosnames.topic(base, "error"), STRING)
-                reply = self._replies[name] = ReplyTopics(self.make_topics(base), error)
+                captured = self.participant.writer(rosnames.topic(base, "capture"), STRING)
+                reply = self._replies[name] = ReplyTopics(self.make_topics(base), error, captured)
             return reply
 
     def _refuse(self, name: str | None, message: str) -> None:
@@ -156,10 +189,12 @@ class FramesAt(HeaderRequests):
 
 @dataclass
 class ReplyTopics:
-    """The writers of one reply name: an image and camera_info per camera, and the error."""
+    """The writers of one reply name: an image and camera_info per camera, the error, and how a
+    capture request's frames were captured."""
 
     cameras: dict[str, CameraTopics]
     error: Writer
+    captured: Writer
     waited: set[int] = field(default_factory=set)  # ids of the writers already waited for
 
     def wait_for_readers(self, writers: list[Writer], stop: threading.Event) -> None:

@@ -98,7 +98,7 @@ def _describe(hint: Any) -> str:
 class CameraWorkerSpec(ChildSpec):
     ROLE = "camera"
     MODULE = "fxis_shm.workers.camera"
-    VERSION = 2  # 2: lockstep_hz, lockstep_phase_ns
+    VERSION = 3  # 2: lockstep_hz, lockstep_phase_ns; 3: lockstep_clock
 
     camera: str
     kind: str  # an entry of fxis_shm.service.camerakinds.KINDS
@@ -106,8 +106,9 @@ class CameraWorkerSpec(ChildSpec):
     slots: int  # without history_s, or without a frame period to size it by
     time_origin_ns: int  # shared by the service's cameras (synthetic frame times)
     history_s: float | None = None  # seconds the ring holds at the camera's nominal rate
-    lockstep_hz: float | None = None  # fire the trigger on the grid k/HZ + phase of CLOCK_REALTIME
+    lockstep_hz: float | None = None  # fire the trigger on the grid k/HZ + phase of lockstep_clock
     lockstep_phase_ns: int = 0
+    lockstep_clock: str = "realtime"  # realtime or tai (core.schedule.GRID_CLOCKS)
 
 
 @dataclass(frozen=True, kw_only=True)

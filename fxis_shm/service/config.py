@@ -15,7 +15,7 @@ from dataclasses import asdict, dataclass, field, replace
 from typing import Any
 
 from fxis_shm.core.requestdefaults import REQUEST_DEFAULTS
-from fxis_shm.core.schedule import parse_lockstep
+from fxis_shm.core.schedule import check_grid_clock, parse_lockstep
 from fxis_shm.errors import ConfigError
 from fxis_shm.service.camerakinds import camera_options
 from fxis_shm.service.options import split_key_values
@@ -57,7 +57,8 @@ class ServiceConfig:
     events: str = defaults.EVENTS
     slots: int = defaults.SLOTS
     history: float | None = None  # seconds each ring holds, sized from its camera's rate (else slots)
-    lockstep: tuple[float, int] | None = None  # (hz, phase_ns): trigger on the grid k/hz + phase of CLOCK_REALTIME
+    lockstep: tuple[float, int] | None = None  # (hz, phase_ns): trigger on the grid k/hz + phase of lockstep_clock
+    lockstep_clock: str = "realtime"  # the clock the grid is counted in (core.schedule.GRID_CLOCKS)
     cameras: tuple[CameraSpec, ...] = ()
     settings: dict[str, Any] = field(default_factory=dict)
     restart_limit: int = defaults.RESTART_LIMIT
@@ -303,6 +304,7 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
         "port_base",
         "history",
         "lockstep",
+        "lockstep_clock",
         *ROS2_KEYS,
         *SERVICE_SETTINGS,
     }
@@ -362,6 +364,11 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
     if values.get("lockstep") is not None:
         try:
             config = replace(config, lockstep=parse_lockstep(str(values["lockstep"])))
+        except ValueError as exc:
+            raise ConfigError(str(exc)) from None
+    if values.get("lockstep_clock") is not None:
+        try:
+            config = replace(config, lockstep_clock=check_grid_clock(str(values["lockstep_clock"])))
         except ValueError as exc:
             raise ConfigError(str(exc)) from None
     if "restart_limit" in values:

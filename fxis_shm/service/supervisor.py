@@ -252,6 +252,7 @@ class Supervisor:
                     history_s=history_of(c, config),
                     lockstep_hz=config.lockstep[0] if config.lockstep else None,
                     lockstep_phase_ns=config.lockstep[1] if config.lockstep else 0,
+                    lockstep_clock=config.lockstep_clock,
                 ),
                 f"camera {c.name!r}",
                 key=f"camera:{c.name}",

@@ -6,6 +6,7 @@ from __future__ import annotations
 import posix_ipc
 
 from fxis_shm.core import timebase
+from fxis_shm.core.schedule import GRID_CLOCKS
 from fxis_shm.core.snapshot import Snapshot
 from fxis_shm.core.waitpolicy import CameraState
 from fxis_shm.errors import RingError
@@ -201,6 +202,7 @@ def sync_status(ring: RingReader) -> dict:
         lockstep = {
             "hz": f["lockstep_mhz"] / 1000,
             "phase_ms": f["lockstep_phase_ns"] / 1e6,
+            "clock": GRID_CLOCKS[f["lockstep_clock"]],
             "frames": f["frames_lockstep"],
             "residual_p50_ms": round(f["residual_p50_ns"] / 1e6, 4),
             "residual_p99_ms": round(f["residual_p99_ns"] / 1e6, 4),

@@ -59,6 +59,7 @@ HEADER = np.dtype(
         ("residual_p99_ns", "<i8"),
         ("timer_late_p50_ns", "<i8"),  # how late the worker's timer fired (its jitter), p50 and p99
         ("timer_late_p99_ns", "<i8"),
+        ("lockstep_clock", "<u8"),  # the grid's clock: an index of fxis_shm.core.schedule.GRID_CLOCKS
     ]
 )
 SYNC_FIELDS = HEADER.names[HEADER.names.index("trigger_latency_ns") :]

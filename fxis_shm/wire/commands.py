@@ -17,7 +17,8 @@ from fxis_shm.errors import Code, ProtocolError
 
 SETTINGS = "settings"  # read the camera's settings, or change some ("set"), applied between two frames
 TRIGGER_AT = "trigger_at"  # {"t": T}: fire the trigger for a capture at T (service clock), at T - latency
-LOCKSTEP = "lockstep"  # {"hz": HZ, "phase_ns": P}: fire on the grid k/HZ + P of CLOCK_REALTIME; {"hz": null}: stop
+# {"hz": HZ, "phase_ns": P, "clock": "realtime"|"tai"}: fire on the grid k/HZ + P of that clock; {"hz": null}: stop
+LOCKSTEP = "lockstep"
 COMMANDS = (SETTINGS, TRIGGER_AT, LOCKSTEP)
 SETTINGS_TIMEOUT_S = 10.0  # a change that restarts a camera's stream may take seconds (GenTL, GigE Vision)
 TRIGGER_TIMEOUT_S = 1.0  # trigger_at and lockstep are answered at once, by the worker's command thread

@@ -65,11 +65,9 @@ SETUPS = {
 
 @pytest.fixture(scope="module", params=SETUPS)
 def bridge(request, tmp_path_factory):
-    peer_kind, via = SETUPS[request.param]
     snapshots = tmp_path_factory.mktemp("snapshots")
     calibration = tmp_path_factory.mktemp("calibration") / "cam0.yaml"
     calibration.write_text(CALIBRATION)
-    domain = domain_id()
     args = [
         "--camera",
         f"cam0=synthetic:width=640,height=480,fps=20,calibration={calibration},frame_id=cam0_optical",
@@ -77,11 +75,6 @@ def bridge(request, tmp_path_factory):
         "cam1=synthetic:width=320,height=240,fps=20,pixel_format=bgr8,phase_ms=7",
         "--slots",
         "100",
-        "--ros2",
-        "--ros2-domain",
-        str(domain),
-        "--ros2-namespace",
-        NS,
         "--ros2-tuples",
         "5",
         "--ros2-snapshots",
@@ -89,9 +82,19 @@ def bridge(request, tmp_path_factory):
         "--history",
         "5",  # the snapshot test's window reaches 3 s back: 2 s to spare when a loaded copy lags
     ]
+    with running_bridge(request.param, args, tmp_path_factory, snapshots=snapshots) as running:
+        yield running
+
+
+@contextlib.contextmanager
+def running_bridge(setup: str, args: list[str], tmp_path_factory, **facts):
+    """A service with ``args`` and its bridge as ``setup`` says, and a Peer factory for its node."""
+    peer_kind, via = SETUPS[setup]
+    domain = domain_id()
+    args = [*args, "--ros2", "--ros2-domain", str(domain), "--ros2-namespace", NS]
     if peer_kind == "cyclone":  # our own peer: Cyclone on 127.0.0.1, no multicast, no namespace
         with ServiceProcess(args, env={**os.environ, "CYCLONEDDS_URI": loopback_config()}) as svc:
-            yield SimpleNamespace(svc=svc, domain=domain, snapshots=snapshots, peer=peer_of(domain, "cyclone"))
+            yield SimpleNamespace(svc=svc, domain=domain, peer=peer_of(domain, "cyclone"), **facts)
         return
     args += ["--ros2-via", via]
     if via == "rclpy":
@@ -103,9 +106,9 @@ def bridge(request, tmp_path_factory):
         yield SimpleNamespace(
             svc=svc,
             domain=domain,
-            snapshots=snapshots,
             peer=peer_of(domain, peer_kind, host.wrapper()),
             udp_into_fastdds=via == "cyclone",  # datagrams into a Fast DDS node's default receive buffer
+            **facts,
         )
 
 
@@ -458,3 +461,50 @@ def test_a_snapshot_asked_for_on_a_codec_topic_keeps_the_window_as_video(bridge)
         stamps = [rosmsgs.stamp_ns(m.msg.timestamp) for m in video]
         assert t - 2_000_000_000 <= stamps[0] and stamps[-1] <= t + 1_000_000_000  # the window, in ROS time
         assert [read_stamp(image) for _, image in decoded(video, pixels)] == [f.msg.frame_id for f in frames]
+
+
+TRIGGER_LATENCY_NS = 3_000_000  # the synthetic camera's modelled trigger latency
+LATENCY_NOISE_NS = 500_000  # what the learned latency may miss by (tests/integration/test_capture_at.py)
+
+
+@pytest.fixture(params=["cyclone-node", "fastdds-kilted-node,rclpy-bridge"])
+def triggered_bridge(request, tmp_path_factory):
+    """A service with a camera that can be triggered and a free-running one, and its bridge
+    (the module's cameras all run free)."""
+    args = ["--camera", "trig=synthetic:trigger=software,trigger_latency_ms=3,width=64,height=48"]
+    args += ["--camera", "free=synthetic:fps=20,width=64,height=48"]
+    with running_bridge(request.param, args, tmp_path_factory) as running:
+        yield running
+
+
+def test_frames_at_capture_triggers_the_camera_for_t_star_and_says_how_each_frame_was_captured(triggered_bridge):
+    name, request = "robot1", f"{NS}/frames_at/capture"
+    topics = [(f"{NS}/frames_at/{name}/{cam}/image_raw", IMAGE) for cam in ("trig", "free")]
+    topics += [(f"{NS}/frames_at/{name}/capture", STRING), (f"{NS}/frames_at/{name}/error", STRING)]
+    asked = []
+    with requester(triggered_bridge, topics, request) as peer:
+        for n in range(1, 4):  # one after the other: each reply's JSON follows its own images
+            t_star = timebase.reader("realtime")() + 300_000_000  # ahead enough for a loaded machine
+            peer.publish_header(request, *divmod(t_star, 1_000_000_000), name)
+            peer.wait_for_samples(f"{NS}/frames_at/{name}/capture", n)
+            asked.append(t_star)
+        peer.publish_header(request, *divmod(asked[0], 1_000_000_000), name)  # now in the past
+        (error,) = peer.wait_for_samples(f"{NS}/frames_at/{name}/error", 1)
+        replies = [json.loads(s["data"]) for s in peer.samples(f"{NS}/frames_at/{name}/capture")]
+        images = {cam: peer.samples(f"{NS}/frames_at/{name}/{cam}/image_raw") for cam in ("trig", "free")}
+    with triggered_bridge.svc.client() as client:
+        sync = client.status()["cameras"]["trig"]["sync"]
+    late_max = sync["timer_late_p99_ms"] * 1_000_000
+    assert error["data"].startswith("OUT_OF_RANGE") and "past" in error["data"]
+    assert [r["t_target"] for r in replies] == asked
+    for n, (reply, trig_image, free_image) in enumerate(zip(replies, images["trig"], images["free"])):
+        trig, free = reply["cameras"]["trig"], reply["cameras"]["free"]
+        assert trig["capture"] == "scheduled" and free["capture"] == "free" and free["residual_ns"] is None
+        assert abs(ns_of(trig_image) - trig["t_capture"]) <= STAMP_TOLERANCE_NS  # the image is that frame
+        assert abs(ns_of(free_image) - free["t_capture"]) <= STAMP_TOLERANCE_NS
+        # the residual as the service measured it, and the frame captured at T: late by at most
+        # what the worker's timer was late (and, on the first trigger, the latency not learned
+        # yet), early by no more than the learned latency's noise
+        assert abs(trig["t_capture"] - reply["t_target"] - trig["residual_ns"]) <= STAMP_TOLERANCE_NS
+        unlearned = TRIGGER_LATENCY_NS if n == 0 else 0
+        assert -LATENCY_NOISE_NS <= trig["residual_ns"] <= late_max + unlearned + LATENCY_NOISE_NS

@@ -52,7 +52,7 @@ def edited(spec, **changes) -> str:
 @pytest.mark.parametrize(
     "text, words",
     [
-        (edited(CAMERA, version=3), ["version 3", "reads version 2", "different installs"]),
+        (edited(CAMERA, version=99), ["version 99", f"reads version {CameraWorkerSpec.VERSION}", "different installs"]),
         (edited(CAMERA, version=None), ["version None"]),
         (edited(CAMERA, role="coordinator"), ["camera process", "'coordinator'"]),
         (edited(CAMERA, slots="4"), ["'slots'", "int", "'4'"]),

@@ -433,3 +433,11 @@ def test_lockstep_is_a_rate_and_a_phase_from_the_flag_or_the_file():
     assert build_config().lockstep is None
     with pytest.raises(ConfigError, match="above 0"):
         build_config(flags={"lockstep": "0"})
+
+
+def test_the_lockstep_grids_clock_is_realtime_or_tai_from_the_flag_or_the_file():
+    assert build_config().lockstep_clock == "realtime"
+    assert build_config({"lockstep_clock": "tai"}).lockstep_clock == "tai"
+    assert build_config({"lockstep_clock": "tai"}, flags={"lockstep_clock": "realtime"}).lockstep_clock == "realtime"
+    with pytest.raises(ConfigError, match="realtime or tai"):
+        build_config({"lockstep_clock": "monotonic"})

@@ -70,6 +70,25 @@ def test_the_grid_points_are_exact_far_from_the_grids_origin():
     assert 0 <= third * 30 % 10**9 < 30
 
 
+def test_a_tai_grid_is_counted_in_tai_and_lands_in_the_services_clock():
+    """TAI runs 37 s ahead of UTC (since 2017): the tai grid's points are its own, not realtime's
+    shifted, when the period does not divide 37 s; each is a point of k/hz + phase in TAI."""
+    monotonic_now, realtime_offset = 5_000 * 10**9, 1_764_000_000 * 10**9 - 5_000 * 10**9
+    tai_offset = realtime_offset + 37 * 10**9
+    period = schedule.grid_period(7.5)  # 133.333... ms
+    tai = schedule.grid_target(monotonic_now, tai_offset, 7.5, 3 * MS, lead_ns=MS)
+    realtime = schedule.grid_target(monotonic_now, realtime_offset, 7.5, 3 * MS, lead_ns=MS)
+    assert monotonic_now + MS <= tai < monotonic_now + MS + period
+    assert (tai + tai_offset - 3 * MS) * 15 % (2 * 10**9) < 15  # on the tai grid, to the ns it was rounded to
+    assert abs(abs(tai - realtime) - period / 2) <= 1  # 37 s is 277.5 periods of 1/7.5 s
+
+
+def test_a_lockstep_clock_is_one_the_hosts_of_a_cell_share():
+    assert [schedule.check_grid_clock(c) for c in ("realtime", "tai")] == ["realtime", "tai"]
+    with pytest.raises(ValueError, match="realtime or tai"):
+        schedule.check_grid_clock("monotonic")
+
+
 @pytest.mark.parametrize(
     ("text", "expected"),
     [("20", (20.0, 0)), ("20,5", (20.0, 5 * MS)), (" 12.5 , -2.5 ", (12.5, -2_500_000))],

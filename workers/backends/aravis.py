@@ -27,6 +27,14 @@ from a helper thread (reading the GigE Vision control-privilege register, or a
 feature for other cameras); a failed probe, a probe showing that this host lost
 control of the camera (it restarted), or Aravis' ``control-lost`` signal raise
 CameraLost; the worker then closes and reopens the camera with backoff.
+
+Threads: the capture loop grabs and applies settings, the worker's trigger threads (the
+coordinator's "now" and the timer of capture at T and lockstep, workers/triggers.py) fire
+TriggerSoftware, the probe reads a register. Aravis serializes the GVCP transactions of a
+device, but its GenICam node map is not made for concurrent use: every use of the camera
+object (``_cam``, ``_device``) takes ``_control``, so one thread at a time touches it. A
+trigger then waits for a settings read in progress (its lateness shows in status, sync);
+the stream's buffers are not the control channel and are popped without it.
 """
 
 from __future__ import annotations
@@ -121,10 +129,15 @@ class AravisCamera(Camera):
         self._lost = threading.Event()
         self._probe_error: str | None = None
         self._opened = False  # has open() ever succeeded?
+        self._control = threading.RLock()  # one thread at a time uses the camera object (above)
 
     # ---- open and configure -------------------------------------------------------------
 
     def open(self) -> None:
+        with self._control:  # a trigger fired meanwhile waits for the configured camera
+            self._open()
+
+    def _open(self) -> None:
         Aravis, GLib = load_aravis()
         self._Aravis, self._GLib = Aravis, GLib
         device_id = self.options["device"] or self._first_device()
@@ -256,36 +269,41 @@ class AravisCamera(Camera):
     # ---- what the worker asks --------------------------------------------------------------
 
     def trigger(self) -> None:
-        cam = self._cam
-        if cam is None:
-            raise RuntimeError(f"camera {self.name!r} is not open (lost?)")
-        try:
-            cam.software_trigger()  # executes TriggerSoftware
-        except self._GLib.Error as exc:
-            raise RuntimeError(f"TriggerSoftware failed: {exc.message}") from None
+        with self._control:
+            cam = self._cam
+            if cam is None:
+                raise RuntimeError(f"camera {self.name!r} is not open (lost?)")
+            try:
+                cam.software_trigger()  # executes TriggerSoftware
+            except self._GLib.Error as exc:
+                raise RuntimeError(f"TriggerSoftware failed: {exc.message}") from None
 
     def ptp(self) -> PtpState:
         """The camera's PTP state (fxis_shm/core/ptp.py): scheduled action commands need it locked."""
-        if self._cam is None:
-            raise RuntimeError(f"camera {self.name!r} is not open (lost?)")
-        return camera_ptp(self._cam, self._GLib)
+        with self._control:
+            if self._cam is None:
+                raise RuntimeError(f"camera {self.name!r} is not open (lost?)")
+            return camera_ptp(self._cam, self._GLib)
 
     # ---- settings at run time (aravis_tuning.py) -------------------------------------------
 
     def settings(self, extra=()) -> dict[str, dict]:
-        return aravis_tuning.describe_all(self._cam, self.options["trigger"], extra, self._Aravis)
+        with self._control:
+            return aravis_tuning.describe_all(self._cam, self.options["trigger"], extra, self._Aravis)
 
     def set_live(self, values) -> None:
-        try:
-            aravis_tuning.set_live(self._cam, values, self._Aravis)
-        except self._GLib.Error as exc:
-            raise ValueError(exc.message) from None
-        self.options.update({k: v for k, v in values.items() if k in self.options})
-        if self.options["trigger"] == "free" and self._cam.is_frame_rate_available():
-            self._period_ns = period_ns(self._cam.get_frame_rate())
+        with self._control:
+            try:
+                aravis_tuning.set_live(self._cam, values, self._Aravis)
+            except self._GLib.Error as exc:
+                raise ValueError(exc.message) from None
+            self.options.update({k: v for k, v in values.items() if k in self.options})
+            if self.options["trigger"] == "free" and self._cam.is_frame_rate_available():
+                self._period_ns = period_ns(self._cam.get_frame_rate())
 
     def features(self) -> list[dict]:
-        return aravis_tuning.features(self._cam, self._Aravis)
+        with self._control:
+            return aravis_tuning.features(self._cam, self._Aravis)
 
     # ---- frames ------------------------------------------------------------------------------
 
@@ -398,6 +416,10 @@ class AravisCamera(Camera):
         self._probe.start()
 
     def _run_probe(self, idle: float) -> None:
+        with self._control:  # a dead camera holds it for the GVCP timeouts: close() waits for them
+            self._probe_once(idle)
+
+    def _probe_once(self, idle: float) -> None:
         cam, device, GLib = self._cam, self._device, self._GLib
         if cam is None:
             return
@@ -416,8 +438,9 @@ class AravisCamera(Camera):
     # ---- close -----------------------------------------------------------------------------
 
     def close(self) -> None:
-        cam, stream, device = self._cam, self._stream, self._device
-        self._cam = self._stream = self._device = None
+        with self._control:  # no trigger or probe midway: from here on they find the camera closed
+            cam, stream, device = self._cam, self._stream, self._device
+            self._cam = self._stream = self._device = None
         if cam is None:
             return
         lost = self._lost.is_set() or self._probe_error is not None
