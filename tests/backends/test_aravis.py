@@ -183,7 +183,7 @@ def test_a_tuple_request_software_triggers_both_cameras(emulator, second_address
         for _ in range(3):
             # a trigger is a GVCP write and its frame a GVSP stream: on a loaded 2-core host that
             # took over the default 1 s once; the claim here is one frame per trigger, not its speed
-            frames = client.tuple(timeout_ms=10_000)
+            frames = client.tuple(timeout=10.0)
             for frame in frames.values():
                 assert frame.t_capture >= frames.t_request  # it arrived after this request's trigger
                 assert is_frame(frame)

@@ -144,6 +144,8 @@ def test_a_capture_at_t_across_two_hosts_with_their_own_clocks(emulated_hosts):
             assert abs(frame.t_target - at) <= 1_000  # T went there and back in one mapping
             true[name] = frame.service_t_capture - host.clock_offset_ns  # exact: the namespace's offset
             bound = estimate.uncertainty_ns + MARGIN_NS
-            assert -bound - LATENCY_NOISE_NS <= true[name] - at <= bound + late_max + LATENCY_NOISE_NS
+            # early by as much as late: a timer preempted between its fire stamp and the trigger
+            # teaches the worker a longer latency, and the next fires come that much sooner
+            assert -bound - late_max - LATENCY_NOISE_NS <= true[name] - at <= bound + late_max + LATENCY_NOISE_NS
         bound = sum(e.uncertainty_ns for e in estimates) + 2 * MARGIN_NS
         assert abs(true["left"] - true["right"]) <= bound + late_max + 2 * LATENCY_NOISE_NS
