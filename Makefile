@@ -57,43 +57,37 @@ demo: setup
 # The whole suite on the compiled hot path (the first line fails if it is not compiled), then the
 # engine's, the ring's and the local path's tests again on the pure-Python fallback
 # (docs/design.md, "The compiled hot path"). `FXIS_PURE_PYTHON=1 make test`: all of it on the fallback.
-PURE_TESTS := tests/unit tests/integration/test_ring.py tests/integration/test_localpath.py \
-              tests/integration/test_localwaits.py
-# Tests run on this many pytest-xdist workers, each test's services, hosts and DDS domain its own.
-# Most of a test's time is waiting on its processes (the suite's end prints each file's seconds
-# and CPU-seconds), yet 4 workers on a 2-core machine were too many: 403 s, but both cores
-# saturated (717 CPU-s) and the synthetic cameras, which keep real time, dropped frames that
-# a dozen tests check for. 2 workers keep the cameras on time.
-# A module's tests stay on one worker, in order: its shared services start once.
-# TEST_WORKERS=0: one process, in order.
-TEST_WORKERS ?= 2
-XDIST := $(if $(filter 0,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist loadscope)
+PURE_INTEGRATION := tests/integration/test_ring.py tests/integration/test_localpath.py \
+                    tests/integration/test_localwaits.py
 
-# The tests marked realtime check that cameras keep their frame times (no frame dropped, a stream's
-# rate, a sync verdict, a trigger's residual): on 2 cores shared with the other worker's services
-# the synthetic cameras, which keep real time, dropped frames and those tests failed (6 of them in
-# one run). They run alone afterwards, one at a time, with the cores to themselves.
-REALTIME := -m realtime -p no:xdist
+# The unit tests (computations, no processes) run on this many pytest-xdist workers; every test
+# that starts processes (services, cameras, emulated hosts, ROS 2 nodes, browsers) runs one at a
+# time. Those tests check that cameras keep real time (no frame dropped, a stream's rate, a sync
+# verdict, a trigger's residual), and on 2 cores beside another worker's services the synthetic
+# cameras, which keep real time, dropped frames: 4 to 12 such failures a run on 2 and 4 workers
+# (the suite's end prints each file's seconds and CPU-seconds). TEST_WORKERS=0: no workers at all.
+TEST_WORKERS ?= 2
+# --dist load: test by test, not file by file, so the few long property-test files do not hold
+# up one worker (58 s on this 2-core machine while others loaded it to 5; 104 s file by file)
+XDIST := $(if $(filter 0,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist load)
 
 # Last, scripts/test-aarch64.sh's steps on this machine's own CPU (its emulated ARM64 run is by
 # hand, 25 minutes): the ordering mode, and its pytest call over one file (its list ran above).
 test: setup lint $(ROS_VENVS)
 	$(BIN)/python -c "import fxis_shm, os, sys; sys.exit(not (fxis_shm.compiled or os.environ.get('FXIS_PURE_PYTHON') == '1'))"
-	$(BIN)/python -m pytest $(XDIST) -m "not realtime"
-	$(BIN)/python -m pytest $(REALTIME)
-	FXIS_PURE_PYTHON=1 $(BIN)/python -m pytest -q $(XDIST) $(PURE_TESTS)
+	$(BIN)/python -m pytest -q $(XDIST) tests/unit
+	$(BIN)/python -m pytest -p no:xdist --ignore=tests/unit
+	FXIS_PURE_PYTHON=1 $(BIN)/python -m pytest -q $(XDIST) tests/unit
+	FXIS_PURE_PYTHON=1 $(BIN)/python -m pytest -q -p no:xdist $(PURE_INTEGRATION)
 	scripts/test-aarch64.sh --quick -q tests/unit/test_ordering.py
 
 # The inner loop: every unit test and one smoke test of a real service (a tuple's pixels checked
 # against its metadata), without lint; `make test` (and CI) still runs everything.
 QUICK_TESTS := tests/unit tests/integration/test_requests.py::test_tuple_pixels_are_the_frames_the_metadata_names
 
-# --dist load: test by test, not file by file, so the few long property-test files do not hold
-# up one worker (58 s on this 2-core machine while others loaded it to 5; 104 s file by file).
-QUICK_XDIST := $(if $(filter 0,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist load)
 
 test-quick: setup
-	$(BIN)/python -m pytest -q $(QUICK_XDIST) $(QUICK_TESTS)
+	$(BIN)/python -m pytest -q $(XDIST) $(QUICK_TESTS)
 
 lint: setup
 	$(BIN)/ruff check .
