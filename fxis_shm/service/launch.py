@@ -21,6 +21,16 @@ from fxis_shm.errors import RequestTimeout, ServiceNotStarted
 from fxis_shm.service.tether import die_with_parent
 
 
+def free_tcp_ports(count: int) -> list[int]:
+    """``count`` distinct ports of ``free_tcp_port``."""
+    ports: list[int] = []
+    while len(ports) < count:
+        port = free_tcp_port()
+        if port not in ports:
+            ports.append(port)
+    return ports
+
+
 def free_tcp_port() -> int:
     """A TCP port free on every interface now, drawn below the kernel's ephemeral range: the
     ports the kernel gives outgoing connections (ZeroMQ's, a browser's) are drawn from that
@@ -71,9 +81,10 @@ class ServiceProcess:
         """``http``: the dashboard's HOST:PORT, or "off" (the default: tests and scripts
         running at once must not all claim the same fixed port)."""
         self.name = name or f"t{os.getpid()}x{time.monotonic_ns() % 10**6}"
-        self.endpoint = endpoint or f"tcp://127.0.0.1:{free_tcp_port()}"
-        self.pub = pub or f"tcp://127.0.0.1:{free_tcp_port()}"
-        self.events = events or f"tcp://127.0.0.1:{free_tcp_port()}"
+        ports = free_tcp_ports(3)  # three distinct: two random draws can be the same port
+        self.endpoint = endpoint or f"tcp://127.0.0.1:{ports[0]}"
+        self.pub = pub or f"tcp://127.0.0.1:{ports[1]}"
+        self.events = events or f"tcp://127.0.0.1:{ports[2]}"
         self.args = [
             "--name",
             self.name,
