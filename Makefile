@@ -69,14 +69,17 @@ XDIST := $(if $(filter 0,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist 
 # a trigger's residual). On 2 shared cores a synthetic camera now and then drops a frame for
 # reasons of the machine's, not the code's: a few such failures in 2500 tests, a different few
 # each run, also with every test run alone (14.7 min). A failed test runs once more; one that
-# fails twice fails the suite, and every rerun is listed at the end (RERUN) for a look.
+# fails twice fails the suite, and every rerun is listed at the end (RERUN) for a look. The
+# modules marked `alone` failed twice beside another worker's services (a recording's every
+# frame, a video snapshot's, a sync verdict): they run after the others, one test at a time.
 RERUN := --reruns 1
 
 # Last, scripts/test-aarch64.sh's steps on this machine's own CPU (its emulated ARM64 run is by
 # hand, 25 minutes): the ordering mode, and its pytest call over one file (its list ran above).
 test: setup lint $(ROS_VENVS)
 	$(BIN)/python -c "import fxis_shm, os, sys; sys.exit(not (fxis_shm.compiled or os.environ.get('FXIS_PURE_PYTHON') == '1'))"
-	$(BIN)/python -m pytest $(XDIST) $(RERUN)
+	$(BIN)/python -m pytest $(XDIST) $(RERUN) -m "not alone"
+	$(BIN)/python -m pytest -p no:xdist $(RERUN) -m alone
 	FXIS_PURE_PYTHON=1 $(BIN)/python -m pytest -q $(XDIST) $(RERUN) tests/unit $(PURE_INTEGRATION)
 	scripts/test-aarch64.sh --quick -q tests/unit/test_ordering.py
 

@@ -17,7 +17,7 @@ from fxis_shm.errors import ProtocolError, ServiceError
 from ..conftest import wait_until
 from .conftest import SMALL
 
-pytestmark = pytest.mark.integration
+pytestmark = [pytest.mark.integration, pytest.mark.alone]
 
 MS = 1_000_000
 LATENCY_MS = 3.0  # the synthetic camera's modelled trigger latency (trigger -> exposure)
