@@ -72,7 +72,7 @@ XDIST := $(if $(filter 0,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist 
 # fails twice fails the suite, and every rerun is listed at the end (RERUN) for a look. The
 # modules marked `alone` failed twice beside another worker's services (a recording's every
 # frame, a video snapshot's, a sync verdict): they run after the others, one test at a time.
-RERUN := --reruns 1
+RERUN := --reruns 1 -raR
 
 # Last, scripts/test-aarch64.sh's steps on this machine's own CPU (its emulated ARM64 run is by
 # hand, 25 minutes): the ordering mode, and its pytest call over one file (its list ran above).
