@@ -74,6 +74,7 @@ COMMON_OPTIONS = {
 # ---- synthetic ----
 
 SYNTHETIC_EXPOSURE_US = 10_000.0  # the exposure at which the pattern shows as drawn (brightness x 1)
+DRIVER_BUFFERS = 12  # frames a camera's driver holds for a late worker (the Aravis backend queues as many)
 
 SYNTHETIC = CameraKind(
     "synthetic",
@@ -92,6 +93,12 @@ SYNTHETIC = CameraKind(
         "phase_ms": Option(number(float), 0.0, "offset of this camera's frame times, ms"),
         "jitter_ms": Option(number(float, 0), 0.0, "uniform timing noise of the capture time, +/- ms"),
         "drop": Option(number(float, 0, 1), 0.0, "probability that a frame is lost"),
+        "buffers": Option(
+            number(int, 1, 10_000),
+            DRIVER_BUFFERS,
+            "frames held for a worker that falls behind, as a driver's buffer pool: "
+            "a worker later than that loses the oldest (1: only the newest frame is kept)",
+        ),
         "seed": Option(number(int, 0), 0, "seed of the jitter and drop noise (0: random)"),
         "pattern": Option(
             choice("stripes", "chessboard"),

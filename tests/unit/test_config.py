@@ -18,6 +18,7 @@ SYNTHETIC_DEFAULTS = {
     "phase_ms": 0.0,
     "jitter_ms": 0.0,
     "drop": 0.0,
+    "buffers": 12,
     "seed": 0,
     "pattern": "stripes",
     "shift_px": 0,

@@ -50,6 +50,7 @@ import numpy as np
 from fxis_shm.core import timebase
 from fxis_shm.core.clocks import wall_to_monotonic
 from fxis_shm.core.ptp import PtpState
+from fxis_shm.service.camerakinds import DRIVER_BUFFERS
 from fxis_shm.shm.ring import FrameLayout
 
 from . import aravis_tuning
@@ -80,7 +81,7 @@ def load_aravis():
     return Aravis, GLib
 
 
-N_BUFFERS = 12  # frames Aravis can hold for us; ~0.6 s at 20 fps if the worker stalls
+N_BUFFERS = DRIVER_BUFFERS  # frames Aravis can hold for us; ~0.6 s at 20 fps if the worker stalls
 MIN_SOCKET_BUFFER = 1 << 20  # bytes; the kernel caps it at net.core.rmem_max
 GV_CCP_REGISTER = 0x0A00  # GigE Vision bootstrap: control channel privilege
 GV_CCP_CONTROL_BITS = 0x3  # exclusive | control

@@ -21,6 +21,10 @@ with ``fps`` they change between two frames (``set_live``). A new fps keeps the 
 the shared origin's grid of the new period (cameras set alike still capture together) and
 the frame ids counting on.
 
+A worker that falls behind gets the frames it missed, late and with their own capture times,
+from a pool of ``buffers`` frames as a real camera's driver keeps them (the Aravis backend
+queues as many); frames older than that are lost and counted in ``frames_dropped``.
+
 ``shift_px`` moves the picture left by that many pixels. Two cameras with the
 same fps and phase capture frames with the same k and see the same sway, so
 ``left`` with shift_px=0 and ``right`` with shift_px=d form a stereo pair
@@ -202,8 +206,11 @@ class SyntheticCamera(Camera):
         self._start()
         while True:
             now = timebase.now()
-            late = self._index_at(now - int(self._period)) - self._k
-            if late > 0:  # we fell more than a frame behind: those frames are lost
+            # Frames wait in the driver's buffers, as a real camera's do (the sensor does not wait
+            # for us): a worker late by up to `buffers` frames gets them all, late; later than
+            # that, the oldest are lost.
+            late = self._index_at(now - int(self.options["buffers"] * self._period)) - self._k
+            if late > 0:
                 self.frames_dropped += late
                 self._k += late
             t_capture = self._due(self._k)

@@ -1,0 +1,52 @@
+"""When the synthetic camera's frames are due and which it counts as dropped: not the frames due
+while its worker was still setting up (a newcomer saw one drop at start), nor those a late worker
+still finds in its driver's buffers; only those older than its buffers hold."""
+
+from __future__ import annotations
+
+import time
+
+from fxis_shm.core import timebase
+from fxis_shm.formats.stamp import read_stamp
+from fxis_shm.service.camerakinds import camera_options
+from fxis_shm.workers.backends.synthetic import SyntheticCamera
+
+
+def test_frames_due_before_the_first_grab_are_not_drops():
+    options = camera_options("a", "synthetic", {"fps": 100, "width": 64, "height": 48})
+    camera = SyntheticCamera("a", options, timebase.now())
+    camera.open()
+    time.sleep(0.05)  # setting up the ring takes five periods here
+    first = camera.grab(timeout=1.0)
+    assert read_stamp(first.image) == first.frame_id  # the image is the camera's until the next grab
+    second = camera.grab(timeout=1.0)
+    assert camera.frames_dropped == 0 and second.frame_id == first.frame_id + 1
+    assert first.frame_id >= 5  # numbered from the shared origin, as every camera of the service is
+
+
+def _late_camera(buffers: int, late_periods: float) -> tuple[SyntheticCamera, object, int]:
+    """A 100 fps camera whose worker took one frame, then came back ``late_periods`` later
+    (and the time it came back)."""
+    options = camera_options("a", "synthetic", {"fps": 100, "width": 64, "height": 48, "buffers": buffers})
+    camera = SyntheticCamera("a", options, timebase.now())
+    camera.open()
+    first = camera.grab(timeout=1.0)
+    time.sleep(late_periods / 100)  # the worker is late on purpose: descheduled, say
+    return camera, first, timebase.now()
+
+
+def test_a_late_worker_gets_the_frames_its_buffers_held_with_their_own_capture_times():
+    camera, first, _ = _late_camera(buffers=12, late_periods=6)
+    first_id, first_t = first.frame_id, first.t_capture
+    later = [camera.grab(timeout=1.0) for _ in range(6)]
+    assert [c.frame_id for c in later] == list(range(first_id + 1, first_id + 7))
+    assert [c.t_capture - first_t for c in later] == [k * 10_000_000 for k in range(1, 7)]
+    assert camera.frames_dropped == 0
+
+
+def test_a_worker_later_than_its_buffers_loses_the_oldest_frames_and_counts_them():
+    camera, first, back = _late_camera(buffers=2, late_periods=8)
+    after = camera.grab(timeout=1.0)
+    assert camera.frames_dropped >= 5  # 8 periods late, 2 frames held (more if the machine was slower)
+    assert after.frame_id == first.frame_id + 1 + camera.frames_dropped
+    assert after.t_capture >= back - 2 * 10_000_000  # one of the two newest when it came back, or newer
