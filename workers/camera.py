@@ -312,5 +312,10 @@ class _TriggerListener:
         self._sem.close()
 
 
-if __name__ == "__main__":
+def main() -> None:
+    """``python -m fxis_shm.workers.camera '<json spec>' READY_FD``, or a fork of the supervisor."""
     child_main(CameraWorkerSpec, run)
+
+
+if __name__ == "__main__":
+    main()

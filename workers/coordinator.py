@@ -14,5 +14,10 @@ def run(spec: CoordinatorSpec, ready: Ready, stop: threading.Event) -> None:
     Coordinator(spec).serve(stop, on_ready=ready.ok)
 
 
-if __name__ == "__main__":
+def main() -> None:
+    """``python -m fxis_shm.workers.coordinator '<json spec>' READY_FD``, or a fork of the supervisor."""
     child_main(CoordinatorSpec, run)
+
+
+if __name__ == "__main__":
+    main()

@@ -12,7 +12,6 @@ from __future__ import annotations
 
 import os
 import signal
-import subprocess
 import sys
 import time
 
@@ -24,10 +23,7 @@ from fxis_shm.service.launch import ServiceProcess
 
 
 def coordinator_pid(svc: ServiceProcess) -> int:
-    out = subprocess.run(
-        ["pgrep", "-P", str(svc.proc.pid), "-f", "fxis_shm.workers.coordinator"], capture_output=True, text=True
-    ).stdout.split()
-    return int(out[0])
+    return svc.children()["coordinator"]
 
 
 def time_to_recover(client, request, timeout: float = 30.0) -> float:

@@ -22,22 +22,11 @@ from bench.shared import common
 from fxis_shm import FxisError, RequestTimeout
 from fxis_shm.client.pubsub import Subscriber
 from fxis_shm.service.launch import ServiceProcess
-from fxis_shm.shm import procstat
 
 
-def service_processes(root: int) -> dict[int, str]:
-    """pid -> role of the supervisor and its children."""
-    procs = {root: "supervisor"}
-    for child in procstat.children(root):
-        cmd = " ".join(procstat.cmdline(child.pid))
-        procs[child.pid] = (
-            "coordinator"
-            if "workers.coordinator" in cmd
-            else "camera " + cmd.split('"camera": "')[1].split('"')[0]
-            if '"camera": "' in cmd
-            else "other"
-        )
-    return procs
+def service_processes(svc: ServiceProcess) -> dict[int, str]:
+    """pid -> role of the supervisor and its children ("camera NAME", "coordinator", ...)."""
+    return {svc.proc.pid: "supervisor", **{pid: key.replace(":", " ") for key, pid in svc.children().items()}}
 
 
 def rss_kib(pid: int) -> int:
@@ -47,9 +36,9 @@ def rss_kib(pid: int) -> int:
     return 0
 
 
-def sample(root: int) -> dict:
+def sample(svc: ServiceProcess) -> dict:
     out = {}
-    for pid, role in service_processes(root).items():
+    for pid, role in service_processes(svc).items():
         try:
             out[role] = {"rss_kib": rss_kib(pid), "fds": len(os.listdir(f"/proc/{pid}/fd"))}
         except OSError:
@@ -107,7 +96,7 @@ def main(argv: list[str] | None = None) -> int:
                     samples.append(
                         {
                             "t_s": round(time.monotonic() - start, 1),
-                            "processes": sample(svc.proc.pid),
+                            "processes": sample(svc),
                             "dropped": sum(c["frames_dropped"] for c in status["cameras"].values()),
                             "stored": sum(c["frames_stored"] for c in status["cameras"].values()),
                             "latency_ms": common.summary(latencies[-200:]) if n else None,

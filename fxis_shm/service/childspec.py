@@ -26,7 +26,9 @@ S = TypeVar("S", bound="ChildSpec")
 @dataclass(frozen=True, kw_only=True)
 class ChildSpec:
     ROLE: ClassVar[str]
-    MODULE: ClassVar[str]  # run as ``python -m MODULE``
+    MODULE: ClassVar[str]  # run as ``python -m MODULE``, or its main() in a fork of the supervisor
+    FORKABLE: ClassVar[bool] = False  # may start as a fork of the supervisor (service/forkstart.py)
+    TITLE: ClassVar[str] = ""  # a forked child's process name, as ps and top show it (at most 15 bytes)
     VERSION: ClassVar[int]  # raise it when a field changes meaning, is added or removed
 
     service: str
@@ -98,6 +100,8 @@ def _describe(hint: Any) -> str:
 class CameraWorkerSpec(ChildSpec):
     ROLE = "camera"
     MODULE = "fxis_shm.workers.camera"
+    FORKABLE = True
+    TITLE = "fxis camera"
     VERSION = 3  # 2: lockstep_hz, lockstep_phase_ns; 3: lockstep_clock
 
     camera: str
@@ -115,8 +119,9 @@ class CameraWorkerSpec(ChildSpec):
 class CoordinatorSpec(ChildSpec):
     ROLE = "coordinator"
     MODULE = "fxis_shm.workers.coordinator"
+    FORKABLE = True
+    TITLE = "fxis coord"  # "fxis coordinator" is a byte too long for the kernel
     VERSION = 2
-
     endpoint: str
     pub: str
     events: str

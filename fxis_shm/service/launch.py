@@ -8,6 +8,7 @@ and scripts: ready when it answers ``status``, stopped with SIGTERM on exit.
 
 from __future__ import annotations
 
+import json
 import os
 import random
 import signal
@@ -19,6 +20,7 @@ import time
 from fxis_shm.client.client import Client
 from fxis_shm.errors import RequestTimeout, ServiceNotStarted
 from fxis_shm.service.tether import die_with_parent
+from fxis_shm.shm import naming, procstat
 
 
 def free_tcp_ports(count: int) -> list[int]:
@@ -132,6 +134,18 @@ class ServiceProcess:
 
     def client(self, timeout: float = 2.0) -> Client:
         return Client(self.endpoint, timeout=timeout, keys=self.client_keys)
+
+    def children(self) -> dict[str, int]:
+        """The service's running child processes by the supervisor's name for them (``camera:NAME``,
+        ``coordinator``, ``dashboard``, ...) -> pid, from its process table: a forked worker's
+        command line is the supervisor's, so ``ps`` cannot tell them apart by it."""
+        try:
+            with open(naming.supervisor_state_path(self.name)) as f:
+                processes = json.load(f)["processes"]
+        except (OSError, ValueError, KeyError):
+            return {}
+        running = {child.pid for child in procstat.children(self.proc.pid)} if self.proc else set()
+        return {key: p["pid"] for key, p in processes.items() if p.get("pid") in running}
 
     def stop(self, timeout: float = 10.0) -> int:
         """SIGTERM, wait, then kill; returns the exit code."""

@@ -32,6 +32,7 @@ from fxis_shm.service.childspec import (
     Ros2Spec,
 )
 from fxis_shm.service.config import ServiceConfig, ViewerAccess, http_address, viewer_accesses
+from fxis_shm.service.forkstart import ForkedProcess, fork_child, fork_wanted
 from fxis_shm.service.memory import ring_lines
 from fxis_shm.service.stopsignals import stop_on
 from fxis_shm.shm import naming
@@ -99,7 +100,7 @@ class Child:
         self.env = env  # added to the supervisor's environment (a viewer's token: never on argv, ps shows it)
         self.state = "starting"
         self.last_exit: int | None = None
-        self.proc: subprocess.Popen | None = None
+        self.proc: subprocess.Popen | ForkedProcess | None = None
         self.restarts = 0
         self.backoff = BACKOFF_FIRST_S
         self.restart_at: float | None = None
@@ -109,12 +110,16 @@ class Child:
     def start(self) -> None:
         read_fd, write_fd = os.pipe()
         try:
-            self.proc = subprocess.Popen(
-                self.spec.command(write_fd),
-                pass_fds=(write_fd,),
-                stdin=subprocess.DEVNULL,
-                env={**os.environ, **self.env} if self.env else None,
-            )
+            if self.spec.FORKABLE and not self.env and fork_wanted():
+                argv = [self.spec.to_json(), str(write_fd)]
+                self.proc = fork_child(self.spec.MODULE, argv, write_fd, self.spec.TITLE)
+            else:
+                self.proc = subprocess.Popen(
+                    self.spec.command(write_fd),
+                    pass_fds=(write_fd,),
+                    stdin=subprocess.DEVNULL,
+                    env={**os.environ, **self.env} if self.env else None,
+                )
         finally:
             os.close(write_fd)
         self._ready_fd = read_fd

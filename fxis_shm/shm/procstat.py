@@ -19,6 +19,7 @@ class ProcStat:
     state: str  # R, S, D, Z (zombie), X (dead), ...
     ppid: int
     cpu_ticks: int  # user + system time of every thread, in clock ticks
+    name: str = ""  # the command name (/proc/PID/comm): "python3", or a forked worker's "fxis camera"
 
     @property
     def running(self) -> bool:
@@ -37,9 +38,11 @@ def read(pid: int) -> ProcStat | None:
             raw = f.read()
     except OSError:
         return None
-    fields = raw[raw.rfind(b")") + 2 :].split()
+    end = raw.rfind(b")")
+    fields = raw[end + 2 :].split()
     # fields[0] is the state (field 3 of proc(5)), [1] the ppid, [11] utime, [12] stime
-    return ProcStat(pid, fields[0].decode(), int(fields[1]), int(fields[11]) + int(fields[12]))
+    name = raw[raw.find(b"(") + 1 : end].decode(errors="replace")
+    return ProcStat(pid, fields[0].decode(), int(fields[1]), int(fields[11]) + int(fields[12]), name)
 
 
 def children(ppid: int) -> list[ProcStat]:

@@ -5,7 +5,6 @@ import pytest
 
 from fxis_shm import Client
 from fxis_shm.service.launch import ServiceProcess
-from fxis_shm.shm import procstat
 
 from ..conftest import assert_nothing_left, start_service, wait_until  # noqa: F401  (shared fixtures)
 
@@ -57,12 +56,8 @@ def two_cameras():
 
 
 def child_pids(svc, role: str) -> list[int]:
-    """Pids of the service's children of one role ("camera" or "coordinator")."""
-    return [
-        child.pid
-        for child in procstat.children(svc.proc.pid)
-        if f"fxis_shm.workers.{role}" in procstat.cmdline(child.pid)
-    ]
+    """Pids of the service's running children of one role ("camera" or "coordinator")."""
+    return [pid for key, pid in svc.children().items() if key.split(":")[0] == role]
 
 
 @pytest.fixture

@@ -32,6 +32,17 @@ SETTINGS = {"sync": "joint", "wait": "auto", "sync_tolerance_ms": 2.0, "horizon_
 PAST_NS = 150_000_000
 
 
+def wait_for_the_past(client) -> None:
+    """Until every camera's ring holds frames from before t* = now - PAST_NS (the cameras
+    start at different moments: one with 6 frames is 120 ms deep at 50 fps)."""
+
+    def deep_enough() -> bool:
+        cameras = client.status()["cameras"].values()
+        return all(c.get("frames_stored", 0) >= PAST_NS * c["fps"] / 1e9 + 3 for c in cameras)
+
+    wait_until(deep_enough, what=f"every ring to hold {PAST_NS / 1e6:.0f} ms")
+
+
 # scripts/test-aarch64.sh on an emulated CPU (qemu, 10-50x slower): cameras there run late on
 # their own schedule (2 of 61 requests twice), and the wait policy hands such a request to the
 # engine; the count of compiled answers is exact on a real CPU only
@@ -79,7 +90,7 @@ def test_the_compiled_read_is_on_unless_fxis_pure_python_turns_it_off(three_came
     """Built (`make setup`), it answers; with FXIS_PURE_PYTHON=1 the engine answers everything."""
     assert fastpick.AVAILABLE != PURE, "the compiled read is not built: `make setup` builds it"
     with Client(three_cameras.endpoint, local="require") as client:
-        wait_until(lambda: client.status()["cameras"]["a"].get("frames_stored", 0) > 5)
+        wait_for_the_past(client)
         client.latest()  # opens the rings
         frames = client.tuple(at=time.monotonic_ns() - PAST_NS)
     assert frames.path == "local" and client.paths["compiled"] == (0 if PURE else 1)
@@ -123,7 +134,7 @@ def test_the_compiled_read_answers_as_the_engine_does(three_cameras):
 @compiled
 def test_zero_copy_views_are_the_slots_and_say_when_they_are_overwritten(three_cameras):
     with Client(three_cameras.endpoint, local="require") as client:
-        wait_until(lambda: client.status()["cameras"]["a"].get("frames_stored", 0) > 5)
+        wait_for_the_past(client)
         client.latest()
         views = client.tuple(at=time.monotonic_ns() - PAST_NS, copy=False)
         copies = client.tuple(at=views.t_request)
@@ -142,7 +153,7 @@ def test_a_copy_lands_in_an_array_nobody_else_holds(three_cameras):
     """The pool hands an array out again only once nothing refers to it: a frame kept, or a view
     of it kept, is never overwritten by a later request."""
     with Client(three_cameras.endpoint, local="require") as client:
-        wait_until(lambda: client.status()["cameras"]["a"].get("frames_stored", 0) > 5)
+        wait_for_the_past(client)
         client.latest()
         kept = client.latest(["a"])["a"]
         kept_id, view = kept.frame_id, kept.image[2:, :]
@@ -160,7 +171,7 @@ def test_a_copy_lands_in_an_array_nobody_else_holds(three_cameras):
 @compiled
 def test_what_the_compiled_read_does_not_settle_gets_the_engines_answer(three_cameras):
     with Client(three_cameras.endpoint, local="require") as client:
-        wait_until(lambda: client.status()["cameras"]["a"].get("frames_stored", 0) > 5)
+        wait_for_the_past(client)
         client.latest()
         served = client.paths["compiled"]
         now = time.monotonic_ns()
@@ -181,7 +192,7 @@ def test_what_the_compiled_read_does_not_settle_gets_the_engines_answer(three_ca
 def test_a_stopped_camera_is_the_engines_to_report(start_service):
     svc = start_service("--camera", f"a=synthetic:fps=50,{SMALL}", "--camera", f"b=synthetic:fps=50,{SMALL}")
     with Client(svc.endpoint, local="require", timeout=5.0) as client:
-        wait_until(lambda: client.status()["cameras"]["b"].get("frames_stored", 0) > 5)
+        wait_for_the_past(client)
         client.latest()  # opens the rings
         client.latest()
         assert client.paths["compiled"] == 1
@@ -239,7 +250,7 @@ def test_the_coordinators_compiled_answer_keeps_the_engines_limits(start_service
     waiting = []
     try:
         with Client(svc.endpoint, local="off", timeout=5.0) as remote:
-            wait_until(lambda: remote.status()["cameras"]["a"].get("frames_stored", 0) > 5)
+            wait_for_the_past(remote)
             future = remote.time() + 3_000_000_000
             for n in (1, 2):
                 waiting.append(zmq.Context.instance().socket(zmq.DEALER))

@@ -10,6 +10,21 @@ def test_this_process_reads_as_running_with_its_parent():
     assert me.running and me.ppid == os.getppid() and me.cpu_ticks >= 0
     with open("/proc/self/cmdline", "rb") as f:  # a test runner may retitle itself: read what it shows
         assert procstat.cmdline(os.getpid()) == f.read().decode().split("\0")[:-1]
+    with open("/proc/self/comm") as f:
+        assert me.name == f.read().rstrip("\n")
+
+
+def test_a_name_with_spaces_and_parentheses_reads_whole():
+    name_it = "import ctypes; ctypes.CDLL(None).prctl(15, b'a (b) c', 0, 0, 0)"
+    script = f"{name_it}; import time; print(1, flush=True); time.sleep(30)"
+    child = subprocess.Popen([sys.executable, "-c", script], stdout=subprocess.PIPE)
+    try:
+        child.stdout.readline()  # named by now
+        stat = procstat.read(child.pid)
+        assert stat.name == "a (b) c" and stat.ppid == os.getpid() and stat.running
+    finally:
+        child.kill()
+        child.wait()
 
 
 def test_a_child_is_found_and_a_reaped_one_is_gone():
