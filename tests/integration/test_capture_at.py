@@ -5,6 +5,7 @@ No bound here is a speed: a scheduled frame's residual is held to what the worke
 measured of its lateness on this machine (its status, ``timer_late_p99_ms``) plus the noise of
 the learned trigger latency; a free camera's frame to half its period. bench/sync/ measures."""
 
+import re
 import statistics
 import time
 from concurrent.futures import ThreadPoolExecutor
@@ -17,7 +18,7 @@ from fxis_shm.errors import ProtocolError, ServiceError
 from ..conftest import wait_until
 from .conftest import SMALL
 
-pytestmark = [pytest.mark.integration, pytest.mark.alone]
+pytestmark = pytest.mark.integration
 
 MS = 1_000_000
 LATENCY_MS = 3.0  # the synthetic camera's modelled trigger latency (trigger -> exposure)
@@ -79,16 +80,27 @@ def test_a_moment_that_cannot_be_kept_gets_a_clear_error_and_the_service_runs_on
     with svc.client() as client:
         with pytest.raises(ServiceError, match="in the past: a capture can only be scheduled ahead") as past:
             client.image("trig", at=time.monotonic_ns() - 10 * MS, capture=True)
-        with pytest.raises(ServiceError, match=r"only .* ms ahead: the nearest T this camera can be") as near:
-            client.image("trig", at=time.monotonic_ns() + MS, capture=True)
+        near = _too_near(client)
         with pytest.raises(ServiceError, match="the horizon is 10000.0 ms") as far:
             client.image("trig", at=time.monotonic_ns() + 20 * 10**9, capture=True)
-        assert past.value.code == near.value.code == far.value.code == "OUT_OF_RANGE"
+        assert past.value.code == near.code == far.value.code == "OUT_OF_RANGE"
         with pytest.raises((ProtocolError, ServiceError), match="'capture' needs 'at'"):
             client.image("trig", capture=True)
         at = time.monotonic_ns() + AHEAD_NS
         assert client.image("trig", at=at, capture=True).t_target == at  # still serving
         assert client.status()["cameras"]["trig"]["alive"]
+
+
+def _too_near(client) -> ServiceError:
+    """The refusal of a T 1 ms ahead. On a loaded machine the request may take longer than that
+    to arrive, and T is then in the past (a refusal of its own): asked again, up to 20 times."""
+    for _ in range(20):
+        with pytest.raises(ServiceError) as refused:
+            client.image("trig", at=time.monotonic_ns() + MS, capture=True)
+        if "in the past" not in str(refused.value):
+            assert re.search(r"only .* ms ahead: the nearest T this camera can be", str(refused.value)), refused.value
+            return refused.value
+    pytest.fail("every request for T 1 ms ahead arrived after T")
 
 
 def test_an_event_request_captures_at_t_too(start_service):
