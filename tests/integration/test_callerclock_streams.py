@@ -42,6 +42,8 @@ def test_an_event_request_at_a_moment_of_the_callers_clock_answers_the_frames_ne
         with client.events() as events, client.subscribe(timeout=10) as answers:
             answers.topic("robot1")
             handshake(events, answers, "robot1", timeout=20)
+            deep = 0.3 * FPS + 3  # frames from before t*: a service just started may hold fewer
+            wait_until(lambda: client.status()["cameras"]["cam"]["frames_stored"] >= deep, what="300 ms of frames")
             t_star = time.monotonic_ns() - 300_000_000  # 300 ms ago, on our clock
             events.request("image", "robot1", camera="cam", at=t_star)
             frame = answers.receive().frames[0]
