@@ -61,26 +61,37 @@ PURE_INTEGRATION := tests/integration/test_ring.py tests/integration/test_localp
                     tests/integration/test_localwaits.py
 
 # Tests run on this many pytest-xdist workers, each test's services, hosts and DDS domain its own.
-# A module's tests stay on one worker, in order: its shared services start once. TEST_WORKERS=0:
-# one process, in order.
-TEST_WORKERS ?= 2
+# A module's tests stay on one worker, in order: its shared services start once. Five workers on
+# 2 cores: most tests wait on cameras, sockets and processes more than they compute (4 workers
+# used 1.6 cores; 5 ran the suite in 275 s to 4's 310). The longest files of the last run start
+# first (tests/filetimes.py). TEST_WORKERS=0: one process, in order.
+TEST_WORKERS ?= 5
 XDIST := $(if $(filter 0,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist loadscope)
-# Many tests check that cameras keep real time (no frame dropped, a stream's rate, a sync verdict,
-# a trigger's residual). On 2 shared cores a synthetic camera now and then drops a frame for
-# reasons of the machine's, not the code's: a few such failures in 2500 tests, a different few
-# each run, also with every test run alone (14.7 min). A failed test runs once more; one that
-# fails twice fails the suite, and every rerun is listed at the end (RERUN) for a look. The
-# modules marked `alone` failed twice beside another worker's services (a recording's every
-# frame, a video snapshot's, a sync verdict): they run after the others, one test at a time.
+# Many tests check that cameras keep real time (a stream's rate, a sync verdict, a trigger's
+# residual). On 2 shared cores a worker is now and then late by more than its driver's buffers
+# hold, for the machine's reasons, not the code's. A failed test runs once more; one that fails
+# twice fails the suite, and every rerun is listed at the end (RERUN) for a look.
 RERUN := --reruns 1 -raR
 
+# Every process the suite starts (services, workers, `fxis` commands: over a thousand) imports the
+# package: its bytecode is written once here, as the environment may forbid writing it at import
+# (PYTHONDONTWRITEBYTECODE), which made each process compile some 50 modules again.
+# The pure-Python pass runs beside the main one, on one process at the lowest priority (nice 19):
+# the main one, waiting on cameras and sockets, leaves a fifth of the 2 cores idle, and the pure
+# pass (70 CPU-s) gets what it leaves, no more. Its report follows the main one's.
 # Last, scripts/test-aarch64.sh's steps on this machine's own CPU (its emulated ARM64 run is by
 # hand, 25 minutes): the ordering mode, and its pytest call over one file (its list ran above).
+PURE_LOG := .pytest_cache/pure-python.log
 test: setup lint $(ROS_VENVS)
 	$(BIN)/python -c "import fxis_shm, os, sys; sys.exit(not (fxis_shm.compiled or os.environ.get('FXIS_PURE_PYTHON') == '1'))"
-	$(BIN)/python -m pytest $(XDIST) $(RERUN) -m "not alone"
-	$(BIN)/python -m pytest -p no:xdist $(RERUN) -m alone
-	FXIS_PURE_PYTHON=1 $(BIN)/python -m pytest -q $(XDIST) $(RERUN) tests/unit $(PURE_INTEGRATION)
+	$(BIN)/python -m compileall -q fxis_shm workers tests bench examples > /dev/null
+	@mkdir -p .pytest_cache
+	FXIS_PURE_PYTHON=1 nice -n 19 $(BIN)/python -m pytest -q -p no:xdist -o cache_dir=.pytest_cache/pure $(RERUN) \
+		tests/unit $(PURE_INTEGRATION) > $(PURE_LOG) 2>&1 & pure=$$!; trap 'kill $$pure 2>/dev/null' INT TERM; \
+	$(BIN)/python -m pytest $(XDIST) $(RERUN); main=$$?; \
+	wait $$pure; pure_code=$$?; \
+	echo "== the pure-Python pass, beside the main one (FXIS_PURE_PYTHON=1; exit code $$pure_code):"; cat $(PURE_LOG); \
+	test $$main -eq 0 -a $$pure_code -eq 0
 	scripts/test-aarch64.sh --quick -q tests/unit/test_ordering.py
 
 # The inner loop: every unit test and one smoke test of a real service (a tuple's pixels checked

@@ -3,7 +3,11 @@ file, printed at its end, so that where the seconds go is seen on every run (iss
 
 Beside each file's seconds, the CPU-seconds its tests and the processes they started and
 ended spent (a finished child's CPU is counted when it is reaped): on a 2-core machine the
-suite is CPU-bound, so a file's CPU is its real cost to the others."""
+suite is CPU-bound, so a file's CPU is its real cost to the others.
+
+The seconds are kept in pytest's cache, and the next run starts the longest files first: with a
+module's tests on one worker (--dist loadscope), a long file started last would leave the other
+workers idle while it finishes."""
 
 import resource
 import time
@@ -15,6 +19,7 @@ _FILE_SECONDS: dict[str, float] = defaultdict(float)
 _FILE_CPU: dict[str, float] = defaultdict(float)
 _STARTED: list[float] = []
 _CPU_BEFORE: list[float] = []
+_CACHE_KEY = "fxis/file_seconds"
 
 
 def _cpu_s() -> float:
@@ -35,6 +40,33 @@ def pytest_runtest_makereport(item, call):
 
 def pytest_sessionstart(session):
     _STARTED.append(time.monotonic())
+
+
+def pytest_collection_modifyitems(session, config, items):
+    """The files that took longest last time first, each file's tests together and in their
+    order (module-scoped services); files not timed yet keep their places after them."""
+    seconds = config.cache.get(_CACHE_KEY, {}) if config.cache else {}
+    if not seconds:
+        return
+    first_place: dict[str, int] = {}
+    for index, item in enumerate(items):
+        first_place.setdefault(item.nodeid.split("::")[0], index)
+
+    def key(item_and_index):
+        item, index = item_and_index
+        path = item.nodeid.split("::")[0]
+        return (-seconds.get(path, 0.0), first_place[path], index)
+
+    items[:] = [item for item, _ in sorted(zip(items, range(len(items))), key=key)]
+
+
+def pytest_sessionfinish(session):
+    """Keeps each file's seconds for the next run's order (on the controller, which saw every
+    worker's reports)."""
+    if _FILE_SECONDS and session.config.cache and not hasattr(session.config, "workerinput"):
+        kept = session.config.cache.get(_CACHE_KEY, {})
+        kept.update(_FILE_SECONDS)
+        session.config.cache.set(_CACHE_KEY, kept)
 
 
 def pytest_runtest_logreport(report):

@@ -21,7 +21,7 @@ from fxis_shm.service.launch import ServiceProcess
 
 from .conftest import SMALL, client_keys, module_service
 
-pytestmark = [pytest.mark.integration, pytest.mark.alone]
+pytestmark = pytest.mark.integration
 
 SOURCE = Path(__file__).resolve().parents[2] / "examples" / "cpp_client"
 FPS = 50

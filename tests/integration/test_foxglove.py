@@ -25,7 +25,7 @@ from ..conftest import fxis, fxis_run_alone, wait_until
 from ..foxglove_decode import message_class
 from .conftest import SMALL, module_services
 
-pytestmark = [pytest.mark.integration, pytest.mark.alone]
+pytestmark = pytest.mark.integration
 
 # foxglove-sdk 0.30 speaks "foxglove.sdk.v1"; earlier servers "foxglove.websocket.v1"
 SUBPROTOCOLS = ["foxglove.sdk.v1", "foxglove.websocket.v1"]

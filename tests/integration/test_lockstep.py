@@ -18,7 +18,7 @@ from fxis_shm.core import timebase
 from ..conftest import fxis, wait_until
 from .conftest import SMALL
 
-pytestmark = [pytest.mark.integration, pytest.mark.alone]
+pytestmark = pytest.mark.integration
 
 MS = 1_000_000
 HZ = 20

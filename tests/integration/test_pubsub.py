@@ -14,7 +14,7 @@ from fxis_shm.wire.protocol import EVENT_TOPIC
 from ..conftest import wait_until
 from .conftest import SMALL
 
-pytestmark = [pytest.mark.integration, pytest.mark.alone]
+pytestmark = pytest.mark.integration
 
 
 @pytest.fixture(scope="module")

@@ -15,7 +15,7 @@ from fxis_shm.formats.bagrecover import KILLED
 from ..conftest import fxis
 from .bags import cut_copy, frame_ids, kill_9_once_written, message_ends, read_bag, record, start_cameras, stop
 
-pytestmark = [pytest.mark.integration, pytest.mark.alone]
+pytestmark = pytest.mark.integration
 CAMS = ("left", "right")
 KEPT = re.compile(
     r"No space left on device in (\S+): the recording stopped and kept left (\d+) frames, "

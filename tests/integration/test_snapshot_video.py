@@ -19,7 +19,7 @@ from .bags import read_bag
 from .conftest import module_service_with_full_rings
 from .test_record_video import decoded, nal_types, stamp_ns
 
-pytestmark = [pytest.mark.integration, pytest.mark.alone]
+pytestmark = pytest.mark.integration
 PIXELS = {"a": "gray", "b": "bgr24"}
 
 

@@ -19,7 +19,7 @@ from fxis_shm.service.launch import free_tcp_port
 from ..conftest import fxis, wait_until
 from .conftest import SMALL
 
-pytestmark = [pytest.mark.integration, pytest.mark.alone]
+pytestmark = pytest.mark.integration
 
 FPS = 20
 PERIOD_MS = 1000 / FPS
