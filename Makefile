@@ -76,9 +76,10 @@ RERUN := --reruns 1 -raR
 # Every process the suite starts (services, workers, `fxis` commands: over a thousand) imports the
 # package: its bytecode is written once here, as the environment may forbid writing it at import
 # (PYTHONDONTWRITEBYTECODE), which made each process compile some 50 modules again.
-# The pure-Python pass runs beside the main one, on one process at the lowest priority (nice 19):
-# the main one, waiting on cameras and sockets, leaves a fifth of the 2 cores idle, and the pure
-# pass (70 CPU-s) gets what it leaves, no more. Its report follows the main one's.
+# The pure-Python pass runs beside the main one, on one process: its services' tests first, then
+# its unit tests at the lowest priority (nice 19; a service started at that priority would not
+# keep real time): the main pass, waiting on cameras and sockets, leaves part of the 2 cores
+# idle, and the unit tests (55 CPU-s) get what it leaves, no more. Its report follows the main one's.
 # Last, scripts/test-aarch64.sh's steps on this machine's own CPU (its emulated ARM64 run is by
 # hand, 25 minutes): the ordering mode, and its pytest call over one file (its list ran above).
 PURE_LOG := .pytest_cache/pure-python.log
@@ -86,8 +87,9 @@ test: setup lint $(ROS_VENVS)
 	$(BIN)/python -c "import fxis_shm, os, sys; sys.exit(not (fxis_shm.compiled or os.environ.get('FXIS_PURE_PYTHON') == '1'))"
 	$(BIN)/python -m compileall -q fxis_shm workers tests bench examples > /dev/null
 	@mkdir -p .pytest_cache
-	FXIS_PURE_PYTHON=1 nice -n 19 $(BIN)/python -m pytest -q -p no:xdist -o cache_dir=.pytest_cache/pure $(RERUN) \
-		tests/unit $(PURE_INTEGRATION) > $(PURE_LOG) 2>&1 & pure=$$!; trap 'kill $$pure 2>/dev/null' INT TERM; \
+	( export FXIS_PURE_PYTHON=1; PURE="$(BIN)/python -m pytest -q -p no:xdist -o cache_dir=.pytest_cache/pure $(RERUN)"; \
+	  $$PURE $(PURE_INTEGRATION); services=$$?; nice -n 19 $$PURE tests/unit; exit $$((services || $$?)) \
+	) > $(PURE_LOG) 2>&1 & pure=$$!; trap 'kill $$pure 2>/dev/null' INT TERM; \
 	$(BIN)/python -m pytest $(XDIST) $(RERUN); main=$$?; \
 	wait $$pure; pure_code=$$?; \
 	echo "== the pure-Python pass, beside the main one (FXIS_PURE_PYTHON=1; exit code $$pure_code):"; cat $(PURE_LOG); \

@@ -250,7 +250,10 @@ class RingWriter(_Mapping):
     def _update_timing(self, frame_id: int, t_capture: int, t_stored: int) -> None:
         """Running estimates of the frame period and the capture-to-storage delay:
         a plain mean over this generation's first samples (so one slow start-up
-        frame does not linger), then an exponential average."""
+        frame does not linger), then an exponential average. The delay rises at once
+        to a later frame's: a worker that fell behind stores the frames its driver held
+        late, and a request waiting for one must not give it up as dropped meanwhile
+        (core/waitpolicy.py: a frame is overdue a period plus this delay after capture)."""
         h = self.header
         self._samples += 1
         weight = min(self._samples, _PERIOD_SMOOTHING)
@@ -259,8 +262,8 @@ class RingWriter(_Mapping):
             old = int(h["period_ns"])
             h["period_ns"] = interval if old <= 0 else old + (interval - old) // weight
         self._last = (frame_id, t_capture)
-        old_delay = int(h["delay_ns"])
-        h["delay_ns"] = old_delay + (t_stored - t_capture - old_delay) // weight
+        old_delay, delay = int(h["delay_ns"]), t_stored - t_capture
+        h["delay_ns"] = delay if delay > old_delay else old_delay + (delay - old_delay) // weight
 
     def new_generation(self) -> int:
         """The camera came back after an outage: later frames carry a new generation."""

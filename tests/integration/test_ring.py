@@ -47,6 +47,26 @@ def test_reader_sees_frames_in_order_across_the_wrap(service):
     writer.close()
 
 
+def test_the_delay_rises_at_once_with_a_late_frame_and_falls_back_smoothly(service):
+    """A worker catching up stores frames late: the ring's delay follows at once (requests then
+    wait for its frames rather than give them up), and eases back as frames come on time."""
+    from fxis_shm.core import timebase
+
+    writer = RingWriter(service, "c", LAYOUT, 4)
+    reader = RingReader(service, "c")
+    ms = 1_000_000
+    for k in range(40):  # on time: stored within a few ms of capture
+        writer.write(frame(k), k, timebase.now())
+    on_time = reader.timing()[1]
+    assert 0 <= on_time < 5 * ms
+    writer.write(frame(40), 40, timebase.now() - 200 * ms)  # held 200 ms in the driver's buffers
+    assert reader.timing()[1] >= 200 * ms
+    writer.write(frame(41), 41, timebase.now())
+    assert 150 * ms < reader.timing()[1] < 200 * ms  # one frame on time: a sixteenth of the way back
+    reader.close()
+    writer.close()
+
+
 def test_each_frame_keeps_how_it_was_captured(service):
     """A frame triggered for a moment keeps that moment and how (scheduled, lockstep) in its slot
     record; a free one says free with no target. Readers see it through every path."""
