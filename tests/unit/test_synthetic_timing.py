@@ -4,6 +4,8 @@ still finds in its driver's buffers; only those older than its buffers hold."""
 
 from __future__ import annotations
 
+import subprocess
+import sys
 import time
 
 from fxis_shm.core import timebase
@@ -50,3 +52,29 @@ def test_a_worker_later_than_its_buffers_loses_the_oldest_frames_and_counts_them
     assert camera.frames_dropped >= 5  # 8 periods late, 2 frames held (more if the machine was slower)
     assert after.frame_id == first.frame_id + 1 + camera.frames_dropped
     assert after.t_capture >= back - 2 * 10_000_000  # one of the two newest when it came back, or newer
+
+
+WAIT_UNDER_SIGNALS = """
+import signal, sys
+from fxis_shm.core import timebase
+from fxis_shm.service.camerakinds import camera_options
+from fxis_shm.workers.backends.synthetic import SyntheticCamera
+
+options = camera_options("t", "synthetic", {"width": 64, "height": 48, "trigger": "software"})
+camera = SyntheticCamera("t", options, timebase.now())
+camera.open()
+signal.signal(signal.SIGALRM, lambda *_: None)
+signal.setitimer(signal.ITIMER_REAL, 0.0005, 0.0005)  # a signal every half millisecond
+returned = sum(camera.grab(timeout=0.01) is None for _ in range(100))
+signal.setitimer(signal.ITIMER_REAL, 0)
+print(returned)
+"""
+
+
+def test_a_triggered_camera_waiting_for_a_trigger_returns_at_its_timeout_whatever_signals_land():
+    """A signal landing near the deadline of the wait for a trigger once left a camera worker
+    waiting for ever, deaf to its SIGTERM (queue.SimpleQueue on Python 3.11): run in a child, so
+    that a wait that never ends fails here rather than hanging the suite."""
+    done = subprocess.run([sys.executable, "-c", WAIT_UNDER_SIGNALS], capture_output=True, text=True, timeout=30)
+    assert done.returncode == 0, done.stderr
+    assert done.stdout.split() == ["100"]

@@ -73,7 +73,9 @@ class SyntheticCamera(Camera):
         self._jitter_ns = round(o["jitter_ms"] * 1e6)
         self._rng = random.Random(o["seed"] or None)
         self._k = 0
-        self._triggers: queue.SimpleQueue[int] = queue.SimpleQueue()  # trigger times, ns
+        # trigger times, ns. A Queue, not a SimpleQueue: on Python 3.11 SimpleQueue.get(timeout)
+        # waits for ever when a signal lands near its deadline (a worker that ignored its SIGTERM)
+        self._triggers: queue.Queue[int] = queue.Queue()
         self._latency_ns = round(o["trigger_latency_ms"] * 1e6)  # trigger -> exposure
         if o["pattern"] == "chessboard":
             self._check_board_fits()
