@@ -45,7 +45,8 @@ def pytest_sessionstart(session):
 def pytest_collection_modifyitems(session, config, items):
     """The files that took longest last time first, each file's tests together and in their
     order (module-scoped services); files not timed yet keep their places after them."""
-    seconds = config.cache.get(_CACHE_KEY, {}) if config.cache else {}
+    cache = getattr(config, "cache", None)  # None with -p no:cacheprovider (scripts/test-aarch64.sh)
+    seconds = cache.get(_CACHE_KEY, {}) if cache else {}
     if not seconds:
         return
     first_place: dict[str, int] = {}
@@ -63,10 +64,11 @@ def pytest_collection_modifyitems(session, config, items):
 def pytest_sessionfinish(session):
     """Keeps each file's seconds for the next run's order (on the controller, which saw every
     worker's reports)."""
-    if _FILE_SECONDS and session.config.cache and not hasattr(session.config, "workerinput"):
-        kept = session.config.cache.get(_CACHE_KEY, {})
+    cache = getattr(session.config, "cache", None)
+    if _FILE_SECONDS and cache and not hasattr(session.config, "workerinput"):
+        kept = cache.get(_CACHE_KEY, {})
         kept.update(_FILE_SECONDS)
-        session.config.cache.set(_CACHE_KEY, kept)
+        cache.set(_CACHE_KEY, kept)
 
 
 def pytest_runtest_logreport(report):
