@@ -54,8 +54,8 @@ ros-venvs: $(ROS_VENVS)
 demo: setup
 	$(BIN)/python bench/latency/paper.py
 
-# The whole suite on the compiled hot path (the first line fails if it is not compiled), then the
-# engine's, the ring's and the local path's tests again on the pure-Python fallback
+# The whole suite on the compiled hot path (the first line fails if it is not compiled) and, beside
+# it, the unit tests and the ring's and the local path's tests again on the pure-Python fallback
 # (docs/design.md, "The compiled hot path"). `FXIS_PURE_PYTHON=1 make test`: all of it on the fallback.
 PURE_INTEGRATION := tests/integration/test_ring.py tests/integration/test_localpath.py \
                     tests/integration/test_localwaits.py
