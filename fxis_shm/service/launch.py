@@ -144,7 +144,8 @@ class ServiceProcess:
                 processes = json.load(f)["processes"]
         except (OSError, ValueError, KeyError):
             return {}
-        running = {child.pid for child in procstat.children(self.proc.pid)} if self.proc else set()
+        children = procstat.children(self.proc.pid) if self.proc else []
+        running = {child.pid for child in children if child.running}  # not a killed one not yet reaped
         return {key: p["pid"] for key, p in processes.items() if p.get("pid") in running}
 
     def stop(self, timeout: float = 10.0) -> int:
