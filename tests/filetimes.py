@@ -38,27 +38,22 @@ def pytest_runtest_makereport(item, call):
     _CPU_BEFORE[:] = [now]
 
 
+def _file_of(nodeid: str) -> str:
+    return nodeid.split("::")[0]
+
+
 def pytest_sessionstart(session):
     _STARTED.append(time.monotonic())
 
 
 def pytest_collection_modifyitems(session, config, items):
-    """The files that took longest last time first, each file's tests together and in their
-    order (module-scoped services); files not timed yet keep their places after them."""
+    """The files that took longest last time first. The sort is stable and a file's tests share
+    its key, so each file's tests stay together and in their order (module-scoped services);
+    files not timed yet keep their places after them."""
     cache = getattr(config, "cache", None)  # None with -p no:cacheprovider (scripts/test-aarch64.sh)
     seconds = cache.get(_CACHE_KEY, {}) if cache else {}
-    if not seconds:
-        return
-    first_place: dict[str, int] = {}
-    for index, item in enumerate(items):
-        first_place.setdefault(item.nodeid.split("::")[0], index)
-
-    def key(item_and_index):
-        item, index = item_and_index
-        path = item.nodeid.split("::")[0]
-        return (-seconds.get(path, 0.0), first_place[path], index)
-
-    items[:] = [item for item, _ in sorted(zip(items, range(len(items))), key=key)]
+    if seconds:
+        items.sort(key=lambda item: -seconds.get(_file_of(item.nodeid), 0.0))
 
 
 def pytest_sessionfinish(session):
@@ -75,7 +70,7 @@ def pytest_runtest_logreport(report):
     """Set-up, call and teardown of every test, summed per file. With xdist this runs on the
     controller with every worker's reports; a file's tests run on one worker (--dist loadscope),
     so its sum is the time it took there."""
-    path = report.nodeid.split("::")[0]
+    path = _file_of(report.nodeid)
     _FILE_SECONDS[path] += report.duration
     _FILE_CPU[path] += sum(value for key, value in report.user_properties if key == "cpu_s")
 

@@ -122,6 +122,7 @@ class CoordinatorSpec(ChildSpec):
     FORKABLE = True
     TITLE = "fxis coord"  # "fxis coordinator" is a byte too long for the kernel
     VERSION = 2
+
     endpoint: str
     pub: str
     events: str

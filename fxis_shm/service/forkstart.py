@@ -28,6 +28,7 @@ import gc
 import importlib
 import logging
 import os
+import select
 import signal
 import subprocess
 import sys
@@ -64,8 +65,6 @@ class ForkedProcess:
         if timeout is not None:
             fd = os.pidfd_open(self.pid)
             try:
-                import select
-
                 if not select.select([fd], [], [], max(0.0, timeout))[0]:
                     raise subprocess.TimeoutExpired(f"pid {self.pid}", timeout)
             finally:

@@ -51,7 +51,7 @@ def test_a_forked_worker_holds_none_of_the_supervisors_files(start_service):
 
 def test_a_killed_forked_worker_is_forked_again(start_service, wait):
     svc = start_service(*CAMERAS)
-    (old,) = [pid for key, pid in svc.children().items() if key == "camera:a"]
+    old = svc.children()["camera:a"]
     os.kill(old, signal.SIGKILL)
     wait(lambda: svc.children().get("camera:a") not in (None, old), timeout=20, what="camera a restarted")
     new = procstat.read(svc.children()["camera:a"])
