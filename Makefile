@@ -12,16 +12,14 @@ BIN    := $(VENV)/bin
 
 setup: $(VENV)/.installed
 
-# the compiled parts (setup.py): the C helpers and the request engine's modules mypyc compiles
-COMPILED_SOURCES := fxis_shm/shm/_ordered.c fxis_shm/shm/_slotio.c fxis_shm/shm/_fastpick.c fxis_shm/shm/plainpick.c fxis_shm/shm/plainpick.h fxis_shm/shm/seqlock.h \
-                    fxis_shm/core/pickcore.c fxis_shm/core/pickcore.h $(addprefix fxis_shm/core/,$(addsuffix .py,\
-                    timesearch snapshot selection waitpolicy sequences decisions engine))
+# the compiled parts: one list, fxis_shm/_compiledparts.py (setup.py builds them, _compiled.py checks them)
+COMPILED_SOURCES := fxis_shm/_compiledparts.py $(shell $(PYTHON) fxis_shm/_compiledparts.py)
 
 $(VENV)/.installed: pyproject.toml setup.py $(COMPILED_SOURCES) scripts/install-system-packages.sh
 	bash scripts/install-system-packages.sh
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[test,bench,aravis,genicam,record,video,foxglove,ros2]"
+	$(BIN)/python -m pip install --quiet -e ".[aravis,genicam,record,video,foxglove,ros2]" --group test --group lint --group bench
 	touch $@
 
 # Real ROS 2 nodes for the bridge's tests (tests/rclpy_peer.py), each distribution from its wheels in
@@ -81,8 +79,10 @@ RERUN := --reruns 2 -raR
 # its unit tests at the lowest priority (nice 19; a service started at that priority would not
 # keep real time): the main pass, waiting on cameras and sockets, leaves part of the 2 cores
 # idle, and the unit tests (55 CPU-s) get what it leaves, no more. Its report follows the main one's.
-# Last, scripts/test-aarch64.sh's steps on this machine's own CPU (its emulated ARM64 run is by
+# Then scripts/test-aarch64.sh's steps on this machine's own CPU (its emulated ARM64 run is by
 # hand, 25 minutes): the ordering mode, and its pytest call over one file (its list ran above).
+# Last, the release wheel of this machine's Python, built from the sdist and smoke-tested in a fresh
+# venv as a user installs it (`make wheels` builds every CPython 3.10-3.13 installed here).
 PURE_LOG := .pytest_cache/pure-python.log
 test: setup lint $(ROS_VENVS)
 	$(BIN)/python -c "import fxis_shm, os, sys; sys.exit(not (fxis_shm.compiled or os.environ.get('FXIS_PURE_PYTHON') == '1'))"
@@ -96,6 +96,7 @@ test: setup lint $(ROS_VENVS)
 	echo "== the pure-Python pass, beside the main one (FXIS_PURE_PYTHON=1; exit code $$pure_code):"; cat $(PURE_LOG); \
 	test $$main -eq 0 -a $$pure_code -eq 0
 	scripts/test-aarch64.sh --quick -q tests/unit/test_ordering.py
+	WHEEL_PYTHONS=$$($(PYTHON) -c 'import sys; print("%d.%d" % sys.version_info[:2])') scripts/build-wheels.sh .pytest_cache/wheels
 
 # The inner loop: every unit test and one smoke test of a real service (a tuple's pixels checked
 # against its metadata), without lint; `make test` (and CI) still runs everything.
@@ -115,7 +116,7 @@ lint: setup
 # tests that cover it; fails if a mutant survives that docs/mutation.md does not explain.
 # Its work is left in mutants/ (`.venv/bin/mutmut show NAME` shows a mutant).
 $(VENV)/.mutation-installed: $(VENV)/.installed pyproject.toml
-	$(BIN)/python -m pip install --quiet -e ".[mutation]"
+	$(BIN)/python -m pip install --quiet --group mutation
 	touch $@
 
 mutation: $(VENV)/.mutation-installed
@@ -130,3 +131,9 @@ mutation: $(VENV)/.mutation-installed
 
 clean:
 	rm -rf $(VENV) .venv-ros .venv-ros-jazzy build *.egg-info bench/results
+
+# Release wheels: manylinux wheels for every CPython 3.10-3.13 installed here, from the sdist, each
+# smoke-tested in a fresh venv (scripts/build-wheels.sh says how; WHEEL_PYTHONS picks versions).
+.PHONY: wheels
+wheels:
+	scripts/build-wheels.sh dist

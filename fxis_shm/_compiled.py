@@ -27,19 +27,11 @@ import sys
 from collections.abc import Sequence
 from types import ModuleType
 
-PURE = os.environ.get("FXIS_PURE_PYTHON") == "1"
-GROUP = "fxis_shm.core._hot__mypyc"  # mypyc's library of the compiled modules (setup.py)
+from fxis_shm import _compiledparts
 
-# compiled by mypyc (setup.py): the modules of one request's decision, leaves first
-MODULES = (
-    "fxis_shm.core.timesearch",
-    "fxis_shm.core.snapshot",
-    "fxis_shm.core.selection",
-    "fxis_shm.core.waitpolicy",
-    "fxis_shm.core.sequences",
-    "fxis_shm.core.decisions",
-    "fxis_shm.core.engine",
-)
+PURE = os.environ.get("FXIS_PURE_PYTHON") == "1"
+GROUP = _compiledparts.GROUP + "__mypyc"  # mypyc's library of the compiled modules (setup.py)
+MODULES = _compiledparts.MYPYC_MODULES  # the modules of one request's decision, leaves first
 C_HELPERS = ("fxis_shm.shm._slotio", "fxis_shm.shm._fastpick")  # the C readers of the rings
 
 
