@@ -2,13 +2,15 @@
 #   make demo   set everything up, start the default service, run the paper's experiment
 #   make test   set everything up and run the whole test suite
 #   make test-quick  the inner loop, under a minute: the unit tests and one integration smoke test
+#   make docs   the documentation site, built strictly (mkdocs.yml)
+#   make wheels the release wheels (scripts/build-wheels.sh)
 #   make lint   ruff (lint and format) over the tree, mypy --strict over the modules pyproject.toml
 #               lists, import-linter over the layers ([tool.importlinter] in pyproject.toml)
 PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 
-.PHONY: setup demo test test-quick lint clean mutation
+.PHONY: setup demo test test-quick lint clean mutation docs
 
 setup: $(VENV)/.installed
 
@@ -19,7 +21,7 @@ $(VENV)/.installed: pyproject.toml setup.py $(COMPILED_SOURCES) scripts/install-
 	bash scripts/install-system-packages.sh
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[aravis,genicam,record,video,foxglove,ros2]" --group test --group lint --group bench
+	$(BIN)/python -m pip install --quiet -e ".[aravis,genicam,record,video,foxglove,ros2]" --group test --group lint --group bench --group docs
 	touch $@
 
 # Real ROS 2 nodes for the bridge's tests (tests/rclpy_peer.py), each distribution from its wheels in
@@ -84,7 +86,7 @@ RERUN := --reruns 2 -raR
 # Last, the release wheel of this machine's Python, built from the sdist and smoke-tested in a fresh
 # venv as a user installs it (`make wheels` builds every CPython 3.10-3.13 installed here).
 PURE_LOG := .pytest_cache/pure-python.log
-test: setup lint $(ROS_VENVS)
+test: setup lint docs $(ROS_VENVS)
 	$(BIN)/python -c "import fxis_shm, os, sys; sys.exit(not (fxis_shm.compiled or os.environ.get('FXIS_PURE_PYTHON') == '1'))"
 	$(BIN)/python -m compileall -q fxis_shm workers tests bench examples > /dev/null
 	@mkdir -p .pytest_cache
@@ -104,6 +106,13 @@ QUICK_TESTS := tests/unit tests/integration/test_requests.py::test_tuple_pixels_
 
 test-quick: setup
 	$(BIN)/python -m pytest -q $(if $(filter 0,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist load) $(QUICK_TESTS)
+
+# The documentation as a site (mkdocs.yml): docs/*.md, the CLI reference generated from the parsers
+# (scripts/cli_reference.py; a test fails when it differs from --help) and the API reference from the
+# docstrings; strict, so a broken link or anchor, a page left out of the site or an API name that
+# does not resolve fails it. `make test` builds it; open .pytest_cache/site/index.html.
+docs: setup
+	PYTHONPATH=. NO_MKDOCS_2_WARNING=1 $(BIN)/mkdocs build --strict --quiet -d .pytest_cache/site
 
 lint: setup
 	$(BIN)/ruff check .

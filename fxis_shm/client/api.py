@@ -54,17 +54,54 @@ class ClientApi(ABC):
         timeout_ms: float | None = None,
         capture: bool = False,
     ) -> Frame:
-        """The frame of ``camera`` nearest to ``at`` (ns of the caller's clock; default: the
-        moment of this call).
+        """The frame of ``camera`` nearest to ``at``.
 
-        ``capture=True`` with ``at`` in the future: a camera that can be triggered is triggered
-        to capture at ``at`` (its frame says ``capture == "scheduled"``, ``t_target`` and
-        ``residual_ns``); one that cannot answers with its frame nearest ``at`` (``"free"``).
+        Parameters
+        ----------
+        camera
+            The camera's name.
+        at
+            t*, int ns of the caller's clock; default: the moment of this call.
+        wait
+            ``"auto"`` (wait only when a closer frame is about to arrive), ``"next"`` (always a
+            new frame) or ``"none"``; default: the service's setting.
+        timeout
+            Seconds the service may wait for frames (default: its setting).
+        copy
+            False (local path only): the image is a read-only view of the ring slot, with no
+            copy at all; check ``frame.still_valid()`` after using it.
+        encoding, quality
+            ``"raw"``, ``"jpeg"`` or ``"png"`` and the JPEG quality, for this request only.
+        timeout_ms
+            The same as ``timeout``, in ms (deprecated: give ``timeout``).
+        capture
+            True with ``at`` in the future: a camera that can be triggered captures at ``at``
+            (its frame says ``capture == "scheduled"``, ``t_target`` and ``residual_ns``); one
+            that cannot answers with its frame nearest ``at`` (``"free"``).
 
-        ``timeout``: seconds the service may wait for frames (default: its setting).
-        ``copy=False`` (local path only): the image is a read-only view of the ring slot,
-        with no copy at all; check ``frame.still_valid()`` after using it.
-        ``encoding``/``quality``: as the client's, for this request."""
+        Returns
+        -------
+        Frame
+            The image as a NumPy array with its metadata, times in the caller's clock.
+
+        Raises
+        ------
+        InvalidArgument
+            An argument out of its range or of the wrong type.
+        RequestTimeout
+            No reply within the client's ``timeout`` (the client stays usable).
+        UnknownCamera
+            A camera the service does not have.
+        CameraDown
+            A camera whose worker is down (see ``partial`` where offered).
+        FrameTimeout
+            The frames waited for did not arrive within ``timeout``.
+        ServiceError
+            Any other refusal, with its ``code`` (``OUT_OF_RANGE``: history the rings no longer
+            hold, or a t* too far ahead; ``BUSY``: too many waiting requests).
+        Overrun
+            The ring came round during every copy: ask for newer frames or keep more history.
+        """
         if self._fast is not None and not capture and encoding is quality is timeout is timeout_ms is None:
             frame = self._compiled(self._fast.image(camera, at, wait, copy))
             if frame is not None:
@@ -88,11 +125,45 @@ class ClientApi(ABC):
         timeout_ms: float | None = None,
         capture: bool = False,
     ) -> FrameTuple:
-        """One frame per camera (default: all), nearest to ``at`` (ns of the caller's clock;
-        default: the moment of this call) and to each other. With ``partial``, cameras
-        that are down are left out (``.missing`` names them) instead of failing the request
-        with CameraDown. ``capture=True`` with ``at`` in the future: every camera that can be
-        triggered captures at ``at`` (as for ``image``), on every service of the client."""
+        """One frame per camera, nearest to ``at`` and to each other.
+
+        Parameters
+        ----------
+        cameras
+            The cameras' names; default: every camera of the service (or services).
+        at
+            t*, int ns of the caller's clock; default: the moment of this call.
+        sync
+            ``"joint"`` (the frames chosen together for the least skew) or ``"independent"``
+            (each camera's nearest frame, the paper's search); default: the service's setting.
+        wait
+            As for ``image``.
+        max_skew_ms
+            Refuse a tuple whose skew (max minus min capture time) is larger (SkewExceeded,
+            naming the best skew there was).
+        timeout
+            Seconds the service may wait for frames (default: its setting).
+        partial
+            True: cameras that are down are left out (``.missing`` names them) instead of
+            failing the request with CameraDown.
+        copy, encoding, quality, timeout_ms
+            As for ``image``.
+        capture
+            True with ``at`` in the future: every camera that can be triggered captures at
+            ``at`` (as for ``image``), on every service of the client.
+
+        Returns
+        -------
+        FrameTuple
+            Camera name to Frame, with ``skew_ns``, ``t_request`` and ``timing``.
+
+        Raises
+        ------
+        InvalidArgument, RequestTimeout, UnknownCamera, CameraDown, FrameTimeout, ServiceError, Overrun
+            As for ``image``.
+        SkewExceeded
+            With ``max_skew_ms``: no tuple near t* was that well synchronized.
+        """
         fast = not capture and encoding is quality is timeout is timeout_ms is max_skew_ms is None
         if self._fast is not None and fast:
             tuple_ = self._compiled(self._fast.tuple(cameras, at, sync, wait, copy))
@@ -124,7 +195,25 @@ class ClientApi(ABC):
         encoding: str | None = None,
         quality: int | None = None,
     ) -> FrameTuple:
-        """The newest stored frame of each camera, without waiting."""
+        """The newest stored frame of each camera, without waiting.
+
+        Parameters
+        ----------
+        cameras
+            The cameras' names; default: every camera.
+        copy, encoding, quality
+            As for ``image``.
+
+        Returns
+        -------
+        FrameTuple
+            Camera name to its newest Frame (not chosen together: the skew is whatever it is).
+
+        Raises
+        ------
+        RequestTimeout, UnknownCamera, CameraDown, ServiceError
+            As for ``image``; ``NO_FRAMES`` (a ServiceError) while a camera has stored none.
+        """
         if self._fast is not None and encoding is quality is None:
             tuple_ = self._compiled(self._fast.latest(cameras, copy))
             if tuple_ is not None:
@@ -150,12 +239,36 @@ class ClientApi(ABC):
         quality: int | None = None,
         timeout_ms: float | None = None,
     ) -> list:
-        """Several frames of one ``camera`` (a list of Frame) or tuples of ``cameras``
-        (default all; a list of FrameTuple):
+        """Several frames of one camera, or several tuples.
 
-        - ``kind="consecutive"``: ``count`` frames ``before``, ``after`` or ``around`` t*;
-        - ``kind="interval"``: the frames nearest to t* + i*interval_ms, i = 0..count-1;
-        - ``kind="range"``: every frame captured in [start, end] (ns of the caller's clock).
+        Parameters
+        ----------
+        kind
+            ``"consecutive"``: ``count`` frames ``before``, ``after`` or ``around`` t*;
+            ``"interval"``: the frames nearest to t* + i * interval_ms, i = 0..count-1;
+            ``"range"``: every frame captured in [start, end].
+        camera
+            One camera: the result is a list of Frame.
+        cameras
+            Several cameras (default: all): a list of FrameTuple, led by the first camera.
+        count, direction, interval_ms
+            As ``kind`` says (``direction``: ``"before"``, ``"after"`` or ``"around"``).
+        start, end
+            int ns of the caller's clock, for ``kind="range"``.
+        at
+            t*, int ns of the caller's clock; default: the moment of this call.
+        sync, timeout, copy, encoding, quality, timeout_ms
+            As for ``tuple``.
+
+        Returns
+        -------
+        list
+            Frames (``camera=``) or FrameTuples (``cameras=``), oldest first.
+
+        Raises
+        ------
+        InvalidArgument, RequestTimeout, UnknownCamera, CameraDown, FrameTimeout, ServiceError, Overrun
+            As for ``image``.
         """
         header, images, check = self._answer(
             "sequence",
@@ -192,13 +305,41 @@ class ClientApi(ABC):
         preset: str | None = None,
         gop_s: float | None = None,
     ) -> dict:
-        """Every frame of ``cameras`` (default all) captured in [at - before, at + after]
-        (``at``: ns of the caller's clock, default now; seconds) into the rosbag2/MCAP bag
-        ``out``, stamps in the caller's clock; returns per camera the frames kept and the ids
-        of any missing (fxis_shm.client.snapshot). Blocks until ``at + after`` has passed.
-        ``codec`` (h264, h265, av1; or ``encoding="h264"``, the same): each camera as video, the
-        window's first frame a keyframe, with ``encoder``, ``crf``, ``preset``, ``gop_s`` as
-        ``fxis record --codec`` takes them."""
+        """Every frame captured in [at - before, at + after] into a rosbag2/MCAP bag.
+
+        Blocks until ``at + after`` has passed: the window's past comes from the rings at once,
+        its future as the frames arrive. The bag is written as ``OUT.partial`` and renamed when
+        complete; its stamps are in the caller's clock.
+
+        Parameters
+        ----------
+        at
+            The event's moment, int ns of the caller's clock; default: now.
+        before, after
+            Seconds of the window before and after ``at``.
+        out
+            The bag's folder (it must not exist).
+        cameras
+            The cameras' names; default: all.
+        encoding, quality
+            ``"raw"``, ``"jpeg"`` (with its quality), or a video codec (the same as ``codec``).
+        codec, encoder, crf, preset, gop_s
+            Each camera as video (``"h264"``, ``"h265"``, ``"av1"``), the window's first frame a
+            keyframe, with the encoder options ``fxis record --codec`` takes.
+
+        Returns
+        -------
+        dict
+            ``cameras``: per camera the ``frames`` kept and the ids of any ``missing``; the
+            window and the bag's path.
+
+        Raises
+        ------
+        InvalidArgument
+            A bad window, folder or video setting.
+        RequestTimeout, UnknownCamera, CameraDown, ServiceError
+            As for ``image`` (``OUT_OF_RANGE`` when the rings no longer hold the window's start).
+        """
         encoding, codec = split_encoding(encoding, codec)
         owners = self._owners(cameras)
         settings = VideoSettings(codec, encoder, crf, preset, gop_s) if codec is not None else None

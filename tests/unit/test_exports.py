@@ -1,4 +1,4 @@
-"""The public API is exactly what README.md documents, all importable from ``fxis_shm``."""
+"""The public API is exactly what docs/quickstart.md documents, all importable from ``fxis_shm``."""
 
 import pathlib
 import re
@@ -7,12 +7,12 @@ import sys
 
 import fxis_shm
 
-README = pathlib.Path(__file__).resolve().parents[2] / "README.md"
+QUICKSTART = pathlib.Path(__file__).resolve().parents[2] / "docs" / "quickstart.md"
 
 
 def documented_names() -> set[str]:
-    text = README.read_text()
-    section = text.split("### The public API", 1)[1].split("\n## ", 1)[0]
+    text = QUICKSTART.read_text()
+    section = text.split("## The public API", 1)[1].split("\n## ", 1)[0]
     return set(re.findall(r"`([A-Za-z_]+)`", section)) - {"fxis_shm", "__all__"}
 
 
