@@ -33,9 +33,15 @@ mkdir -p "$OUT"
 sdist=$(ls "$OUT"/fxis_shm-*.tar.gz)
 echo "sdist: $sdist ($(du -k "$sdist" | cut -f1) KB)"
 
-find_python() {
-  command -v "python$1" 2>/dev/null && return
-  ls -d "${PYENV_ROOT:-$HOME/.pyenv}"/versions/"$1".*/bin/python 2>/dev/null | sort -V | tail -1
+find_python() {  # an interpreter of CPython $1 that runs (a pyenv shim of a version not selected does not)
+  local candidate
+  for candidate in $(command -v "python$1" 2>/dev/null) \
+      $(ls -d "${PYENV_ROOT:-$HOME/.pyenv}"/versions/"$1".*/bin/python 2>/dev/null | sort -V -r); do
+    if "$candidate" -c 'import sys; sys.exit(sys.version_info[:2] != tuple(map(int, "'"$1"'".split("."))))' 2>/dev/null; then
+      echo "$candidate"
+      return
+    fi
+  done
 }
 
 built=0
