@@ -443,7 +443,9 @@ class Coordinator:
         try:
             send_parts(self.router, envelope + frames)
         except zmq.Again:
-            log.warning("dropped a reply: the client is not reading its replies")
+            dropped = "dropped a reply: the client is not reading its replies"
+            for line in self.tally.note("dropped replies", dropped, timebase.now()):
+                log.warning("%s", line)
         except zmq.ZMQError as exc:  # EHOSTUNREACH: the client went away
             log.info("could not send a reply: %s", exc)
 

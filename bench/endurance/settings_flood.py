@@ -1,0 +1,172 @@
+"""A client flooding ``settings`` beside a good client (issue 42, finding 4).
+
+Launches a service (2 synthetic cameras, 20 fps, 640x480). A good client asks camera a's
+``latest`` every --interval-ms over the network path (no shared memory), for --seconds without
+a flood, then for --seconds beside a flooder: a DEALER that keeps --depth settings requests in
+flight on camera a, changes (gain 1 and 2 by turns) and reads alternating, as fast as the
+service answers. Prints the good client's ``latest`` p50/p99 and its CAMERA_DOWN count per
+phase, what the flooder's requests got (ok, BUSY, other), camera a's frames stored and dropped,
+and the target: p99 with the flood within 2x of p99 without. Writes settings_flood.json.
+"""
+
+from __future__ import annotations
+
+import collections
+import json
+import os
+import sys
+import threading
+import time
+
+import zmq
+
+if not __package__:  # run as a script (python bench/endurance/settings_flood.py): the project root on the path
+    sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
+from bench.shared import common
+from fxis_shm import Client, FxisError
+from fxis_shm.errors import Code
+from fxis_shm.service.launch import ServiceProcess
+from fxis_shm.wire import protocol
+
+TARGET_RATIO = 2.0  # the flood's p99 against the quiet one's (issue 42, "What to build" 3)
+
+
+class Flooder(threading.Thread):
+    """Keeps ``depth`` settings requests on ``camera`` in flight until ``stop`` is set, then
+    collects the answers still due (for at most ``drain_s``: a reply the service dropped
+    because this client's queue was full never comes); ``replies`` counts them by ok or
+    error code, and "unanswered"."""
+
+    def __init__(self, endpoint: str, camera: str, depth: int = 64, drain_s: float = 2.0):
+        super().__init__(daemon=True, name="flooder")
+        self.endpoint, self.camera, self.depth, self.drain_s = endpoint, camera, depth, drain_s
+        self.stop = threading.Event()
+        self.replies: collections.Counter[str] = collections.Counter()
+        self.sent = 0
+
+    def _request(self) -> list[bytes]:
+        n = self.sent
+        change = {"set": {"gain": 1 + n // 2 % 2}} if n % 2 == 0 else {}
+        return protocol.encode_request("settings", id=n, camera=self.camera, **change)
+
+    def run(self) -> None:
+        ctx = zmq.Context()
+        sock = ctx.socket(zmq.DEALER)
+        sock.setsockopt(zmq.LINGER, 0)
+        sock.connect(self.endpoint)
+        try:
+            while not self.stop.is_set():
+                while self.sent - sum(self.replies.values()) < self.depth:
+                    sock.send_multipart([b"", *self._request()])
+                    self.sent += 1
+                if sock.poll(100):
+                    self._receive(sock)
+            deadline = time.monotonic() + self.drain_s
+            while self.sent > sum(self.replies.values()) and time.monotonic() < deadline:
+                if sock.poll(100):
+                    self._receive(sock)
+            self.replies["unanswered"] = self.sent - sum(self.replies.values())
+        finally:
+            sock.close()
+            ctx.term()
+
+    def _receive(self, sock: zmq.Socket) -> None:
+        while sock.poll(0):
+            header = json.loads(sock.recv_multipart()[1])
+            self.replies["ok" if header["ok"] else header["error"]["code"]] += 1
+
+
+def good_client(endpoint: str, camera: str, seconds: float, interval_s: float) -> dict:
+    """``latest`` of ``camera`` every ``interval_s`` for ``seconds`` over the network path:
+    each call's ms, and the errors by code (CAMERA_DOWN among them)."""
+    took, errors = [], collections.Counter()
+    with Client(endpoint, timeout=10, local="off") as client:
+        end = time.monotonic() + seconds
+        while time.monotonic() < end:
+            began = time.perf_counter()
+            try:
+                client.latest([camera])
+                took.append((time.perf_counter() - began) * 1e3)
+            except FxisError as exc:
+                errors[getattr(exc, "code", None) or type(exc).__name__] += 1
+            time.sleep(max(0.0, interval_s - (time.perf_counter() - began)))
+    return {"ms": took, "errors": dict(errors)}
+
+
+def _frames(client: Client, camera: str) -> tuple[int, int]:
+    info = client.status()["cameras"][camera]
+    return info["frames_stored"], info["frames_dropped"]
+
+
+def phase(svc: ServiceProcess, client: Client, args, flood: bool) -> dict:
+    flooder = Flooder(svc.endpoint, "a", args.depth) if flood else None
+    stored, dropped = _frames(client, "a")
+    if flooder is not None:
+        flooder.start()
+    good = good_client(svc.endpoint, "a", args.seconds, args.interval_ms / 1e3)
+    if flooder is not None:
+        flooder.stop.set()
+        flooder.join()
+    after = _frames(client, "a")
+    return {
+        **good,
+        "flooder": dict(flooder.replies) if flooder else None,
+        "frames_stored": after[0] - stored,
+        "frames_dropped": after[1] - dropped,
+    }
+
+
+def main(argv: list[str] | None = None) -> int:
+    p = common.parser_for(__file__, __doc__)
+    p.add_argument("--seconds", type=common.positive_float, default=8.0, help="of each phase")
+    p.add_argument("--interval-ms", type=common.positive_float, default=50.0, help="between the good client's calls")
+    p.add_argument("--depth", type=common.positive_int, default=64, help="the flooder's requests in flight")
+    p.add_argument("--out", default=common.DEFAULT_OUT)
+    args = p.parse_args(argv)
+    out = common.ensure_dir(args.out)
+    flags = common.synthetic_camera_flags(["a", "b"], 20.0, 640, 480)
+    with (
+        open(os.path.join(out, "settings_flood.service.log"), "wb") as log,
+        ServiceProcess(flags, stderr=log) as svc,
+        svc.client(timeout=5) as client,
+    ):
+        common.wait_until_streaming(client)
+        results = {"no flood": phase(svc, client, args, False), "flood": phase(svc, client, args, True)}
+    rows = []
+    for name, r in results.items():
+        s = common.summary(r["ms"])
+        replies = r["flooder"] or {}
+        rows.append(
+            [
+                name,
+                s["n"],
+                s["median"],
+                s["p99"],
+                r["errors"].get(Code.CAMERA_DOWN, 0),
+                sum(n for code, n in r["errors"].items() if code != Code.CAMERA_DOWN),
+                replies.get("ok", "-"),
+                replies.get(Code.BUSY, "-"),
+                sum(n for code, n in replies.items() if code not in ("ok", Code.BUSY)) if replies else "-",
+                r["frames_stored"],
+                r["frames_dropped"],
+            ]
+        )
+    header = ["phase", "latest n", "p50 ms", "p99 ms", "CAMERA_DOWN", "other errors"]
+    header += ["flooder ok", "flooder BUSY", "flooder other", "a stored", "a dropped"]
+    print(common.table(header, rows, digits=2, title=f"the good client's latest('a') every {args.interval_ms:g} ms"))
+    quiet, flooded = (common.summary(results[k]["ms"])["p99"] for k in ("no flood", "flood"))
+    ratio = flooded / quiet if quiet and flooded else None
+    passed = None if ratio is None else ratio <= TARGET_RATIO and not results["flood"]["errors"]
+    print(
+        f"target: p99 with the flood within {TARGET_RATIO:g}x of without, no CAMERA_DOWN: "
+        f"{common.fmt(ratio)}x {common.verdict(passed)}"
+    )
+    common.write_json(
+        os.path.join(out, "settings_flood.json"),
+        {"results": results, "ratio": ratio, "host": common.host_info(), "code": common.code_version()},
+    )
+    return 0
+
+
+if __name__ == "__main__":
+    sys.exit(main())
