@@ -95,7 +95,7 @@ def set_command(args) -> int:
         with client_for(args) as client:
             answer = client.configure(args.camera, **values)
         if args.save:
-            save_camera_values(args.config, args.camera, answer["changed"])
+            save_camera_values(args.config, args.camera, answer["changed"], given=values)
     except (ServiceError, RequestTimeout, ConfigError) as exc:
         return _failed("set", exc)
     if args.json:
