@@ -14,12 +14,13 @@ from __future__ import annotations
 import logging
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 from fxis_shm.core import timebase
 from fxis_shm.core.tuning import UNCHANGED
 from fxis_shm.errors import Code, ProtocolError
 from fxis_shm.service.logtally import LogTally
-from fxis_shm.service.workerlink import WorkerLinks
+from fxis_shm.service.workerlink import Done, WorkerLinks
 from fxis_shm.shm.cameras import CameraHandle
 from fxis_shm.wire import commands, protocol
 
@@ -29,16 +30,17 @@ CHANGES_LIMIT = 8  # changes (and feature lists) waiting for a camera's worker; 
 READERS_LIMIT = 64  # reads waiting for a worker's first report of a new generation; beyond: BUSY
 REPORTED = ("values", "limits", "generation", "ptp")  # what a read answers with
 
-Respond = Callable[[list], None]
+Message = dict[str, Any]  # a request, a reply's body, a worker's report
+Respond = Callable[[list[Any]], None]
 # (respond, request, reply body): the coordinator's reply, counted and stamped
-Answer = Callable[[Respond, dict, dict], None]
+Answer = Callable[[Respond, Message, Message], None]
 
 
 @dataclass
 class _Camera:
-    report: dict | None = None  # the worker's last report (REPORTED), None: none yet
+    report: Message | None = None  # the worker's last report (REPORTED), None: none yet
     asking: bool = False  # a report asked for, not answered yet
-    readers: list[tuple[dict, Respond]] = field(default_factory=list)  # reads waiting for it
+    readers: list[tuple[Message, Respond]] = field(default_factory=list)  # reads waiting for it
     changes: int = 0  # changes sent to the worker, not answered yet
 
 
@@ -47,14 +49,14 @@ class SettingsDesk:
         self,
         cameras: dict[str, CameraHandle],
         answer: Answer,
-        publish: Callable[[str, list], None],
+        publish: Callable[[str, list[Any]], None],
         tally: LogTally,
     ):
         self.cameras, self._answer, self._publish, self._tally = cameras, answer, publish, tally
         self._known = {name: _Camera() for name in cameras}
         self.links: WorkerLinks | None = None  # set when the coordinator's sockets are made
 
-    def request(self, request: dict, respond: Respond) -> None:
+    def request(self, request: Message, respond: Respond) -> None:
         """Answer a ``settings`` request, now or when the worker has; ProtocolError for one
         that cannot be (unknown camera, BUSY, CAMERA_DOWN)."""
         camera = request["camera"]
@@ -76,23 +78,25 @@ class SettingsDesk:
         known.asking = True
         self.links.send(camera, commands.SETTINGS, commands.SETTINGS_TIMEOUT_S, self._reported(camera))
 
-    def values(self, camera: str, generation: int | None) -> dict | None:
+    def values(self, camera: str, generation: int | None) -> Message | None:
         """For status: the values the worker reported for this generation of its frames; for
         another, the worker is asked again (None until it answers)."""
         report = self._known[camera].report
         if report is not None and generation in (report["generation"], None):
-            return report["values"]
+            values: Message = report["values"]
+            return values
         if generation is not None:
             self.ask(camera)
         return None
 
-    def ptp(self, camera: str) -> dict | None:
+    def ptp(self, camera: str) -> Message | None:
         report = self._known[camera].report
-        return None if report is None else report.get("ptp")
+        ptp: Message | None = None if report is None else report.get("ptp")
+        return ptp
 
     # ---- reads ----
 
-    def _read(self, camera: str, request: dict, respond: Respond) -> None:
+    def _read(self, camera: str, request: Message, respond: Respond) -> None:
         handle = self.cameras[camera]
         down = handle.down_reason(timebase.now())
         if down is not None:
@@ -107,8 +111,8 @@ class SettingsDesk:
         known.readers.append((request, respond))
         self.ask(camera)
 
-    def _reported(self, camera: str):
-        def done(result: dict | None, code: str | None, message: str | None) -> None:
+    def _reported(self, camera: str) -> Done:
+        def done(result: Message | None, code: str | None, message: str | None) -> None:
             known = self._known[camera]
             known.asking = False
             readers, known.readers = known.readers, []
@@ -117,15 +121,15 @@ class SettingsDesk:
                 for request, respond in readers:
                     respond(protocol.encode_error(request["id"], code or Code.INTERNAL, message or ""))
                 return
-            self._keep(camera, result)
+            report = self._keep(camera, result)
             for request, respond in readers:
-                self._answer(respond, request, {"op": "settings", "camera": camera, **known.report})
+                self._answer(respond, request, {"op": "settings", "camera": camera, **report})
 
         return done
 
     # ---- changes ----
 
-    def _change(self, camera: str, request: dict, respond: Respond) -> None:
+    def _change(self, camera: str, request: Message, respond: Respond) -> None:
         known = self._known[camera]
         if known.changes >= CHANGES_LIMIT:
             raise self._busy(
@@ -135,7 +139,7 @@ class SettingsDesk:
             )
         known.changes += 1
 
-        def done(result: dict | None, code: str | None, message: str | None) -> None:
+        def done(result: Message | None, code: str | None, message: str | None) -> None:
             known.changes -= 1
             if result is None:
                 respond(protocol.encode_error(request["id"], code or Code.INTERNAL, message or ""))
@@ -147,18 +151,19 @@ class SettingsDesk:
         assert self.links is not None
         self.links.send(camera, commands.SETTINGS, commands.SETTINGS_TIMEOUT_S, done, **fields)
 
-    def _keep(self, camera: str, result: dict) -> None:
+    def _keep(self, camera: str, result: Message) -> Message:
         """Keep a worker's report for reads and status, and announce a change (the log, and
         the event ``settings/CAMERA|`` on the publish endpoint); a change to the values the
-        camera had is none."""
-        self._known[camera].report = {key: result.get(key) for key in REPORTED}
+        camera had is none. Returns the report kept."""
+        report = self._known[camera].report = {key: result.get(key) for key in REPORTED}
         if result.get("cost", UNCHANGED) == UNCHANGED:
-            return
+            return report
         text = f"camera {camera} changed {result['changed']} ({result['cost']})"
         for line in self._tally.note(f"changes of camera {camera}", text, timebase.now()):
             log.info("%s", line)
         event = {k: result[k] for k in ("changed", "cost", "values", "generation")}
         self._publish(f"settings/{camera}|", protocol.encode_reply(None, {"camera": camera, **event}))
+        return report
 
     def _busy(self, camera: str, message: str) -> ProtocolError:
         for line in self._tally.note(f"BUSY settings of camera {camera}", message, timebase.now()):
