@@ -2,8 +2,10 @@
 
 The worker binds a ROUTER socket on ``ipc://`` under the service's commands folder (mode 0700;
 the socket file 0600), so only the service's own user can reach it. A thread of its own
-receives the coordinator's commands and queues them; the capture loop takes them between two
-frames (``take``), applies them and hands back each reply (``reply``), which the thread sends.
+receives the coordinator's commands and queues them (at most ``INBOX_LIMIT``: beyond, BUSY at
+once); the capture loop takes one between two frames (``take``), applies it and hands back its
+reply (``reply``), which the thread sends. One a frame: a flood of commands slows the commands,
+never the frames.
 The sockets stay in their threads: the capture loop's side is a PAIR socket into the thread.
 A worker that restarts binds the same path again, and the coordinator's DEALER reconnects.
 """
@@ -25,6 +27,8 @@ from fxis_shm.wire import commands
 
 log = logging.getLogger("camera")
 _POLL_MS = 100  # how often the thread looks at the stop event when nothing arrives
+# commands waiting for the capture loop; the coordinator sends at most 8 changes and 1 read a camera
+INBOX_LIMIT = 16
 
 
 class Command:
@@ -75,7 +79,7 @@ class CommandServer:
         self._replies_in.bind(inner)
         self._replies_out = self._socket(zmq.PAIR)  # the capture loop's end
         self._replies_out.connect(inner)
-        self._inbox: queue.SimpleQueue[Command] = queue.SimpleQueue()
+        self._inbox: queue.Queue[Command] = queue.Queue(INBOX_LIMIT)
         self._stop = stop
         self._thread = threading.Thread(target=self._serve, daemon=True, name="commands")
         self._thread.start()
@@ -87,14 +91,12 @@ class CommandServer:
 
     # ---- the capture loop's side ----
 
-    def take(self) -> list[Command]:
-        """The commands that arrived since the last look (none: an empty list, at once)."""
-        taken = []
-        while True:
-            try:
-                taken.append(self._inbox.get_nowait())
-            except queue.Empty:
-                return taken
+    def take(self) -> Command | None:
+        """The oldest command waiting (None: none, at once)."""
+        try:
+            return self._inbox.get_nowait()
+        except queue.Empty:
+            return None
 
     def send(self, envelope: list[bytes], reply: bytes) -> None:
         self._replies_out.send_multipart([*envelope, reply])
@@ -139,7 +141,11 @@ class CommandServer:
             return
         handle = self._direct.get(command["cmd"])
         if handle is None:
-            self._inbox.put(Command(self, envelope, command))
+            try:
+                self._inbox.put_nowait(Command(self, envelope, command))
+            except queue.Full:
+                message = f"the camera worker has {INBOX_LIMIT} commands waiting (it applies one a frame)"
+                self._router.send_multipart([*envelope, commands.encode_failure(command["id"], Code.BUSY, message)])
             return
         try:
             reply = commands.encode_result(command["id"], handle(command))
@@ -152,19 +158,27 @@ class CommandServer:
 
 
 def serve_pending(server: CommandServer | None, handle: Callable[[Command], dict]) -> None:
-    """Apply every command waiting, between two frames: each gets its result, or a clear error."""
-    if server is None:
+    """Apply the oldest command waiting, between two frames: it gets its result, or a clear
+    error. At most one a call, so that the frames go on whatever number of commands comes."""
+    command = _next_in_time(server) if server is not None else None
+    if command is None:
         return
-    for command in server.take():
+    try:
+        command.reply(handle(command))
+    except (ValueError, ProtocolError) as exc:  # refused: the camera keeps its settings
+        code = getattr(exc, "code", Code.SETTING_REFUSED)
+        command.fail(code, str(getattr(exc, "message", exc)))
+    except Exception as exc:  # a bug must not stop the camera
+        log.exception("command %s failed", command.body.get("cmd"))
+        command.fail(Code.INTERNAL, f"{type(exc).__name__}: {exc}")
+
+
+def _next_in_time(server: CommandServer) -> Command | None:
+    """The oldest command whose deadline has not passed (the others are dropped: their callers
+    were told they timed out)."""
+    while (command := server.take()) is not None:
         deadline = command.body.get("deadline")
-        if isinstance(deadline, int) and timebase.now() > deadline:  # its caller was told it timed out
-            log.warning("dropped a %s command that came after its deadline", command.body.get("cmd"))
-            continue
-        try:
-            command.reply(handle(command))
-        except (ValueError, ProtocolError) as exc:  # refused: the camera keeps its settings
-            code = getattr(exc, "code", Code.SETTING_REFUSED)
-            command.fail(code, str(getattr(exc, "message", exc)))
-        except Exception as exc:  # a bug must not stop the camera
-            log.exception("command %s failed", command.body.get("cmd"))
-            command.fail(Code.INTERNAL, f"{type(exc).__name__}: {exc}")
+        if not isinstance(deadline, int) or timebase.now() <= deadline:
+            return command
+        log.warning("dropped a %s command that came after its deadline", command.body.get("cmd"))
+    return None

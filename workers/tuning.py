@@ -4,7 +4,10 @@ settings, or change some, all or none.
 Live keys are set on the running camera (and put back as they were if it refuses one);
 keys that cost a restart (size, pixel format, region) restart the stream with the camera's
 options plus every key asked for, so the new ring, its generation and the camera agree.
-Every refusal names the limits; the camera keeps running on its old settings.
+Every refusal names the limits; the camera keeps running on its old settings. A key asked for
+with the value it has already is left alone (a request of only such keys costs ``UNCHANGED``:
+nothing applied, no restart); a key that does not apply in the camera's mode (``fps`` on the
+lockstep grid) is described read-only with the reason, so a change of it is refused with it.
 """
 
 from __future__ import annotations
@@ -14,7 +17,7 @@ import logging
 import os
 from typing import TYPE_CHECKING
 
-from fxis_shm.core.tuning import LIVE, RESTART, check_change, cost_of
+from fxis_shm.core.tuning import LIVE, READ_ONLY, RESTART, UNCHANGED, check_change, cost_of
 from fxis_shm.errors import ConfigError, SettingRefused
 from fxis_shm.service.childspec import CameraWorkerSpec
 from fxis_shm.shm import naming
@@ -32,14 +35,18 @@ def handle(stream: Stream, command: dict) -> dict:
     asked = command.get("set") or {}
     cost = None
     if asked:
-        split = check_change(camera.name, camera.settings(asked), asked)
+        described = described_in_mode(stream, asked)
+        split = check_change(camera.name, described, asked)
+        for values in split.values():  # a key at the value it has: nothing to apply
+            for key in [k for k, v in values.items() if described[k]["value"] == v]:
+                del values[key]
         cost = cost_of(split)
         if cost == RESTART:
             _restart(stream, {**split[LIVE], **split[RESTART]})
-        else:
+        elif cost == LIVE:
             _live(stream, split[LIVE])
         camera = stream.camera
-    described = camera.settings(asked)
+    described = described_in_mode(stream, asked)
     answer = {
         "values": {key: entry["value"] for key, entry in described.items()},
         "limits": {key: {k: v for k, v in entry.items() if k != "value"} for key, entry in described.items()},
@@ -48,11 +55,24 @@ def handle(stream: Stream, command: dict) -> dict:
     answer["ptp"] = _ptp(camera)
     if asked:
         answer.update(changed={key: described[key]["value"] for key in asked}, cost=cost)
-        log.info("camera %s: set %s (%s), took %s", camera.name, asked, cost, answer["changed"])
-        remember(stream)
+        log.debug("camera %s: set %s (%s), took %s", camera.name, asked, cost, answer["changed"])
+        if cost != UNCHANGED:
+            remember(stream)
     if command.get("features"):
         answer["features"] = camera.features()
     return answer
+
+
+def described_in_mode(stream: Stream, extra=()) -> dict:
+    """The camera's settings as they apply in its mode: on the lockstep grid (a camera that
+    can be triggered, in a service run with --lockstep) the grid sets the frame rate, so
+    ``fps`` is read-only there, saying why."""
+    described = stream.camera.settings(extra)
+    grid = stream.timer.lockstep if stream.timer is not None and stream.camera.supports_trigger else None
+    if grid is not None and "fps" in described:
+        note = f"it does not apply on the lockstep grid, whose {grid[0]:g} Hz set the camera's rate (--lockstep)"
+        described["fps"] = {**described["fps"], "access": READ_ONLY, "note": note}
+    return described
 
 
 def _ptp(camera) -> dict | None:

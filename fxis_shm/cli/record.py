@@ -75,11 +75,14 @@ def record_command(args) -> int:
     print(summary_table(summary))
     if summary["interrupted_by"]:
         return interrupted("record", f"interrupted by {summary['interrupted_by']}: {kept_line(summary)}")
+    if summary.get("stopped_by"):  # a camera restarted as its video track cannot go on
+        print(f"fxis record: {summary['stopped_by']}: the recording stopped and {kept_line(summary)}", file=sys.stderr)
+        return exitcodes.FAILED
     return exitcodes.DONE
 
 
 def kept_line(summary: dict) -> str:
-    """What an interrupted recording kept, in one line."""
+    """What an interrupted or stopped recording kept, in one line."""
     frames = ", ".join(f"{cam} {c['frames']} frames" for cam, c in summary["cameras"].items())
     tuples = f", {summary['tuples']} tuples" if summary["tuples"] is not None else ""
     return f"kept {frames}{tuples}, {summary['seconds']:.1f} s, in {summary['out']}, a valid bag"

@@ -8,7 +8,7 @@ import sys
 
 from fxis_shm.cli import exitcodes
 from fxis_shm.cli.options import add_client_options, client_for
-from fxis_shm.core.tuning import limits_text
+from fxis_shm.core.tuning import UNCHANGED, limits_text
 from fxis_shm.errors import ConfigError, RequestTimeout, ServiceError, UnknownCamera
 from fxis_shm.service.configedit import camera_table, save_camera_values
 
@@ -95,14 +95,16 @@ def set_command(args) -> int:
         with client_for(args) as client:
             answer = client.configure(args.camera, **values)
         if args.save:
-            save_camera_values(args.config, args.camera, answer["changed"])
+            save_camera_values(args.config, args.camera, answer["changed"], given=values)
     except (ServiceError, RequestTimeout, ConfigError) as exc:
         return _failed("set", exc)
     if args.json:
         print(json.dumps(answer, indent=2))
         return exitcodes.DONE
     took = " ".join(f"{k}={v}" for k, v in answer["changed"].items())
-    how = "live" if answer["cost"] == "live" else f"the stream restarted, generation {answer['generation']}"
+    how = {"live": "live", UNCHANGED: "unchanged: the camera has these values"}.get(
+        answer["cost"], f"the stream restarted, generation {answer['generation']}"
+    )
     saved = f"; saved in {args.config}" if args.save else ""
     print(f"camera {args.camera!r}: {took} ({how}){saved}")
     return exitcodes.DONE

@@ -16,6 +16,7 @@ from typing import Any
 from fxis_shm.errors import SettingRefused
 
 LIVE, RESTART = "live", "restart"  # applied between two frames / the stream restarts (new ring, generation + 1)
+UNCHANGED = "none"  # a change's cost when every value asked for is the one the camera has: nothing applied
 READ_WRITE, READ_ONLY = "rw", "ro"
 TYPES = ("int", "float", "bool", "enum", "string")
 
@@ -125,5 +126,6 @@ def check_change(
 
 
 def cost_of(split: Mapping[str, Mapping[str, Any]]) -> str:
-    """What applying a checked change costs: a restart of the stream if any key needs one."""
-    return RESTART if split[RESTART] else LIVE
+    """What applying a checked change costs: a restart of the stream if any key needs one,
+    nothing if no key is left to apply."""
+    return RESTART if split[RESTART] else LIVE if split[LIVE] else UNCHANGED

@@ -13,9 +13,14 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
-from fxis_shm.errors import FxisError
+from fxis_shm.errors import ConfigError, FxisError
 from fxis_shm.formats import rosmsgs, videochoice
-from fxis_shm.formats.videoencoder import CameraEncoder, StreamEncoder, encoding_of, opens, require_av
+from fxis_shm.formats.videoencoder import CameraEncoder, StreamEncoder, check_image, encoding_of, opens, require_av
+
+
+class CannotCarry(FxisError):
+    """A camera restarted in a size or format its video track cannot carry (an odd width for
+    4:2:0 video): the recording ends there, with what it has (fxis_shm.record.recorder)."""
 
 
 @dataclass
@@ -82,9 +87,15 @@ class VideoTracks:
 
     def offer(self, frame, t_stamp: int) -> str | None:
         """Hand the frame to its camera's encoder; the words for a new generation (a camera
-        restarted, maybe at a new size), which its encoder begins with a keyframe."""
-        self.encoders[frame.camera].offer(frame.image, t_stamp, frame.frame_id, frame.generation)
+        restarted, maybe at a new size), which its encoder begins with a keyframe, or
+        CannotCarry for one the track cannot carry (its frames are not offered)."""
         before = self._generations.get(frame.camera)
+        if before is not None and before != frame.generation:
+            try:
+                check_image(self.plan.choice.codec, frame.camera, frame.image)
+            except ConfigError as exc:
+                raise CannotCarry(f"{exc} (from its generation {frame.generation} on)") from None
+        self.encoders[frame.camera].offer(frame.image, t_stamp, frame.frame_id, frame.generation)
         self._generations[frame.camera] = frame.generation
         if before is None or before == frame.generation:
             return None

@@ -28,7 +28,7 @@ from fxis_shm.core import timebase
 from fxis_shm.errors import CameraDown, ConfigError, DiskFull, Overwritten, ServiceError
 from fxis_shm.formats import rosmsgs
 from fxis_shm.formats.bagfile import BagWriter
-from fxis_shm.formats.videotracks import VideoPlan, VideoSettings, VideoTracks
+from fxis_shm.formats.videotracks import CannotCarry, VideoPlan, VideoSettings, VideoTracks
 from fxis_shm.record.recording import Follower, Steps
 from fxis_shm.wire import encoding as codec
 
@@ -59,6 +59,7 @@ class Recorder:
     def __init__(self, settings: RecordSettings, client: Client, progress=None):
         self.s = settings
         self.client = client
+        self.stopped_by: str | None = None  # what ended the recording before its end: a size video cannot carry
         self.progress = progress or Progress(sys.stderr)
         status = client.status()
         known = list(status["cameras"])
@@ -148,6 +149,9 @@ class Recorder:
                 if self._stopping:
                     ended = f"interrupted by {self.interrupted_by}"
                     self.progress.stage(f"{ended}: closing the bag")
+            except CannotCarry as exc:  # the bag is closed with the frames before it, and summed up
+                self.stopped_by = str(exc)
+                ended = f"stopped: {exc}"
             except KeyboardInterrupt as exc:  # a second Ctrl-C: the bag is closed all the same
                 self.interrupted_by = interrupted_by(exc)
                 ended = f"interrupted by {self.interrupted_by}"
@@ -372,6 +376,7 @@ class Recorder:
         return {
             "out": self.s.out,
             "interrupted_by": self.interrupted_by,
+            "stopped_by": self.stopped_by,
             "seconds": (self._now() - self.t_start) / 1e9,
             "cameras": per_camera,
             "tuples": self.steps.taken if self.s.tuples else None,

@@ -28,6 +28,8 @@ from fxis_shm.errors import Code, ConfigError, ProtocolError
 from fxis_shm.service.childspec import CoordinatorSpec
 from fxis_shm.service.fastanswers import FastAnswers
 from fxis_shm.service.framewatch import FrameWatch
+from fxis_shm.service.logtally import LogTally
+from fxis_shm.service.settingsdesk import SettingsDesk
 from fxis_shm.service.streams import Streams
 from fxis_shm.service.workerlink import WorkerLinks
 from fxis_shm.shm import fastpick, naming, ordering
@@ -142,9 +144,8 @@ class Coordinator:
         self.events_dropped = 0
         self.boot_id = boot_id()
         self.time_namespace = time_namespace()
-        # per camera, (generation, values) its worker last reported (values None: asked, not answered yet)
-        self.camera_settings: dict[str, tuple[int, dict | None]] = {}
-        self.camera_ptp: dict[str, dict | None] = {}  # per camera, its PTP state read with those values
+        self.tally = LogTally()  # what a client does wrong again and again: logged once an interval
+        self.desk = SettingsDesk(self.cameras, self._reply, self._publish, self.tally)
         self.links: WorkerLinks | None = None
 
     # ---- the loop ----
@@ -174,15 +175,15 @@ class Coordinator:
                 self.events.setsockopt(zmq.SUBSCRIBE, protocol.EVENT_TOPIC)
             watch = FrameWatch(ctx, self.service, list(self.cameras))
             closing.append(watch)
-            self.links = links = WorkerLinks(ctx, self.service, list(self.cameras))
+            self.links = self.desk.links = links = WorkerLinks(ctx, self.service, list(self.cameras))
             closing.append(links)
             self.streams = Streams(self.copyout, self._publish)
             poller = zmq.Poller()
             for sock in (self.router, self.pub, self.events, watch.pull, *links.sockets.values()):
                 if sock is not None:
                     poller.register(sock, zmq.POLLIN)
-            for name in self.cameras:  # what status shows until a change is made
-                links.send(name, commands.SETTINGS, commands.SETTINGS_TIMEOUT_S, self._settings_known(name))
+            for name in self.cameras:  # what reads and status answer with until a change is made
+                self.desk.ask(name)
             on_ready()
             log.info(
                 "serving %s on %s, publishing on %s, events on %s",
@@ -204,6 +205,8 @@ class Coordinator:
                     if sock in events:
                         links.drain(sock)
                 links.expire(timebase.now())
+                for line in self.tally.flush(timebase.now()):
+                    log.info("%s", line)
                 if updated or self._due():
                     self._carry_out(self.engine.on_frames(updated, timebase.now()))
                 if updated:
@@ -271,7 +274,8 @@ class Coordinator:
         try:
             request = protocol.decode_request(body)
         except ProtocolError as exc:
-            log.info("bad request: %s", exc.message)
+            for line in self.tally.note("bad requests", f"bad request: {exc.message}", t_received):
+                log.info("%s", line)
             rid = _readable_field(body[0], "id", (int, str)) if body else None
             respond(protocol.encode_error(rid, exc.code, exc.message))
             return
@@ -296,7 +300,9 @@ class Coordinator:
                 )
             else:
                 self.events_dropped += 1
-            log.warning("dropped a malformed request event: %s", exc.message)
+            dropped = f"dropped a malformed request event: {exc.message}"
+            for line in self.tally.note("malformed events", dropped, t_received):
+                log.warning("%s", line)
             return
         topic = request["reply_topic"]
         self._start(request, lambda reply: self._publish(topic, reply), t_received)
@@ -306,8 +312,8 @@ class Coordinator:
     ) -> None:
         op = request["op"]
         try:
-            if op == "settings":  # answered when the camera's worker has applied it
-                self._settings(request, respond)
+            if op == "settings":  # a read at once, a change when the camera's worker has applied it
+                self.desk.request(request, respond)
                 return
             if op not in FRAME_OPS:
                 self._reply(respond, request, getattr(self, f"_op_{op}")(request, t_received))
@@ -393,20 +399,9 @@ class Coordinator:
         cameras = {name: cam.status(now) for name, cam in self.cameras.items()}
         for name, info in cameras.items():
             info["restarts"] = processes.get(f"camera:{name}", {}).get("restarts")
-            info["settings"] = self._settings_of(name, info.get("generation"))
-            info["ptp"] = self.camera_ptp.get(name)  # None: the camera cannot say (or not yet asked)
+            info["settings"] = self.desk.values(name, info.get("generation"))
+            info["ptp"] = self.desk.ptp(name)  # None: the camera cannot say (or not yet asked)
         return cameras
-
-    def _settings_of(self, camera: str, generation: int | None) -> dict | None:
-        """The values the camera's worker reported for this generation of its frames; a worker
-        that restarted since is asked again (None until it answers)."""
-        known = self.camera_settings.get(camera)
-        if known is not None and (known[0] == generation or generation is None):
-            return known[1]
-        if self.links is not None and generation is not None:
-            self.camera_settings[camera] = (generation, None)
-            self.links.send(camera, commands.SETTINGS, commands.SETTINGS_TIMEOUT_S, self._settings_known(camera))
-        return None
 
     def _state_of(self, process: str) -> dict | None:
         """What the supervisor or the ROS 2 bridge last reported (None: nothing)."""
@@ -415,46 +410,6 @@ class Coordinator:
                 return json.load(f)
         except (OSError, ValueError):
             return None
-
-    # ---- camera settings, through the camera's worker ----
-
-    def _settings(self, request: dict, respond: Callable[[list], None]) -> None:
-        camera = request["camera"]
-        if camera not in self.cameras:
-            raise ProtocolError(
-                f"unknown camera {camera!r}; this service has {sorted(self.cameras)}", Code.UNKNOWN_CAMERA
-            )
-        known = self._settings_known(camera)
-
-        def done(result: dict | None, code: str | None, message: str | None) -> None:
-            if result is None:
-                respond(protocol.encode_error(request["id"], code or Code.INTERNAL, message or ""))
-                return
-            known(result, None, None)
-            self._reply(respond, request, {"op": "settings", "camera": camera, **result})
-
-        fields = {k: request[k] for k in ("set", "features") if request[k] is not None}
-        assert self.links is not None
-        self.links.send(camera, commands.SETTINGS, commands.SETTINGS_TIMEOUT_S, done, **fields)
-
-    def _settings_known(self, camera: str):
-        """What to do with a worker's settings answer: keep its values for status, and announce
-        a change (log, and the event ``settings/CAMERA|`` on the publish endpoint)."""
-
-        def known(result: dict | None, code: str | None, message: str | None) -> None:
-            if result is None:
-                log.info("camera %s did not report its settings: %s", camera, message)
-                if self.camera_settings.get(camera, (0, {}))[1] is None:
-                    del self.camera_settings[camera]  # asked again by the next status
-                return
-            self.camera_settings[camera] = (result["generation"], result["values"])
-            self.camera_ptp[camera] = result.get("ptp")
-            if "changed" in result:
-                log.info("camera %s changed %s (%s)", camera, result["changed"], result["cost"])
-                event = {k: result[k] for k in ("changed", "cost", "values", "generation")}
-                self._publish(f"settings/{camera}|", protocol.encode_reply(None, {"camera": camera, **event}))
-
-        return known
 
     def _op_time(self, request: dict, t_received: int) -> dict:
         """The clock now, and when the request was received: a caller estimating our clock
@@ -488,7 +443,9 @@ class Coordinator:
         try:
             send_parts(self.router, envelope + frames)
         except zmq.Again:
-            log.warning("dropped a reply: the client is not reading its replies")
+            dropped = "dropped a reply: the client is not reading its replies"
+            for line in self.tally.note("dropped replies", dropped, timebase.now()):
+                log.warning("%s", line)
         except zmq.ZMQError as exc:  # EHOSTUNREACH: the client went away
             log.info("could not send a reply: %s", exc)
 

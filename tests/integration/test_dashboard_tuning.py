@@ -10,7 +10,10 @@ import urllib.request
 
 import pytest
 
-from .test_dashboard import start_dashboard
+from fxis_shm.service.launch import free_tcp_port
+
+from .conftest import SMALL
+from .test_dashboard import _seen, start_dashboard
 from .test_dashboard_browser import browser, picture, tiles  # noqa: F401  (the fixture, by name)
 
 pytestmark = pytest.mark.integration
@@ -92,3 +95,20 @@ def test_the_exposure_control_changes_the_camera_and_the_picture(browser, start_
     assert _post(base + "/cameras/a/settings.json", {"gain": 99})[0] == 400
     assert _post(base + "/cameras/a/settings.json", ["gain"])[0] == 400
     assert _post(base + "/cameras/zz/settings.json", {"gain": 1})[0] == 404
+
+
+def test_a_lockstep_camera_has_no_frame_rate_control(browser, start_service, wait):  # noqa: F811
+    """On the lockstep grid the grid sets the rate: the camera says fps is read-only (and why),
+    and its card offers exposure and gain but no frame rate."""
+    port = free_tcp_port()
+    lockstep = ["--lockstep", "20", "--camera", f"a=synthetic:trigger=software,{SMALL}"]
+    svc, base = _seen(start_service(*lockstep, http=f"127.0.0.1:{port}"), port)
+    browser.open(base + "/")
+    wait(
+        lambda: browser.evaluate(CONTROL_JS % ("exposure_us", "exposure_us")),
+        timeout=30,
+        interval=0.2,
+        what="the exposure control of camera a",
+    )
+    assert browser.evaluate(CONTROL_JS % ("gain", "gain")) is not None
+    assert browser.evaluate(CONTROL_JS % ("fps", "fps")) is None

@@ -312,16 +312,24 @@ def test_a_size_change_mid_raw_recording_goes_on(start_service, tmp_path):
     assert all(b > a for a, b in zip(ids[boundary:], ids[boundary + 1 :])), ids
 
 
-def test_a_restart_at_a_size_video_cannot_carry_stops_the_recording_in_one_line(start_service, tmp_path):
+def test_a_restart_at_a_size_video_cannot_carry_ends_the_recording_with_its_summary(start_service, tmp_path):
+    """`fxis set left width=161` during an H.264 recording: the recording ends there, closed
+    valid with the frames before the restart, and says so with its summary and what it kept."""
     svc = start_service("--camera", "left=synthetic:fps=20,width=160,height=120")
     out = tmp_path / "odd"
-    code, _, stderr = record_across_a_size_change(svc, out, "left", {"width": 161}, "--seconds", "4", "--codec", "h264")
+    code, stdout, stderr = record_across_a_size_change(
+        svc, out, "left", {"width": 161}, "--seconds", "4", "--codec", "h264"
+    )
     assert code == 4, stderr
-    assert "camera left is 161x120; 4:2:0 video needs an even width and height" in stderr.strip().splitlines()[-1]
+    last = stderr.strip().splitlines()[-1]
+    assert "camera left is 161x120; 4:2:0 video needs an even width and height (from its generation 2 on)" in last
     bag = read_bag(out)  # closed valid, with the frames before the restart
-    assert bag.custom_data["ended"].startswith("stopped by an error")
     frames = bag.messages["/left/video/frames"]
     assert len(frames) >= 10 and {f.msg.generation for f in frames} == {1}
+    assert f"the recording stopped and kept left {len(frames)} frames" in last and "a valid bag" in last
+    assert stdout.splitlines()[0].split() == ["camera", "topic", "frames", "missed", "dropped", "by", "camera"]
+    assert stdout.splitlines()[1].split()[:3] == ["left", "/left/video", str(len(frames))]  # the summary
+    assert bag.custom_data["ended"].startswith("stopped: --codec h264: camera left is 161x120")
 
 
 def test_fxis_export_remuxes_a_camera_track_into_a_vfr_mp4_at_its_capture_times(h264_folder, h264_bag, tmp_path):

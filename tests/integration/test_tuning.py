@@ -13,7 +13,7 @@ import pytest
 from fxis_shm import Client, read_stamp
 from fxis_shm.errors import CameraDown, ConfigError, SettingRejected, UnknownCamera
 
-from ..conftest import wait_until
+from ..conftest import fxis, wait_until
 from .conftest import SMALL, child_pids
 
 pytestmark = pytest.mark.integration
@@ -222,3 +222,45 @@ def test_a_camera_whose_worker_is_down_says_so_at_once(start_service):
         with pytest.raises(CameraDown, match="takes no commands now: its worker is not running"):
             client.configure("left", gain=3)
         assert client.time() > 0  # the service answers on
+
+
+def test_a_change_to_the_values_the_camera_has_is_none(start_service, tmp_path):
+    """`fxis set left width=64` when the width is 64: no restart, the generation unchanged, no
+    event; a request with one new value applies only that one, at its own cost."""
+    svc = start_service("--camera", f"left=synthetic:fps=50,{SMALL}")
+    with svc.client(timeout=5) as client:
+        before = client.image("left")
+        answer = client.configure("left", width=64, height=48, gain=0)
+        assert answer["cost"] == "none" and answer["changed"] == {"width": 64, "height": 48, "gain": 0.0}
+        assert answer["generation"] == before.generation
+        done = fxis("set", "left", "width=64", "--endpoint", svc.endpoint)
+        assert done.returncode == 0 and "width=64 (unchanged: the camera has these values)" in done.stdout
+        mixed = client.configure("left", width=64, gain=3)  # the width as it is: a live change of the gain
+        assert mixed["cost"] == "live" and mixed["generation"] == before.generation
+        later = _first_after(client, "left", lambda f: f.frame_id > before.frame_id + 3, "frames going on")
+        assert later.generation == before.generation and client.status()["cameras"]["left"]["generation"] == (
+            before.generation
+        )
+    svc.stop()
+    changes = [line for line in (tmp_path / "service0.log").read_text().splitlines() if "camera left changed" in line]
+    assert len(changes) == 1 and "'gain': 3.0} (live)" in changes[0], changes  # the no-ops left no trace
+
+
+def test_fps_is_refused_with_its_reason_on_the_lockstep_grid(start_service):
+    svc = start_service(
+        "--lockstep",
+        "20",
+        "--camera",
+        f"grid=synthetic:trigger=software,{SMALL}",
+        "--camera",
+        f"free=synthetic:{SMALL}",
+    )
+    with svc.client(timeout=5) as client:
+        limits = client.settings("grid")["limits"]["fps"]
+        assert limits["access"] == "ro" and "lockstep grid" in limits["note"]  # (the dashboard shows no control)
+        with pytest.raises(SettingRejected, match=r"fps of camera 'grid' is read-only .*lockstep grid, whose 20 Hz"):
+            client.configure("grid", fps=10)
+        done = fxis("set", "grid", "fps=10", "--endpoint", svc.endpoint)
+        assert done.returncode != 0 and "lockstep grid" in done.stderr  # (its code: docs/cli.md's table)
+        assert client.status()["cameras"]["grid"]["sync"]["lockstep"]["hz"] == 20
+        assert client.configure("free", fps=10)["changed"] == {"fps": 10.0}  # a free-running camera takes it

@@ -2,7 +2,7 @@
 
 import pytest
 
-from fxis_shm.core.tuning import LIVE, READ_ONLY, RESTART, check_change, cost_of, describe
+from fxis_shm.core.tuning import LIVE, READ_ONLY, RESTART, UNCHANGED, check_change, cost_of, describe
 from fxis_shm.errors import SettingRefused
 
 CAMERA = {
@@ -19,6 +19,7 @@ def test_values_are_typed_rounded_to_their_step_and_split_by_cost():
     assert split == {LIVE: {"exposure_us": 2000.0, "reverse_x": True}, RESTART: {"width": 656}}
     assert cost_of(split) == RESTART
     assert cost_of(check_change("cam", CAMERA, {"exposure_us": 20})) == LIVE
+    assert cost_of({LIVE: {}, RESTART: {}}) == UNCHANGED  # every key at its value (workers/tuning.py)
     near_max = {"width": describe(640, "int", RESTART, lo=16, hi=1275, inc=16)}
     assert check_change("cam", near_max, {"width": 1275})[RESTART] == {"width": 1264}  # never past max
 
