@@ -1,0 +1,169 @@
+"""Who may change a camera through the dashboard (issue 42, finding 1), tried as an attacker
+would: curl with the bodies a form or another site's page can send, a foreign Origin, a foreign
+Host (DNS rebinding), and a second local user made for the test. Each is refused and the
+camera's setting stays as it was; the operator with the operator token changes it."""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import pwd
+import subprocess
+
+import pytest
+
+from fxis_shm import Client
+from fxis_shm.service.launch import free_tcp_port
+
+from ..conftest import fxis
+from .conftest import SMALL, client_keys
+from .test_dashboard import service_ok
+
+pytestmark = pytest.mark.integration
+
+OPERATOR_TOKEN = "operator-token-0123456789abcdef"
+BODY = json.dumps({"exposure_us": 1234})
+
+
+def curl(url: str, *options: str, user: pwd.struct_passwd | None = None) -> tuple[int, str]:
+    """(status, body) of a request made by the curl program, as ``user`` where given."""
+    command = ["curl", "-s", "-o", "-", "-w", "\n%{http_code}", "--max-time", "20", *options, url]
+    if user is not None:  # that user's own process: no root, no file of ours it could read
+        command = ["setpriv", f"--reuid={user.pw_uid}", f"--regid={user.pw_gid}", "--clear-groups", *command]
+    done = subprocess.run(command, capture_output=True, text=True, timeout=30)
+    body, _, status = done.stdout.rpartition("\n")
+    return int(status), body
+
+
+def post(url: str, *options: str, body: str = BODY, user=None) -> tuple[int, str]:
+    return curl(url, "-X", "POST", "--data", body, *options, user=user)
+
+
+@contextlib.contextmanager
+def local_user():
+    """A second local user (no home, no login), removed afterwards whatever happened."""
+    name = f"fxisneighbour{os.getpid() % 100000}"
+    subprocess.run(["useradd", "--no-create-home", "--shell", "/usr/sbin/nologin", name], check=True)
+    try:
+        yield pwd.getpwnam(name)
+    finally:
+        subprocess.run(["userdel", name], check=True)
+
+
+@pytest.fixture
+def operated(start_service, wait, keys, tmp_path):
+    """A service under --curve-operators whose dashboard has an operator token: (svc, base, log,
+    a client with an operator's key)."""
+    folder, allowed = keys
+    assert fxis("keys", "--out", str(folder), "--name", "operator").returncode == 0
+    operators = tmp_path / "operators"
+    operators.mkdir()
+    (operators / "operator.key").write_bytes((folder / "operator.key").read_bytes())
+    token_file = tmp_path / "operator.token"
+    token_file.write_text(OPERATOR_TOKEN)
+    token_file.chmod(0o600)
+    port = free_tcp_port()
+    svc = start_service(
+        "--camera",
+        f"a=synthetic:fps=20,{SMALL}",
+        "--curve-secret",
+        str(folder / "server.key_secret"),
+        "--curve-clients",
+        str(allowed),
+        "--curve-operators",
+        str(operators),
+        "--operator-token-file",
+        str(token_file),
+        client_keys=client_keys(folder, "alice"),
+        http=f"127.0.0.1:{port}",
+    )
+    base = f"http://127.0.0.1:{port}"
+    wait(lambda: service_ok(base), timeout=30, what="the dashboard through CurveZMQ")
+    with Client(svc.endpoint, timeout=15, keys=client_keys(folder, "operator")) as operator:
+        yield svc, base, tmp_path / "service0.log", operator
+
+
+def exposure(client) -> float:
+    return client.settings("a")["values"]["exposure_us"]
+
+
+def test_cross_site_and_foreign_host_requests_change_nothing(operated):
+    svc, base, log, operator = operated
+    url = base + "/cameras/a/settings.json"
+    before = exposure(operator)
+    assert before != 1234
+    token = ["-H", f"X-Fxis-Operator-Token: {OPERATOR_TOKEN}"]
+    json_type = ["-H", "Content-Type: application/json"]
+    for options, status, words in [
+        (["-H", "Content-Type: text/plain", "-H", "Origin: http://evil.example", *token], 403, "another site"),
+        (["-H", "Content-Type: text/plain", *token], 415, "application/json"),
+        (["-H", "Content-Type: application/x-www-form-urlencoded", *token], 415, "application/json"),
+        ([*json_type, "-H", "Origin: http://evil.example", *token], 403, "another site"),
+        ([*json_type, "-H", "Origin: null", *token], 403, "another site"),
+        ([*json_type, "-H", "Host: attacker.example:80", *token], 403, "not an address this dashboard serves"),
+        ([*json_type, "-H", "X-Fxis-Operator-Token: not-the-token"], 403, "operator token"),
+        (json_type, 403, "operator token"),
+    ]:
+        answer = post(url, *options)
+        assert answer[0] == status and words in answer[1], (options, answer)
+    for path in ("/status.json", "/dashboard.json", "/cameras/a/settings.json", "/"):  # reads: DNS rebinding
+        answer = curl(base + path, "-H", "Host: attacker.example")
+        assert answer[0] == 403 and "not an address" in answer[1], (path, answer)
+    assert exposure(operator) == before
+    refusals = [line for line in log.read_text().splitlines() if "refused a request from 127.0.0.1" in line]
+    assert 0 < len(refusals) <= 5, refusals  # one line per kind in the period, not one per request
+
+    status, body = post(url, *json_type, *token, "-H", f"Origin: {base}")  # the page's own request
+    assert status == 200 and json.loads(body)["changed"] == {"exposure_us": 1234.0}, body
+    assert exposure(operator) == 1234
+    assert curl(base + "/status.json", "-H", f"Host: localhost:{base.rsplit(':', 1)[1]}")[0] == 200
+    answer = json.loads(curl(url)[1])
+    assert answer["dashboard"]["mode"] == "operator token" and answer["values"]["exposure_us"] == 1234
+
+
+def test_a_second_local_user_cannot_change_a_camera(operated, tmp_path):
+    svc, base, _, operator = operated
+    url = base + "/cameras/a/settings.json"
+    before = exposure(operator)
+    with local_user() as neighbour:
+        assert curl(base + "/status.json", user=neighbour)[0] == 200  # loopback, no viewer token: it may look
+        for options in ([], ["-H", "Content-Type: application/json"]):
+            status, body = post(url, *options, user=neighbour)
+            assert status in (403, 415), (options, status, body)
+        token_file = tmp_path / "operator.token"  # nor read the operator token
+        done = subprocess.run(
+            ["setpriv", f"--reuid={neighbour.pw_uid}", f"--regid={neighbour.pw_gid}", "--clear-groups"]
+            + ["cat", str(token_file)],
+            capture_output=True,
+            text=True,
+        )
+        assert done.returncode != 0 and OPERATOR_TOKEN not in done.stdout
+    assert exposure(operator) == before
+
+
+def test_under_operators_without_an_operator_token_the_dashboard_only_shows(start_service, wait, keys, tmp_path):
+    folder, allowed = keys
+    operators = tmp_path / "operators"
+    operators.mkdir()
+    assert fxis("keys", "--out", str(operators), "--name", "operator").returncode == 0
+    port = free_tcp_port()
+    start_service(
+        "--camera",
+        f"a=synthetic:fps=20,{SMALL}",
+        "--curve-secret",
+        str(folder / "server.key_secret"),
+        "--curve-clients",
+        str(allowed),
+        "--curve-operators",
+        str(operators),
+        client_keys=client_keys(folder, "alice"),
+        http=f"127.0.0.1:{port}",
+    )
+    base = f"http://127.0.0.1:{port}"
+    wait(lambda: service_ok(base), timeout=30, what="the dashboard through CurveZMQ")
+    url = base + "/cameras/a/settings.json"
+    status, body = post(url, "-H", "Content-Type: application/json", "-H", f"Origin: {base}")
+    assert status == 403 and "only shows settings" in body and "--operator-token-file" in body
+    answer = json.loads(curl(url)[1])
+    assert answer["dashboard"]["mode"] == "read only" and answer["values"]["exposure_us"] != 1234
