@@ -12,25 +12,9 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from fxis_shm.errors import ConfigError
 from fxis_shm.service.config import ServiceConfig, ViewerAccess, read_token_file
 
 SETTING = "operator_token_file"
-
-
-def with_operator_token(config: ServiceConfig, token_file: object) -> ServiceConfig:
-    """``config`` with its operator token file, checked now: a token, not the viewers' one."""
-    if token_file is None or token_file == "":
-        return config
-    if not isinstance(token_file, str):
-        raise ConfigError(f"{SETTING} must be the path of a file, got {token_file!r}")
-    token = read_token_file(token_file, SETTING)
-    if config.viewer_token_file and read_token_file(config.viewer_token_file) == token:
-        raise ConfigError(
-            f"{SETTING} {token_file} holds the viewer token: whoever may look could change the cameras; "
-            "give the operators a token of their own"
-        )
-    return replace(config, operator_token_file=token_file)
 
 
 def dashboard_access(config: ServiceConfig, access: ViewerAccess) -> ViewerAccess:
@@ -65,4 +49,7 @@ def change_lines(config: ServiceConfig) -> list[str]:
         else:
             readers.append("ROS 2 NS/settings (--ros2-settings allow to change)")
     lines = [f"  camera settings can be changed over {', '.join(changers)}"]
+    if config.http_url and config.operator_token_file:
+        link = f"{config.http_url}/#operator=<the token in {config.operator_token_file}>"
+        lines.append(f"      change them on the dashboard from {link}")
     return lines + ([f"  camera settings can only be read over {', '.join(readers)}"] if readers else [])

@@ -446,9 +446,6 @@ def _security(config: ServiceConfig, values: dict) -> ServiceConfig:
     if not isinstance(insecure, bool):
         raise ConfigError(f"insecure_bind must be true or false, got {insecure!r}")
     config = _viewer_access(replace(config, insecure_bind=insecure), values)
-    from fxis_shm.service.changers import with_operator_token
-
-    config = with_operator_token(config, values.get("operator_token_file"))
     zmq_exposed = [e for e in config.exposed if e not in config.viewer_urls.values()]
     if zmq_exposed and not secret and not insecure:
         raise ConfigError(
@@ -460,13 +457,19 @@ def _security(config: ServiceConfig, values: dict) -> ServiceConfig:
 
 
 def _viewer_access(config: ServiceConfig, values: dict) -> ServiceConfig:
-    """The viewers' token file and TLS files, checked now: a bad one stops the start here."""
-    token_file, cert, key = (values.get(k) or None for k in ("viewer_token_file", "viewer_tls_cert", "viewer_tls_key"))
-    for setting, value in (("viewer_token_file", token_file), ("viewer_tls_cert", cert), ("viewer_tls_key", key)):
+    """The viewers' token file and TLS files, and the dashboard's operator token file (its own
+    token, never the viewers'), checked now: a bad one stops the start here."""
+    files = ("viewer_token_file", "viewer_tls_cert", "viewer_tls_key", "operator_token_file")
+    token_file, cert, key, operator_file = (values.get(k) or None for k in files)
+    for setting, value in zip(files, (token_file, cert, key, operator_file), strict=True):
         if value is not None and not isinstance(value, str):
             raise ConfigError(f"{setting} must be the path of a file, got {value!r}")
     check_viewer_files(token_file, cert, key)
-    return replace(config, viewer_token_file=token_file, viewer_tls_cert=cert, viewer_tls_key=key)
+    operator = read_token_file(operator_file, files[3]) if operator_file else None
+    if operator is not None and token_file and operator == read_token_file(token_file):
+        raise ConfigError(f"{files[3]} {operator_file} holds the viewer token: give the operators a token of their own")
+    files_given = dict(zip(files, (token_file, cert, key, operator_file)))
+    return replace(config, **files_given)
 
 
 def check_viewer_files(token_file: str | None, cert: str | None, key: str | None) -> None:

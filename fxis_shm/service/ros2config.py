@@ -63,10 +63,11 @@ def ros2_settings(values: Mapping[str, Any], cameras: Iterable[str], environ=os.
     tuples = values.get("ros2_tuples")
     if tuples is not None:
         settings = replace(settings, tuples_hz=_rate(tuples))
-    if values.get("ros2_settings") is not None:
-        if values["ros2_settings"] not in SETTINGS_ACCESS:
-            raise ConfigError(f"ros2_settings must be one of {', '.join(SETTINGS_ACCESS)}, got {values['ros2_settings']!r}")
-        settings = replace(settings, settings=values["ros2_settings"])
+    access = values.get("ros2_settings")
+    if access is not None:
+        if access not in SETTINGS_ACCESS:
+            raise ConfigError(f"ros2_settings must be one of {', '.join(SETTINGS_ACCESS)}, got {access!r}")
+        settings = replace(settings, settings=access)
     if values.get("ros2_snapshots") is not None:
         settings = replace(settings, snapshots=_folder(values["ros2_snapshots"]))
     for camera in cameras:  # every topic the bridge will publish must be a ROS name

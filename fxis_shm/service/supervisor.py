@@ -23,6 +23,7 @@ import time
 
 from fxis_shm.core import timebase
 from fxis_shm.errors import ConfigError, FxisError
+from fxis_shm.service.changers import change_lines, dashboard_access, ros2_may_change
 from fxis_shm.service.childspec import (
     CameraWorkerSpec,
     ChildSpec,
@@ -31,7 +32,6 @@ from fxis_shm.service.childspec import (
     FoxgloveSpec,
     Ros2Spec,
 )
-from fxis_shm.service.changers import change_lines, dashboard_access, ros2_may_change
 from fxis_shm.service.config import ServiceConfig, ViewerAccess, http_address, viewer_accesses
 from fxis_shm.service.forkstart import ForkedProcess, fork_child, fork_wanted
 from fxis_shm.service.memory import ring_lines

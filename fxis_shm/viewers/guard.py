@@ -90,6 +90,7 @@ def same_origin(origin: str, host: str, tls: bool) -> bool:
     default = 443 if tls else 80
     return (
         scheme == ("https" if tls else "http")
+        and not any(c in authority for c in "/?#@")  # an origin is scheme://host[:port], nothing more
         and ours is not None
         and theirs is not None
         and (ours[0].lower(), ours[1] or default) == (theirs[0].lower(), theirs[1] or default)

@@ -19,6 +19,8 @@ from fxis_shm.service.launch import free_tcp_port
 from ..conftest import fxis
 from .conftest import SMALL, client_keys
 from .test_dashboard import service_ok
+from .test_dashboard_browser import browser  # noqa: F401  (the fixture, by name)
+from .test_dashboard_tuning import CONTROL_JS, SET_JS
 
 pytestmark = pytest.mark.integration
 
@@ -167,3 +169,30 @@ def test_under_operators_without_an_operator_token_the_dashboard_only_shows(star
     assert status == 403 and "only shows settings" in body and "--operator-token-file" in body
     answer = json.loads(curl(url)[1])
     assert answer["dashboard"]["mode"] == "read only" and answer["values"]["exposure_us"] != 1234
+
+
+def test_the_page_changes_a_camera_with_the_operator_token_and_not_without(browser, operated, wait):  # noqa: F811
+    """In Chromium: the page opened from the #operator= link sends the token with its JSON
+    changes (same origin); opened without it, the change is refused on the card."""
+    _, base, _, operator = operated
+    browser.open(base + "/")
+    wait(lambda: browser.evaluate(CONTROL_JS % ("exposure_us", "exposure_us")), timeout=30, what="the controls")
+    assert browser.evaluate("document.getElementById('operator').hidden") is False  # it asks for the token
+    browser.evaluate(SET_JS % ("exposure_us", 3000))
+    refused = wait(
+        lambda: (c := browser.evaluate(CONTROL_JS % ("exposure_us", "exposure_us")))["state"] == "refused" and c,
+        timeout=20,
+        what="the refusal on the card",
+    )
+    assert "operator token" in refused["said"] and exposure(operator) != 3000
+
+    browser.open(f"{base}/#operator={OPERATOR_TOKEN}")
+    wait(lambda: browser.evaluate(CONTROL_JS % ("exposure_us", "exposure_us")), timeout=30, what="the controls")
+    assert "operator" not in browser.evaluate("location.href")  # out of the address bar and the history
+    browser.evaluate(SET_JS % ("exposure_us", 3000))
+    wait(
+        lambda: browser.evaluate(CONTROL_JS % ("exposure_us", "exposure_us"))["said"] == "exposure_us = 3000",
+        timeout=20,
+        what="the camera's answer on the card",
+    )
+    assert exposure(operator) == 3000
