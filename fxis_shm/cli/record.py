@@ -75,6 +75,9 @@ def record_command(args) -> int:
     print(summary_table(summary))
     if summary["interrupted_by"]:
         return interrupted("record", f"interrupted by {summary['interrupted_by']}: {kept_line(summary)}")
+    if any(c["lost_to_restarts"] for c in summary["cameras"].values()):
+        print("fxis record: done, but frames are missing where cameras restarted (above)", file=sys.stderr)
+        return exitcodes.MISSING
     return exitcodes.DONE
 
 
