@@ -408,9 +408,7 @@ def summary_table(summary: dict) -> str:
         )
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     lines = ["  ".join(v.ljust(w) for v, w in zip(r, widths)).rstrip() for r in rows]
-    lines += [
-        f"{cam}: restarted, {gap}" for cam, c in summary["cameras"].items() for gap in c.get("restarts", [])
-    ]
+    lines += [f"{cam}: restarted, {gap}" for cam, c in summary["cameras"].items() for gap in c.get("restarts", [])]
     lines += [
         f"{cam}: the encoder fell behind and skipped {c['skipped_by_encoder']} frames"
         for cam, c in summary["cameras"].items()

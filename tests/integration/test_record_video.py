@@ -311,7 +311,9 @@ def test_a_size_change_mid_raw_recording_goes_on(start_service, tmp_path):
     """A raw recording across the same restart: each image message carries its own size."""
     svc = start_service("--camera", "left=synthetic:fps=20,width=160,height=120")
     out = tmp_path / "raw"
-    code, stdout, stderr = record_across_a_size_change(svc, out, "left", {"width": 320, "height": 240}, "--seconds", "3")
+    code, stdout, stderr = record_across_a_size_change(
+        svc, out, "left", {"width": 320, "height": 240}, "--seconds", "3"
+    )
     images = read_bag(out).messages["/left/image_raw"]
     sizes = [(m.msg.width, m.msg.height) for m in images]
     boundary = sizes.index((320, 240))

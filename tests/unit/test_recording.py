@@ -1,13 +1,12 @@
 """The recorder's pure decisions (which frames to take, what was missed) and its bag metadata."""
 
+import json
 import sys
 
 import pytest
 
 from fxis_shm.errors import ConfigError
 from fxis_shm.formats import bagfile
-import json
-
 from fxis_shm.record.recording import Follower, RestartGap, Steps, restart_record
 
 P = 50_000_000  # a 20 fps camera
