@@ -5,7 +5,6 @@ camera's setting stays as it was; the operator with the operator token changes i
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import pwd
@@ -18,6 +17,7 @@ from fxis_shm.service.launch import free_tcp_port
 
 from ..conftest import fxis
 from .conftest import SMALL, client_keys
+from .neighbour import as_user, local_user
 from .test_dashboard import service_ok
 from .test_dashboard_browser import browser  # noqa: F401  (the fixture, by name)
 from .test_dashboard_tuning import CONTROL_JS, SET_JS
@@ -32,7 +32,7 @@ def curl(url: str, *options: str, user: pwd.struct_passwd | None = None) -> tupl
     """(status, body) of a request made by the curl program, as ``user`` where given."""
     command = ["curl", "-s", "-o", "-", "-w", "\n%{http_code}", "--max-time", "20", *options, url]
     if user is not None:  # that user's own process: no root, no file of ours it could read
-        command = ["setpriv", f"--reuid={user.pw_uid}", f"--regid={user.pw_gid}", "--clear-groups", *command]
+        command = as_user(user, command)
     done = subprocess.run(command, capture_output=True, text=True, timeout=30)
     body, _, status = done.stdout.rpartition("\n")
     return int(status), body
@@ -40,17 +40,6 @@ def curl(url: str, *options: str, user: pwd.struct_passwd | None = None) -> tupl
 
 def post(url: str, *options: str, body: str = BODY, user=None) -> tuple[int, str]:
     return curl(url, "-X", "POST", "--data", body, *options, user=user)
-
-
-@contextlib.contextmanager
-def local_user():
-    """A second local user (no home, no login), removed afterwards whatever happened."""
-    name = f"fxisneighbour{os.getpid() % 100000}"
-    subprocess.run(["useradd", "--no-create-home", "--shell", "/usr/sbin/nologin", name], check=True)
-    try:
-        yield pwd.getpwnam(name)
-    finally:
-        subprocess.run(["userdel", name], check=True)
 
 
 @pytest.fixture
@@ -134,12 +123,7 @@ def test_a_second_local_user_cannot_change_a_camera(operated, tmp_path):
             status, body = post(url, *options, user=neighbour)
             assert status in (403, 415), (options, status, body)
         token_file = tmp_path / "operator.token"  # nor read the operator token
-        done = subprocess.run(
-            ["setpriv", f"--reuid={neighbour.pw_uid}", f"--regid={neighbour.pw_gid}", "--clear-groups"]
-            + ["cat", str(token_file)],
-            capture_output=True,
-            text=True,
-        )
+        done = subprocess.run(as_user(neighbour, ["cat", str(token_file)]), capture_output=True, text=True)
         assert done.returncode != 0 and OPERATOR_TOKEN not in done.stdout
     assert exposure(operator) == before
 
