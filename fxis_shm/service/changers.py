@@ -34,7 +34,9 @@ def ros2_may_change(config: ServiceConfig) -> bool:
 
 def change_lines(config: ServiceConfig) -> list[str]:
     """The banner's lines saying which faces can change camera settings, and who through each."""
-    changers = ["requests (operators' keys only)" if config.curve_operators else "requests (every client let in)"]
+    changers = [
+        "ZeroMQ requests (operators' keys only)" if config.curve_operators else "ZeroMQ requests (every client let in)"
+    ]
     readers = []
     if config.http_url:
         if config.operator_token_file:
