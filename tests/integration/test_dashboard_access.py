@@ -6,7 +6,6 @@ camera's setting stays as it was; the operator with the operator token changes i
 from __future__ import annotations
 
 import json
-import os
 import pwd
 import subprocess
 
