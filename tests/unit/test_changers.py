@@ -147,3 +147,25 @@ def test_a_bridge_that_only_reads_answers_reads_and_refuses_changes():
     assert requests.answer(client, json.dumps({"id": 1, "camera": "a"}))["values"] == {"gain": 0.0}
     refused = requests.answer(client, json.dumps({"id": 2, "camera": "a", "set": {"gain": 6}}))
     assert refused == {"id": 2, "camera": "a", "error": READ_ONLY} and client.changed == []
+
+
+def test_the_cell_dashboard_takes_an_operator_token_of_its_own(tmp_path):
+    from argparse import Namespace
+
+    from fxis_shm.cli.dashboard import access_for
+
+    (tmp_path / "op").write_text("O" * 24)
+    (tmp_path / "viewer").write_text("V" * 24)
+    args = Namespace(
+        http="127.0.0.1:8080",
+        insecure_bind=False,
+        viewer_token_file=str(tmp_path / "viewer"),
+        viewer_tls_cert=None,
+        viewer_tls_key=None,
+        operator_token_file=str(tmp_path / "op"),
+    )
+    access = access_for(args)
+    assert (access.token, access.operator_token, changes(access)["mode"]) == ("V" * 24, "O" * 24, "operator token")
+    with pytest.raises(ConfigError, match="holds the viewer token"):
+        access_for(Namespace(**{**vars(args), "operator_token_file": str(tmp_path / "viewer")}))
+    assert changes(access_for(Namespace(**{**vars(args), "operator_token_file": None})))["mode"] == "open"
