@@ -41,36 +41,40 @@ def post(url: str, *options: str, body: str = BODY, user=None) -> tuple[int, str
     return curl(url, "-X", "POST", "--data", body, *options, user=user)
 
 
-@pytest.fixture
-def operated(start_service, wait, keys, tmp_path):
-    """A service under --curve-operators whose dashboard has an operator token: (svc, base, log,
-    a client with an operator's key)."""
+def start_operated(start_service, wait, keys, tmp_path, *options: str):
+    """A service under --curve-operators (one key, ``operator``) with its dashboard and
+    ``options``: (svc, the dashboard's base URL)."""
     folder, allowed = keys
     assert fxis("keys", "--out", str(folder), "--name", "operator").returncode == 0
     operators = tmp_path / "operators"
     operators.mkdir()
     (operators / "operator.key").write_bytes((folder / "operator.key").read_bytes())
-    token_file = tmp_path / "operator.token"
-    token_file.write_text(OPERATOR_TOKEN)
-    token_file.chmod(0o600)
     port = free_tcp_port()
+    curve = ["--curve-secret", str(folder / "server.key_secret"), "--curve-clients", str(allowed)]
     svc = start_service(
         "--camera",
         f"a=synthetic:fps=20,{SMALL}",
-        "--curve-secret",
-        str(folder / "server.key_secret"),
-        "--curve-clients",
-        str(allowed),
+        *curve,
         "--curve-operators",
         str(operators),
-        "--operator-token-file",
-        str(token_file),
+        *options,
         client_keys=client_keys(folder, "alice"),
         http=f"127.0.0.1:{port}",
     )
     base = f"http://127.0.0.1:{port}"
     wait(lambda: service_ok(base), timeout=30, what="the dashboard through CurveZMQ")
-    with Client(svc.endpoint, timeout=15, keys=client_keys(folder, "operator")) as operator:
+    return svc, base
+
+
+@pytest.fixture
+def operated(start_service, wait, keys, tmp_path):
+    """A service under --curve-operators whose dashboard has an operator token: (svc, base, log,
+    a client with an operator's key)."""
+    token_file = tmp_path / "operator.token"
+    token_file.write_text(OPERATOR_TOKEN)
+    token_file.chmod(0o600)
+    svc, base = start_operated(start_service, wait, keys, tmp_path, "--operator-token-file", str(token_file))
+    with Client(svc.endpoint, timeout=15, keys=client_keys(keys[0], "operator")) as operator:
         yield svc, base, tmp_path / "service0.log", operator
 
 
@@ -128,25 +132,7 @@ def test_a_second_local_user_cannot_change_a_camera(operated, tmp_path):
 
 
 def test_under_operators_without_an_operator_token_the_dashboard_only_shows(start_service, wait, keys, tmp_path):
-    folder, allowed = keys
-    operators = tmp_path / "operators"
-    operators.mkdir()
-    assert fxis("keys", "--out", str(operators), "--name", "operator").returncode == 0
-    port = free_tcp_port()
-    start_service(
-        "--camera",
-        f"a=synthetic:fps=20,{SMALL}",
-        "--curve-secret",
-        str(folder / "server.key_secret"),
-        "--curve-clients",
-        str(allowed),
-        "--curve-operators",
-        str(operators),
-        client_keys=client_keys(folder, "alice"),
-        http=f"127.0.0.1:{port}",
-    )
-    base = f"http://127.0.0.1:{port}"
-    wait(lambda: service_ok(base), timeout=30, what="the dashboard through CurveZMQ")
+    _, base = start_operated(start_service, wait, keys, tmp_path)
     url = base + "/cameras/a/settings.json"
     status, body = post(url, "-H", "Content-Type: application/json", "-H", f"Origin: {base}")
     assert status == 403 and "only shows settings" in body and "--operator-token-file" in body
