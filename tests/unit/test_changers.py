@@ -169,3 +169,15 @@ def test_the_cell_dashboard_takes_an_operator_token_of_its_own(tmp_path):
     with pytest.raises(ConfigError, match="holds the viewer token"):
         access_for(Namespace(**{**vars(args), "operator_token_file": str(tmp_path / "viewer")}))
     assert changes(access_for(Namespace(**{**vars(args), "operator_token_file": None})))["mode"] == "open"
+
+
+def test_the_foxglove_server_changes_no_camera_setting():
+    """Its one parameter is its own picture rate: one named as a camera setting changes nothing."""
+    from foxglove import Parameter
+
+    from fxis_shm.viewers.foxglove_live import RATE_PARAMETER, RateParameter
+
+    rate = RateParameter(10)
+    answer = rate.on_set_parameters(None, [Parameter("exposure_us", value=1234.0), Parameter("a.gain", value=6.0)])
+    assert [(p.name, p.get_value()) for p in answer] == [(RATE_PARAMETER, 10.0)]
+    assert [p.name for p in rate.on_get_parameters(None, [])] == [RATE_PARAMETER]
