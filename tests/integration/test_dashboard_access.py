@@ -23,6 +23,11 @@ from .test_dashboard_tuning import CONTROL_JS, SET_JS
 
 pytestmark = pytest.mark.integration
 
+DISABLED_JS = """(() => {
+  const tile = document.querySelector('.camera[data-camera="a"]');
+  const number = tile && tile.querySelector('input[type=number][data-key="exposure_us"]');
+  return number ? {disabled: number.disabled, said: tile.querySelector('.said').textContent} : null;
+})()"""
 OPERATOR_TOKEN = "operator-token-0123456789abcdef"
 BODY = json.dumps({"exposure_us": 1234})
 
@@ -131,13 +136,22 @@ def test_a_second_local_user_cannot_change_a_camera(operated, tmp_path):
     assert exposure(operator) == before
 
 
-def test_under_operators_without_an_operator_token_the_dashboard_only_shows(start_service, wait, keys, tmp_path):
+def test_under_operators_without_an_operator_token_the_dashboard_only_shows(
+    browser,  # noqa: F811
+    start_service,
+    wait,
+    keys,
+    tmp_path,
+):
     _, base = start_operated(start_service, wait, keys, tmp_path)
     url = base + "/cameras/a/settings.json"
     status, body = post(url, "-H", "Content-Type: application/json", "-H", f"Origin: {base}")
     assert status == 403 and "only shows settings" in body and "--operator-token-file" in body
     answer = json.loads(curl(url)[1])
     assert answer["dashboard"]["mode"] == "read only" and answer["values"]["exposure_us"] != 1234
+    browser.open(base + "/")  # the page greys its controls out and says why
+    control = wait(lambda: browser.evaluate(DISABLED_JS), timeout=30, what="the controls of camera a")
+    assert control == {"disabled": True, "said": answer["dashboard"]["why"]}
 
 
 def test_the_page_changes_a_camera_with_the_operator_token_and_not_without(browser, operated, wait):  # noqa: F811
