@@ -12,7 +12,7 @@ import threading
 
 from fxis_shm.cli.options import add_key_options, client_keys_for, positive_seconds
 from fxis_shm.errors import ConfigError
-from fxis_shm.service.config import ViewerAccess, check_viewer_files, http_address, viewer_token
+from fxis_shm.service.config import ViewerAccess, check_viewer_files, http_address, read_token_file, viewer_token
 from fxis_shm.service.stopsignals import stop_on
 from fxis_shm.service.supervisor import link_host
 from fxis_shm.wire.endpoints import check_endpoint, check_host_known
@@ -28,7 +28,10 @@ def access_for(args) -> ViewerAccess:
     exposed = not is_loopback(f"tcp://{http_address(args.http)[0]}")
     needs_token = bool(args.viewer_token_file) or (exposed and not args.insecure_bind)  # as ServiceConfig.token_viewers
     token = viewer_token(args.viewer_token_file) if needs_token else None
-    return ViewerAccess(token, args.viewer_tls_cert, args.viewer_tls_key)
+    operator = read_token_file(args.operator_token_file, "--operator-token-file") if args.operator_token_file else None
+    if operator is not None and operator == token:
+        raise ConfigError("--operator-token-file holds the viewer token: give the operators a token of their own")
+    return ViewerAccess(token, args.viewer_tls_cert, args.viewer_tls_key, operator_token=operator)
 
 
 def dashboard_command(args) -> int:
@@ -88,6 +91,11 @@ def add_parser(sub) -> None:
     )
     add_key_options(p)
     p.add_argument("--viewer-token-file", metavar="FILE", help="the token the page requires (default: a new one)")
+    p.add_argument(
+        "--operator-token-file",
+        metavar="FILE",
+        help="the token the page requires to change camera settings (give it where --client-key is an operator's)",
+    )
     p.add_argument("--viewer-tls-cert", metavar="FILE", help="serve https with this certificate (PEM)")
     p.add_argument("--viewer-tls-key", metavar="FILE", help="... and this key (PEM)")
     p.add_argument(

@@ -17,9 +17,18 @@ class LookFailed(FxisError):
     """The backends' look for cameras failed or took too long (exit code 4)."""
 
 
+def checked_name(name: str) -> str:
+    """``--name`` as ``run`` and ``clean`` take it: a file or object name, never a path."""
+    try:
+        return naming.check_name("service", name)
+    except ValueError as exc:
+        raise ConfigError(f"--name: {exc}") from None
+
+
 def keys_command(args) -> int:
     from fxis_shm.wire.security import create_keys
 
+    checked_name(args.name)
     public, secret = create_keys(args.out, args.name, force=args.force)
     print(f"wrote {public} (public: give it to the other side) and {secret} (secret: keep it)")
     return 0
@@ -63,10 +72,7 @@ def cameras_command(args) -> int:
 def clean_command(args) -> int:
     from fxis_shm.service.supervisor import service_running
 
-    try:
-        naming.check_name("service", args.name)
-    except ValueError as exc:
-        raise ConfigError(f"--name: {exc}") from None
+    checked_name(args.name)
     if service_running(args.name):
         raise ConfigError(f"service {args.name!r} is running: stop it first (its shared memory is in use)")
     removed = naming.remove_leftovers(args.name)

@@ -78,6 +78,9 @@ def record_command(args) -> int:
     if summary.get("stopped_by"):  # a camera restarted as its video track cannot go on
         print(f"fxis record: {summary['stopped_by']}: the recording stopped and {kept_line(summary)}", file=sys.stderr)
         return exitcodes.FAILED
+    if any(c["lost_to_restarts"] for c in summary["cameras"].values()):
+        print("fxis record: done, but frames are missing where cameras restarted (above)", file=sys.stderr)
+        return exitcodes.MISSING
     return exitcodes.DONE
 
 

@@ -42,6 +42,7 @@ def run_command(args) -> int:
             "foxglove": args.foxglove,
             "foxglove_rate": args.foxglove_rate,
             "viewer_token_file": args.viewer_token_file,
+            "operator_token_file": args.operator_token_file,
             "viewer_tls_cert": args.viewer_tls_cert,
             "viewer_tls_key": args.viewer_tls_key,
             "ros2": args.ros2 or None,
@@ -51,6 +52,7 @@ def run_command(args) -> int:
             "ros2_snapshots": args.ros2_snapshots,
             "ros2_via": args.ros2_via,
             "ros2_python": args.ros2_python,
+            "ros2_settings": args.ros2_settings,
             "port_base": args.port_base,
             "history": args.history,
             "lockstep": args.lockstep,
@@ -158,6 +160,12 @@ def add_parser(sub) -> None:
         "start, where other hosts reach them)",
     )
     run.add_argument(
+        "--operator-token-file",
+        metavar="FILE",
+        help="the token the dashboard requires to change camera settings (not the viewer token); with "
+        "--curve-operators and without it the dashboard only shows them (docs/security.md)",
+    )
+    run.add_argument(
         "--viewer-tls-cert",
         metavar="FILE",
         help="PEM certificate: the dashboard serves https and the Foxglove server wss (with --viewer-tls-key)",
@@ -220,5 +228,11 @@ def add_parser(sub) -> None:
         "--ros2-python",
         metavar="PYTHON",
         help="run the bridge in this interpreter, one that imports rclpy and fxis_shm (a ROS 2 venv; docs/ros2.md)",
+    )
+    run.add_argument(
+        "--ros2-settings",
+        choices=("allow", "read"),
+        help="whether nodes may change camera settings on NS/settings (allow) or only read them (read); "
+        "default: read with --curve-operators (DDS has no keys), else allow",
     )
     run.set_defaults(func=run_command)

@@ -29,7 +29,7 @@ from fxis_shm.errors import CameraDown, ConfigError, DiskFull, Overwritten, Serv
 from fxis_shm.formats import rosmsgs
 from fxis_shm.formats.bagfile import BagWriter
 from fxis_shm.formats.videotracks import CannotCarry, VideoPlan, VideoSettings, VideoTracks
-from fxis_shm.record.recording import Follower, Steps
+from fxis_shm.record.recording import Follower, Steps, restart_record
 from fxis_shm.wire import encoding as codec
 
 _MAX_TUPLES_PER_REQUEST = 16  # bounds a reply's size (and the service's sequence limit)
@@ -160,7 +160,7 @@ class Recorder:
                 ended = f"stopped by an error: {exc}"
                 raise
             finally:
-                self.bag.custom_data["ended"] = ended
+                self.bag.custom_data["ended"] = self._ended(ended)
                 if self.video is not None and not self.bag.closed:
                     self.video.finish(self.bag, self.to_realtime)  # what the encoders still hold
                 self.bag.close()
@@ -172,6 +172,15 @@ class Recorder:
         summary = self.summary()
         self.progress.stage(f"recorded {summary['seconds']:.1f} s into {self.s.out}")
         return summary
+
+    def _ended(self, ended: str) -> str:
+        """How the recording ended, with the frames restarts cost (also as JSON, ``restarts``)."""
+        if self.s.tuples:  # a tuple a camera could not give is counted in tuples_missed
+            return ended
+        missing, self.bag.custom_data["restarts"] = restart_record(self.followers)
+        if not missing:
+            return ended
+        return f"done, but {missing}" if ended == "complete" else f"{ended}; {missing}"
 
     def _write_video(self) -> None:
         self.video.write_ready(self.bag, self.to_realtime)
@@ -365,10 +374,14 @@ class Recorder:
             topic = self._topic(cam)
             counted = self.bag.topics.get(topic)
             dropped = status.get(cam, {}).get("frames_dropped")
+            follower = None if self.s.tuples else self.followers[cam]
             per_camera[cam] = {
                 "topic": topic,
                 "frames": counted.count if counted else 0,
-                "missed": None if self.s.tuples else self.followers[cam].missed,
+                "missed": None if follower is None else follower.missed,
+                "missing_at_restarts": None if follower is None else follower.missing_at_restarts,
+                "restarts": [] if follower is None else [gap.describe() for gap in follower.restarts],
+                "lost_to_restarts": follower is not None and follower.lost_to_restarts,
                 "dropped_by_camera": None if dropped is None else dropped - self._dropped_at_start[cam],
                 "skipped_by_encoder": self.video.encoders[cam].skipped if self.video else None,
             }
@@ -400,6 +413,7 @@ def summary_table(summary: dict) -> str:
         )
     widths = [max(len(r[i]) for r in rows) for i in range(len(rows[0]))]
     lines = ["  ".join(v.ljust(w) for v, w in zip(r, widths)).rstrip() for r in rows]
+    lines += [f"{cam}: restarted, {gap}" for cam, c in summary["cameras"].items() for gap in c.get("restarts", [])]
     lines += [
         f"{cam}: the encoder fell behind and skipped {c['skipped_by_encoder']} frames"
         for cam, c in summary["cameras"].items()

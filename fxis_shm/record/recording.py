@@ -9,17 +9,50 @@ frame ids are told apart, because only one of them is the recorder's fault:
 - the ring came round before the recorder took them (it fell behind): the last frame
   taken is no longer in the ring, and every id between it and the oldest held is missed.
 
+A camera whose worker restarted starts a new generation of its ring, counting its ids afresh:
+what the restart cost is the time between the last frame seen of one generation and the first
+of the next, over the camera's period (a RestartGap; docs/recording.md).
+
 Pure: frame rows and times in, decisions out.
 """
 
 from __future__ import annotations
 
-from dataclasses import dataclass, field
+import json
+from dataclasses import asdict, dataclass, field
 
 from fxis_shm.core.decimation import Decimator
 
 # The columns of a ``frames`` row (fxis_shm.shm.cameras.FRAME_FIELDS).
 ID, T_CAPTURE, GENERATION = 0, 1, 4
+
+
+@dataclass(frozen=True)
+class RestartGap:
+    """The frames a camera's restart cost a recording: none between ``last`` (id, capture time),
+    the last frame of ``generations[0]``, and ``first``, the first of ``generations[1]``."""
+
+    generations: tuple[int, int]
+    last: tuple[int, int]
+    first: tuple[int, int]
+    missing: int | None  # frames the camera would have captured between, None: it has no period
+
+    @classmethod
+    def between(cls, generation: int, last_id: int, last_t: int, first: list[int], period_ns: int) -> RestartGap:
+        gap_ns = first[T_CAPTURE] - last_t
+        missing = max(0, round(gap_ns / period_ns) - 1) if period_ns else None
+        return cls((generation, first[GENERATION]), (last_id, last_t), (first[ID], first[T_CAPTURE]), missing)
+
+    @property
+    def gap_ms(self) -> float:
+        return (self.first[1] - self.last[1]) / 1e6
+
+    def describe(self) -> str:
+        count = "an unknown number of frames (no period)" if self.missing is None else f"{self.missing} frames"
+        return (
+            f"generation {self.generations[0]} -> {self.generations[1]}: {count} missing in {self.gap_ms:.0f} ms "
+            f"(after frame {self.last[0]}, before frame {self.first[0]} of the next)"
+        )
 
 
 @dataclass
@@ -33,6 +66,7 @@ class Follower:
     generation: int | None = None
     missed: int = 0  # frames the ring held but the recorder did not take in time
     taken: int = 0
+    restarts: list[RestartGap] = field(default_factory=list)  # what each restart of its worker cost
     decimator: Decimator = field(init=False)
 
     def __post_init__(self):
@@ -48,7 +82,9 @@ class Follower:
             return []
         first = fresh[0]
         if first[GENERATION] != self.generation:
-            self.last_id = None  # a restarted camera counts its ids afresh: no gap to measure
+            if self.generation is not None and self.last_id is not None and self.last_t is not None:
+                self.restarts.append(RestartGap.between(self.generation, self.last_id, self.last_t, first, period_ns))
+            self.last_id = None  # a restarted camera counts its ids afresh: its ids tell no gap
         elif self.last_id is not None and rows[0][T_CAPTURE] > self.last_t:
             # the last frame taken has left the ring: everything up to the oldest held is lost
             self.missed += max(0, first[ID] - self.last_id - 1)
@@ -56,6 +92,15 @@ class Follower:
         last = fresh[-1]
         self.last_id, self.last_t, self.generation = last[ID], last[T_CAPTURE], last[GENERATION]
         return chosen
+
+    @property
+    def missing_at_restarts(self) -> int:
+        return sum(gap.missing or 0 for gap in self.restarts)
+
+    @property
+    def lost_to_restarts(self) -> bool:
+        """Whether a restart cost frames (or may have: a camera without a period cannot say)."""
+        return any(gap.missing != 0 for gap in self.restarts)
 
     def lost(self, count: int) -> None:
         """Frames chosen but overwritten before their pixels could be copied."""
@@ -97,3 +142,16 @@ class Steps:
             self.taken += count
         else:
             self.missed += count
+
+
+def restart_record(followers: dict[str, Follower]) -> tuple[str, str]:
+    """What the camera restarts cost a recording, for its bag's ``fxis`` record: the ``ended``
+    words to add ("" if none restarted) and the gaps as JSON, per camera."""
+    restarted = {cam: f for cam, f in followers.items() if f.lost_to_restarts}
+    gaps = json.dumps({cam: [asdict(gap) for gap in f.restarts] for cam, f in restarted.items()})
+    if not restarted:
+        return "", gaps
+    each = ", ".join(
+        f"{cam} {f.missing_at_restarts} frames in {len(f.restarts)} restart(s)" for cam, f in restarted.items()
+    )
+    return f"frames missing where cameras restarted: {each}", gaps

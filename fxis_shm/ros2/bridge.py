@@ -83,7 +83,7 @@ class Bridge:
             if spec.tuples_hz
             else None
         )
-        self.settings = SettingsRequests(self.participant, ns, self.make_client, stop)
+        self.settings = SettingsRequests(self.participant, ns, self.make_client, stop, may_change=spec.may_change)
         self.frames_at = FramesAt(self.participant, ns, self.topics_under, self.make_client, self.ros_time, stop)
         self.snapshots = (
             SnapshotRequests(

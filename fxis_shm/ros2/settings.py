@@ -8,7 +8,9 @@ do not cross DDS vendors and a topic pair works with any RMW:
 The answer repeats ``id`` and ``camera`` and holds the service's own reply (``values``,
 ``limits``, ``generation``; for a change ``changed`` and ``cost``), or ``error``: a request
 that is not such JSON, an unknown camera, a refused value (its limits named), a key the
-service's operators' keys do not allow. Requests are answered in order, one at a time.
+service's operators' keys do not allow, or any change where the bridge only reads (under
+``--curve-operators``, unless ``--ros2-settings allow``: DDS carries no key that could name an
+operator; fxis_shm.service.changers). Requests are answered in order, one at a time.
 """
 
 from __future__ import annotations
@@ -26,6 +28,11 @@ from fxis_shm.ros2.follow import Counts
 
 log = logging.getLogger("ros2")
 
+READ_ONLY = (
+    "this bridge only reads settings: the service names --curve-operators and a DDS node carries no key; "
+    "change them over ZeroMQ with an operator's key (fxis set), or start the service with --ros2-settings allow"
+)
+
 
 def parse_request(text: str) -> dict[str, Any]:
     """The request's fields; ValueError saying what is wrong."""
@@ -41,8 +48,15 @@ def parse_request(text: str) -> dict[str, Any]:
 
 
 class SettingsRequests:
-    def __init__(self, participant: Participant, namespace: str, make_client: Callable, stop: threading.Event):
-        self.make_client, self.stop = make_client, stop
+    def __init__(
+        self,
+        participant: Participant,
+        namespace: str,
+        make_client: Callable,
+        stop: threading.Event,
+        may_change: bool = True,
+    ):
+        self.make_client, self.stop, self.may_change = make_client, stop, may_change
         self.counts = Counts()
         self._reader = participant.string_reader(rosnames.topic(namespace, "settings"))
         self._result = participant.writer(rosnames.topic(namespace, "settings", "result"), STRING)
@@ -65,6 +79,8 @@ class SettingsRequests:
             return self._refused({}, str(exc))
         head = {"id": request.get("id"), "camera": request["camera"]}
         try:
+            if "set" in request and not self.may_change:
+                return self._refused(head, READ_ONLY)
             if "set" in request:
                 reply = client.configure(request["camera"], **request["set"])
             else:

@@ -177,7 +177,7 @@ class Ros2Spec(ViewerSpec):
 
     ROLE = "ros2"
     MODULE = "fxis_shm.workers.ros2_bridge"
-    VERSION = 2
+    VERSION = 3
 
     domain: int
     namespace: str  # "" or "/a/b"
@@ -185,6 +185,7 @@ class Ros2Spec(ViewerSpec):
     snapshots: str | None = None  # where NS/snapshot requests write their bags (None: no such topic)
     via: str = "auto"  # "rclpy", "cyclone", or "auto": rclpy where it imports (fxis_shm.ros2.participants)
     python: str | None = None  # the interpreter the bridge runs in (a ROS 2 one), None: the supervisor's
+    may_change: bool = True  # NS/settings may change settings, else only read them (service.changers)
 
     def command(self, ready_fd: int) -> list[str]:
         return [self.python or sys.executable, *super().command(ready_fd)[1:]]

@@ -73,6 +73,7 @@ class ServiceConfig:
     foxglove: str = HTTP_OFF  # HOST:PORT of the Foxglove WebSocket server, or "off"
     foxglove_rate: float = DEFAULT_FOXGLOVE_RATE_HZ
     viewer_token_file: str | None = None  # the viewers' token (else a random one where one is needed)
+    operator_token_file: str | None = None  # the token the dashboard requires to change settings (service.changers)
     viewer_tls_cert: str | None = None  # PEM certificate and key: the viewers serve https and wss
     viewer_tls_key: str | None = None
     ros2: Ros2Settings | None = None  # the ROS 2 bridge (fxis_shm.service.ros2config), None: off
@@ -127,6 +128,10 @@ class ViewerAccess:
     token: str | None = field(default=None, repr=False)
     tls_cert: str | None = None
     tls_key: str | None = None
+    # who may change camera settings through it (service.changers): with an operator token, who
+    # sends it; else nobody where read_only (--curve-operators named), else whoever may look
+    operator_token: str | None = field(default=None, repr=False)
+    read_only: bool = False
 
     def environment(self) -> dict[str, str]:
         return {VIEWER_ACCESS_ENV: json.dumps(asdict(self))}
@@ -157,17 +162,17 @@ def new_token() -> str:
     return secrets.token_urlsafe(TOKEN_BYTES)
 
 
-def read_token_file(path: str) -> str:
+def read_token_file(path: str, setting: str = "viewer_token_file") -> str:
     """The token a file holds (surrounding white space dropped); ConfigError unless it is at
     least 16 characters of A-Z a-z 0-9 . _ ~ - (what a URL and a cookie carry as they are)."""
     try:
         with open(path) as f:
             token = f.read().strip()
     except (OSError, UnicodeDecodeError) as exc:
-        raise ConfigError(f"viewer_token_file {path}: {getattr(exc, 'strerror', None) or exc}") from None
+        raise ConfigError(f"{setting} {path}: {getattr(exc, 'strerror', None) or exc}") from None
     if not TOKEN_PATTERN.fullmatch(token):
         raise ConfigError(
-            f"viewer_token_file {path}: a token must be at least 16 characters of A-Z a-z 0-9 . _ ~ - "
+            f"{setting} {path}: a token must be at least 16 characters of A-Z a-z 0-9 . _ ~ - "
             f"(make one: python3 -c 'import secrets; print(secrets.token_urlsafe({TOKEN_BYTES}))' > {path})"
         )
     return token
@@ -299,6 +304,7 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
         "foxglove",
         "foxglove_rate",
         "viewer_token_file",
+        "operator_token_file",
         "viewer_tls_cert",
         "viewer_tls_key",
         "port_base",
@@ -451,13 +457,19 @@ def _security(config: ServiceConfig, values: dict) -> ServiceConfig:
 
 
 def _viewer_access(config: ServiceConfig, values: dict) -> ServiceConfig:
-    """The viewers' token file and TLS files, checked now: a bad one stops the start here."""
-    token_file, cert, key = (values.get(k) or None for k in ("viewer_token_file", "viewer_tls_cert", "viewer_tls_key"))
-    for setting, value in (("viewer_token_file", token_file), ("viewer_tls_cert", cert), ("viewer_tls_key", key)):
+    """The viewers' token file and TLS files, and the dashboard's operator token file (its own
+    token, never the viewers'), checked now: a bad one stops the start here."""
+    files = ("viewer_token_file", "viewer_tls_cert", "viewer_tls_key", "operator_token_file")
+    token_file, cert, key, operator_file = (values.get(k) or None for k in files)
+    for setting, value in zip(files, (token_file, cert, key, operator_file), strict=True):
         if value is not None and not isinstance(value, str):
             raise ConfigError(f"{setting} must be the path of a file, got {value!r}")
     check_viewer_files(token_file, cert, key)
-    return replace(config, viewer_token_file=token_file, viewer_tls_cert=cert, viewer_tls_key=key)
+    operator = read_token_file(operator_file, files[3]) if operator_file else None
+    if operator is not None and token_file and operator == read_token_file(token_file):
+        raise ConfigError(f"{files[3]} {operator_file} holds the viewer token: give the operators a token of their own")
+    files_given = dict(zip(files, (token_file, cert, key, operator_file)))
+    return replace(config, **files_given)
 
 
 def check_viewer_files(token_file: str | None, cert: str | None, key: str | None) -> None:

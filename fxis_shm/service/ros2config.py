@@ -15,7 +15,17 @@ from typing import Any
 from fxis_shm.errors import ConfigError
 from fxis_shm.formats import rosnames
 
-KEYS = ("ros2", "ros2_domain", "ros2_namespace", "ros2_tuples", "ros2_snapshots", "ros2_via", "ros2_python")
+KEYS = (
+    "ros2",
+    "ros2_domain",
+    "ros2_namespace",
+    "ros2_tuples",
+    "ros2_snapshots",
+    "ros2_via",
+    "ros2_python",
+    "ros2_settings",
+)
+SETTINGS_ACCESS = ("allow", "read")  # NS/settings may change settings, or only read them (service.changers)
 VIAS = ("auto", "rclpy", "cyclone")  # how the bridge publishes (docs/ros2.md, "Two ways onto the graph")
 DOMAIN_ENV = "ROS_DOMAIN_ID"  # what every ROS 2 node reads
 MAX_DOMAIN = 232  # the highest id DDS's port mapping allows (ROS's own advice: 0-101)
@@ -30,6 +40,7 @@ class Ros2Settings:
     snapshots: str | None = None  # the folder NS/snapshot requests write their bags into, None: no topic
     via: str = "auto"  # rclpy (a real ROS 2 node), cyclone (no ROS install), auto: rclpy where it imports
     python: str | None = None  # the bridge's interpreter (one that imports rclpy), None: fxis's own
+    settings: str | None = None  # "allow", "read", None: read only under --curve-operators (service.changers)
 
 
 def ros2_settings(values: Mapping[str, Any], cameras: Iterable[str], environ=os.environ) -> Ros2Settings | None:
@@ -52,6 +63,11 @@ def ros2_settings(values: Mapping[str, Any], cameras: Iterable[str], environ=os.
     tuples = values.get("ros2_tuples")
     if tuples is not None:
         settings = replace(settings, tuples_hz=_rate(tuples))
+    access = values.get("ros2_settings")
+    if access is not None:
+        if access not in SETTINGS_ACCESS:
+            raise ConfigError(f"ros2_settings must be one of {', '.join(SETTINGS_ACCESS)}, got {access!r}")
+        settings = replace(settings, settings=access)
     if values.get("ros2_snapshots") is not None:
         settings = replace(settings, snapshots=_folder(values["ros2_snapshots"]))
     for camera in cameras:  # every topic the bridge will publish must be a ROS name

@@ -23,6 +23,7 @@ import time
 
 from fxis_shm.core import timebase
 from fxis_shm.errors import ConfigError, FxisError
+from fxis_shm.service.changers import change_lines, dashboard_access, ros2_may_change
 from fxis_shm.service.childspec import (
     CameraWorkerSpec,
     ChildSpec,
@@ -175,7 +176,12 @@ def viewer_children(config: ServiceConfig, common: dict, access: dict[str, Viewe
     children = []
     if config.http_url:
         children.append(
-            Child(DashboardSpec(**viewer, http=config.http), "dashboard", "dashboard", access["http"].environment())
+            Child(
+                DashboardSpec(**viewer, http=config.http),
+                "dashboard",
+                "dashboard",
+                dashboard_access(config, access["http"]).environment(),
+            )
         )
     if config.foxglove_url:
         children.append(
@@ -204,6 +210,7 @@ def viewer_children(config: ServiceConfig, common: dict, access: dict[str, Viewe
             snapshots=ros2.snapshots,
             via=ros2.via,
             python=ros2.python,
+            may_change=ros2_may_change(config),
         )
         children.append(Child(spec, "ros2", key="ros2"))
     return children
@@ -331,6 +338,7 @@ class Supervisor:
         if c.ros2 is not None:
             tuples = f", tuples at {c.ros2.tuples_hz:g} Hz" if c.ros2.tuples_hz else ""
             lines.append(f"  ROS 2 topics under {c.ros2.namespace or '/'} on DDS domain {c.ros2.domain}{tuples}")
+        lines += change_lines(c)
         if c.curve_secret:
             lines.append(f"  CurveZMQ: only the clients whose keys are in {c.curve_clients}")
         if c.exposed_unencrypted:

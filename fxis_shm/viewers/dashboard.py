@@ -6,14 +6,17 @@
     /cameras/NAME/latest.jpg       the newest frame, scaled down (?width=, default 640)
     /cameras/NAME/stream.mjpg      MJPEG (?fps=, default 5; ?width=)
     /tuple.zip                     one synchronized tuple: NAME.png per camera + tuple.json
-    /cameras/NAME/settings.json    GET: the camera's settings and limits; POST {"key": value, ...}:
-                                   change them (docs/protocol.md 7.8), 400/403 with the refusal
+    /cameras/NAME/settings.json    GET: the camera's settings and limits, and who may change them
+                                   here; POST {"key": value, ...}: change them (docs/protocol.md
+                                   7.8), 400/403 with the refusal
 
 It runs in a process of its own (workers/dashboard.py) and reads through fxis_shm.Client
 (fxis_shm.viewers.livefeed). A slow viewer gets fewer frames, never a queue: each stream sends the
 newest frame when it is ready for one. Bad parameters get 400, unknown cameras 404, a camera
 down or a silent service 503, each with a message in plain text. Where a token is required
-(fxis_shm.viewers.access), a request without it gets 401 before anything else is looked at.
+(fxis_shm.viewers.access), a request without it gets 401 before anything else is looked at;
+then fxis_shm.viewers.guard refuses other sites, other addresses and, where settings are
+kept to operators, changes without the operator token.
 """
 
 from __future__ import annotations
@@ -30,6 +33,7 @@ from aiohttp import web
 from fxis_shm.errors import Code, FxisError, InvalidArgument, ServiceError, UnknownCamera
 from fxis_shm.service.config import ViewerAccess
 from fxis_shm.viewers.access import middlewares, ssl_context
+from fxis_shm.viewers.guard import changes, guard_middleware
 from fxis_shm.viewers.livefeed import SAMPLE_PERIOD_S, LiveFeed
 from fxis_shm.viewers.preview import parse_fps, parse_width
 from fxis_shm.viewers.tuningfeed import CameraTuning
@@ -40,6 +44,7 @@ BOUNDARY = "fxisframe"
 NOT_READY_RETRY_S = 0.2  # a stream whose camera is down looks again this often
 FEED = web.AppKey("feed", LiveFeed)
 TUNING = web.AppKey("tuning", CameraTuning)
+CHANGES = web.AppKey("changes", dict)  # who may change settings here (fxis_shm.viewers.guard.changes)
 FRAME_HEADER = "X-Fxis-Frame"  # GENERATION:FRAME_ID of the frame a picture shows
 
 
@@ -143,7 +148,7 @@ async def _settings(request: web.Request) -> web.Response:
                 raise InvalidArgument('POST a JSON object of settings, e.g. {"exposure_us": 5000}')
             answer = await request.app[TUNING].configure(camera, values)
         else:
-            answer = await request.app[TUNING].settings(camera)
+            answer = {**await request.app[TUNING].settings(camera), "dashboard": request.app[CHANGES]}
     except (FxisError, ServiceError) as exc:
         return _error(exc)
     return web.json_response(answer, headers={"Cache-Control": "no-store"})
@@ -168,11 +173,11 @@ async def _sample_forever(app: web.Application) -> None:
         await asyncio.sleep(SAMPLE_PERIOD_S)
 
 
-def make_app(feed: LiveFeed, access: ViewerAccess | None = None, port: int = 0) -> web.Application:
-    """The dashboard's web app; with ``access.token``, every path requires it (the cookie's name
-    has the ``port`` in it)."""
-    app = web.Application(middlewares=middlewares(access or ViewerAccess(), port))
-    app[FEED] = feed
+def make_app(feed: LiveFeed, access: ViewerAccess, host: str, port: int) -> web.Application:
+    """The dashboard's web app serving ``host``:``port``; with ``access.token``, every path
+    requires it (the cookie's name has the ``port`` in it)."""
+    app = web.Application(middlewares=[*middlewares(access, port), guard_middleware(access, host, port)])
+    app[FEED], app[CHANGES] = feed, changes(access)
     app.router.add_get("/", _index)
     app.router.add_get("/status.json", _status)
     app.router.add_get("/dashboard.json", _dashboard)
@@ -201,7 +206,7 @@ async def serve(
     """Serve until ``stop`` is set; ``on_ready`` once listening (a port in use raises OSError).
     ``access``: the token it requires and its TLS files (default: neither)."""
     access = access or ViewerAccess()
-    runner = web.AppRunner(make_app(feed, access, port), access_log=None, handle_signals=False)
+    runner = web.AppRunner(make_app(feed, access, host, port), access_log=None, handle_signals=False)
     await runner.setup()
     try:
         tls = ssl_context(access)

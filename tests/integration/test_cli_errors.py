@@ -244,6 +244,16 @@ def test_keys_refuses_to_replace_a_pair_unless_forced(tmp_path, capsys):
     assert (tmp_path / "k" / "server.key").read_bytes() != before["server.key"]
 
 
+def test_keys_refuses_a_name_that_is_a_path(tmp_path, capsys):
+    """Issue 42 finding 8: ``--name ../evil`` wrote the secret key outside --out."""
+    folder = tmp_path / "k"
+    for name in ("../evil", "a/b", "..", "/tmp/evil", ""):
+        code, _, err = run_fxis(capsys, ["keys", "--out", str(folder), "--name", name])
+        assert code == USAGE, name
+        assert_one_line(err, "keys", "--name", "invalid")
+    assert os.listdir(tmp_path) == []  # neither the folder nor ../evil.key
+
+
 def test_debug_shows_the_traceback(capsys, monkeypatch):
     code, _, err = run_fxis(capsys, ["--debug", "status", "--endpoint", "127.0.0.1:6500"])
     assert code == USAGE and "Traceback" in err and err.strip().splitlines()[-1].startswith("fxis status: ")

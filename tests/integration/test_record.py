@@ -159,3 +159,47 @@ def test_a_recorder_that_cannot_keep_up_says_how_many_frames_it_missed(start_ser
     span = ids[-1] - ids[0] + 1
     assert span - frames - missed <= dropped  # every gap not counted as missed, the camera dropped
     assert frames + missed <= 1000 * 1 + 1  # nothing counted twice: the camera made 1000 frames in 1 s
+
+
+def test_frames_a_camera_restart_cost_are_counted_and_the_exit_code_says_so(start_service, tmp_path):
+    """Issue 42, finding 7: camera a's worker killed mid-recording. The recording goes on and
+    says, per camera, what the restart cost (by ids and capture times), in the summary, the
+    metadata's ``ended`` and the bag's ``fxis`` record, and exits 1 (done, something missing)."""
+    import json
+    import signal
+    import subprocess
+    import sys
+
+    from ..conftest import wait_until
+
+    svc = start_service("--camera", f"a=synthetic:fps={FPS},width=160,height=120", "--camera", "b=synthetic:fps=10")
+    out = tmp_path / "restarted"
+    command = [sys.executable, "-m", "fxis_shm.cli", "record", "--endpoint", svc.endpoint, "--out", str(out)]
+    proc = subprocess.Popen([*command, "--seconds", "6"], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
+    try:
+        with svc.client() as client:
+            generation = client.status()["cameras"]["a"]["generation"]
+            wait_until(lambda: (out / "restarted_0.mcap").exists(), timeout=20, what="the recording to begin")
+            os.kill(svc.children()["camera:a"], signal.SIGKILL)
+            wait_until(
+                lambda: client.status()["cameras"]["a"].get("generation", generation) > generation,
+                timeout=20,
+                what="camera a back in a new generation",
+            )
+        stdout, stderr = proc.communicate(timeout=60)
+    finally:
+        proc.kill()
+    assert proc.returncode == 1, stderr
+    assert "done, but frames are missing where cameras restarted" in stderr
+    said = [line for line in stdout.splitlines() if line.startswith("a: restarted, generation")]
+    assert len(said) == 1 and not any(line.startswith("b: restarted") for line in stdout.splitlines()), stdout
+    bag = read_bag(out)
+    assert bag.custom_data["ended"].startswith("done, but frames missing where cameras restarted: a ")
+    (gap,) = json.loads(bag.custom_data["restarts"])["a"]
+    assert gap["generations"][1] > gap["generations"][0] and gap["missing"] > 0
+    # the bag agrees: the capture times either side of the hole, over the camera's period
+    stamps = [m.stamp for m in bag.messages["/a/image_raw"]]
+    hole = gap["first"][1] - gap["last"][1]
+    assert hole in [b - a for a, b in zip(stamps, stamps[1:])]  # two frames recorded side by side
+    assert gap["missing"] == round(hole * FPS / 1e9) - 1
+    assert f"{gap['missing']} frames missing" in said[0]

@@ -262,6 +262,16 @@ def test_a_camera_video_cannot_carry_is_refused_at_start(start_service, tmp_path
     assert not (tmp_path / "x").exists()
 
 
+def assert_restart_cost_said(code: int, stdout: str, stderr: str, stamps: list[int], boundary: int) -> None:
+    """The recording of a 20 fps camera restarted between ``stamps[boundary - 1]`` and
+    ``stamps[boundary]`` said what the restart cost, as the bag shows it (issue 42): the frames
+    of the time between, and exit code 1 when that is any (a restart may be quicker than a period)."""
+    missing = round((stamps[boundary] - stamps[boundary - 1]) * 20 / 1e9) - 1
+    assert f"left: restarted, generation 1 -> 2: {missing} frames missing" in stdout, stdout
+    assert code == (1 if missing else 0), stderr
+    assert ("frames are missing where cameras restarted" in stderr) == bool(missing)
+
+
 def test_a_size_change_mid_recording_goes_on_in_the_same_track_from_a_keyframe(start_service, tmp_path):
     """The camera restarted at 320x240 (a new generation) one second into the recording: the
     bag stays one file, /left/video one track that one decoder plays through (each keyframe
@@ -272,7 +282,6 @@ def test_a_size_change_mid_recording_goes_on_in_the_same_track_from_a_keyframe(s
     code, stdout, stderr = record_across_a_size_change(
         svc, out, "left", {"width": 320, "height": 240}, "--seconds", "4", "--codec", "h264"
     )
-    assert code == 0, stderr
     assert "left: generation 2, 320x240: the same track /left/video goes on with a keyframe at the new size" in stderr
     bag = read_bag(out)
     assert len(list(out.glob("*.mcap"))) == 1
@@ -280,6 +289,7 @@ def test_a_size_change_mid_recording_goes_on_in_the_same_track_from_a_keyframe(s
     assert len(video) == len(frames)
     generations = [f.msg.generation for f in frames]
     boundary = generations.index(2)
+    assert_restart_cost_said(code, stdout, stderr, [stamp_ns(m.msg) for m in video], boundary)
     assert generations == [1] * boundary + [2] * (len(frames) - boundary) and boundary >= 10
     assert len(frames) - boundary >= 20
     stamps = [stamp_ns(m.msg) for m in video]
@@ -301,11 +311,13 @@ def test_a_size_change_mid_raw_recording_goes_on(start_service, tmp_path):
     """A raw recording across the same restart: each image message carries its own size."""
     svc = start_service("--camera", "left=synthetic:fps=20,width=160,height=120")
     out = tmp_path / "raw"
-    code, _, stderr = record_across_a_size_change(svc, out, "left", {"width": 320, "height": 240}, "--seconds", "3")
-    assert code == 0, stderr
+    code, stdout, stderr = record_across_a_size_change(
+        svc, out, "left", {"width": 320, "height": 240}, "--seconds", "3"
+    )
     images = read_bag(out).messages["/left/image_raw"]
     sizes = [(m.msg.width, m.msg.height) for m in images]
     boundary = sizes.index((320, 240))
+    assert_restart_cost_said(code, stdout, stderr, [m.stamp for m in images], boundary)
     assert sizes == [(160, 120)] * boundary + [(320, 240)] * (len(sizes) - boundary) and boundary >= 10
     ids = [read_stamp(rosmsgs.image_array(m.msg)) for m in images]
     assert all(b > a for a, b in zip(ids[:boundary], ids[1:boundary])), ids

@@ -29,6 +29,7 @@ from tests.hosts import Lab, LoopbackNamespace
 
 from ..conftest import fxis, fxis_run_alone, wait_until
 from .bags import read_bag
+from .conftest import client_keys
 
 pytestmark = pytest.mark.integration
 
@@ -87,13 +88,15 @@ def bridge(request, tmp_path_factory):
 
 
 @contextlib.contextmanager
-def running_bridge(setup: str, args: list[str], tmp_path_factory, **facts):
-    """A service with ``args`` and its bridge as ``setup`` says, and a Peer factory for its node."""
+def running_bridge(setup: str, args: list[str], tmp_path_factory, service: dict | None = None, **facts):
+    """A service with ``args`` (and ServiceProcess's ``service`` options) and its bridge as
+    ``setup`` says, and a Peer factory for its node."""
+    service = service or {}
     peer_kind, via = SETUPS[setup]
     domain = domain_id()
     args = [*args, "--ros2", "--ros2-domain", str(domain), "--ros2-namespace", NS]
     if peer_kind == "cyclone":  # our own peer: Cyclone on 127.0.0.1, no multicast, no namespace
-        with ServiceProcess(args, env={**os.environ, "CYCLONEDDS_URI": loopback_config()}) as svc:
+        with ServiceProcess(args, env={**os.environ, "CYCLONEDDS_URI": loopback_config()}, **service) as svc:
             yield SimpleNamespace(svc=svc, domain=domain, peer=peer_of(domain, "cyclone"), **facts)
         return
     args += ["--ros2-via", via]
@@ -102,7 +105,10 @@ def running_bridge(setup: str, args: list[str], tmp_path_factory, **facts):
     sockets = tmp_path_factory.mktemp("sockets")  # ipc endpoints: reachable from outside the namespace
     endpoints = {kind: f"ipc://{sockets}/{kind}" for kind in ("endpoint", "pub", "events")}
     env = {key: value for key, value in os.environ.items() if key != "CYCLONEDDS_URI"}  # Cyclone's defaults
-    with LoopbackNamespace() as host, ServiceProcess(args, env=env, wrapper=host.wrapper(), **endpoints) as svc:
+    with (
+        LoopbackNamespace() as host,
+        ServiceProcess(args, env=env, wrapper=host.wrapper(), **endpoints, **service) as svc,
+    ):
         yield SimpleNamespace(
             svc=svc,
             domain=domain,
@@ -439,6 +445,35 @@ def test_a_ros_node_reads_and_changes_a_cameras_settings_on_the_settings_topics(
     with bridge.svc.client() as client:  # the change took, in the service itself
         assert client.settings("cam0")["values"]["gain"] == 6.0
         client.configure("cam0", gain=0)  # the module's service, as the other tests found it
+
+
+@pytest.mark.parametrize("allow", [False, True], ids=["operators", "operators,ros2-settings-allow"])
+def test_under_operators_a_node_without_a_key_changes_settings_only_where_allowed(allow, keys, tmp_path_factory):
+    """Issue 42, finding 2: a bare rclpy node (DDS carries no key) changed settings while an
+    authenticated non-operator got FORBIDDEN. Now the bridge only reads under --curve-operators,
+    unless --ros2-settings allow."""
+    folder, allowed = keys
+    operators = tmp_path_factory.mktemp("operators")
+    assert fxis("keys", "--out", str(operators), "--name", "operator").returncode == 0
+    args = ["--camera", "cam0=synthetic:width=320,height=240,fps=20"]
+    args += ["--curve-secret", str(folder / "server.key_secret"), "--curve-clients", str(allowed)]
+    args += ["--curve-operators", str(operators), *(["--ros2-settings", "allow"] if allow else [])]
+    setup = "fastdds-kilted-node,rclpy-bridge"  # a real rclpy node, a real rclpy bridge
+    alice = client_keys(folder, "alice")  # let in, no operator
+    with running_bridge(setup, args, tmp_path_factory, service={"client_keys": alice}) as bridge:
+        result = f"{NS}/settings/result"
+        with requester(bridge, [(result, STRING)], f"{NS}/settings", "publish_strings") as peer:
+            peer.publish_string(f"{NS}/settings", json.dumps({"id": 1, "camera": "cam0"}))
+            peer.publish_string(f"{NS}/settings", json.dumps({"id": 2, "camera": "cam0", "set": {"gain": 6}}))
+            answers = {a.get("id"): a for a in (json.loads(s["data"]) for s in peer.wait_for_samples(result, 2))}
+        assert "gain" in answers[1]["values"]  # reading is open, as over ZeroMQ
+        with bridge.svc.client() as client:
+            gain = client.settings("cam0")["values"]["gain"]
+        if allow:
+            assert answers[2]["changed"] == {"gain": 6.0} and gain == 6.0
+        else:
+            assert "--ros2-settings allow" in answers[2]["error"] and "changed" not in answers[2]
+            assert gain == 0.0
 
 
 @pytest.mark.parametrize("bridge", ["cyclone-node", "fastdds-kilted-node,rclpy-bridge"], indirect=True)

@@ -1,12 +1,13 @@
 """The recorder's pure decisions (which frames to take, what was missed) and its bag metadata."""
 
+import json
 import sys
 
 import pytest
 
 from fxis_shm.errors import ConfigError
 from fxis_shm.formats import bagfile
-from fxis_shm.record.recording import Follower, Steps
+from fxis_shm.record.recording import Follower, RestartGap, Steps, restart_record
 
 P = 50_000_000  # a 20 fps camera
 
@@ -42,6 +43,32 @@ def test_a_restarted_camera_counts_afresh():
     f.new_frames(rows(range(0, 10)), P)
     restarted = [[k, (20 + k) * P, 0, 0, 2] for k in range(0, 3)]
     assert [r[0] for r in f.new_frames(restarted, P)] == [0, 1, 2] and f.missed == 0
+
+
+def test_what_a_restart_cost_is_counted_by_ids_and_capture_times():
+    """Issue 42, finding 7: frames 10..19 of the camera's time were never captured (the worker
+    was down): the gap 9 P -> 20 P over the period P, less one."""
+    f = Follower(t_start=0)
+    f.new_frames(rows(range(0, 10)), P)
+    f.new_frames([[k, (20 + k) * P, 0, 0, 2] for k in range(0, 3)], P)
+    assert f.restarts == [RestartGap((1, 2), (9, 9 * P), (0, 20 * P), 10)] and f.missing_at_restarts == 10
+    assert f.lost_to_restarts and f.missed == 0  # not the recorder's fault: counted apart
+    assert f.restarts[0].describe() == (
+        "generation 1 -> 2: 10 frames missing in 550 ms (after frame 9, before frame 0 of the next)"
+    )
+    f.new_frames([[k, (40 + k) * P, 0, 0, 3] for k in range(0, 3)], P)
+    ended, gaps = restart_record({"a": f, "b": Follower(t_start=0)})
+    assert ended == "frames missing where cameras restarted: a 27 frames in 2 restart(s)"
+    assert [g["missing"] for g in json.loads(gaps)["a"]] == [10, 17] and "b" not in json.loads(gaps)
+
+
+def test_a_camera_without_a_period_cannot_say_what_a_restart_cost():
+    f = Follower(t_start=0)
+    f.new_frames(rows(range(0, 3)), 0)
+    f.new_frames([[0, 30 * P, 0, 0, 2]], 0)
+    assert f.restarts[0].missing is None and f.missing_at_restarts == 0 and f.lost_to_restarts
+    assert "an unknown number of frames" in f.restarts[0].describe()
+    assert restart_record({"a": Follower(t_start=0)}) == ("", "{}")  # none restarted: complete
 
 
 def test_a_rate_thins_on_purpose_without_counting_misses():
