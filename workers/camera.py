@@ -12,6 +12,7 @@ import time
 import posix_ipc
 
 from fxis_shm.core import timebase
+from fxis_shm.service import realtime, rtpolicy
 from fxis_shm.service.childspec import CameraWorkerSpec
 from fxis_shm.shm import history, naming
 from fxis_shm.shm.ring import FLAG_TRIGGERED, FrameLayout, RingWriter, segment_size
@@ -165,6 +166,11 @@ def run(spec: CameraWorkerSpec, ready: Ready, stop: threading.Event) -> None:
     try:
         stream.start()
         triggers = _TriggerListener(spec.service, stream, stop)  # also for a camera set to trigger=software later
+        if spec.realtime is not None:
+            why = realtime.lock_memory()
+            if why:
+                log.warning("camera %s: --realtime: %s", spec.camera, why)
+            _realtime(stream)
         ready.ok()
         try:
             _stream(stream)
@@ -208,6 +214,7 @@ def _stream(stream: Stream) -> None:
         if stream.ring.generation != generation:  # started, or restarted by a command
             camera, process, ring, generation = stream.camera, stream.process, stream.ring, stream.ring.generation
             dropped, note = camera.frames_dropped, ""
+            _realtime(stream)  # the new camera's own threads too
             if stream.first is not None:
                 _store(stream, stream.first)
                 stream.first = None
@@ -233,6 +240,21 @@ def _stream(stream: Stream) -> None:
             note = camera.note
             ring.set_status(note)
         serve_pending(stream.commands, lambda command: tuning.handle(stream, command.body))
+
+
+def _realtime(stream: Stream) -> None:
+    """The worker's threads at SCHED_FIFO by their roles (--realtime; service.rtpolicy)."""
+    priority = stream.spec.realtime
+    if priority is None:
+        return
+    options = stream.camera.options
+    inline = bool(options.get("process")) and (options.get("process_workers") or 1) == 1
+
+    def role(name: str | None, comm: str) -> str:
+        return rtpolicy.camera_thread_role(name, comm, inline)
+
+    for line in realtime.raise_threads(role, priority):
+        log.warning("camera %s: --realtime: %s", stream.spec.camera, line)
 
 
 def _reconnect(camera, ring: RingWriter, stop: threading.Event, reason: str) -> None:
