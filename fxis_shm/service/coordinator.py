@@ -25,9 +25,9 @@ from zmq.auth.thread import ThreadAuthenticator
 from fxis_shm.core import timebase
 from fxis_shm.core.engine import FRAME_OPS, Action, Failure, Pending, Reply, RequestEngine, Schedule, Trigger
 from fxis_shm.errors import Code, ConfigError, ProtocolError
+from fxis_shm.service import realtime
 from fxis_shm.service.childspec import CoordinatorSpec
 from fxis_shm.service.fastanswers import FastAnswers
-from fxis_shm.service import realtime
 from fxis_shm.service.framewatch import FrameWatch
 from fxis_shm.service.streams import Streams
 from fxis_shm.service.workerlink import WorkerLinks
