@@ -91,10 +91,10 @@ def raise_threads(role_of: Callable[[str | None, str], str], priority: int) -> l
     return failed
 
 
-def threads_of(pid: int) -> list[tuple[int, int]]:
-    """(policy, rt_priority) of each thread of ``pid`` (proc(5): fields 41 and 40 of its stat);
-    [] if it is gone."""
-    found = []
+def threads_of(pid: int) -> dict[int, tuple[int, int]]:
+    """Each thread of ``pid`` -> its (policy, rt_priority) (proc(5): fields 41 and 40 of its
+    stat); {} if it is gone."""
+    found = {}
     for tid in _tasks(str(pid)):
         try:
             with open(f"/proc/{pid}/task/{tid}/stat", "rb") as f:
@@ -102,7 +102,7 @@ def threads_of(pid: int) -> list[tuple[int, int]]:
         except OSError:
             continue
         fields = raw[raw.rfind(b")") + 2 :].split()  # fields[0] is field 3 of proc(5)
-        found.append((int(fields[38]), int(fields[37])))
+        found[tid] = (int(fields[38]), int(fields[37]))
     return found
 
 
@@ -111,8 +111,8 @@ def with_scheduling(state: dict | None) -> dict | None:
     (``sched``: rtpolicy.summary of its threads, None once it is gone)."""
     for process in (state or {}).get("processes", {}).values():
         pid = process.get("pid")
-        threads = threads_of(pid) if isinstance(pid, int) else []
-        process["sched"] = rtpolicy.summary(threads) if threads else None
+        threads = threads_of(pid) if isinstance(pid, int) else {}
+        process["sched"] = rtpolicy.summary(threads.values()) if threads else None
     return state
 
 
