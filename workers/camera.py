@@ -46,7 +46,7 @@ class Stream:
         self.commands: CommandServer | None = None
         self.first = None  # the first frame to store, if finding the layout took one
         # triggers for a moment (capture at T, lockstep), fired by a timer thread of their own
-        self.triggers = TriggerLog()
+        self.triggers = TriggerLog(_tolerance_ns(self.camera))
         self.timer: TriggerTimer | None = None
 
     def start(self) -> None:
@@ -125,6 +125,7 @@ class Stream:
             old.open()
             raise
         self.camera, self.first = camera, first
+        self.triggers.tolerance_ns = _tolerance_ns(camera)
         ring = self.ring
         assert ring is not None
         slots = history.slots_for(self.spec.history_s, camera.nominal_period_ns, self.spec.slots)
@@ -159,6 +160,11 @@ class Stream:
             self.ring.close()
         self.process.close()
         self.camera.close()
+
+
+def _tolerance_ns(camera) -> int:
+    """How far from T a frame captured for T may land before it is marked late."""
+    return round(camera.options["capture_tolerance_ms"] * 1e6)
 
 
 def run(spec: CameraWorkerSpec, ready: Ready, stop: threading.Event) -> None:

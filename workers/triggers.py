@@ -32,8 +32,10 @@ _MARGIN_NS = schedule.MS // 2  # a lockstep trigger is planned at least this far
 class TriggerLog:
     """The triggers fired and not yet answered by a frame; the learned latency; the figures."""
 
-    def __init__(self) -> None:
+    def __init__(self, tolerance_ns: int = round(schedule.CAPTURE_TOLERANCE_MS * schedule.MS)) -> None:
+        """``tolerance_ns``: a frame captured for T further from T than this is marked late."""
         self._lock = threading.Lock()
+        self.tolerance_ns = tolerance_ns
         self._fired: deque[tuple[int, int, int]] = deque(maxlen=_KEPT)  # (t_fired, t_target, capture)
         self.latency_ns = 0
         self.samples = 0
@@ -53,7 +55,8 @@ class TriggerLog:
                 self.lateness.append(late_ns)
 
     def answer(self, t_capture: int) -> tuple[int, int]:
-        """(t_target, capture) of a frame captured at ``t_capture``: the trigger it answers."""
+        """(t_target, capture) of a frame captured at ``t_capture``: the trigger it answers (a
+        scheduled one answered too far from its T: late)."""
         with self._lock:
             fired = [t for t, _, _ in self._fired]
             k = schedule.answered_trigger(fired, t_capture, self.latency_ns)
@@ -70,7 +73,7 @@ class TriggerLog:
                 self.residuals.append(t_capture - t_target)
             elif capture == CAPTURE_SCHEDULED:
                 self.scheduled += 1
-            return t_target, capture
+            return t_target, schedule.captured_as(capture, t_capture, t_target, self.tolerance_ns)
 
     def skipped(self, points: int) -> None:
         """Lockstep grid points the timer gave up (it woke too late for them)."""
