@@ -5,6 +5,7 @@ the coordinator's commands (workers/commands.py, workers/tuning.py)."""
 
 from __future__ import annotations
 
+import functools
 import logging
 import threading
 import time
@@ -82,6 +83,7 @@ class Stream:
             lockstep,
             self.timed,
             spec.lockstep_clock,
+            functools.partial(realtime.raise_this_thread, rtpolicy.TIMER, spec.realtime),
         )
         direct = {commands.TRIGGER_AT: self.timer.trigger_at, commands.LOCKSTEP: self.timer.set_lockstep}
         # before the ring: a coordinator that sees the ring's new generation finds the commands
@@ -173,10 +175,10 @@ def run(spec: CameraWorkerSpec, ready: Ready, stop: threading.Event) -> None:
         stream.start()
         triggers = _TriggerListener(spec.service, stream, stop)  # also for a camera set to trigger=software later
         if spec.realtime is not None:
+            _realtime(stream)
             why = realtime.lock_memory()
             if why:
                 log.warning("camera %s: --realtime: %s", spec.camera, why)
-            _realtime(stream)
         ready.ok()
         try:
             _stream(stream)

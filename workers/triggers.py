@@ -118,11 +118,13 @@ class TriggerTimer:
         lockstep: tuple[float, int] | None = None,
         on_grid: Callable[[], None] = lambda: None,
         lockstep_clock: str = schedule.GRID_CLOCKS[0],
+        on_start: Callable[[], None] = lambda: None,
     ):
         """``on_grid``: called when the lockstep grid was set or stopped (the ring says so);
-        ``lockstep_clock``: the clock the grid is counted in (schedule.GRID_CLOCKS)."""
+        ``lockstep_clock``: the clock the grid is counted in (schedule.GRID_CLOCKS); ``on_start``:
+        called first in the timer's thread (--realtime raises its priority there, before any trigger)."""
         self._trigger, self._can_trigger, self.log = trigger, can_trigger, triggers
-        self._on_grid = on_grid
+        self._on_grid, self._on_start = on_grid, on_start
         self._due: list[tuple[int, int]] = []  # heap of (t_fire, t_target), service clock
         self._targets: set[int] = set()
         self.lockstep: tuple[float, int] | None = None  # (hz, phase_ns) of grid_clock
@@ -217,6 +219,7 @@ class TriggerTimer:
         return self._planned
 
     def _run(self) -> None:
+        self._on_start()
         while True:
             with self._wake:
                 if self._stop:

@@ -73,6 +73,17 @@ def lock_memory() -> str | None:
     return None
 
 
+def raise_this_thread(role: str, priority: int | None) -> None:
+    """The calling thread at the priority of its ``role`` (``priority`` None: --realtime is off);
+    a refusal is left to raise_threads's sweep, which reports it."""
+    wanted = None if priority is None else rtpolicy.priority_of(role, priority)
+    if wanted is not None:
+        try:
+            _set_fifo(0, wanted)
+        except OSError:
+            pass
+
+
 def raise_threads(role_of: Callable[[str | None, str], str], priority: int) -> list[str]:
     """Set every thread of this process to the priority its role gives (rtpolicy.priority_of);
     ``role_of(python_name or None, comm)``. Returns what failed, one line each."""
