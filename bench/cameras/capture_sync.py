@@ -198,6 +198,7 @@ def main(argv=None) -> int:
     p.add_argument("--lead-ms", type=float, default=100.0, help="T = now + this (default 100)")
     p.add_argument("--tuples", type=int, default=400, help="lockstep tuples per condition (default 400)")
     p.add_argument("--hz", type=float, default=20.0, help="lockstep rate (default 20)")
+    p.add_argument("--logs", metavar="DIR", help="keep the services' logs here (default: removed with the hosts)")
     args = p.parse_args(argv)
     if args.hosts < 1 or args.requests < 1 or args.tuples < 1 or args.hz <= 0 or args.load < 0:
         p.error("--hosts, --requests, --tuples and --hz must be positive, --load at least 0")
@@ -208,7 +209,7 @@ def main(argv=None) -> int:
     ]
     load = os.getloadavg()
     try:
-        with Lab() as lab:
+        with Lab(log_dir=args.logs) as lab:
             hosts = [lab.host(clock_offset_s=1000 * (k + 1)) for k in range(args.hosts)]
             for cond in conditions:
                 loops = busy_loops(cond.load)
