@@ -64,9 +64,9 @@ def lock_refusal() -> str:
 
 def lock_memory() -> str | None:
     """mlockall(MCL_CURRENT | MCL_FUTURE) where it is safe (rtpolicy.memory_lock_allowed); None
-    if done, else why not."""
+    if done or not safe (``fxis run`` said so at start, in its one line), else why it failed."""
     if not memory_lockable():
-        return lock_refusal()
+        return None
     libc = ctypes.CDLL(None, use_errno=True)
     if libc.mlockall(_MCL_CURRENT | _MCL_FUTURE) != 0:
         return f"memory not locked: {os.strerror(ctypes.get_errno())}"

@@ -118,3 +118,27 @@ def test_refused_with_require_it_exits_2_with_that_line():
         f"fxis run: --realtime=require: SCHED_FIFO {DEFAULT_PRIORITY} refused (EPERM: no CAP_SYS_NICE and "
         f"RLIMIT_RTPRIO 0 (below {DEFAULT_PRIORITY})); not starting (docs/deployment.md says how to grant it)"
     ]
+
+
+def test_memory_that_cannot_be_locked_safely_is_one_line_and_fifo_goes_on(start_service, wait, tmp_path):
+    """Under a finite RLIMIT_MEMLOCK without CAP_IPC_LOCK, mlockall(MCL_FUTURE) would make later
+    mappings past the limit fail: memory stays unlocked, and the threads still run FIFO."""
+    limit = 64 << 10
+    unlockable = [
+        "prlimit",
+        f"--memlock={limit}:{limit}",
+        "setpriv",
+        "--inh-caps=-ipc_lock",
+        "--bounding-set=-ipc_lock",
+    ]
+    svc = start_service("--realtime", "--camera", TRIGGERED, wrapper=[*unlockable, "--"])
+    children = wait(lambda: running(svc, 2), what="camera and coordinator")
+    assert policies(children["camera:a"])[TIMER] == 1
+    for pid in children.values():
+        with open(f"/proc/{pid}/status") as f:
+            assert "VmLck:\t       0 kB" in f.read().splitlines()
+    said = [line for line in (tmp_path / "service0.log").read_text().splitlines() if "realtime" in line]
+    assert said == [
+        f"fxis run: --realtime: SCHED_FIFO {DEFAULT_PRIORITY}, but memory not locked (RLIMIT_MEMLOCK {limit} bytes "
+        "and no CAP_IPC_LOCK)"
+    ]
