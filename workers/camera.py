@@ -230,6 +230,7 @@ def _stream(stream: Stream) -> None:
             capture = camera.grab(_RESULT_POLL_S if process.in_flight else _GRAB_TIMEOUT_S)
         except CameraLost as exc:
             _reconnect(camera, ring, stop, str(exc))
+            _realtime(stream)  # the reopened camera's own threads
             generation = ring.generation  # the same camera and ring, a new generation
             dropped, note = camera.frames_dropped, ""  # _reconnect cleared the status
             continue
