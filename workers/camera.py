@@ -5,6 +5,7 @@ the coordinator's commands (workers/commands.py, workers/tuning.py)."""
 
 from __future__ import annotations
 
+import functools
 import logging
 import threading
 import time
@@ -12,6 +13,7 @@ import time
 import posix_ipc
 
 from fxis_shm.core import timebase
+from fxis_shm.service import realtime, rtpolicy
 from fxis_shm.service.childspec import CameraWorkerSpec
 from fxis_shm.shm import history, naming
 from fxis_shm.shm.ring import FLAG_TRIGGERED, FrameLayout, RingWriter, segment_size
@@ -45,7 +47,7 @@ class Stream:
         self.commands: CommandServer | None = None
         self.first = None  # the first frame to store, if finding the layout took one
         # triggers for a moment (capture at T, lockstep), fired by a timer thread of their own
-        self.triggers = TriggerLog()
+        self.triggers = TriggerLog(_tolerance_ns(self.camera))
         self.timer: TriggerTimer | None = None
 
     def start(self) -> None:
@@ -81,6 +83,7 @@ class Stream:
             lockstep,
             self.timed,
             spec.lockstep_clock,
+            functools.partial(realtime.raise_this_thread, rtpolicy.TIMER, spec.realtime),
         )
         direct = {commands.TRIGGER_AT: self.timer.trigger_at, commands.LOCKSTEP: self.timer.set_lockstep}
         # before the ring: a coordinator that sees the ring's new generation finds the commands
@@ -124,6 +127,7 @@ class Stream:
             old.open()
             raise
         self.camera, self.first = camera, first
+        self.triggers.tolerance_ns = _tolerance_ns(camera)
         ring = self.ring
         assert ring is not None
         slots = history.slots_for(self.spec.history_s, camera.nominal_period_ns, self.spec.slots)
@@ -160,11 +164,21 @@ class Stream:
         self.camera.close()
 
 
+def _tolerance_ns(camera) -> int:
+    """How far from T a frame captured for T may land before it is marked late."""
+    return round(camera.options["capture_tolerance_ms"] * 1e6)
+
+
 def run(spec: CameraWorkerSpec, ready: Ready, stop: threading.Event) -> None:
     stream = Stream(spec, stop)
     try:
         stream.start()
         triggers = _TriggerListener(spec.service, stream, stop)  # also for a camera set to trigger=software later
+        if spec.realtime is not None:
+            _realtime(stream)
+            why = realtime.lock_memory()
+            if why:
+                log.warning("camera %s: --realtime: %s", spec.camera, why)
         ready.ok()
         try:
             _stream(stream)
@@ -208,6 +222,7 @@ def _stream(stream: Stream) -> None:
         if stream.ring.generation != generation:  # started, or restarted by a command
             camera, process, ring, generation = stream.camera, stream.process, stream.ring, stream.ring.generation
             dropped, note = camera.frames_dropped, ""
+            _realtime(stream)  # the new camera's own threads too
             if stream.first is not None:
                 _store(stream, stream.first)
                 stream.first = None
@@ -215,6 +230,7 @@ def _stream(stream: Stream) -> None:
             capture = camera.grab(_RESULT_POLL_S if process.in_flight else _GRAB_TIMEOUT_S)
         except CameraLost as exc:
             _reconnect(camera, ring, stop, str(exc))
+            _realtime(stream)  # the reopened camera's own threads
             generation = ring.generation  # the same camera and ring, a new generation
             dropped, note = camera.frames_dropped, ""  # _reconnect cleared the status
             continue
@@ -233,6 +249,21 @@ def _stream(stream: Stream) -> None:
             note = camera.note
             ring.set_status(note)
         serve_pending(stream.commands, lambda command: tuning.handle(stream, command.body))
+
+
+def _realtime(stream: Stream) -> None:
+    """The worker's threads at SCHED_FIFO by their roles (--realtime; service.rtpolicy)."""
+    priority = stream.spec.realtime
+    if priority is None:
+        return
+    options = stream.camera.options
+    inline = bool(options.get("process")) and (options.get("process_workers") or 1) == 1
+
+    def role(name: str | None, comm: str) -> str:
+        return rtpolicy.camera_thread_role(name, comm, inline)
+
+    for line in realtime.raise_threads(role, priority):
+        log.warning("camera %s: --realtime: %s", stream.spec.camera, line)
 
 
 def _reconnect(camera, ring: RingWriter, stop: threading.Event, reason: str) -> None:

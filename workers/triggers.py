@@ -32,8 +32,10 @@ _MARGIN_NS = schedule.MS // 2  # a lockstep trigger is planned at least this far
 class TriggerLog:
     """The triggers fired and not yet answered by a frame; the learned latency; the figures."""
 
-    def __init__(self) -> None:
+    def __init__(self, tolerance_ns: int = round(schedule.CAPTURE_TOLERANCE_MS * schedule.MS)) -> None:
+        """``tolerance_ns``: a frame captured for T further from T than this is marked late."""
         self._lock = threading.Lock()
+        self.tolerance_ns = tolerance_ns
         self._fired: deque[tuple[int, int, int]] = deque(maxlen=_KEPT)  # (t_fired, t_target, capture)
         self.latency_ns = 0
         self.samples = 0
@@ -53,7 +55,8 @@ class TriggerLog:
                 self.lateness.append(late_ns)
 
     def answer(self, t_capture: int) -> tuple[int, int]:
-        """(t_target, capture) of a frame captured at ``t_capture``: the trigger it answers."""
+        """(t_target, capture) of a frame captured at ``t_capture``: the trigger it answers (a
+        scheduled one answered too far from its T: late)."""
         with self._lock:
             fired = [t for t, _, _ in self._fired]
             k = schedule.answered_trigger(fired, t_capture, self.latency_ns)
@@ -70,7 +73,7 @@ class TriggerLog:
                 self.residuals.append(t_capture - t_target)
             elif capture == CAPTURE_SCHEDULED:
                 self.scheduled += 1
-            return t_target, capture
+            return t_target, schedule.captured_as(capture, t_capture, t_target, self.tolerance_ns)
 
     def skipped(self, points: int) -> None:
         """Lockstep grid points the timer gave up (it woke too late for them)."""
@@ -115,11 +118,13 @@ class TriggerTimer:
         lockstep: tuple[float, int] | None = None,
         on_grid: Callable[[], None] = lambda: None,
         lockstep_clock: str = schedule.GRID_CLOCKS[0],
+        on_start: Callable[[], None] = lambda: None,
     ):
         """``on_grid``: called when the lockstep grid was set or stopped (the ring says so);
-        ``lockstep_clock``: the clock the grid is counted in (schedule.GRID_CLOCKS)."""
+        ``lockstep_clock``: the clock the grid is counted in (schedule.GRID_CLOCKS); ``on_start``:
+        called first in the timer's thread (--realtime raises its priority there, before any trigger)."""
         self._trigger, self._can_trigger, self.log = trigger, can_trigger, triggers
-        self._on_grid = on_grid
+        self._on_grid, self._on_start = on_grid, on_start
         self._due: list[tuple[int, int]] = []  # heap of (t_fire, t_target), service clock
         self._targets: set[int] = set()
         self.lockstep: tuple[float, int] | None = None  # (hz, phase_ns) of grid_clock
@@ -214,6 +219,7 @@ class TriggerTimer:
         return self._planned
 
     def _run(self) -> None:
+        self._on_start()
         while True:
             with self._wake:
                 if self._stop:

@@ -7,6 +7,7 @@ import json
 from fxis_shm.cli.options import add_client_options, client_for, nanoseconds
 from fxis_shm.cli.stopsignals import as_interrupts, interrupted
 from fxis_shm.cli.table import aligned
+from fxis_shm.service.rtpolicy import sched_text
 from fxis_shm.shm.cameras import RATE_WINDOW_NS
 
 
@@ -75,6 +76,9 @@ def status_command(args) -> int:
         line = _sync_line(cam.get("sync"))
         if line:
             print(f"  {name}: {line}")
+    processes = (status.get("supervisor") or {}).get("processes") or {}
+    if processes:  # --realtime's doing (docs/deployment.md)
+        print("scheduling: " + ", ".join(f"{key} {sched_text(p.get('sched'))}" for key, p in processes.items()))
     if status.get("ros2"):
         print("\n".join(_ros2_lines(status["ros2"])))
     return 0

@@ -12,6 +12,7 @@ from fxis_shm.cli import exitcodes
 from fxis_shm.errors import ConfigError
 from fxis_shm.service.camerakinds import COMMON_OPTIONS, KINDS
 from fxis_shm.service.config import DEFAULT_FOXGLOVE_RATE_HZ, MAX_FOXGLOVE_RATE_HZ, build_config, load_toml
+from fxis_shm.service.rtpolicy import DEFAULT_PRIORITY, KERNEL_PRIORITY
 from fxis_shm.wire import defaults
 
 
@@ -57,8 +58,11 @@ def run_command(args) -> int:
             "history": args.history,
             "lockstep": args.lockstep,
             "lockstep_clock": args.lockstep_clock,
+            "realtime": args.realtime,
         },
     )
+    if config.realtime is not None:
+        config = _realtime_granted(config)
     if service_running(config.name):  # its ports are in use too: say the more useful thing
         raise ConfigError(f"service {config.name!r} is already running (give --name another)")
     config, warnings = check_free(config)  # before anything starts: a port in use is one line
@@ -70,6 +74,27 @@ def run_command(args) -> int:
     logging.basicConfig(level=config.log_level, format="%(asctime)s supervisor %(levelname)s %(message)s")
     # a StartError is one line, after all was stopped and removed: code 2 if a camera refused its settings, else 4
     return exitcodes.DONE if Supervisor(config).run() == 0 else exitcodes.FAILED
+
+
+def _realtime_granted(config):
+    """The config as it can run: where SCHED_FIFO is refused, one line says so and the service runs
+    at normal priority, or (require) it stops here with that line (code 2)."""
+    from dataclasses import replace
+
+    from fxis_shm.service import realtime
+
+    why = realtime.refusal(config.realtime.priority)
+    if why is None:
+        if not realtime.memory_lockable():
+            print(
+                f"fxis run: --realtime: SCHED_FIFO {config.realtime.priority}, but {realtime.lock_refusal()}",
+                file=sys.stderr,
+            )
+        return config
+    if config.realtime.require:
+        raise ConfigError(f"--realtime=require: {why}; not starting (docs/deployment.md says how to grant it)")
+    print(f"fxis run: --realtime: {why}; running at normal priority (docs/deployment.md)", file=sys.stderr)
+    return replace(config, realtime=None)
 
 
 def _kinds_help() -> str:
@@ -189,6 +214,16 @@ def add_parser(sub) -> None:
         choices=("realtime", "tai"),
         help="the clock the --lockstep grid is counted in: realtime (default) or tai (PTP's timescale: no leap "
         "seconds; ptp4l + phc2sys keep it, with the kernel's TAI offset set)",
+    )
+    run.add_argument(
+        "--realtime",
+        nargs="?",
+        const=True,
+        metavar="PRIORITY|require",
+        help=f"run the camera workers' threads and the coordinator's loop at SCHED_FIFO, memory locked: the "
+        f"trigger timers at PRIORITY (default {DEFAULT_PRIORITY}, below the kernel's interrupt threads at "
+        f"{KERNEL_PRIORITY}), the rest one below; where it is not allowed a line says so and the service runs "
+        "at normal priority, or with require (also PRIORITY,require) does not start (docs/deployment.md)",
     )
     run.add_argument(
         "--port-base",

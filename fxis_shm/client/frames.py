@@ -20,8 +20,9 @@ from fxis_shm.shm.bufferpool import release as release_buffer
 LOCAL, NETWORK = "local", "network"
 _TIMES = ("t_capture", "t_stored", "t_available", "t_target")
 # how a frame came to be captured (Frame.capture): on its own (free-running, or triggered by a
-# request for "now"), triggered for a moment a caller named, or on the service's lockstep grid
-FREE, SCHEDULED, LOCKSTEP = "free", "scheduled", "lockstep"
+# request for "now"), triggered for a moment a caller named, on the service's lockstep grid, or
+# for a named moment and captured further from it than the camera's capture_tolerance_ms
+FREE, SCHEDULED, LOCKSTEP, LATE = "free", "scheduled", "lockstep", "late"
 
 
 @dataclass(slots=True)
@@ -43,8 +44,8 @@ class Frame:
     service_t_capture: int = field(default=0, repr=False)
     service_t_stored: int = field(default=0, repr=False)
     service_t_available: int | None = field(default=None, repr=False)
-    capture: str = FREE  # FREE, SCHEDULED or LOCKSTEP
-    t_target: int | None = None  # the moment a SCHEDULED or LOCKSTEP frame was to be captured at
+    capture: str = FREE  # FREE, SCHEDULED, LOCKSTEP or LATE
+    t_target: int | None = None  # the moment a SCHEDULED, LATE or LOCKSTEP frame was to be captured at
 
     @property
     def residual_ns(self) -> int | None:

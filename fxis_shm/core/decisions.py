@@ -17,7 +17,7 @@ from typing import Any, Protocol
 
 from fxis_shm.core import sequences
 from fxis_shm.core.selection import INDEPENDENT, Selection, radius_for, select, tolerance_for
-from fxis_shm.core.snapshot import CAPTURE_SCHEDULED, Snapshot
+from fxis_shm.core.snapshot import CAPTURE_LATE, CAPTURE_SCHEDULED, Snapshot
 from fxis_shm.core.timesearch import Timeline
 from fxis_shm.core.waitpolicy import AUTO, NEXT, CameraState, waiting_for, waiting_for_selection
 from fxis_shm.errors import Code
@@ -185,7 +185,7 @@ def _usable(p: Request, cam: str, snap: Snapshot) -> tuple[Timeline, int] | None
             meta = snap.frame_meta(i)
             if meta.t_stored < p.t_received:  # stored before the request came: not its frame
                 break
-            if meta.capture == CAPTURE_SCHEDULED and meta.t_target == p.t_star:
+            if (meta.capture == CAPTURE_SCHEDULED or meta.capture == CAPTURE_LATE) and meta.t_target == p.t_star:
                 return Timeline(tl.times, tl.physical(i), 1), i
         return None
     if cam not in p.triggered:

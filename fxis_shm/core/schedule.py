@@ -9,6 +9,7 @@ import math
 from dataclasses import dataclass
 from fractions import Fraction
 
+from fxis_shm.core.snapshot import CAPTURE_LATE, CAPTURE_SCHEDULED
 from fxis_shm.errors import Code
 
 MS = 1_000_000
@@ -20,6 +21,10 @@ MAX_AHEAD_NS = 10_000 * MS  # the request engine's horizon: a T further ahead is
 LATENCY_SMOOTHING = 8  # EWMA weight 1/8 of the trigger latency, after a plain mean of the first 8
 MATCH_SLACK_NS = 2 * MS  # a frame up to this much before its trigger still answers it (clock mapping)
 MAX_LOCKSTEP_HZ = 1000.0
+# how far from T a frame captured for T may land and still count as captured at T (a camera's
+# capture_tolerance_ms): the timer's 2 ms of spinning; later, it was held up (or the camera's
+# latency changed) and its frame is marked late
+CAPTURE_TOLERANCE_MS = 2.0
 # the clocks a lockstep grid may be counted in: the cell's common clocks (CLOCK_MONOTONIC is not
 # common to hosts); the index is what the ring's header says (lockstep_clock)
 GRID_CLOCKS = ("realtime", "tai")
@@ -131,3 +136,11 @@ def percentile(values: list[int], q: float) -> int | None:
     ordered = sorted(values)
     rank = min(len(ordered) - 1, max(0, round(q / 100 * (len(ordered) - 1))))
     return ordered[rank]
+
+
+def captured_as(capture: int, t_capture: int, t_target: int, tolerance_ns: int) -> int:
+    """A stored frame's ``capture`` (core.snapshot.CAPTURES): a frame captured for a named moment
+    that missed it by more than ``tolerance_ns`` either way is late, never just scheduled."""
+    if capture == CAPTURE_SCHEDULED and abs(t_capture - t_target) > tolerance_ns:
+        return CAPTURE_LATE
+    return capture

@@ -28,9 +28,11 @@ SLOT = np.dtype(
     ]
 )
 # Slot record ``capture`` values, by index: free-running (or triggered for "now"), triggered
-# for a moment a caller named (trigger_at), triggered on the service's lockstep grid.
-CAPTURES = ("free", "scheduled", "lockstep")
-CAPTURE_FREE, CAPTURE_SCHEDULED, CAPTURE_LOCKSTEP = range(3)
+# for a moment a caller named (trigger_at), triggered on the service's lockstep grid, triggered
+# for a named moment and captured further from it than the camera's capture_tolerance_ms
+# (core.schedule.captured_as).
+CAPTURES = ("free", "scheduled", "lockstep", "late")
+CAPTURE_FREE, CAPTURE_SCHEDULED, CAPTURE_LOCKSTEP, CAPTURE_LATE = range(4)
 
 
 @dataclass(frozen=True)

@@ -41,7 +41,7 @@ DEFAULT_MIN_SYNCED_PCT = 95.0
 DEFAULT_MAX_DROPPED_PCT = 5.0
 
 # Frame.capture's values, in the order of the ``capture`` codes below (-1: no frame)
-CAPTURE_METHODS = ("free", "scheduled", "lockstep")
+CAPTURE_METHODS = ("free", "scheduled", "lockstep", "late")
 ABSENT = -1
 
 Ints = npt.NDArray[np.int64]

@@ -19,6 +19,7 @@ from dataclasses import dataclass
 from typing import Any
 
 from fxis_shm.formats import cdr
+from fxis_shm.service.rtpolicy import sched_text
 
 OK, WARN, ERROR, STALE = 0, 1, 2, 3
 WINDOW_S = 5.0  # the rate and the drops are measured over the last this many seconds
@@ -69,6 +70,7 @@ def diagnose(service: str, camera: str, status: dict[str, Any], window: list[Sam
         ("worker", "running" if status.get("alive") else "down"),
         ("trigger", str(status.get("trigger", "free"))),
         ("generation", str(status.get("generation", ""))),
+        ("scheduling", sched_text(status.get("sched"))),  # its worker's (fxis run --realtime)
     ]
     return cdr.DiagnosticStatus(level, f"fxis {service}: {camera}", message, f"{status.get('kind', '')}", values)
 

@@ -13,6 +13,7 @@ from collections.abc import Mapping
 from dataclasses import dataclass
 from typing import Any
 
+from fxis_shm.core.schedule import CAPTURE_TOLERANCE_MS
 from fxis_shm.errors import ConfigError
 from fxis_shm.formats.calibration import read_calibration
 from fxis_shm.service.options import Option, boolean, choice, number, parse_options, text
@@ -67,6 +68,11 @@ COMMON_OPTIONS = {
     "frame_id": Option(frame_id, None, "header.frame_id of the camera's ROS 2 messages (default: its name)"),
     "calibration": Option(
         calibration_file, None, "camera_info_manager YAML file for its ROS 2 camera_info (default: size only)"
+    ),
+    "capture_tolerance_ms": Option(
+        number(float, 0, 10_000),
+        CAPTURE_TOLERANCE_MS,
+        "a frame captured at T that lands further than this from T is marked late (docs/sync.md)",
     ),
 }
 

@@ -102,7 +102,7 @@ class CameraWorkerSpec(ChildSpec):
     MODULE = "fxis_shm.workers.camera"
     FORKABLE = True
     TITLE = "fxis camera"
-    VERSION = 3  # 2: lockstep_hz, lockstep_phase_ns; 3: lockstep_clock
+    VERSION = 4  # 2: lockstep_hz, lockstep_phase_ns; 3: lockstep_clock; 4: realtime
 
     camera: str
     kind: str  # an entry of fxis_shm.service.camerakinds.KINDS
@@ -113,6 +113,7 @@ class CameraWorkerSpec(ChildSpec):
     lockstep_hz: float | None = None  # fire the trigger on the grid k/HZ + phase of lockstep_clock
     lockstep_phase_ns: int = 0
     lockstep_clock: str = "realtime"  # realtime or tai (core.schedule.GRID_CLOCKS)
+    realtime: int | None = None  # SCHED_FIFO priority of the trigger timer (service.rtpolicy), None: normal
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -121,7 +122,7 @@ class CoordinatorSpec(ChildSpec):
     MODULE = "fxis_shm.workers.coordinator"
     FORKABLE = True
     TITLE = "fxis coord"  # "fxis coordinator" is a byte too long for the kernel
-    VERSION = 2
+    VERSION = 3  # 3: realtime
 
     endpoint: str
     pub: str
@@ -132,6 +133,7 @@ class CoordinatorSpec(ChildSpec):
     curve_clients: str | None = None
     curve_operators: str | None = None  # the keys that may change camera settings (None: every client)
     history: dict[str, float] = dataclasses.field(default_factory=dict)  # camera -> seconds asked for
+    realtime: int | None = None  # the service's --realtime priority (its loop runs one below), None: normal
 
 
 @dataclass(frozen=True, kw_only=True)

@@ -20,6 +20,7 @@ from fxis_shm.errors import ConfigError
 from fxis_shm.service.camerakinds import camera_options
 from fxis_shm.service.options import split_key_values
 from fxis_shm.service.ros2config import KEYS as ROS2_KEYS, Ros2Settings, ros2_settings
+from fxis_shm.service.rtpolicy import Realtime, parse_realtime
 from fxis_shm.shm.naming import check_name
 from fxis_shm.wire import defaults
 from fxis_shm.wire.endpoints import check_endpoint
@@ -59,6 +60,7 @@ class ServiceConfig:
     history: float | None = None  # seconds each ring holds, sized from its camera's rate (else slots)
     lockstep: tuple[float, int] | None = None  # (hz, phase_ns): trigger on the grid k/hz + phase of lockstep_clock
     lockstep_clock: str = "realtime"  # the clock the grid is counted in (core.schedule.GRID_CLOCKS)
+    realtime: Realtime | None = None  # SCHED_FIFO for the capture and request path (service.rtpolicy)
     cameras: tuple[CameraSpec, ...] = ()
     settings: dict[str, Any] = field(default_factory=dict)
     restart_limit: int = defaults.RESTART_LIMIT
@@ -311,6 +313,7 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
         "history",
         "lockstep",
         "lockstep_clock",
+        "realtime",
         *ROS2_KEYS,
         *SERVICE_SETTINGS,
     }
@@ -377,6 +380,8 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
             config = replace(config, lockstep_clock=check_grid_clock(str(values["lockstep_clock"])))
         except ValueError as exc:
             raise ConfigError(str(exc)) from None
+    if "realtime" in values:
+        config = replace(config, realtime=parse_realtime(values["realtime"]))
     if "restart_limit" in values:
         config = replace(config, restart_limit=_check_int("restart_limit", values["restart_limit"], 0))
     config = _security(config, values)

@@ -25,6 +25,7 @@ from zmq.auth.thread import ThreadAuthenticator
 from fxis_shm.core import timebase
 from fxis_shm.core.engine import FRAME_OPS, Action, Failure, Pending, Reply, RequestEngine, Schedule, Trigger
 from fxis_shm.errors import Code, ConfigError, ProtocolError
+from fxis_shm.service import realtime
 from fxis_shm.service.childspec import CoordinatorSpec
 from fxis_shm.service.fastanswers import FastAnswers
 from fxis_shm.service.framewatch import FrameWatch
@@ -369,7 +370,7 @@ class Coordinator:
         self._reply(reply.pending.ticket, reply.pending.request, body, images)
 
     def _op_status(self, request: dict, t_received: int) -> dict:
-        now = timebase.now()
+        now, supervisor = timebase.now(), realtime.with_scheduling(self._state_of("supervisor"))
         return {
             "op": "status",
             "service": self.service,
@@ -388,17 +389,17 @@ class Coordinator:
             "requests_compiled": self.fast.answered if self.fast is not None else 0,
             "events_dropped": self.events_dropped,
             "streams": self.streams.status(),
-            "supervisor": self._state_of("supervisor"),
+            "supervisor": supervisor,
             "ros2": self._state_of("ros2"),
             "settings": self.settings,
-            "cameras": self._camera_status(now),
+            "cameras": self._camera_status(now, (supervisor or {}).get("processes", {})),
         }
 
-    def _camera_status(self, now: int) -> dict:
-        processes = (self._state_of("supervisor") or {}).get("processes", {})
+    def _camera_status(self, now: int, processes: dict) -> dict:
         cameras = {name: cam.status(now) for name, cam in self.cameras.items()}
         for name, info in cameras.items():
-            info["restarts"] = processes.get(f"camera:{name}", {}).get("restarts")
+            process = processes.get(f"camera:{name}", {})
+            info["restarts"], info["sched"] = process.get("restarts"), process.get("sched")
             info["settings"] = self.desk.values(name, info.get("generation"))
             info["ptp"] = self.desk.ptp(name)  # None: the camera cannot say (or not yet asked)
         return cameras

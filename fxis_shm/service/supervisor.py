@@ -252,6 +252,7 @@ class Supervisor:
         self.stop = threading.Event()
         origin = timebase.reader(config.clock)()  # the synthetic cameras' shared time origin
         common = {"service": config.name, "log_level": config.log_level, "clock": config.clock}
+        realtime = config.realtime.priority if config.realtime else None  # viewers never: they are clients
         self.cameras = [
             Child(
                 CameraWorkerSpec(
@@ -265,6 +266,7 @@ class Supervisor:
                     lockstep_hz=config.lockstep[0] if config.lockstep else None,
                     lockstep_phase_ns=config.lockstep[1] if config.lockstep else 0,
                     lockstep_clock=config.lockstep_clock,
+                    realtime=realtime,
                 ),
                 f"camera {c.name!r}",
                 key=f"camera:{c.name}",
@@ -283,6 +285,7 @@ class Supervisor:
                 curve_clients=config.curve_clients,
                 curve_operators=config.curve_operators,
                 history={c.name: h for c in config.cameras if (h := history_of(c, config))},
+                realtime=realtime,
             ),
             "coordinator",
             key="coordinator",

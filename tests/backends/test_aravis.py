@@ -354,7 +354,9 @@ def test_captures_at_t_keep_the_fake_camera_up_and_land_within_its_trigger_jitte
     sync = status["sync"]
     assert status["alive"] and status["generation"] == generation  # never lost, never reopened
     assert sync["frames_scheduled"] == 12 and sync["triggers_missed"] == 0
-    assert all(f.capture == "scheduled" and is_frame(f) for f in frames)
+    # late beyond the default tolerance of 2 ms: the emulator's tick spreads its captures over 40 ms
+    assert all(f.capture == ("late" if abs(f.residual_ns) > 2_000_000 else "scheduled") for f in frames)
+    assert all(is_frame(f) for f in frames)
     ticks = [b.frame_id - a.frame_id for a, b in zip(frames, frames[1:])]
     assert ticks == [1] * 11  # one frame per trigger
     # once the latency was learned (the first two teach it), each frame is its trigger's: a

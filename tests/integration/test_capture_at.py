@@ -13,6 +13,7 @@ from concurrent.futures import ThreadPoolExecutor
 import pytest
 
 from fxis_shm import Client, handshake, read_stamp
+from fxis_shm.core.schedule import CAPTURE_TOLERANCE_MS
 from fxis_shm.errors import ProtocolError, ServiceError
 
 from ..conftest import wait_until
@@ -28,6 +29,11 @@ AHEAD_NS = 300 * MS  # far enough that a loaded machine still delivers the comma
 # (the worker stamps the trigger, then calls the camera, which stamps it again)
 LATENCY_NOISE_NS = MS // 2
 TRIGGERED = f"synthetic:trigger=software,trigger_latency_ms={LATENCY_MS},{SMALL}"
+
+
+def captured_as(frame, tolerance_ms: float = CAPTURE_TOLERANCE_MS) -> str:
+    """What a frame captured for T must say by its residual: late beyond the camera's tolerance."""
+    return "late" if abs(frame.residual_ns) > tolerance_ms * MS else "scheduled"
 
 
 def _capture_tuples(client, n: int, cameras=None) -> list:
@@ -50,7 +56,7 @@ def test_a_capture_at_t_triggers_the_camera_for_t_and_a_free_camera_answers_near
     residuals = []
     for at, pair in tuples:
         trig, free = pair["trig"], pair["free"]
-        assert (trig.capture, trig.t_target) == ("scheduled", at)  # the caller's clock: this host's
+        assert (trig.capture, trig.t_target) == (captured_as(trig), at)  # the caller's clock: this host's
         assert read_stamp(trig.image) == trig.frame_id
         # never early beyond the latency's noise; late by at most what the timer was late
         assert -LATENCY_NOISE_NS <= trig.residual_ns <= late_max + LATENCY_NOISE_NS
@@ -66,13 +72,28 @@ def test_an_image_captured_at_t_and_a_free_cameras_image(start_service):
     with svc.client() as client:
         at = time.monotonic_ns() + AHEAD_NS
         frame = client.image("trig", at=at, capture=True)
-        assert (frame.capture, frame.t_target) == ("scheduled", at) and frame.residual_ns >= -LATENCY_NOISE_NS
+        assert (frame.capture, frame.t_target) == (captured_as(frame), at) and frame.residual_ns >= -LATENCY_NOISE_NS
         at = time.monotonic_ns() + AHEAD_NS
         free = client.image("free", at=at, capture=True)
         assert (free.capture, free.t_target) == ("free", None)
         assert abs(free.t_capture - at) <= 10**9 // FREE_FPS // 2 + MS
         now = client.image("trig")  # a trigger for "now" is not a capture for a moment
         assert (now.capture, now.t_target) == ("free", None)
+
+
+def test_a_frame_that_missed_t_says_late_with_its_residual_never_scheduled(start_service):
+    """The first capture of a camera 20 ms slow to trigger: its latency not learned yet, the
+    trigger fires at T and the frame lands 20 ms after it, beyond the tolerance of 2 ms (a
+    camera given 50 ms of tolerance calls the same miss scheduled)."""
+    slow = f"synthetic:trigger=software,trigger_latency_ms=20,{SMALL}"
+    svc = start_service("--camera", f"strict={slow}", "--camera", f"lenient={slow},capture_tolerance_ms=50")
+    with svc.client() as client:
+        at = time.monotonic_ns() + AHEAD_NS
+        frames = client.tuple(["strict", "lenient"], at=at, capture=True)
+    strict, lenient = frames["strict"], frames["lenient"]
+    assert (strict.capture, strict.t_target) == ("late", at) and strict.residual_ns >= 20 * MS
+    assert (lenient.t_target, lenient.residual_ns >= 20 * MS) == (at, True)
+    assert lenient.capture == captured_as(lenient, tolerance_ms=50)
 
 
 def test_a_moment_that_cannot_be_kept_gets_a_clear_error_and_the_service_runs_on(start_service):
@@ -111,7 +132,7 @@ def test_an_event_request_captures_at_t_too(start_service):
         at = time.monotonic_ns() + AHEAD_NS
         events.request("image", "robot", camera="trig", at=at, capture=True)
         frame = answers.receive().frames[0]
-    assert (frame.capture, frame.t_target) == ("scheduled", at) and frame.residual_ns >= -LATENCY_NOISE_NS
+    assert (frame.capture, frame.t_target) == (captured_as(frame), at) and frame.residual_ns >= -LATENCY_NOISE_NS
 
 
 def test_two_requests_for_one_moment_share_its_frame(start_service):
@@ -152,7 +173,7 @@ def test_a_capture_at_t_across_two_hosts_with_their_own_clocks(emulated_hosts):
     for at, pair in tuples:
         true = {}
         for (name, frame), host, estimate in zip(pair.items(), hosts, estimates):
-            assert frame.capture == "scheduled" and frame.path == "network"
+            assert frame.capture in ("scheduled", "late") and frame.path == "network"  # late: by its residual
             assert abs(frame.t_target - at) <= 1_000  # T went there and back in one mapping
             true[name] = frame.service_t_capture - host.clock_offset_ns  # exact: the namespace's offset
             bound = estimate.uncertainty_ns + MARGIN_NS

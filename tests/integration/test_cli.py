@@ -23,13 +23,15 @@ pytestmark = pytest.mark.integration
 def test_status_prints_a_table(two_cameras):
     result = fxis("status", "--endpoint", two_cameras.endpoint)
     assert result.returncode == 0, result.stderr
-    clock, header, *rows = result.stdout.splitlines()[1:]
+    clock, header, *rows, scheduling = result.stdout.splitlines()[1:]
     assert clock.startswith("clock monotonic: same clock, offset from this host's monotonic +0.000 ms")
     assert header.split()[:4] == ["camera", "kind", "alive", "shape"]
     assert [r.split()[:4] for r in rows] == [
         ["cam0", "synthetic", "yes", "48x64"],
         ["cam1", "synthetic", "yes", "48x64"],
     ]
+    # each process's threads, read from /proc: at normal priority without --realtime
+    assert scheduling == "scheduling: camera:cam0 other, camera:cam1 other, coordinator other"
 
 
 def test_status_json(two_cameras):

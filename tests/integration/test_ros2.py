@@ -534,7 +534,8 @@ def test_frames_at_capture_triggers_the_camera_for_t_star_and_says_how_each_fram
     assert [r["t_target"] for r in replies] == asked
     for n, (reply, trig_image, free_image) in enumerate(zip(replies, images["trig"], images["free"])):
         trig, free = reply["cameras"]["trig"], reply["cameras"]["free"]
-        assert trig["capture"] == "scheduled" and free["capture"] == "free" and free["residual_ns"] is None
+        assert trig["capture"] == ("late" if abs(trig["residual_ns"]) > 2_000_000 else "scheduled")  # tolerance
+        assert free["capture"] == "free" and free["residual_ns"] is None
         assert abs(ns_of(trig_image) - trig["t_capture"]) <= STAMP_TOLERANCE_NS  # the image is that frame
         assert abs(ns_of(free_image) - free["t_capture"]) <= STAMP_TOLERANCE_NS
         # the residual as the service measured it, and the frame captured at T: late by at most

@@ -50,7 +50,7 @@ def test_two_cameras_in_phase_pass(start_service, tmp_path):
     assert report["synced_pct"] == 100.0 and report["dropped_pct"] <= 5.0
     for cam in report["cameras"].values():
         assert cam["period_ms"] == PERIOD_MS and cam["missing"] == 0
-        assert cam["captures"] == {"free": report["slots"], "scheduled": 0, "lockstep": 0}
+        assert cam["captures"] == {"free": report["slots"], "scheduled": 0, "lockstep": 0, "late": 0}
         assert cam["residual_ms"] is None  # free frames have no target
     # a synthetic camera cannot say anything of PTP: its status has no state, shown as "-"
     assert report["ptp"] == {"a": None, "b": None}

@@ -29,6 +29,7 @@ SYNTHETIC_DEFAULTS = {
     "history": None,
     "frame_id": None,
     "calibration": None,
+    "capture_tolerance_ms": 2.0,
 }
 
 

@@ -4,6 +4,7 @@ import pytest
 
 from fxis_shm.core import schedule
 from fxis_shm.core.schedule import MS
+from fxis_shm.core.snapshot import CAPTURE_FREE, CAPTURE_LATE, CAPTURE_LOCKSTEP, CAPTURE_SCHEDULED
 from fxis_shm.errors import Code
 
 NOW = 5_000 * MS
@@ -110,3 +111,14 @@ def test_percentiles_by_nearest_rank():
     assert schedule.percentile([5, 1, 3], 50) == 3
     assert schedule.percentile(list(range(101)), 99) == 99
     assert schedule.percentile([7], 99) == 7
+
+
+def test_a_frame_for_t_further_from_t_than_the_tolerance_is_late_and_only_such_a_frame():
+    tolerance = 2 * MS
+    for residual in (0, 2 * MS, -2 * MS, 500_000):
+        assert schedule.captured_as(CAPTURE_SCHEDULED, NOW + residual, NOW, tolerance) == CAPTURE_SCHEDULED
+    for residual in (2 * MS + 1, -2 * MS - 1, 336 * MS):  # 336 ms: the frames, once marked scheduled
+        assert schedule.captured_as(CAPTURE_SCHEDULED, NOW + residual, NOW, tolerance) == CAPTURE_LATE
+    # a free frame has no T; a lockstep frame keeps saying lockstep (its residual is in status)
+    assert schedule.captured_as(CAPTURE_FREE, NOW + 336 * MS, 0, tolerance) == CAPTURE_FREE
+    assert schedule.captured_as(CAPTURE_LOCKSTEP, NOW + 336 * MS, NOW, tolerance) == CAPTURE_LOCKSTEP

@@ -50,7 +50,7 @@ def test_cameras_in_phase_pass_librealsenses_criteria():
     assert report.synced_pct == 100.0 and report.dropped_pct == 0.0
     assert all(cam.missing == cam.repeated == cam.skipped == 0 for cam in report.cameras.values())
     assert report.cameras["a"].period_ms == pytest.approx(50.0)  # estimated from the frames
-    assert report.cameras["a"].captures == {"free": 100, "scheduled": 0, "lockstep": 0}
+    assert report.cameras["a"].captures == {"free": 100, "scheduled": 0, "lockstep": 0, "late": 0}
     assert report.cameras["a"].residual_ms is None  # free frames have no target
     assert report.passed and [c.passed for c in report.checks] == [True, True, True]
 
@@ -156,7 +156,7 @@ def test_residuals_and_capture_methods_per_camera():
     parts["residual_ns"][:, 1] = [0.1 * MS, -0.2 * MS, 0.3 * MS, 0.2 * MS, 0.0, 0.1 * MS, 0.2 * MS, 0, 0, 2 * MS]
     report = figures(samples(parts))
     b = report.cameras["b"]
-    assert b.captures == {"free": 0, "scheduled": 4, "lockstep": 6}
+    assert b.captures == {"free": 0, "scheduled": 4, "lockstep": 6, "late": 0}
     assert b.residual_ms["p50"] == pytest.approx(0.15) and b.residual_ms["max"] == pytest.approx(2.0)
     assert b.residual_ms["p50"] <= b.residual_ms["p99"] <= b.residual_ms["max"]
 

@@ -2,7 +2,7 @@
 the latency it learns, and the figures status shows. A plain object: no thread, no camera."""
 
 from fxis_shm.core.schedule import MS
-from fxis_shm.core.snapshot import CAPTURE_FREE, CAPTURE_LOCKSTEP, CAPTURE_SCHEDULED
+from fxis_shm.core.snapshot import CAPTURE_FREE, CAPTURE_LATE, CAPTURE_LOCKSTEP, CAPTURE_SCHEDULED
 from fxis_shm.workers.triggers import TriggerLog
 
 T0 = 10_000 * MS
@@ -31,3 +31,13 @@ def test_a_lockstep_trigger_that_got_no_frame_is_missed_and_residuals_are_kept()
     assert figures["timer_late_p99_ns"] == 20_000
     log.reset_lockstep(None)
     assert log.figures()["lockstep_mhz"] == 0 and log.figures()["triggers_missed"] == 0
+
+
+def test_a_frame_that_missed_its_t_by_more_than_the_tolerance_is_answered_late():
+    log = TriggerLog(tolerance_ns=MS)
+    log.latency_ns, log.samples = 3 * MS, 8  # learned before
+    log.fired(T0 - 3 * MS, T0, CAPTURE_SCHEDULED)
+    log.fired(T0 + 97 * MS, T0 + 100 * MS, CAPTURE_SCHEDULED)
+    assert log.answer(T0 + 500_000) == (T0, CAPTURE_SCHEDULED)
+    assert log.answer(T0 + 101 * MS + 1) == (T0 + 100 * MS, CAPTURE_LATE)
+    assert log.figures()["frames_scheduled"] == 2  # captured for a T, both
