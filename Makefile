@@ -75,7 +75,7 @@ XDIST := $(if $(filter 0,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist 
 # parallel pass, alone, one at a time; a failed one runs once more, and every rerun is written to
 # RERUN_LOG (tests/rerunlog.py), which the run ends by listing (issue 41).
 RERUN_LOG := .pytest_cache/reruns.log
-REALTIME := -p no:xdist -m realtime -raR --reruns 1 -p tests.rerunlog --rerun-log $(RERUN_LOG)
+REALTIME := -p no:xdist -m realtime -raR --reruns 1 -p tests.rerunlog --rerun-log $(RERUN_LOG) tests
 
 # Every process the suite starts (services, workers, `fxis` commands: over a thousand) imports the
 # package: its bytecode is written once here, as the environment may forbid writing it at import
