@@ -130,6 +130,31 @@ def test_lockstep_tuples_skew_by_the_timers_lateness_not_by_the_phase():
         assert a.log.figures()["timer_late_p99_ns"] == 400_000 and a.log.figures()["triggers_missed"] == 0
 
 
+def test_a_capture_at_t_lands_on_t_late_by_the_timers_lateness_and_a_free_camera_answers_nearest():
+    """The engine schedules the capture, the timer fires T minus the learned latency, late by its
+    script; the frame says it was captured for T, its residual is that lateness. The first request
+    the engine sees is a capture at T (it failed INTERNAL while the cameras' rings were unopened)."""
+    lateness = [0, 100_000, 300_000, 50_000]
+    with Cell() as cell:
+        trig = cell.camera("trig", Script(timer_late=lambda n: lateness[n % 4]), **TRIGGERED)
+        cell.camera("free", fps=30)
+        cell.run_for(SECOND)
+        pairs = []
+        for k in range(23):
+            at = cell.now + 100 * MS + k * 7 * MS % 40
+            pairs.append((at, cell.ask(at=at, capture=True)))
+        figures = trig.log.figures()
+    assert figures["trigger_latency_ns"] == 3 * MS and figures["frames_scheduled"] == 23
+    assert figures["triggers_missed"] == 0 and figures["timer_late_p99_ns"] == 300_000
+    for n, (at, pair) in enumerate(pairs):
+        trig_frame, free_frame = pair.frames["trig"], pair.frames["free"]
+        assert (trig_frame.capture, trig_frame.t_target) == (1, at)  # scheduled, for T
+        residual = trig_frame.t_capture - at
+        assert residual == (3 * MS if n == 0 else 0) + lateness[n % 4]  # the first teaches the latency
+        assert abs(free_frame.t_capture - at) <= SECOND // 30 // 2 + 1  # its frame nearest T
+        assert pair.skew_ns == pair.body["skew_ns"] == abs(free_frame.t_capture - trig_frame.t_capture)
+
+
 def paired_silently(answer) -> bool:
     """Lockstep frames of different grid points in a tuple that does not say so."""
     targets = {f.t_target for f in answer.frames.values() if f.capture == CAPTURE_LOCKSTEP}

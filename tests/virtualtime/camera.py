@@ -93,6 +93,12 @@ class VirtualCamera:
             stored = self._store(*self._captured.popleft()[1:]) or stored
         return stored
 
+    def trigger_at(self, t: int) -> None:
+        """A capture at ``t`` (the coordinator's TRIGGER_AT command); the timer plans again, as
+        the command's notify makes its thread."""
+        self.timer.trigger_at({"t": t})
+        self._wake = None
+
     def trigger_now(self) -> None:
         """A request's software trigger (the worker's trigger listener)."""
         self.log.fired(self.clock.now_ns())

@@ -160,7 +160,7 @@ class Cell:
     def _schedule(self, action: Schedule) -> None:
         for name in action.cameras:
             try:
-                self.cameras[name].timer.trigger_at({"t": action.t})
+                self.cameras[name].trigger_at(action.t)
             except ProtocolError as exc:
                 self._carry_out(self.engine.fail(action.pending, exc.code, f"camera {name!r}: {exc.message}"))
 
