@@ -6,18 +6,38 @@ busy the machine is. Each decision of an image or tuple request is also the C tw
 
 from __future__ import annotations
 
+import threading
+
 import pytest
 
+from fxis_shm.core import timebase
 from fxis_shm.core.snapshot import CAPTURE_LOCKSTEP
 from fxis_shm.errors import Code
 
-from ..virtualtime import MS, SECOND, Cell, Script
+from ..virtualtime import MS, SECOND, Cell, Script, VirtualClock
 
 PERIOD = 50 * MS  # 20 fps
 PHASE = MS  # cam1 1 ms behind cam0, like the paper's cameras
 TRIGGERED = {"trigger": "software", "trigger_latency_ms": 3}
 GRID = (20.0, 0)  # lockstep at 20 Hz on the realtime clock
 TUPLE_FIELDS = {"op", "t_request", "skew_ns", "sync"}  # all a tuple's reply said before issue 41
+
+
+def test_the_clocks_wait_as_they_say():
+    """The real clock's wait returns at once for a moment gone or a stop set (it would wait
+    1000 s otherwise, past the test's timeout); the virtual one jumps to the moment."""
+    stopped = threading.Event()
+    stopped.set()
+    assert timebase.REAL.sleep_until(timebase.now() + 1000 * SECOND, stopped) is False
+    assert timebase.REAL.sleep_until(timebase.now() - 1) is True
+    clock = VirtualClock()
+    start = clock.now_ns()
+    assert clock.sleep_until(start + SECOND) and clock.now_ns() == start + SECOND
+    assert clock.sleep_until(start) and clock.now_ns() == start + SECOND  # gone: no wait, no way back
+    assert clock.read("realtime") - clock.now_ns() == clock.ahead["realtime"] > 0
+    assert clock.sleep_until(start + 2 * SECOND, stopped) is False and clock.now_ns() == start + SECOND
+    with pytest.raises(ValueError, match="runs forward only"):
+        clock.advance_to(start)
 
 
 @pytest.fixture
