@@ -70,8 +70,9 @@ XDIST := $(if $(filter 0,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist 
 # No test of the parallel pass is rerun: the sync logic is tested in virtual time (tests/virtualtime,
 # tests/unit/test_virtual_sync.py), exact whatever the load, and a failure there is a defect.
 # The real-time tier: the tests marked `realtime` (pyproject.toml), which judge a real timer's
-# residuals and skews across real clocks, 6 tests today (tests/integration/test_lockstep.py 3,
-# tests/integration/test_capture_at.py 2, tests/backends/test_aravis.py 1). They run after the
+# residuals, skews across real clocks and a file's playback rate, 7 tests today
+# (tests/integration/test_lockstep.py 3, tests/integration/test_capture_at.py 2,
+# tests/backends/test_aravis.py 1, tests/backends/test_opencv.py 1). They run after the
 # parallel pass, alone, one at a time; a failed one runs once more, and every rerun is written to
 # RERUN_LOG (tests/rerunlog.py), which the run ends by listing (issue 41).
 RERUN_LOG := .pytest_cache/reruns.log
