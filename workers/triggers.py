@@ -7,7 +7,10 @@ before the moment, then spins on the clock: a sleep alone wakes up to a schedule
 Every trigger fired, also the coordinator's "now" triggers, goes into the ``TriggerLog``; each
 frame stored takes from it which trigger it answers (so its slot record says scheduled or
 lockstep, and for which moment), and the log learns the latency trigger -> t_capture from them.
-The arithmetic is fxis_shm.core.schedule's.
+The arithmetic is fxis_shm.core.schedule's. The timer reads its clock and waits on ``clock``
+(fxis_shm.core.timebase.Clock): the real one in a worker; the virtual-time tests run it without
+its thread (``threaded=False``), firing each trigger (``fire_next``) at the moment ``next_fire``
+names, or as late as their script says.
 """
 
 from __future__ import annotations
@@ -119,11 +122,16 @@ class TriggerTimer:
         on_grid: Callable[[], None] = lambda: None,
         lockstep_clock: str = schedule.GRID_CLOCKS[0],
         on_start: Callable[[], None] = lambda: None,
+        clock: timebase.Clock = timebase.REAL,
+        threaded: bool = True,
     ):
         """``on_grid``: called when the lockstep grid was set or stopped (the ring says so);
         ``lockstep_clock``: the clock the grid is counted in (schedule.GRID_CLOCKS); ``on_start``:
-        called first in the timer's thread (--realtime raises its priority there, before any trigger)."""
+        called first in the timer's thread (--realtime raises its priority there, before any
+        trigger); ``threaded`` False: no thread of its own (its caller fires the triggers, see the
+        module's doc)."""
         self._trigger, self._can_trigger, self.log = trigger, can_trigger, triggers
+        self.clock = clock
         self._on_grid, self._on_start = on_grid, on_start
         self._due: list[tuple[int, int]] = []  # heap of (t_fire, t_target), service clock
         self._targets: set[int] = set()
@@ -137,7 +145,8 @@ class TriggerTimer:
         if lockstep is not None:  # the service's --lockstep: fired whenever the camera is triggerable
             self.lockstep = lockstep
             triggers.reset_lockstep(lockstep, lockstep_clock)
-        self._thread.start()
+        if threaded:
+            self._thread.start()
 
     # ---- the commands (answered in the command thread) ----
 
@@ -147,7 +156,7 @@ class TriggerTimer:
         if not isinstance(t_target, int):
             raise ProtocolError("trigger_at needs an integer t (ns of the service clock)")
         self._check_triggerable()
-        refusal = schedule.check_target(t_target, timebase.now(), self.log.latency_ns)
+        refusal = schedule.check_target(t_target, self.clock.now_ns(), self.log.latency_ns)
         if refusal is not None:
             raise ProtocolError(refusal.message, refusal.code)
         t_fire = schedule.fire_time(t_target, self.log.latency_ns)
@@ -210,11 +219,12 @@ class TriggerTimer:
         once: a timer that wakes late fires late (its lateness shows), and only a point whose
         moment is half a period gone is given up (a frame missed)."""
         hz, phase = grid
-        now = timebase.now()
+        now = self.clock.now_ns()
         if self._planned is not None and now - self._planned[0] < 5e8 / hz:
             return self._planned
         # the first point whose trigger is still ahead
-        t_target = schedule.grid_target(now, _grid_offset(self.grid_clock), hz, phase, self.log.latency_ns + _MARGIN_NS)
+        offset = _grid_offset(self.clock, self.grid_clock)
+        t_target = schedule.grid_target(now, offset, hz, phase, self.log.latency_ns + _MARGIN_NS)
         self._planned = (schedule.fire_time(t_target, self.log.latency_ns), t_target)
         return self._planned
 
@@ -225,22 +235,38 @@ class TriggerTimer:
                 if self._stop:
                     return
                 nxt = self._next()
-                wait_ns = _IDLE_S * 1e9 if nxt is None else nxt[0] - _SPIN_NS - timebase.now()
+                wait_ns = _IDLE_S * 1e9 if nxt is None else nxt[0] - _SPIN_NS - self.clock.now_ns()
                 if wait_ns > 0:
                     self._wake.wait(min(wait_ns / 1e9, _IDLE_S))
                     continue  # look again: a command may have come meanwhile
-            t_fire, t_target, capture = nxt
-            while timebase.now() < t_fire:  # the last 2 ms: spin
+            while self.clock.now_ns() < nxt[0]:  # the last 2 ms: spin
                 pass
-            with self._wake:
-                if capture == CAPTURE_SCHEDULED:
-                    heapq.heappop(self._due)
-                    self._targets.discard(t_target)
-                elif self.lockstep is None:
-                    continue  # stopped meanwhile
-                else:
-                    self._planned = None
-            self._fire(t_target, capture, timebase.now() - t_fire)
+            self._fire_planned(nxt)
+
+    def next_fire(self) -> int | None:
+        """When the next trigger is due (service clock), None if none is planned."""
+        with self._wake:
+            nxt = self._next()
+        return None if nxt is None else nxt[0]
+
+    def fire_next(self) -> None:
+        """Fire the next trigger now (at or after ``next_fire``; the lateness is counted)."""
+        with self._wake:
+            nxt = self._next()
+        if nxt is not None:
+            self._fire_planned(nxt)
+
+    def _fire_planned(self, nxt: tuple[int, int, int]) -> None:
+        t_fire, t_target, capture = nxt
+        with self._wake:
+            if capture == CAPTURE_SCHEDULED:
+                heapq.heappop(self._due)
+                self._targets.discard(t_target)
+            elif self.lockstep is None:
+                return  # stopped meanwhile
+            else:
+                self._planned = None
+        self._fire(t_target, capture, self.clock.now_ns() - t_fire)
 
     def _fire(self, t_target: int, capture: int, late_ns: int) -> None:
         if not self._can_trigger():
@@ -250,7 +276,7 @@ class TriggerTimer:
                 skipped = round((t_target - self._last_point) * self.lockstep[0] / 1e9) - 1
                 self.log.skipped(max(0, skipped))
             self._last_point = t_target
-        self.log.fired(timebase.now(), t_target, capture, late_ns)
+        self.log.fired(self.clock.now_ns(), t_target, capture, late_ns)
         try:
             self._trigger()
         except Exception:
@@ -260,19 +286,19 @@ class TriggerTimer:
         with self._wake:
             self._stop = True
             self._wake.notify()
-        self._thread.join(1.0)
+        if self._thread.is_alive():
+            self._thread.join(1.0)
 
 
-def _grid_offset(clock: str, tries: int = 3, good_ns: int = 20_000) -> int:
+def _grid_offset(clock: timebase.Clock, grid_clock: str, tries: int = 3, good_ns: int = 20_000) -> int:
     """The grid's clock minus the service's clock, from the read whose two service-clock reads
     around the grid clock's one were nearest: a thread preempted between them would move every
     grid point by the preemption."""
     best: tuple[int, int] | None = None
-    read_grid = timebase.reader(clock)
     for _ in range(tries):
-        before = timebase.now()
-        grid_now = read_grid()
-        after = timebase.now()
+        before = clock.now_ns()
+        grid_now = clock.read(grid_clock)
+        after = clock.now_ns()
         if best is None or after - before < best[0]:
             best = (after - before, grid_now - (before + after) // 2)
         if after - before <= good_ns:

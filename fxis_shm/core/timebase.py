@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from typing import Protocol
 
 from fxis_shm.errors import InvalidArgument
 
@@ -86,3 +87,51 @@ def offset(to_clock: str, from_clock: str, reads: int = 5) -> int:
         if best_gap is None or after - before < best_gap:
             best_gap, best = after - before, target - (before + after) // 2
     return best
+
+
+class StopEvent(Protocol):
+    """What a sleep may be cut short by (a threading.Event)."""
+
+    def is_set(self) -> bool: ...
+
+    def wait(self, timeout: float | None = None) -> bool: ...
+
+
+class Clock(Protocol):
+    """Where the code that keeps time (the synthetic camera, the trigger timer, the coordinator's
+    loop, the ring's writer) reads "now" and waits: ``REAL`` in a service; a virtual clock in the
+    tests that run the sync logic in virtual time (tests/virtualtime), as trio's MockClock."""
+
+    def now_ns(self) -> int:
+        """The service's clock now, int ns."""
+        ...
+
+    def read(self, name: str) -> int:
+        """Clock ``name`` (CLOCK_IDS) now, int ns: a lockstep grid is counted in another clock."""
+        ...
+
+    def sleep_until(self, t_ns: int, stop: StopEvent | None = None) -> bool:
+        """Return at ``t_ns`` of the service's clock (at once if it has passed); False if ``stop``
+        was set first."""
+        ...
+
+
+class RealClock:
+    """The clocks themselves: ``now`` as ``use`` set it, and real sleeps."""
+
+    def now_ns(self) -> int:
+        return now()
+
+    def read(self, name: str) -> int:
+        return reader(name)()
+
+    def sleep_until(self, t_ns: int, stop: StopEvent | None = None) -> bool:
+        wait_s = (t_ns - now()) / 1e9
+        if stop is not None:
+            return not (stop.wait(wait_s) if wait_s > 0 else stop.is_set())
+        if wait_s > 0:
+            time.sleep(wait_s)
+        return True
+
+
+REAL = RealClock()

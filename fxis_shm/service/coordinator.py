@@ -121,7 +121,8 @@ class AllowedKeys:
 
 
 class Coordinator:
-    def __init__(self, spec: CoordinatorSpec):
+    def __init__(self, spec: CoordinatorSpec, clock: timebase.Clock = timebase.REAL):
+        self.clock = clock  # the loop's "now" (tests/virtualtime drive its engine and streams on a virtual one)
         self.service = spec.service
         self.endpoint = spec.endpoint
         self.pub_endpoint = spec.pub
@@ -140,13 +141,13 @@ class Coordinator:
         self.settings = self.engine.settings
         self.copyout = CopyOut(self.cameras, self.settings)
         self.fast: FastAnswers | None = None
-        self.started_ns = timebase.now()
+        self.started_ns = self.clock.now_ns()
         self.requests_served = 0
         self.events_dropped = 0
         self.boot_id = boot_id()
         self.time_namespace = time_namespace()
         self.tally = LogTally()  # what a client does wrong again and again: logged once an interval
-        self.desk = SettingsDesk(self.cameras, self._reply, self._publish, self.tally)
+        self.desk = SettingsDesk(self.cameras, self._reply, self._publish, self.tally, self.clock)
         self.links: WorkerLinks | None = None
 
     # ---- the loop ----
@@ -205,13 +206,13 @@ class Coordinator:
                 for sock in links.sockets.values():
                     if sock in events:
                         links.drain(sock)
-                links.expire(timebase.now())
-                for line in self.tally.flush(timebase.now()):
+                links.expire(self.clock.now_ns())
+                for line in self.tally.flush(self.clock.now_ns()):
                     log.info("%s", line)
                 if updated or self._due():
-                    self._carry_out(self.engine.on_frames(updated, timebase.now()))
+                    self._carry_out(self.engine.on_frames(updated, self.clock.now_ns()))
                 if updated:
-                    self.streams.on_frames(updated, timebase.now())
+                    self.streams.on_frames(updated, self.clock.now_ns())
         finally:
             for sock in reversed(closing):
                 sock.close()
@@ -238,11 +239,11 @@ class Coordinator:
         wake = min(wakes, default=None)
         if wake is None:
             return 200
-        return max(0, min(200, (wake - timebase.now()) // 1_000_000 + 1))
+        return max(0, min(200, (wake - self.clock.now_ns()) // 1_000_000 + 1))
 
     def _due(self) -> bool:
         wake = self.engine.next_wake()
-        return wake is not None and wake <= timebase.now()
+        return wake is not None and wake <= self.clock.now_ns()
 
     def _drain_subscriptions(self) -> None:
         while True:
@@ -253,8 +254,7 @@ class Coordinator:
             if message and message[0] in (0, 1):
                 self.streams.subscription(message[1:].decode(errors="replace"), message[0] == 1)
 
-    @staticmethod
-    def _drain(sock, handle, budget: int = 256, copy: bool = True) -> None:
+    def _drain(self, sock, handle, budget: int = 256, copy: bool = True) -> None:
         for _ in range(budget):
             if not sock.getsockopt(_EVENTS) & _POLLIN:  # (cheaper than the exception of an empty recv)
                 return
@@ -263,7 +263,7 @@ class Coordinator:
             except zmq.Again:
                 return
             try:
-                handle(frames, timebase.now())
+                handle(frames, self.clock.now_ns())
             except Exception:  # no message may take the service down
                 log.exception("a message could not be handled; dropped")
 
@@ -365,12 +365,12 @@ class Coordinator:
         try:
             body, images = self.copyout.reply(reply, REFS if reply.pending.local else MESSAGES)
         except Overwritten:  # the ring came round during the copy: the engine plans again
-            self._carry_out(self.engine.retry(reply, timebase.now()))
+            self._carry_out(self.engine.retry(reply, self.clock.now_ns()))
             return
         self._reply(reply.pending.ticket, reply.pending.request, body, images)
 
     def _op_status(self, request: dict, t_received: int) -> dict:
-        now, supervisor = timebase.now(), realtime.with_scheduling(self._state_of("supervisor"))
+        now, supervisor = self.clock.now_ns(), realtime.with_scheduling(self._state_of("supervisor"))
         return {
             "op": "status",
             "service": self.service,
@@ -415,7 +415,7 @@ class Coordinator:
     def _op_time(self, request: dict, t_received: int) -> dict:
         """The clock now, and when the request was received: a caller estimating our clock
         against its own takes both (an NTP-style exchange of four timestamps)."""
-        return {"op": "time", "received": t_received, "now": timebase.now(), "boot_id": self.boot_id}
+        return {"op": "time", "received": t_received, "now": self.clock.now_ns(), "boot_id": self.boot_id}
 
     def _op_frames(self, request: dict, t_received: int) -> dict:
         """Every camera's frame times without pixels, for callers that choose frames
@@ -424,7 +424,7 @@ class Coordinator:
         unknown = [n for n in names if n not in self.cameras]
         if unknown:
             raise ProtocolError(f"unknown camera(s) {unknown}; known: {sorted(self.cameras)}", Code.UNKNOWN_CAMERA)
-        now = timebase.now()
+        now = self.clock.now_ns()
         return {
             "op": "frames",
             "now": now,
@@ -436,7 +436,7 @@ class Coordinator:
 
     def _reply(self, respond, request: dict, body: dict, images: list = ()) -> None:
         if "timing" in body:
-            body["timing"]["sent"] = timebase.now()
+            body["timing"]["sent"] = self.clock.now_ns()
         self.requests_served += 1
         respond(protocol.encode_reply(request["id"], body, images))
 
@@ -445,7 +445,7 @@ class Coordinator:
             send_parts(self.router, envelope + frames)
         except zmq.Again:
             dropped = "dropped a reply: the client is not reading its replies"
-            for line in self.tally.note("dropped replies", dropped, timebase.now()):
+            for line in self.tally.note("dropped replies", dropped, self.clock.now_ns()):
                 log.warning("%s", line)
         except zmq.ZMQError as exc:  # EHOSTUNREACH: the client went away
             log.info("could not send a reply: %s", exc)

@@ -51,8 +51,10 @@ class SettingsDesk:
         answer: Answer,
         publish: Callable[[str, list[Any]], None],
         tally: LogTally,
+        clock: timebase.Clock = timebase.REAL,
     ):
         self.cameras, self._answer, self._publish, self._tally = cameras, answer, publish, tally
+        self.clock = clock  # the coordinator's (virtual in the harness)
         self._known = {name: _Camera() for name in cameras}
         self.links: WorkerLinks | None = None  # set when the coordinator's sockets are made
 
@@ -98,7 +100,7 @@ class SettingsDesk:
 
     def _read(self, camera: str, request: Message, respond: Respond) -> None:
         handle = self.cameras[camera]
-        down = handle.down_reason(timebase.now())
+        down = handle.down_reason(self.clock.now_ns())
         if down is not None:
             raise ProtocolError(down, Code.CAMERA_DOWN)
         known = self._known[camera]
@@ -159,13 +161,13 @@ class SettingsDesk:
         if result.get("cost", UNCHANGED) == UNCHANGED:
             return report
         text = f"camera {camera} changed {result['changed']} ({result['cost']})"
-        for line in self._tally.note(f"changes of camera {camera}", text, timebase.now()):
+        for line in self._tally.note(f"changes of camera {camera}", text, self.clock.now_ns()):
             log.info("%s", line)
         event = {k: result[k] for k in ("changed", "cost", "values", "generation")}
         self._publish(f"settings/{camera}|", protocol.encode_reply(None, {"camera": camera, **event}))
         return report
 
     def _busy(self, camera: str, message: str) -> ProtocolError:
-        for line in self._tally.note(f"BUSY settings of camera {camera}", message, timebase.now()):
+        for line in self._tally.note(f"BUSY settings of camera {camera}", message, self.clock.now_ns()):
             log.info("refused a settings request: %s", line)
         return ProtocolError(message, Code.BUSY)

@@ -96,8 +96,10 @@ class CameraHandle:
 
     @property
     def triggered(self) -> bool:
-        """True if the camera captures on software triggers rather than free-running."""
-        return bool(self.reader.field("flags") & FLAG_TRIGGERED)
+        """True if the camera captures on software triggers rather than free-running (the ring
+        opened if it was not: a capture at T may be the first request the coordinator reads)."""
+        ring = self.ring()
+        return ring is not None and bool(ring.field("flags") & FLAG_TRIGGERED)
 
     # ---- what the request engine reads (fxis_shm.core.engine.CameraSource) ----
 

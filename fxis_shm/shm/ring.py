@@ -152,18 +152,28 @@ def segment_size(layout: FrameLayout, slots: int) -> tuple[int, int, int]:
 
 
 class RingWriter(_Mapping):
-    """The camera worker's side: creates (or re-attaches to) the ring and stores frames."""
+    """The camera worker's side: creates (or re-attaches to) the ring and stores frames. Its
+    times (t_stored, the heartbeat) are ``clock``'s: the real one but in virtual-time tests."""
 
-    def __init__(self, service: str, camera: str, layout: FrameLayout, slots: int, nominal_period_ns: int = 0):
+    def __init__(
+        self,
+        service: str,
+        camera: str,
+        layout: FrameLayout,
+        slots: int,
+        nominal_period_ns: int = 0,
+        clock: timebase.Clock = timebase.REAL,
+    ):
         if slots < 2:
             raise ValueError(f"a ring needs at least 2 slots, got {slots}")
+        self.clock = clock
         self.name = naming.ring_name(service, camera)
         self.layout = layout
         self._open_or_create(layout, slots)
         h = self.header
         h["generation"] = int(h["generation"]) + 1
         h["writer_pid"] = os.getpid()
-        h["generation_started_ns"] = h["heartbeat_ns"] = timebase.now()
+        h["generation_started_ns"] = h["heartbeat_ns"] = clock.now_ns()
         h["nominal_period_ns"] = nominal_period_ns
         if int(h["period_ns"]) <= 0:
             h["period_ns"] = nominal_period_ns
@@ -233,7 +243,7 @@ class RingWriter(_Mapping):
         ordering.fence_release()  # the slot reads as being written before any of its new bytes show
         np.copyto(self.slot_image(slot), image, casting="no")
         rec = self.table[slot]
-        t_stored = timebase.now()
+        t_stored = self.clock.now_ns()
         rec["frame_id"], rec["t_capture"], rec["t_stored"] = frame_id, t_capture, t_stored
         rec["t_available"] = t_capture if t_available is None else t_available
         rec["generation"] = self.generation
@@ -268,7 +278,7 @@ class RingWriter(_Mapping):
     def new_generation(self) -> int:
         """The camera came back after an outage: later frames carry a new generation."""
         self.generation = int(self.header["generation"]) + 1
-        self.header["generation"], self.header["generation_started_ns"] = self.generation, timebase.now()
+        self.header["generation"], self.header["generation_started_ns"] = self.generation, self.clock.now_ns()
         self._last, self._samples = None, 0
         return self.generation
 
@@ -278,7 +288,7 @@ class RingWriter(_Mapping):
         self._last, self._samples = None, 0
 
     def heartbeat(self) -> None:
-        self.header["heartbeat_ns"] = timebase.now()
+        self.header["heartbeat_ns"] = self.clock.now_ns()
 
     def count(self, field: str, n: int = 1) -> None:
         """Add to one of the counters frames_captured, frames_dropped, hook_errors."""

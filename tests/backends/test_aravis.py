@@ -322,6 +322,7 @@ def test_aravis_fake_camera_live_exposure_gain_features_and_a_new_size(emulator,
     assert "ExposureTimeAbs" in listed.stdout and "TestRegister" in listed.stdout and "PixelFormat" in listed.stdout
 
 
+@pytest.mark.realtime  # the residuals of a real timer and a real camera
 def test_captures_at_t_keep_the_fake_camera_up_and_land_within_its_trigger_jitter(emulator, start_service):
     """Capture at T (issue 34) on a GigE Vision camera: the worker's timer thread fires
     TriggerSoftware while the capture loop reads the camera's whole node map (a settings

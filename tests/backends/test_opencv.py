@@ -76,6 +76,7 @@ def test_the_test_video_is_what_the_tests_expect(video):
     assert numbers == list(range(FRAMES))
 
 
+@pytest.mark.realtime  # a file played at its rate: the rate measured on the real clock
 def test_a_file_plays_in_order_at_its_rate_then_stops(start_service, video):
     svc = start_service("--camera", f"v=opencv:source={video}", "--slots", "64")
     status = wait_until(

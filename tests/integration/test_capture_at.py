@@ -44,6 +44,7 @@ def _capture_tuples(client, n: int, cameras=None) -> list:
     return tuples
 
 
+@pytest.mark.realtime  # the residuals of a real timer
 def test_a_capture_at_t_triggers_the_camera_for_t_and_a_free_camera_answers_nearest(start_service):
     svc = start_service("--camera", f"trig={TRIGGERED}", "--camera", f"free=synthetic:fps={FREE_FPS},{SMALL}")
     with svc.client() as client:
@@ -152,6 +153,7 @@ HOSTS_TIMEOUT_S = 15.0  # CurveZMQ handshakes on a loaded machine
 MARGIN_NS = 500_000  # beyond a clock estimate's stated uncertainty (tests/integration/test_hosts.py)
 
 
+@pytest.mark.realtime
 def test_a_capture_at_t_across_two_hosts_with_their_own_clocks(emulated_hosts):
     """T in the caller's clock reaches each host in its own clock: both cameras capture at T,
     as the namespaces' exact offsets tell, within the clock estimates and the timers' lateness."""

@@ -18,7 +18,7 @@ from fxis_shm.core import timebase
 from ..conftest import fxis, wait_until
 from .conftest import SMALL
 
-pytestmark = pytest.mark.integration
+pytestmark = [pytest.mark.integration, pytest.mark.realtime]  # residuals and skews of real timers
 
 MS = 1_000_000
 HZ = 20

@@ -69,21 +69,6 @@ def test_frame_stream_carries_every_stored_frame_and_decimation_keeps_the_rate(s
     assert steps <= {4, 5, 6}  # 50 fps decimated to 10 per second, within a frame
 
 
-@pytest.mark.parametrize("kind,rate", [("frames", 10), ("tuples", 7), ("tuples", 12.5)])
-def test_a_decimated_stream_keeps_the_rate_asked_for_over_seconds(start_service, kind, rate):
-    svc = start_service("--camera", f"a=synthetic:fps=25,{SMALL}", "--camera", f"b=synthetic:fps=25,phase_ms=2,{SMALL}")
-    with Subscriber(svc.pub) as sub:
-        sub.frames("a", rate_hz=rate) if kind == "frames" else sub.tuples(rate_hz=rate)
-        first = sub.receive(timeout=5)
-        assert first.rate == {"asked_hz": rate, "camera_fps": 25.0, "every_frame": False}
-        t0 = first.frames[0].t_capture
-        times = [t0]
-        while times[-1] - t0 < 3_000_000_000:  # 3 s of the stream, by capture time
-            times.append(sub.receive(timeout=5).frames[0].t_capture)
-    sent_in_3s = sum(t - t0 < 3_000_000_000 for t in times)
-    assert abs(sent_in_3s - 3 * rate) <= 1.5, sent_in_3s  # the old rule gave 12.5/s for 10 Hz
-
-
 def test_a_stream_asked_faster_than_the_camera_says_it_gets_every_frame(svc):
     with Subscriber(svc.pub) as sub:
         sub.frames("a", rate_hz=200)

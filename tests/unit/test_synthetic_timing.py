@@ -1,57 +1,64 @@
 """When the synthetic camera's frames are due and which it counts as dropped: not the frames due
 while its worker was still setting up (a newcomer saw one drop at start), nor those a late worker
-still finds in its driver's buffers; only those older than its buffers hold."""
+still finds in its driver's buffers; only those older than its buffers hold. On a virtual clock
+(tests/virtualtime): the worker is late by exactly what the test says."""
 
 from __future__ import annotations
 
 import subprocess
 import sys
-import time
 
-from fxis_shm.core import timebase
 from fxis_shm.formats.stamp import read_stamp
 from fxis_shm.service.camerakinds import camera_options
 from fxis_shm.workers.backends.synthetic import SyntheticCamera
 
+from ..virtualtime import MS, VirtualClock
+
+PERIOD = 10 * MS  # 100 fps
+
+
+def _camera(**options) -> tuple[SyntheticCamera, VirtualClock]:
+    clock = VirtualClock()
+    options = camera_options("a", "synthetic", {"fps": 100, "width": 64, "height": 48, **options})
+    camera = SyntheticCamera("a", options, clock.now_ns(), clock=clock)
+    camera.open()
+    return camera, clock
+
 
 def test_frames_due_before_the_first_grab_are_not_drops():
-    options = camera_options("a", "synthetic", {"fps": 100, "width": 64, "height": 48})
-    camera = SyntheticCamera("a", options, timebase.now())
-    camera.open()
-    time.sleep(0.05)  # setting up the ring takes five periods here
+    camera, clock = _camera()
+    clock.advance_to(clock.now_ns() + 5 * PERIOD - MS)  # setting up the ring took five periods
     first = camera.grab(timeout=1.0)
     assert read_stamp(first.image) == first.frame_id  # the image is the camera's until the next grab
     second = camera.grab(timeout=1.0)
     assert camera.frames_dropped == 0 and second.frame_id == first.frame_id + 1
-    assert first.frame_id >= 5  # numbered from the shared origin, as every camera of the service is
+    assert first.frame_id == 5  # numbered from the shared origin, as every camera of the service is
+    assert clock.now_ns() == second.t_capture  # grab waited (on the clock) for the frame due
 
 
-def _late_camera(buffers: int, late_periods: float) -> tuple[SyntheticCamera, object, int]:
+def _late_camera(buffers: int, late_periods: int) -> tuple[SyntheticCamera, object, int]:
     """A 100 fps camera whose worker took one frame, then came back ``late_periods`` later
     (and the time it came back)."""
-    options = camera_options("a", "synthetic", {"fps": 100, "width": 64, "height": 48, "buffers": buffers})
-    camera = SyntheticCamera("a", options, timebase.now())
-    camera.open()
+    camera, clock = _camera(buffers=buffers)
     first = camera.grab(timeout=1.0)
-    time.sleep(late_periods / 100)  # the worker is late on purpose: descheduled, say
-    return camera, first, timebase.now()
+    clock.advance_to(first.t_capture + late_periods * PERIOD)  # the worker is late: descheduled, say
+    return camera, first, clock.now_ns()
 
 
 def test_a_late_worker_gets_the_frames_its_buffers_held_with_their_own_capture_times():
-    camera, first, _ = _late_camera(buffers=10_000, late_periods=6)  # however late a loaded machine makes it
+    camera, first, back = _late_camera(buffers=10, late_periods=6)
     first_id, first_t = first.frame_id, first.t_capture
-    later = [camera.grab(timeout=1.0) for _ in range(6)]
-    assert [c.frame_id for c in later] == list(range(first_id + 1, first_id + 7))
-    assert [c.t_capture - first_t for c in later] == [k * 10_000_000 for k in range(1, 7)]
-    assert camera.frames_dropped == 0
+    later = [camera.grab(timeout=1.0) for _ in range(7)]
+    assert [c.frame_id for c in later] == list(range(first_id + 1, first_id + 8))
+    assert [c.t_capture - first_t for c in later] == [k * PERIOD for k in range(1, 8)]
+    assert camera.frames_dropped == 0 and later[5].t_capture == back  # the six held, at once
 
 
 def test_a_worker_later_than_its_buffers_loses_the_oldest_frames_and_counts_them():
     camera, first, back = _late_camera(buffers=2, late_periods=8)
     after = camera.grab(timeout=1.0)
-    assert camera.frames_dropped >= 5  # 8 periods late, 2 frames held (more if the machine was slower)
-    assert after.frame_id == first.frame_id + 1 + camera.frames_dropped
-    assert after.t_capture >= back - 2 * 10_000_000  # one of the two newest when it came back, or newer
+    assert camera.frames_dropped == 5  # 8 periods late, 2 frames held: frames 1 to 5 after the first are lost
+    assert after.frame_id == first.frame_id + 6 and after.t_capture == back - 2 * PERIOD
 
 
 WAIT_UNDER_SIGNALS = """

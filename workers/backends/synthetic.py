@@ -25,6 +25,10 @@ A worker that falls behind gets the frames it missed, late and with their own ca
 from a pool of ``buffers`` frames as a real camera's driver keeps them (the Aravis backend
 queues as many); frames older than that are lost and counted in ``frames_dropped``.
 
+Its clock and its waits are ``clock``'s (fxis_shm.core.timebase.Clock): the real one in a
+service; the virtual-time tests (tests/virtualtime) give it a virtual one and schedule its grabs
+themselves (``next_due``).
+
 ``shift_px`` moves the picture left by that many pixels. Two cameras with the
 same fps and phase capture frames with the same k and see the same sway, so
 ``left`` with shift_px=0 and ``right`` with shift_px=d form a stereo pair
@@ -35,7 +39,6 @@ from __future__ import annotations
 
 import queue
 import random
-import time
 from fractions import Fraction
 
 import numpy as np
@@ -62,8 +65,9 @@ def board_square_px(width: int, height: int) -> int:
 class SyntheticCamera(Camera):
     kind = "synthetic"
 
-    def __init__(self, name, options, time_origin_ns):
+    def __init__(self, name, options, time_origin_ns, clock: timebase.Clock = timebase.REAL):
         super().__init__(name, options, time_origin_ns)
+        self.clock = clock
         o = self.options
         self._period = self._period_of(o["fps"])
         self._grid0 = 0  # frame k is due at index k - _grid0 of the origin's grid (moved by fps changes)
@@ -128,7 +132,7 @@ class SyntheticCamera(Camera):
         if self._k < 0:  # not started: frame numbers start on the grid as at start-up
             return
         self._grid0 = 0
-        self._grid0 = self._k - self._index_at(timebase.now())
+        self._grid0 = self._k - self._index_at(self.clock.now_ns())
 
     def _check_board_fits(self) -> None:
         w, h, shift = self.options["width"], self.options["height"], self.options["shift_px"]
@@ -154,7 +158,7 @@ class SyntheticCamera(Camera):
         return 0 if self.supports_trigger else round(self._period)
 
     def trigger(self) -> None:
-        self._triggers.put(timebase.now())
+        self._triggers.put(self.clock.now_ns())
 
     def open(self) -> None:
         lay = self.layout
@@ -204,10 +208,10 @@ class SyntheticCamera(Camera):
     def grab(self, timeout: float) -> Capture | None:
         if self.supports_trigger:
             return self._grab_triggered(timeout)
-        give_up = timebase.now() + int(timeout * 1e9)
+        give_up = self.clock.now_ns() + int(timeout * 1e9)
         self._start()
         while True:
-            now = timebase.now()
+            now = self.clock.now_ns()
             # Frames wait in the driver's buffers, as a real camera's do (the sensor does not wait
             # for us): a worker late by up to `buffers` frames gets them all, late; later than
             # that, the oldest are lost.
@@ -219,10 +223,9 @@ class SyntheticCamera(Camera):
             if self._jitter_ns:
                 t_capture += self._rng.randint(-self._jitter_ns, self._jitter_ns)
             if t_capture > give_up:
-                time.sleep(max(0, give_up - now) / 1e9)
+                self.clock.sleep_until(give_up)
                 return None
-            if t_capture > now:
-                time.sleep((t_capture - now) / 1e9)
+            self.clock.sleep_until(t_capture)
             k = self._k
             self._k += 1
             if self.options["drop"] and self._rng.random() < self.options["drop"]:
@@ -239,15 +242,19 @@ class SyntheticCamera(Camera):
         k = self._k
         self._k += 1
         t_capture = t_trigger + self._latency_ns
-        wait_ns = t_capture - timebase.now()
-        if wait_ns > 0:  # a frame is there only after its exposure
-            time.sleep(wait_ns / 1e9)
+        self.clock.sleep_until(t_capture)  # a frame is there only after its exposure
         return Capture(self._render(k), k, t_capture)
 
     def _start(self) -> None:
         """Frame numbers start with the first grab, at the frame due then."""
         if self._k < 0:
-            self._k = self._index_at(timebase.now())
+            self._k = self._index_at(self.clock.now_ns())
+
+    def next_due(self) -> int:
+        """When the next frame of a free-running camera is due (before its jitter): a scheduler
+        that runs the grabs itself calls ``grab`` then (tests/virtualtime)."""
+        self._start()
+        return self._due(self._k)
 
     def _render(self, k: int) -> np.ndarray:
         x = self._window(k)
