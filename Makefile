@@ -73,7 +73,8 @@ XDIST := $(if $(filter 0,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist 
 # residuals, skews across real clocks and a file's playback rate, 7 tests today
 # (tests/integration/test_lockstep.py 3, tests/integration/test_capture_at.py 2,
 # tests/backends/test_aravis.py 1, tests/backends/test_opencv.py 1). They run after the
-# parallel pass, alone, one at a time; a failed one runs once more, and every rerun is written to
+# parallel pass, alone, one at a time, their services at SCHED_FIFO (--realtime, as a cell that
+# needs its cameras in step runs them); a failed one runs once more, and every rerun is written to
 # RERUN_LOG (tests/rerunlog.py), which the run ends by listing (issue 41).
 RERUN_LOG := .pytest_cache/reruns.log
 REALTIME := -p no:xdist -m realtime -raR --reruns 1 -p tests.rerunlog --rerun-log $(RERUN_LOG) tests

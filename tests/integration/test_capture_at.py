@@ -46,7 +46,9 @@ def _capture_tuples(client, n: int, cameras=None) -> list:
 
 @pytest.mark.realtime  # the residuals of a real timer
 def test_a_capture_at_t_triggers_the_camera_for_t_and_a_free_camera_answers_nearest(start_service):
-    svc = start_service("--camera", f"trig={TRIGGERED}", "--camera", f"free=synthetic:fps={FREE_FPS},{SMALL}")
+    svc = start_service(
+        "--realtime", "--camera", f"trig={TRIGGERED}", "--camera", f"free=synthetic:fps={FREE_FPS},{SMALL}"
+    )
     with svc.client() as client:
         _capture_tuples(client, 3)  # the worker learns the camera's latency from these
         tuples = _capture_tuples(client, 20)
@@ -158,7 +160,9 @@ def test_a_capture_at_t_across_two_hosts_with_their_own_clocks(emulated_hosts):
     """T in the caller's clock reaches each host in its own clock: both cameras capture at T,
     as the namespaces' exact offsets tell, within the clock estimates and the timers' lateness."""
     hosts = [emulated_hosts.host(clock_offset_s=1000), emulated_hosts.host(clock_offset_s=2000)]
-    services = [host.service("--camera", f"{name}={TRIGGERED}") for host, name in zip(hosts, ("left", "right"))]
+    services = [
+        host.service("--realtime", "--camera", f"{name}={TRIGGERED}") for host, name in zip(hosts, ("left", "right"))
+    ]
     endpoints = [svc.endpoint for svc in services]
     with Client(endpoints, timeout=HOSTS_TIMEOUT_S, keys=emulated_hosts.client_keys) as client:
 

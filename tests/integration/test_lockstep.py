@@ -18,7 +18,9 @@ from fxis_shm.core import timebase
 from ..conftest import fxis, wait_until
 from .conftest import SMALL
 
-pytestmark = [pytest.mark.integration, pytest.mark.realtime]  # residuals and skews of real timers
+# residuals and skews of real timers: the real-time tier, its services at SCHED_FIFO (--realtime), as a cell
+# that needs its cameras in step runs them
+pytestmark = [pytest.mark.integration, pytest.mark.realtime]
 
 MS = 1_000_000
 HZ = 20
@@ -32,7 +34,9 @@ MARGIN_NS = 500_000  # beyond a clock estimate's stated uncertainty (tests/integ
 # tests/unit/test_schedule.py holds the tai grid apart from the realtime one)
 @pytest.mark.parametrize("clock", ["realtime", "tai"])
 def test_a_lockstep_camera_captures_on_the_grid_of_its_clock_and_says_so(start_service, clock):
-    svc = start_service("--lockstep", f"{HZ},5", "--lockstep-clock", clock, "--camera", f"trig={TRIGGERED}")
+    svc = start_service(
+        "--realtime", "--lockstep", f"{HZ},5", "--lockstep-clock", clock, "--camera", f"trig={TRIGGERED}"
+    )
     with svc.client() as client:
         wait_until(lambda: client.status()["cameras"]["trig"]["frames_stored"] >= 20, what="a second of frames")
         frames = [client.tuple(["trig"]).values() for _ in range(5)]  # no extra trigger: the grid's frames
@@ -63,6 +67,7 @@ def test_lockstep_across_hosts_skews_by_the_trigger_jitter_not_by_the_phase(emul
     for host, side in zip(hosts, ("l", "r")):
         services.append(
             host.service(
+                "--realtime",
                 "--lockstep",
                 str(HZ),
                 "--camera",
