@@ -61,7 +61,7 @@ def cameras_command(args) -> int:
 
 
 def clean_command(args) -> int:
-    from fxis_shm.service.supervisor import service_running
+    from fxis_shm.service.servicelock import service_running
 
     try:
         naming.check_name("service", args.name)

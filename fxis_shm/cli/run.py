@@ -18,7 +18,8 @@ from fxis_shm.wire import defaults
 def run_command(args) -> int:
     from fxis_shm.service.addresses import check_free
     from fxis_shm.service.memory import check_room
-    from fxis_shm.service.supervisor import Supervisor, service_running
+    from fxis_shm.service.servicelock import service_running
+    from fxis_shm.service.supervisor import Supervisor
 
     # every error below is one line and code 2 (fxis_shm.cli.main), before anything starts
     file_values = load_toml(args.config) if args.config else {}

@@ -9,7 +9,6 @@ and wait for its readiness handshake, then the coordinator. Shutdown: ask
 
 from __future__ import annotations
 
-import fcntl
 import json
 import logging
 import os
@@ -17,7 +16,6 @@ import signal
 import socket
 import subprocess
 import sys
-import tempfile
 import threading
 import time
 
@@ -34,6 +32,7 @@ from fxis_shm.service.childspec import (
 from fxis_shm.service.config import ServiceConfig, ViewerAccess, http_address, viewer_accesses
 from fxis_shm.service.forkstart import ForkedProcess, fork_child, fork_wanted
 from fxis_shm.service.memory import ring_lines
+from fxis_shm.service.servicelock import ServiceLock
 from fxis_shm.service.stopsignals import stop_on
 from fxis_shm.shm import naming
 
@@ -52,44 +51,6 @@ class StartError(FxisError):
 class StartRefused(StartError, ConfigError):
     """A child said what it could not use of what it was given (a setting the camera refuses, a
     file or device that is not there, a hook that does not load): a setting to change."""
-
-
-def lock_path(service: str) -> str:
-    return os.path.join(os.environ.get("XDG_RUNTIME_DIR") or tempfile.gettempdir(), f"fxis-{service}.lock")
-
-
-class ServiceLock:
-    """An flock held for the supervisor's lifetime; the kernel drops it if the supervisor dies."""
-
-    def __init__(self, service: str):
-        self.path = lock_path(service)
-        self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o600)
-        try:
-            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            owner = os.pread(self._fd, 32, 0).decode(errors="replace").strip()
-            os.close(self._fd)
-            raise StartError(
-                f"service {service!r} is already running (supervisor pid {owner or '?'}); "
-                "stop it first, or pick another --name"
-            ) from None
-        os.ftruncate(self._fd, 0)
-        os.pwrite(self._fd, str(os.getpid()).encode(), 0)
-
-    def release(self) -> None:
-        try:
-            os.unlink(self.path)
-        except FileNotFoundError:
-            pass
-        os.close(self._fd)
-
-
-def service_running(service: str) -> bool:
-    try:
-        ServiceLock(service).release()
-    except StartError:
-        return True
-    return False
 
 
 class Child:

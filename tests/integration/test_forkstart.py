@@ -7,7 +7,7 @@ import signal
 
 import pytest
 
-from fxis_shm.service.supervisor import lock_path
+from fxis_shm.service.servicelock import lock_path
 from fxis_shm.shm import procstat
 
 from .conftest import SMALL, child_pids
