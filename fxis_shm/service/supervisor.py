@@ -20,6 +20,7 @@ import threading
 import time
 
 from fxis_shm.core import timebase
+from fxis_shm.core.restarts import gives_up, recent_crashes
 from fxis_shm.errors import ConfigError, FxisError
 from fxis_shm.service.childspec import (
     CameraWorkerSpec,
@@ -63,6 +64,7 @@ class Child:
         self.last_exit: int | None = None
         self.proc: subprocess.Popen | ForkedProcess | None = None
         self.restarts = 0
+        self.crashes: list[float] = []  # when it exited, within the restart window (monotonic s)
         self.backoff = BACKOFF_FIRST_S
         self.restart_at: float | None = None
         self.started_at = 0.0
@@ -316,15 +318,18 @@ class Supervisor:
         return 0
 
     def _schedule_restart(self, child: Child, code: int) -> bool:
-        if time.monotonic() - child.started_at > STABLE_AFTER_S:
+        now, limit, window = time.monotonic(), self.config.restart_limit, self.config.restart_window_s
+        if now - child.started_at > STABLE_AFTER_S:
             child.backoff = BACKOFF_FIRST_S
         child.last_exit = code
-        if child.restarts >= self.config.restart_limit:
+        child.crashes = recent_crashes([*child.crashes, now], now, window)
+        if gives_up(child.crashes, now, limit, window):
             log.error(
-                "%s exited with code %s; restart limit of %d reached, leaving it down",
+                "%s exited with code %s; restart limit of %d in %g s reached, leaving it down",
                 child.label,
                 code,
-                self.config.restart_limit,
+                limit,
+                window,
             )
             child.restart_at = float("inf")
             child.state = "given up"
