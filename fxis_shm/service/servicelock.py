@@ -121,7 +121,8 @@ class ServiceLock:
             holder = _holder(self._fd)
             os.close(self._fd)
             raise AlreadyRunning(
-                f"service {service!r} is already running (supervisor pid {holder}); stop it first, or pick another --name"
+                f"service {service!r} is already running (supervisor pid {holder}); "
+                "stop it first, or pick another --name"
             )
         os.ftruncate(self._fd, 0)
         os.pwrite(self._fd, str(os.getpid()).encode(), 0)

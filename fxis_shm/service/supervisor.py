@@ -16,7 +16,6 @@ import signal
 import socket
 import subprocess
 import sys
-import threading
 import time
 
 from fxis_shm.core import timebase
@@ -34,7 +33,7 @@ from fxis_shm.service.config import ServiceConfig, ViewerAccess, http_address, v
 from fxis_shm.service.forkstart import ForkedProcess, fork_child, fork_wanted
 from fxis_shm.service.memory import ring_lines
 from fxis_shm.service.servicelock import ServiceLock
-from fxis_shm.service.stopsignals import stop_on
+from fxis_shm.service.stopsignals import StopSignals
 from fxis_shm.shm import naming
 
 log = logging.getLogger("supervisor")
@@ -205,7 +204,7 @@ class Supervisor:
     def __init__(self, config: ServiceConfig, out=sys.stdout):
         self.config = config
         self.out = out
-        self.stop = threading.Event()
+        self.stop: StopSignals | None = None  # from run() on: SIGINT or SIGTERM received
         origin = timebase.reader(config.clock)()  # the synthetic cameras' shared time origin
         common = {"service": config.name, "log_level": config.log_level, "clock": config.clock}
         self.cameras = [
@@ -253,7 +252,7 @@ class Supervisor:
 
     def run(self) -> int:
         """Serve until SIGINT/SIGTERM; returns the process exit code."""
-        stop_on((signal.SIGINT, signal.SIGTERM), self.stop)
+        self.stop = StopSignals((signal.SIGINT, signal.SIGTERM))  # no thread: the supervisor forks
         lock = ServiceLock(self.config.name)
         try:
             removed = naming.remove_leftovers(self.config.name)
@@ -305,6 +304,7 @@ class Supervisor:
         print("\n".join(lines), file=self.out, flush=True)
 
     def _watch(self) -> int:
+        assert self.stop is not None
         while not self.stop.wait(0.1):
             for child in self.children:
                 code = child.exited()

@@ -37,7 +37,8 @@ def run_pytest(tmp_path, source: str) -> subprocess.CompletedProcess:
     (tmp_path / "pytest.ini").write_text("[pytest]\n")
     env = {k: v for k, v in os.environ.items() if k != "FXIS_TEST_RUN"}
     env["PYTHONPATH"] = REPO + os.pathsep + env.get("PYTHONPATH", "")
-    command = [sys.executable, "-m", "pytest", "-q", "-p", "no:xdist", "-p", "no:cacheprovider", "-p", "tests.leftovers"]
+    plugins = ["-p", "no:xdist", "-p", "no:cacheprovider", "-p", "tests.leftovers"]
+    command = [sys.executable, "-m", "pytest", "-q", *plugins]
     return subprocess.run(
         [*command, str(tmp_path / "test_it.py")], cwd=tmp_path, env=env, capture_output=True, text=True, timeout=120
     )
