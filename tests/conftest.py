@@ -123,7 +123,7 @@ def fxis_run_alone(*args: str, timeout: float = 60.0) -> subprocess.CompletedPro
 
     endpoints = [f"tcp://127.0.0.1:{free_tcp_port()}" for _ in range(3)]
     name = f"alone{os.getpid()}x{time.monotonic_ns() % 10**6}"
-    return fxis(
+    result = fxis(
         "run",
         "--name",
         name,
@@ -136,3 +136,5 @@ def fxis_run_alone(*args: str, timeout: float = 60.0) -> subprocess.CompletedPro
         *args,
         timeout=timeout,
     )
+    assert_unlocked(name)  # and its lock file goes
+    return result
