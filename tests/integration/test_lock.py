@@ -269,3 +269,18 @@ def test_two_supervisors_of_one_name_never_both_hold_the_lock(tmp_path):
     assert sum(refused for _, refused, _ in results) > 0, "they never met: nothing was tested"
     assert sum(both for _, _, both in results) == 0, f"two processes held the lock at once: {results}"
     assert_unlocked(name)
+
+
+def test_xdg_runtime_dir_holds_the_lock_when_set_and_is_checked_too(tmp_path, monkeypatch):
+    runtime = tmp_path / "runtime"
+    runtime.mkdir(mode=0o700)
+    monkeypatch.setenv("XDG_RUNTIME_DIR", str(runtime))
+    lock = servicelock.ServiceLock("xdg")
+    try:
+        assert lock.path == str(runtime / "fxis-xdg.lock") and servicelock.service_running("xdg")
+    finally:
+        lock.release()
+    assert not servicelock.service_running("xdg")
+    runtime.chmod(0o755)
+    with pytest.raises(servicelock.LockRefused, match="has mode 0755: chmod 700 it"):
+        servicelock.ServiceLock("xdg")
