@@ -8,7 +8,7 @@ import pytest
 from hypothesis import settings
 
 from fxis_shm.service.launch import ServiceProcess
-from fxis_shm.service.supervisor import lock_path
+from fxis_shm.service.servicelock import lock_path, service_running
 from fxis_shm.shm import naming
 
 # a real ROS 2 node run by its own venv's Python (tests.dds_peer.Peer), not a module to collect
@@ -50,7 +50,17 @@ def run_in_threads(target, count: int, timeout: float) -> None:
 
 def assert_nothing_left(name: str) -> None:
     assert naming.leftovers(name) == [], f"service {name!r} left shared memory behind"
-    assert not os.path.exists(lock_path(name)), f"service {name!r} left its lock file"
+    assert_unlocked(name)
+
+
+def assert_unlocked(name: str) -> None:
+    """The stopped service ``name`` holds its lock no more. It keeps the lock file (servicelock.py
+    says why); a test's name is its own: the file goes, so that runs of the suite pile none up."""
+    assert not service_running(name), f"service {name!r} still holds its lock"
+    try:
+        os.remove(lock_path(name))
+    except FileNotFoundError:
+        pass
 
 
 @pytest.fixture
@@ -103,7 +113,7 @@ def _lab(log_dir):
         yield lab
     assert lab.leftovers() == [], "emulated hosts left namespaces or links behind"
     for svc in (svc for host in lab.hosts for svc in host.services):
-        assert not os.path.exists(lock_path(svc.name)), f"service {svc.name!r} left its lock file"
+        assert_unlocked(svc.name)
 
 
 def fxis_run_alone(*args: str, timeout: float = 60.0) -> subprocess.CompletedProcess:
@@ -113,7 +123,7 @@ def fxis_run_alone(*args: str, timeout: float = 60.0) -> subprocess.CompletedPro
 
     endpoints = [f"tcp://127.0.0.1:{free_tcp_port()}" for _ in range(3)]
     name = f"alone{os.getpid()}x{time.monotonic_ns() % 10**6}"
-    return fxis(
+    result = fxis(
         "run",
         "--name",
         name,
@@ -126,3 +136,5 @@ def fxis_run_alone(*args: str, timeout: float = 60.0) -> subprocess.CompletedPro
         *args,
         timeout=timeout,
     )
+    assert_unlocked(name)  # and its lock file goes
+    return result

@@ -7,6 +7,11 @@ skips the frame. ``process_workers=n`` runs it in n processes, for hooks slower
 than the frame period (the paper's rule: n workers when (n-1)*period < cost <=
 n*period); frames still enter the ring in capture order. A hook that raises is
 counted (``hook_errors`` in status) and the worker goes on.
+
+The processes of a pool end with the worker however it ends: closed (SIGTERM, a stop) they get
+a bounded time to finish their frame and are then killed; if the worker dies (kill -9) the
+kernel kills them (a parent-death signal each sets as it starts), and multiprocessing's resource
+tracker, which they and the worker keep open, then sees its pipe close and ends too.
 """
 
 from __future__ import annotations
@@ -16,11 +21,15 @@ import concurrent.futures
 import importlib
 import logging
 import multiprocessing
+import os
+import signal
 import time
 from collections.abc import Callable
 from dataclasses import dataclass
 
 import numpy as np
+
+from fxis_shm.service.tether import die_with_parent
 
 log = logging.getLogger("camera")
 
@@ -88,10 +97,16 @@ class Inline(Direct):
 
 
 _pool_hook = None
+CLOSE_TIMEOUT_S = 2.0  # a closing pool's processes finish the frame they hold within this, or are killed
 
 
-def _pool_init(path: str) -> None:
+def _pool_init(path: str, worker_pid: int) -> None:
     global _pool_hook
+    # killed by the kernel when the worker that started it dies, even by kill -9 (the pool's own
+    # pipes never tell it: it holds their ends itself); a worker gone already is not waited for
+    die_with_parent(signal.SIGKILL)
+    if os.getppid() != worker_pid:
+        os._exit(0)
     _pool_hook = load_hook(path)
 
 
@@ -112,14 +127,18 @@ class Pool:
         self.n = n
         self.hook = load_hook(path)  # also here, for the first frame, which fixes the layout
         self._pool = concurrent.futures.ProcessPoolExecutor(
-            n, mp_context=multiprocessing.get_context("spawn"), initializer=_pool_init, initargs=(path,)
+            n, mp_context=multiprocessing.get_context("spawn"), initializer=_pool_init, initargs=(path, os.getpid())
         )
         self._pending: collections.deque = collections.deque()
         # Start every process (and import the hook there) now, not on the first frames.
         warm = [self._pool.submit(_pool_warm) for _ in range(n)]
-        concurrent.futures.wait(warm, timeout=start_timeout)
-        for future in warm:
-            future.result(timeout=0)  # raises if a process could not load the hook
+        try:
+            concurrent.futures.wait(warm, timeout=start_timeout)
+            for future in warm:
+                future.result(timeout=0)  # raises if a process could not load the hook
+        except BaseException:
+            self.close()
+            raise
 
     @property
     def in_flight(self) -> int:
@@ -143,8 +162,20 @@ class Pool:
             done.append(Processed(image, frame_id, t_capture, t_available, error))
         return done
 
-    def close(self) -> None:
+    def close(self, timeout: float = CLOSE_TIMEOUT_S) -> None:
+        """Stop the processes: each finishes its frame within ``timeout`` or is killed. Waited
+        for here, not at interpreter exit: a forked worker leaves by ``os._exit``, which skips
+        the executor's exit hook."""
+        processes = list((self._pool._processes or {}).values())  # the executor forgets them on shutdown
         self._pool.shutdown(wait=False, cancel_futures=True)
+        deadline = time.monotonic() + timeout
+        for process in processes:
+            process.join(max(0.0, deadline - time.monotonic()))
+        for process in processes:
+            if process.is_alive():
+                log.warning("processing process %d did not stop within %.0f s; killing it", process.pid, timeout)
+                process.kill()
+                process.join(timeout)
 
 
 def pipeline(options: dict):

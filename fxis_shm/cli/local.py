@@ -70,7 +70,7 @@ def cameras_command(args) -> int:
 
 
 def clean_command(args) -> int:
-    from fxis_shm.service.supervisor import service_running
+    from fxis_shm.service.servicelock import service_running
 
     checked_name(args.name)
     if service_running(args.name):

@@ -19,7 +19,8 @@ from fxis_shm.wire import defaults
 def run_command(args) -> int:
     from fxis_shm.service.addresses import check_free
     from fxis_shm.service.memory import check_room
-    from fxis_shm.service.supervisor import Supervisor, service_running
+    from fxis_shm.service.servicelock import service_running
+    from fxis_shm.service.supervisor import Supervisor
 
     # every error below is one line and code 2 (fxis_shm.cli.main), before anything starts
     file_values = load_toml(args.config) if args.config else {}
@@ -33,6 +34,7 @@ def run_command(args) -> int:
             "slots": args.slots,
             "cameras": args.camera,
             "restart_limit": args.restart_limit,
+            "restart_window_s": args.restart_window,
             "log_level": args.log_level,
             "curve_secret": args.curve_secret,
             "curve_clients": args.curve_clients,
@@ -138,7 +140,15 @@ def add_parser(sub) -> None:
     run.add_argument(
         "--restart-limit",
         type=int,
-        help=f"restarts of a crashed process before giving up (default {defaults.RESTART_LIMIT})",
+        help=f"restarts of a crashed process within --restart-window before giving up, leaving it down "
+        f"(default {defaults.RESTART_LIMIT})",
+    )
+    run.add_argument(
+        "--restart-window",
+        type=float,
+        metavar="SECONDS",
+        help=f"the restart limit counts the crashes of the last SECONDS; older ones are forgiven, so a process "
+        f"that crashes now and then is always restarted (default {defaults.RESTART_WINDOW_S:g})",
     )
     run.add_argument("--log-level", help=f"DEBUG, INFO, WARNING or ERROR (default {defaults.LOG_LEVEL})")
     run.add_argument("--curve-secret", metavar="FILE", help="the service's NAME.key_secret: CurveZMQ on every socket")

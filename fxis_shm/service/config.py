@@ -64,6 +64,7 @@ class ServiceConfig:
     cameras: tuple[CameraSpec, ...] = ()
     settings: dict[str, Any] = field(default_factory=dict)
     restart_limit: int = defaults.RESTART_LIMIT
+    restart_window_s: float = defaults.RESTART_WINDOW_S  # the restart limit counts the crashes of this long
     log_level: str = defaults.LOG_LEVEL
     curve_secret: str | None = None  # the service's NAME.key_secret: CURVE on every socket
     curve_clients: str | None = None  # folder of the public keys of the clients allowed in
@@ -296,6 +297,7 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
         "slots",
         "cameras",
         "restart_limit",
+        "restart_window_s",
         "log_level",
         "curve_secret",
         "curve_clients",
@@ -384,6 +386,8 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
         config = replace(config, realtime=parse_realtime(values["realtime"]))
     if "restart_limit" in values:
         config = replace(config, restart_limit=_check_int("restart_limit", values["restart_limit"], 0))
+    if values.get("restart_window_s") is not None:
+        config = replace(config, restart_window_s=_setting("restart_window_s", float, values["restart_window_s"]))
     config = _security(config, values)
     if "clock" in values:
         from fxis_shm.core.timebase import CLOCK_IDS

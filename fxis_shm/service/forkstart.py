@@ -8,13 +8,14 @@ every restart of a crashed worker. The child is the supervisor's own, as with ``
 the supervisor waits for it, sees its exit code and signals it.
 
 The forked child is a copy of the supervisor, so it first sheds what is the supervisor's: its
-signal handlers (they write to the supervisor's pipe), its stdin (a worker reads none), its open
+signal handlers and their wakeup pipe (stopsignals.StopSignals), its stdin (a worker reads none), its open
 files but the readiness pipe (the service's lock among them: an orphaned worker must not hold
 it), its logging handlers (the child sets its own), and, on the way out, its exit handlers and
 ``finally`` blocks (``os._exit``: a child unwinding into the supervisor's code would remove the
 service's shared memory). The supervisor's objects are frozen out of the child's garbage
-collection, so that none is finalized there, closing a file number the child has reused. Its
-threads are not copied. ``ps`` and ``top`` show the child's
+collection, so that none is finalized there, closing a file number the child has reused. The
+supervisor has no thread but its main one (its signals wake its loop through a pipe), so no
+lock is held by a thread the fork leaves behind. ``ps`` and ``top`` show the child's
 role in its name (``fxis camera``, ``fxis coord``: /proc/PID/comm); its command line is
 the supervisor's.
 
@@ -35,7 +36,7 @@ import sys
 import traceback
 
 _PR_SET_NAME = 15
-# what a child resets: the signals the supervisor (stop_on) and Python itself handle
+# what a child resets: the signals the supervisor (StopSignals) and Python itself handle
 _SUPERVISOR_SIGNALS = (signal.SIGINT, signal.SIGTERM)
 
 
@@ -112,11 +113,13 @@ def fork_child(module: str, argv: list[str], keep_fd: int, title: str) -> Forked
 
 
 def _shed_the_supervisor(keep_fd: int, title: str) -> None:
+    for sig in _SUPERVISOR_SIGNALS:
+        signal.signal(sig, signal.SIG_DFL)
+    # before the files close: a signal would write to the wakeup pipe's number, soon another file's
+    signal.set_wakeup_fd(-1)
     gc.freeze()
     os.closerange(3, keep_fd)
     os.closerange(keep_fd + 1, os.sysconf("SC_OPEN_MAX"))
-    for sig in _SUPERVISOR_SIGNALS:
-        signal.signal(sig, signal.SIG_DFL)
     devnull = os.open(os.devnull, os.O_RDONLY)
     os.dup2(devnull, 0)
     os.close(devnull)

@@ -9,7 +9,6 @@ and wait for its readiness handshake, then the coordinator. Shutdown: ask
 
 from __future__ import annotations
 
-import fcntl
 import json
 import logging
 import os
@@ -17,11 +16,10 @@ import signal
 import socket
 import subprocess
 import sys
-import tempfile
-import threading
 import time
 
 from fxis_shm.core import timebase
+from fxis_shm.core.restarts import gives_up, recent_crashes
 from fxis_shm.errors import ConfigError, FxisError
 from fxis_shm.service.changers import change_lines, dashboard_access, ros2_may_change
 from fxis_shm.service.childspec import (
@@ -35,7 +33,8 @@ from fxis_shm.service.childspec import (
 from fxis_shm.service.config import ServiceConfig, ViewerAccess, http_address, viewer_accesses
 from fxis_shm.service.forkstart import ForkedProcess, fork_child, fork_wanted
 from fxis_shm.service.memory import ring_lines
-from fxis_shm.service.stopsignals import stop_on
+from fxis_shm.service.servicelock import ServiceLock
+from fxis_shm.service.stopsignals import StopSignals
 from fxis_shm.shm import naming
 
 log = logging.getLogger("supervisor")
@@ -55,44 +54,6 @@ class StartRefused(StartError, ConfigError):
     file or device that is not there, a hook that does not load): a setting to change."""
 
 
-def lock_path(service: str) -> str:
-    return os.path.join(os.environ.get("XDG_RUNTIME_DIR") or tempfile.gettempdir(), f"fxis-{service}.lock")
-
-
-class ServiceLock:
-    """An flock held for the supervisor's lifetime; the kernel drops it if the supervisor dies."""
-
-    def __init__(self, service: str):
-        self.path = lock_path(service)
-        self._fd = os.open(self.path, os.O_RDWR | os.O_CREAT, 0o600)
-        try:
-            fcntl.flock(self._fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
-        except BlockingIOError:
-            owner = os.pread(self._fd, 32, 0).decode(errors="replace").strip()
-            os.close(self._fd)
-            raise StartError(
-                f"service {service!r} is already running (supervisor pid {owner or '?'}); "
-                "stop it first, or pick another --name"
-            ) from None
-        os.ftruncate(self._fd, 0)
-        os.pwrite(self._fd, str(os.getpid()).encode(), 0)
-
-    def release(self) -> None:
-        try:
-            os.unlink(self.path)
-        except FileNotFoundError:
-            pass
-        os.close(self._fd)
-
-
-def service_running(service: str) -> bool:
-    try:
-        ServiceLock(service).release()
-    except StartError:
-        return True
-    return False
-
-
 class Child:
     """One supervised process and its restart bookkeeping."""
 
@@ -103,6 +64,7 @@ class Child:
         self.last_exit: int | None = None
         self.proc: subprocess.Popen | ForkedProcess | None = None
         self.restarts = 0
+        self.crashes: list[float] = []  # when it exited, within the restart window (monotonic s)
         self.backoff = BACKOFF_FIRST_S
         self.restart_at: float | None = None
         self.started_at = 0.0
@@ -249,7 +211,7 @@ class Supervisor:
     def __init__(self, config: ServiceConfig, out=sys.stdout):
         self.config = config
         self.out = out
-        self.stop = threading.Event()
+        self.stop: StopSignals | None = None  # from run() on: SIGINT or SIGTERM received
         origin = timebase.reader(config.clock)()  # the synthetic cameras' shared time origin
         common = {"service": config.name, "log_level": config.log_level, "clock": config.clock}
         realtime = config.realtime.priority if config.realtime else None  # viewers never: they are clients
@@ -300,7 +262,7 @@ class Supervisor:
 
     def run(self) -> int:
         """Serve until SIGINT/SIGTERM; returns the process exit code."""
-        stop_on((signal.SIGINT, signal.SIGTERM), self.stop)
+        self.stop = StopSignals((signal.SIGINT, signal.SIGTERM))  # no thread: the supervisor forks
         lock = ServiceLock(self.config.name)
         try:
             removed = naming.remove_leftovers(self.config.name)
@@ -353,6 +315,7 @@ class Supervisor:
         print("\n".join(lines), file=self.out, flush=True)
 
     def _watch(self) -> int:
+        assert self.stop is not None
         while not self.stop.wait(0.1):
             for child in self.children:
                 code = child.exited()
@@ -366,15 +329,18 @@ class Supervisor:
         return 0
 
     def _schedule_restart(self, child: Child, code: int) -> bool:
-        if time.monotonic() - child.started_at > STABLE_AFTER_S:
+        now, limit, window = time.monotonic(), self.config.restart_limit, self.config.restart_window_s
+        if now - child.started_at > STABLE_AFTER_S:
             child.backoff = BACKOFF_FIRST_S
         child.last_exit = code
-        if child.restarts >= self.config.restart_limit:
+        child.crashes = recent_crashes([*child.crashes, now], now, window)
+        if gives_up(child.crashes, now, limit, window):
             log.error(
-                "%s exited with code %s; restart limit of %d reached, leaving it down",
+                "%s exited with code %s; restart limit of %d in %g s reached, leaving it down",
                 child.label,
                 code,
-                self.config.restart_limit,
+                limit,
+                window,
             )
             child.restart_at = float("inf")
             child.state = "given up"

@@ -7,7 +7,7 @@ import signal
 
 import pytest
 
-from fxis_shm.service.supervisor import lock_path
+from fxis_shm.service.servicelock import lock_path
 from fxis_shm.shm import procstat
 
 from .conftest import SMALL, child_pids
@@ -47,6 +47,25 @@ def test_a_forked_worker_holds_none_of_the_supervisors_files(start_service):
         assert lock_path(svc.name) not in files.values(), f"{key} holds the service's lock"
         inherited = {fd: path for fd, path in files.items() if fd > 2 and supervisor.get(fd) == path}
         assert not inherited, f"{key} kept the supervisor's {inherited}"
+
+
+def threads_of(pid: int) -> list[str]:
+    """The names of a process's threads (/proc/PID/task/*/comm)."""
+    tasks = f"/proc/{pid}/task"
+    return [open(os.path.join(tasks, tid, "comm")).read().strip() for tid in sorted(os.listdir(tasks))]
+
+
+def test_the_supervisor_forks_with_no_thread_but_its_main_one(start_service, wait):
+    """A fork copies only the forking thread: a lock another thread held stays locked in the child.
+    The supervisor has none other (its signals wake its loop through a pipe), at start and at a
+    restart's fork alike (issue 42, finding 9)."""
+    svc = start_service(*CAMERAS)
+    assert len(threads_of(svc.proc.pid)) == 1, threads_of(svc.proc.pid)
+    old = svc.children()["camera:a"]
+    os.kill(old, signal.SIGKILL)
+    wait(lambda: svc.children().get("camera:a") not in (None, old), timeout=20, what="camera a forked again")
+    assert len(threads_of(svc.proc.pid)) == 1, threads_of(svc.proc.pid)
+    assert svc.stop() == 0  # and SIGTERM still stops it, through the wakeup pipe
 
 
 def test_a_killed_forked_worker_is_forked_again(start_service, wait):

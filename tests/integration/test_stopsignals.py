@@ -1,6 +1,7 @@
 """A process stops on SIGTERM whenever the signal lands (fxis_shm.service.stopsignals): also
 while its main thread is inside ``Event.wait``, where a handler that set the event itself
-would wait on the event's own lock for ever."""
+would wait on the event's own lock for ever; and the supervisor's way, with no thread, sees
+every signal whether it lands in its wait or between two."""
 
 import os
 import select
@@ -21,11 +22,26 @@ import signal, sys, threading
 from fxis_shm.service.stopsignals import stop_on
 stop = threading.Event()
 stop_on((signal.SIGTERM,), stop)
-print("ready", flush=True)
+print("ready", threading.active_count(), flush=True)
 for k in range({ROUNDS}):
     while not stop.wait(0):
         pass
     stop.clear()
+    print("stopped", k, flush=True)
+"""
+
+
+# The supervisor's loop (StopSignals): no thread, a wait on the wakeup pipe; here polled with no
+# timeout, and with a timeout, so that signals land both inside select and between two calls.
+WAKER = f"""
+import signal, threading
+from fxis_shm.service.stopsignals import StopSignals
+stops = StopSignals((signal.SIGTERM,))
+print("ready", threading.active_count(), flush=True)
+for k in range({ROUNDS}):
+    while not stops.wait(0.05 if k % 2 else 0):
+        pass
+    stops.clear()
     print("stopped", k, flush=True)
 """
 
@@ -36,10 +52,12 @@ def read_line(proc: subprocess.Popen, timeout: float) -> str:
     return proc.stdout.readline().strip()
 
 
-def test_sigterm_stops_a_main_loop_waiting_on_the_event_wherever_it_lands():
-    proc = subprocess.Popen([sys.executable, "-c", CHILD], stdout=subprocess.PIPE, text=True)
+@pytest.mark.parametrize("child, threads", [(CHILD, None), (WAKER, "1")], ids=["stop_on", "StopSignals"])
+def test_sigterm_stops_a_main_loop_waiting_on_the_event_wherever_it_lands(child, threads):
+    proc = subprocess.Popen([sys.executable, "-c", child], stdout=subprocess.PIPE, text=True)
     try:
-        assert read_line(proc, 30) == "ready"
+        first = read_line(proc, 30).split()
+        assert first[0] == "ready" and (threads is None or first[1] == threads)
         for k in range(ROUNDS):
             time.sleep((k % 7) * 0.0003)  # the signal lands at ever other points of the loop
             os.kill(proc.pid, signal.SIGTERM)
