@@ -5,11 +5,12 @@ from __future__ import annotations
 import sys
 
 from fxis_shm.cli import exitcodes
-from fxis_shm.cli.options import EXIT_USAGE, add_client_options, client_for
+from fxis_shm.cli.options import EXIT_USAGE, add_client_options, client_for, duration_seconds, ranged, rate_hz
 from fxis_shm.cli.stopsignals import as_interrupts, interrupted
 from fxis_shm.cli.videoflags import add_encoding_option, add_video_options, video_settings
 from fxis_shm.errors import ConfigError
 from fxis_shm.formats.outfolder import check_out_folder
+from fxis_shm.wire import ranges
 
 
 def record_command(args) -> int:
@@ -135,13 +136,18 @@ def add_parser(sub) -> None:
     )
     record.add_argument("--cameras", metavar="A,B", help="comma-separated cameras (default all)")
     until = record.add_mutually_exclusive_group()
-    until.add_argument("--seconds", type=float, metavar="S", help="stop after S seconds (default: at Ctrl-C)")
     until.add_argument(
-        "--frames", type=int, metavar="N", help="stop after N frames per camera (N tuples with --tuples)"
+        "--seconds", type=duration_seconds, metavar="S", help="stop after S seconds (default: at Ctrl-C)"
+    )
+    until.add_argument(
+        "--frames",
+        type=ranged(ranges.FRAMES),
+        metavar="N",
+        help="stop after N frames per camera (N tuples with --tuples)",
     )
     record.add_argument(
         "--rate",
-        type=float,
+        type=rate_hz,
         metavar="HZ",
         help="thin each camera to HZ on purpose (default every frame); with --tuples, "
         "the step rate (default the slowest camera's)",
@@ -153,6 +159,8 @@ def add_parser(sub) -> None:
         "and /fxis/tuples lists their frame ids",
     )
     add_encoding_option(record, "raw: sensor_msgs/Image (default); jpeg: sensor_msgs/CompressedImage")
-    record.add_argument("--quality", type=int, metavar="Q", help="JPEG quality 1-100 (default 90)")
+    record.add_argument(
+        "--quality", type=ranged(ranges.JPEG_QUALITY), metavar="Q", help="JPEG quality 1-100 (default 90)"
+    )
     add_video_options(record, "record the frames")
     record.set_defaults(func=record_command)

@@ -11,7 +11,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable
 from typing import Any
 
-from fxis_shm.client import snapshot as snapshots
+from fxis_shm.client import arguments, snapshot as snapshots
 from fxis_shm.client.fastreads import FastReads
 from fxis_shm.client.frames import Frame, FrameTuple, frames_of, sequence_of, tuple_of
 from fxis_shm.core.clockmap import ClockEstimate
@@ -65,11 +65,15 @@ class ClientApi(ABC):
         ``copy=False`` (local path only): the image is a read-only view of the ring slot,
         with no copy at all; check ``frame.still_valid()`` after using it.
         ``encoding``/``quality``: as the client's, for this request."""
+        camera = arguments.camera_name(camera)
+        if at is not None or timeout is not None:
+            arguments.check_numbers(timeout, at=at)
         if self._fast is not None and not capture and encoding is quality is timeout is timeout_ms is None:
             frame = self._compiled(self._fast.image(camera, at, wait, copy))
             if frame is not None:
                 return frame
         fields = {"camera": camera, "at": at, "wait": wait, "capture": capture or None}
+        arguments.check_request("image", **fields)
         return frames_of(*self._answer("image", timeout, timeout_ms, copy, encoding, quality, **fields))[0]
 
     def tuple(
@@ -93,11 +97,24 @@ class ClientApi(ABC):
         that are down are left out (``.missing`` names them) instead of failing the request
         with CameraDown. ``capture=True`` with ``at`` in the future: every camera that can be
         triggered captures at ``at`` (as for ``image``), on every service of the client."""
+        cameras = arguments.camera_names(cameras)
+        if at is not None or timeout is not None or max_skew_ms is not None:
+            arguments.check_numbers(timeout, at=at, max_skew_ms=max_skew_ms)
         fast = not capture and encoding is quality is timeout is timeout_ms is max_skew_ms is None
         if self._fast is not None and fast:
             tuple_ = self._compiled(self._fast.tuple(cameras, at, sync, wait, copy))
             if tuple_ is not None:
                 return tuple_
+        arguments.check_request(
+            "tuple",
+            cameras=cameras,
+            at=at,
+            sync=sync,
+            wait=wait,
+            max_skew_ms=max_skew_ms,
+            partial=partial or None,
+            capture=capture or None,
+        )
         return tuple_of(
             *self._answer(
                 "tuple",
@@ -125,10 +142,12 @@ class ClientApi(ABC):
         quality: int | None = None,
     ) -> FrameTuple:
         """The newest stored frame of each camera, without waiting."""
+        cameras = arguments.camera_names(cameras)
         if self._fast is not None and encoding is quality is None:
             tuple_ = self._compiled(self._fast.latest(cameras, copy))
             if tuple_ is not None:
                 return tuple_
+        arguments.check_request("latest", cameras=cameras)
         return tuple_of(*self._answer("latest", None, None, copy, encoding, quality, cameras=cameras))
 
     def sequence(
@@ -157,6 +176,11 @@ class ClientApi(ABC):
         - ``kind="interval"``: the frames nearest to t* + i*interval_ms, i = 0..count-1;
         - ``kind="range"``: every frame captured in [start, end] (ns of the caller's clock).
         """
+        cameras = arguments.camera_names(cameras)
+        arguments.check_numbers(timeout, at=at, start=start, end=end, count=count, interval_ms=interval_ms)
+        fields = dict(camera=camera, cameras=cameras, kind=kind, count=count, direction=direction)
+        fields.update(interval_ms=interval_ms, start=start, end=end, at=at, sync=sync)
+        arguments.check_request("sequence", **fields)
         header, images, check = self._answer(
             "sequence",
             timeout,
@@ -164,16 +188,7 @@ class ClientApi(ABC):
             copy,
             encoding,
             quality,
-            camera=camera,
-            cameras=cameras,
-            kind=kind,
-            count=count,
-            direction=direction,
-            interval_ms=interval_ms,
-            start=start,
-            end=end,
-            at=at,
-            sync=sync,
+            **fields,
         )
         return sequence_of(header, images, check, single=camera is not None)
 
@@ -200,19 +215,22 @@ class ClientApi(ABC):
         window's first frame a keyframe, with ``encoder``, ``crf``, ``preset``, ``gop_s`` as
         ``fxis record --codec`` takes them."""
         encoding, codec = split_encoding(encoding, codec)
-        owners = self._owners(cameras)
+        owners = self._owners(arguments.camera_names(cameras))
         settings = VideoSettings(codec, encoder, crf, preset, gop_s) if codec is not None else None
         return snapshots.take(owners, self.clock, out, at, before, after, encoding, quality, self._clock_name, settings)
 
     def subscribe(self, timeout: float = 2.0, queue: int = 16) -> Any:
         """A subscriber of the streams (``frames(camera)``, and joint ``tuples(rate_hz)``), every
         time in this client's clock; a context manager like the client."""
-        return self._subscriber(timeout, queue)
+        arguments.check_numbers(timeout)
+        return self._subscriber(timeout, arguments.check_queue(queue))
 
     def frame_times(self, cameras: list[str] | None = None) -> dict:
         """Each camera's frames without pixels (the ``frames`` op): liveness, period and a row
         per valid frame with the fields named in ``columns``, times in the clock of the camera's
         service."""
+        cameras = arguments.camera_names(cameras)
+        arguments.check_request("frames", cameras=cameras)
         return self._frame_times(cameras)
 
     @abstractmethod
