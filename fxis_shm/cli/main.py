@@ -50,7 +50,11 @@ def _interrupted(signum, frame) -> NoReturn:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = parser().parse_args(argv)
+    top = parser()
+    args, extra = top.parse_known_args(argv)
+    if extra:  # said by the command's parser: "fxis get: unrecognized arguments ...", as its other usage errors
+        (sub,) = [a for a in top._actions if isinstance(a, argparse._SubParsersAction)]
+        sub.choices[args.command].error(f"unrecognized arguments: {' '.join(extra)}")
     # SIGTERM ends a command as Ctrl-C does (code 130); a command with handlers of its own
     # (fxis run, record) sets them over this one
     in_main = threading.current_thread() is threading.main_thread()  # where Python handles signals

@@ -41,7 +41,7 @@ def test_a_refused_setting_is_usage_and_a_refused_request_is_a_failure():
     assert exitcodes.for_error(service_error(Code.BAD_REQUEST, "why")) == exitcodes.FAILED
     assert exitcodes.for_error(service_error(Code.CAMERA_DOWN, "why")) == exitcodes.FAILED
     assert exitcodes.for_error(service_error("NOT_A_CODE", "why")) == exitcodes.FAILED  # a newer service's code
-    assert exitcodes.for_error(errors.RequestTimeout("no reply")) == exitcodes.NO_SERVICE  # (a TimeoutError, an OSError)
+    assert exitcodes.for_error(errors.RequestTimeout("no reply")) == exitcodes.NO_SERVICE  # (an OSError too)
     assert exitcodes.for_error(KeyboardInterrupt()) == exitcodes.INTERRUPTED
     assert exitcodes.for_error(OSError(28, "No space left", "/x")) == exitcodes.FAILED
     assert exitcodes.for_error(PermissionError(13, "Permission denied", "/x")) == exitcodes.USAGE
