@@ -129,7 +129,7 @@ def test_every_command_keeps_the_contract_on_any_input(command, service):
 
 BAD_TYPES = st.one_of(st.text(max_size=5), st.floats(), st.lists(st.integers(), max_size=2), st.just(object()))
 TIMES = st.one_of(st.none(), st.integers(-(2**70), 2**70), st.floats(allow_nan=True), st.just("abc"), st.just(1.5e18))
-TIMEOUTS = st.one_of(st.none(), st.floats(allow_nan=True, max_value=0.3), st.integers(-5, 0), BAD_TYPES)
+TIMEOUTS = st.one_of(st.none(), st.floats(max_value=0.3), st.just(float("nan")), st.integers(-5, 0), BAD_TYPES)
 CAMERAS = st.one_of(
     st.none(),
     st.just(draws.CAMERA),
@@ -181,7 +181,7 @@ def api_calls() -> st.SearchStrategy[tuple[str, dict]]:
         st.fixed_dictionaries(
             {
                 "before": st.one_of(st.floats(allow_nan=True), st.integers(-1, 10**6), BAD_TYPES),
-                "after": st.one_of(st.floats(allow_nan=True, max_value=0.2), st.integers(-1, 0), BAD_TYPES),
+                "after": st.one_of(st.floats(max_value=0.2), st.just(float("nan")), st.integers(-1, 0), BAD_TYPES),
                 "at": TIMES,
             }
         ).map(lambda k: ("snapshot", k)),
