@@ -49,6 +49,13 @@ def _interrupted(signum, frame) -> NoReturn:
     raise KeyboardInterrupt
 
 
+def _quiet_stdout() -> None:
+    """stdout onto /dev/null: what is still buffered for a reader that left goes nowhere, silently."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
+
+
 def main(argv: list[str] | None = None) -> int:
     top = parser()
     args, extra = top.parse_known_args(argv)
@@ -60,7 +67,12 @@ def main(argv: list[str] | None = None) -> int:
     in_main = threading.current_thread() is threading.main_thread()  # where Python handles signals
     previous = signal.signal(signal.SIGTERM, _interrupted) if in_main else None
     try:
-        return args.func(args)
+        code = args.func(args)
+        sys.stdout.flush()  # a reader that went away is found here, not in the interpreter's exit
+        return code
+    except BrokenPipeError:  # the reader of stdout went away (fxis get --json | head -2): not an error
+        _quiet_stdout()
+        return exitcodes.DONE
     except SystemExit:
         raise
     except BaseException as exc:

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import sys
+from dataclasses import replace
 
 from fxis_shm.cli import exitcodes
 from fxis_shm.cli.options import EXIT_USAGE, add_client_options, client_for, duration_seconds, ranged, rate_hz
@@ -61,6 +62,7 @@ def record_command(args) -> int:
     recorder = None
     try:
         with as_interrupts(), client_for(args) as client:
+            settings = replace(settings, endpoint=client.endpoint)  # --endpoint's, or the config file's
             try:
                 recorder = Recorder(settings, client)
             except ConfigError as exc:

@@ -23,6 +23,7 @@ import time
 
 from fxis_shm.core import timebase
 from fxis_shm.errors import ConfigError, FxisError
+from fxis_shm.service.addresses import remove_stale_ipc_files
 from fxis_shm.service.childspec import (
     CameraWorkerSpec,
     ChildSpec,
@@ -305,6 +306,7 @@ class Supervisor:
         finally:
             self._stop_all()
             naming.remove_leftovers(self.config.name)
+            remove_stale_ipc_files(self.config)
             lock.release()
 
     def _start_all(self) -> None:
