@@ -256,10 +256,11 @@ def _check_foxglove_sdk() -> None:
         ) from None
 
 
-def _in_range(setting: str, value: Any, limits: ranges.Range) -> Any:
-    """A number of the config file or a flag (the flag's text) within ``limits``, else ConfigError."""
+def _in_range(setting: str, value: Any, limits: ranges.Range, *, text: bool = False) -> Any:
+    """A number of the config file or a flag within ``limits`` (``text``: a flag's text taken
+    too), else ConfigError."""
     try:
-        return limits.parse(value, setting) if isinstance(value, str) else limits.check(value, setting)
+        return limits.parse(value, setting) if text and isinstance(value, str) else limits.check(value, setting)
     except InvalidArgument as exc:
         raise ConfigError(str(exc)) from None
 
@@ -368,7 +369,7 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
     if "slots" in values:
         config = replace(config, slots=_in_range("slots", values["slots"], ranges.SLOTS))
     if values.get("history") is not None:
-        config = replace(config, history=_in_range("history", values["history"], ranges.HISTORY_S))
+        config = replace(config, history=_in_range("history", values["history"], ranges.HISTORY_S, text=True))
     if values.get("lockstep") is not None:
         try:
             config = replace(config, lockstep=parse_lockstep(str(values["lockstep"])))
