@@ -105,33 +105,10 @@ class ClientApi(ABC):
             tuple_ = self._compiled(self._fast.tuple(cameras, at, sync, wait, copy))
             if tuple_ is not None:
                 return tuple_
-        arguments.check_request(
-            "tuple",
-            cameras=cameras,
-            at=at,
-            sync=sync,
-            wait=wait,
-            max_skew_ms=max_skew_ms,
-            partial=partial or None,
-            capture=capture or None,
-        )
-        return tuple_of(
-            *self._answer(
-                "tuple",
-                timeout,
-                timeout_ms,
-                copy,
-                encoding,
-                quality,
-                cameras=cameras,
-                at=at,
-                sync=sync,
-                wait=wait,
-                max_skew_ms=max_skew_ms,
-                partial=partial or None,
-                capture=capture or None,
-            )
-        )
+        fields = dict(cameras=cameras, at=at, sync=sync, wait=wait, max_skew_ms=max_skew_ms)
+        fields.update(partial=partial or None, capture=capture or None)
+        arguments.check_request("tuple", **fields)
+        return tuple_of(*self._answer("tuple", timeout, timeout_ms, copy, encoding, quality, **fields))
 
     def latest(
         self,
