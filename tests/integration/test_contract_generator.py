@@ -38,7 +38,7 @@ from fxis_shm.errors import BadRequest, InvalidArgument, ProtocolError, SettingR
 from fxis_shm.shm import naming
 
 from . import contractdraws as draws
-from .conftest import module_service
+from .conftest import assert_nothing_left, module_service
 
 pytestmark = [pytest.mark.integration, pytest.mark.timeout(1800)]
 
@@ -334,4 +334,17 @@ def test_fxis_run_keeps_the_contract_on_any_flags_and_config_file(config, flags)
         check_lines(err, "run", code)
         assert code in (exitcodes.DONE, exitcodes.USAGE), (args, code, err)
         assert time.monotonic() - started < 120  # a hang guard (the spawn's own timeouts make it so)
-    assert naming.leftovers(name) == []
+        assert os.listdir(tmp) == (["c.toml"] if config is not None else []), os.listdir(tmp)  # no ipc file left
+    assert_nothing_left(name)  # shared memory, its lock
+    assert processes_named(name) == []
+
+
+def processes_named(name: str) -> list[int]:
+    """The processes whose command line holds ``name`` (a service's workers are forks of it)."""
+    found = []
+    for pid in filter(str.isdigit, os.listdir("/proc")):
+        with contextlib.suppress(OSError):
+            with open(f"/proc/{pid}/cmdline", "rb") as f:
+                if name.encode() in f.read().split(b"\0"):
+                    found.append(int(pid))
+    return found
