@@ -9,6 +9,7 @@ and from ``MEANINGS`` below: ``python -m fxis_shm.cli.exitcodedocs --write docs/
 from __future__ import annotations
 
 import errno
+import sys
 
 from fxis_shm.errors import Exit, exit_code
 
@@ -81,6 +82,17 @@ def for_error(exc: BaseException) -> int | None:
     return None
 
 
+def one_line(text: str) -> str:
+    """``text`` as one line: every run of whitespace, a line break among them (also one a user
+    typed in a name: U+0085, U+2028, ...), one space."""
+    return " ".join(text.split())
+
+
+def say(command: str, text: str) -> None:
+    """``fxis COMMAND: text`` on stderr, as one line."""
+    print(f"fxis {command}: {one_line(text)}", file=sys.stderr)
+
+
 def message(exc: BaseException) -> str:
     """The error's one line: what is wrong (the message says what to change)."""
     if isinstance(exc, KeyboardInterrupt):
@@ -89,4 +101,4 @@ def message(exc: BaseException) -> str:
         where = f"{exc.filename}: " if exc.filename else ""
         room = "; free some room there, or write elsewhere" if exc.errno in DISK_FULL else ""
         return f"{where}{exc.strerror or exc}{room}"
-    return " ".join(str(exc).split()) or type(exc).__name__
+    return one_line(str(exc)) or type(exc).__name__

@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import sys
 from dataclasses import replace
 
 from fxis_shm.cli import exitcodes
@@ -20,7 +19,7 @@ def record_command(args) -> int:
     from fxis_shm.wire import encoding
 
     def usage(message: str) -> int:
-        print(f"fxis record: {message}", file=sys.stderr)
+        exitcodes.say("record", message)
         return EXIT_USAGE
 
     if args.recover is not None:

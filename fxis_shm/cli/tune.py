@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import json
-import sys
 
 from fxis_shm.cli import exitcodes
 from fxis_shm.cli.options import add_client_options, client_for
@@ -51,10 +50,8 @@ def get_command(args) -> int:
     keys = args.keys or list(answer["values"])
     unknown = [k for k in keys if k not in answer["values"]]
     if unknown:
-        print(
-            f"fxis get: camera {args.camera!r} has no setting {', '.join(unknown)}; "
-            f"it has {', '.join(answer['values'])}",
-            file=sys.stderr,
+        exitcodes.say(
+            "get", f"camera {args.camera!r} has no setting {', '.join(unknown)}; it has {', '.join(answer['values'])}"
         )
         return exitcodes.USAGE
     if args.json:

@@ -40,7 +40,16 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from fxis_shm.core import timebase
-from fxis_shm.errors import CameraDown, DiskFull, FxisError, InvalidArgument, Overwritten, ServiceError
+from fxis_shm.errors import (
+    CameraDown,
+    Code,
+    DiskFull,
+    FxisError,
+    InvalidArgument,
+    Overwritten,
+    ServiceError,
+    UnknownCamera,
+)
 from fxis_shm.formats import rosmsgs
 from fxis_shm.formats.bagfile import BagWriter
 from fxis_shm.formats.outfolder import check_out_folder
@@ -122,7 +131,7 @@ def take(
         raise InvalidArgument(
             f"at is {(t - now) / 1e9:.0f} s from now: a snapshot's t is at most {ranges.WINDOW_S.highest:g} s ahead"
         )
-    _check_history(owners, before)
+    _check_cameras(owners, before)
     plan = _video_plan(owners, video)  # before anything is made: bad settings leave nothing behind
     out = os.path.normpath(out)
     partial = out + ".partial"
@@ -322,12 +331,16 @@ def _check(at, before, after, out, encoding, quality, video) -> None:
     check_out_folder(out)
 
 
-def _check_history(owners: dict[str, Any], before: float) -> None:
-    """InvalidArgument if ``before`` is longer than any of the cameras' rings holds (their
-    ``history_s``, as their services' status says: O(1), before a frame is looked at)."""
+def _check_cameras(owners: dict[str, Any], before: float) -> None:
+    """UnknownCamera for a camera its service lacks; InvalidArgument if ``before`` is longer
+    than any of the cameras' rings holds (their ``history_s``, as their services' status
+    says: O(1), before a frame is looked at)."""
     held: dict[str, float] = {}
     for client in {id(c): c for c in owners.values()}.values():
         cameras = client.status()["cameras"]
+        unknown = [name for name, owner in owners.items() if owner is client and name not in cameras]
+        if unknown:  # before the bag is begun: nothing made, one line
+            raise UnknownCamera(Code.UNKNOWN_CAMERA, f"unknown camera(s) {unknown}; known: {sorted(cameras)}")
         held.update({name: cameras[name]["history_s"] for name in owners if cameras.get(name, {}).get("history_s")})
     if held and before > max(held.values()):
         rings = ", ".join(f"{name} {seconds:g} s" for name, seconds in held.items())

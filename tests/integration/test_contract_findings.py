@@ -92,3 +92,12 @@ def test_a_sync_report_of_too_many_tuples_is_refused_before_a_service_is_asked(c
     assert code == exitcodes.USAGE and "at most 1000" in err
     code, err = one_line(capsys, ["sync-report", "--endpoint", NOWHERE, "--rate", "1000", "--seconds", "600000"])
     assert code == exitcodes.USAGE and "tuples" in err  # not a time-out: nothing was asked
+
+
+@pytest.mark.parametrize("command", ["record", "snapshot", "grab"])
+def test_a_name_holding_a_line_break_is_still_one_line(service, capsys, tmp_path, command):
+    """Found by the generator: a camera name with U+0085 (a line break to str.splitlines) made
+    two lines of fxis record's refusal."""
+    argv = [command, "--endpoint", service.endpoint, "--out", str(tmp_path / "o"), "--cameras", "0\x850"]
+    code, err = one_line(capsys, [*argv, *(["--seconds", "0.2"] if command == "record" else [])])
+    assert code == exitcodes.USAGE and "unknown camera" in err.lower() or "UNKNOWN_CAMERA" in err, err
