@@ -122,19 +122,19 @@ class SettingRejected(ServiceError):
 
 
 class CameraDown(ServiceError):
-    pass
+    """The camera's worker is not running (code CAMERA_DOWN)."""
 
 
 class UnknownCamera(ServiceError):
-    pass
+    """The service has no camera of that name (code UNKNOWN_CAMERA)."""
 
 
 class SkewExceeded(ServiceError):
-    pass
+    """No tuple meets ``max_skew_ms`` (code SKEW_EXCEEDED)."""
 
 
 class FrameTimeout(ServiceError, TimeoutError):
-    pass
+    """The frames waited for did not arrive within the request's timeout (code TIMEOUT)."""
 
 
 class Overrun(ServiceError, Overwritten):
@@ -142,14 +142,104 @@ class Overrun(ServiceError, Overwritten):
     OVERRUN): the ring holds too little history for the request, or the reader is too slow."""
 
 
-_BY_CODE = {
-    Code.CAMERA_DOWN: CameraDown,
-    Code.UNKNOWN_CAMERA: UnknownCamera,
-    Code.SKEW_EXCEEDED: SkewExceeded,
-    Code.TIMEOUT: FrameTimeout,
-    Code.OVERRUN: Overrun,
-    Code.SETTING_REFUSED: SettingRejected,
+class BadRequest(ServiceError):
+    """The service could not read the request (code BAD_REQUEST)."""
+
+
+class UnsupportedVersion(ServiceError):
+    """The service speaks another protocol version (code UNSUPPORTED_VERSION)."""
+
+
+class UnknownOp(ServiceError):
+    """The service has no such operation (code UNKNOWN_OP)."""
+
+
+class NoFrames(ServiceError):
+    """The camera has stored nothing yet (code NO_FRAMES)."""
+
+
+class OutOfRange(ServiceError):
+    """t* too far in the future, or history the ring no longer holds (code OUT_OF_RANGE)."""
+
+
+class TooLarge(ServiceError):
+    """A limit of the service was exceeded (code TOO_LARGE)."""
+
+
+class Busy(ServiceError):
+    """Too many requests wait already (code BUSY)."""
+
+
+class Forbidden(ServiceError):
+    """This client's key may not do that (code FORBIDDEN)."""
+
+
+class InternalError(ServiceError):
+    """The service failed answering (code INTERNAL)."""
+
+
+class Exit:
+    """The exit codes of every ``fxis`` command (docs/cli.md, "Exit codes"; named again in
+    fxis_shm.cli.exitcodes, where the commands take them from)."""
+
+    DONE = 0  # the command did all it was asked
+    MISSING = 1  # done, but some of what was asked is missing (frames gone, a camera down)
+    USAGE = 2  # bad usage or settings (a flag, a path, a key file, a config): change the command
+    NO_SERVICE = 3  # a service did not answer (down, wrong endpoint, wrong keys)
+    FAILED = 4  # anything else went wrong at run time (a full disk, a refusal by the service)
+    SYNC_FAILED = 5  # done, measured, and the figures missed a limit (fxis sync-report's FAIL)
+    INTERRUPTED = 130  # Ctrl-C or SIGTERM: stopped, with what was kept said on screen (128 + SIGINT)
+
+
+# THE table: each error class, the exit code a command ends with when it is raised, and the
+# wire code it travels as (None: raised on this side, never sent). A subclass not named here
+# takes the row of its nearest named base (fxis_shm.cli's own errors do). docs/cli.md's
+# exit-code table is generated from it (python -m fxis_shm.cli.exitcodedocs), and a test keeps them equal.
+ERROR_TABLE: tuple[tuple[type[BaseException], int, str | None], ...] = (
+    (FxisError, Exit.FAILED, None),
+    (ConfigError, Exit.USAGE, None),
+    (InvalidArgument, Exit.USAGE, None),
+    (BadEndpoint, Exit.USAGE, None),
+    (SpecError, Exit.USAGE, None),
+    (SettingRefused, Exit.USAGE, None),
+    (RequestTimeout, Exit.NO_SERVICE, None),
+    (DiskFull, Exit.FAILED, None),
+    (ServiceNotStarted, Exit.FAILED, None),
+    (ProtocolError, Exit.FAILED, None),
+    (RingError, Exit.FAILED, None),
+    (Overwritten, Exit.FAILED, None),
+    (LocalPathUnavailable, Exit.FAILED, None),
+    (ServiceError, Exit.FAILED, None),
+    (UnknownCamera, Exit.USAGE, Code.UNKNOWN_CAMERA),
+    (SettingRejected, Exit.USAGE, Code.SETTING_REFUSED),
+    (CameraDown, Exit.FAILED, Code.CAMERA_DOWN),
+    (SkewExceeded, Exit.FAILED, Code.SKEW_EXCEEDED),
+    (FrameTimeout, Exit.FAILED, Code.TIMEOUT),
+    (Overrun, Exit.FAILED, Code.OVERRUN),
+    (BadRequest, Exit.FAILED, Code.BAD_REQUEST),
+    (UnsupportedVersion, Exit.FAILED, Code.UNSUPPORTED_VERSION),
+    (UnknownOp, Exit.FAILED, Code.UNKNOWN_OP),
+    (NoFrames, Exit.FAILED, Code.NO_FRAMES),
+    (OutOfRange, Exit.FAILED, Code.OUT_OF_RANGE),
+    (TooLarge, Exit.FAILED, Code.TOO_LARGE),
+    (Busy, Exit.FAILED, Code.BUSY),
+    (Forbidden, Exit.FAILED, Code.FORBIDDEN),
+    (InternalError, Exit.FAILED, Code.INTERNAL),
+    (KeyboardInterrupt, Exit.INTERRUPTED, None),
+)
+
+_EXIT_OF: dict[type[BaseException], int] = {cls: code for cls, code, _ in ERROR_TABLE}
+_BY_CODE: dict[str, type[ServiceError]] = {
+    wire: cls for cls, _, wire in ERROR_TABLE if wire is not None and issubclass(cls, ServiceError)
 }
+
+
+def exit_code(exc: BaseException) -> int | None:
+    """The exit code of ``exc`` by the table (its nearest named class), None if no row names it."""
+    for cls in type(exc).__mro__:
+        if cls in _EXIT_OF:
+            return _EXIT_OF[cls]
+    return None
 
 
 def service_error(code: str, message: str) -> ServiceError:

@@ -10,7 +10,7 @@ import signal
 import sys
 import threading
 
-from fxis_shm.cli.options import add_key_options, client_keys_for, positive_seconds
+from fxis_shm.cli.options import add_key_options, client_keys_for, timeout_seconds
 from fxis_shm.errors import ConfigError
 from fxis_shm.service.config import ViewerAccess, check_viewer_files, http_address, read_token_file, viewer_token
 from fxis_shm.service.stopsignals import stop_on
@@ -87,7 +87,7 @@ def add_parser(sub) -> None:
         "--http", default=DEFAULT_HTTP, metavar="ADDR", help=f"where to serve the page (default {DEFAULT_HTTP})"
     )
     p.add_argument(
-        "--timeout", type=positive_seconds, default=1.5, help="seconds a service may take to answer (default 1.5)"
+        "--timeout", type=timeout_seconds, default=1.5, help="seconds a service may take to answer (default 1.5)"
     )
     add_key_options(p)
     p.add_argument("--viewer-token-file", metavar="FILE", help="the token the page requires (default: a new one)")

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import contextlib
 import os
-import sys
 
 from fxis_shm.cli import exitcodes
 from fxis_shm.cli.stopsignals import as_interrupts, interrupted
@@ -23,7 +22,7 @@ def save_tuple(folder: str, frames) -> int:
     names = [f"{c}.png" for c in frames] + [META_FILE]
     there = [n for n in names if os.path.lexists(os.path.join(folder, n))]
     if there:  # an earlier grab's: never replaced
-        print(f"fxis grab: {folder} already holds {', '.join(there)}: choose another --out", file=sys.stderr)
+        exitcodes.say("grab", f"{folder} already holds {', '.join(there)}: choose another --out")
         return exitcodes.USAGE
     try:
         os.makedirs(folder, exist_ok=True)
@@ -39,9 +38,7 @@ def save_tuple(folder: str, frames) -> int:
         if exc.errno in exitcodes.DISK_FULL:  # one line and code 4 (fxis_shm.cli.main); what was written stays
             raise
         where = exc.filename or folder
-        print(
-            f"fxis grab: could not write {where}: {exc.strerror} (--out names a folder to write into)", file=sys.stderr
-        )
+        exitcodes.say("grab", f"could not write {where}: {exc.strerror} (--out names a folder to write into)")
         return exitcodes.USAGE
     if ended != "complete":
         kept = ", ".join(f"{c}.png" for c in saved) or "no image"

@@ -6,7 +6,7 @@ import json
 import subprocess
 import sys
 
-from fxis_shm.cli.options import positive_seconds
+from fxis_shm.cli.options import timeout_seconds
 from fxis_shm.cli.table import aligned
 from fxis_shm.errors import ConfigError, FxisError
 from fxis_shm.shm import naming
@@ -95,7 +95,7 @@ def add_parsers(sub) -> None:
     cameras = sub.add_parser("cameras", help="list the cameras the installed backends can reach")
     cameras.add_argument("--json", action="store_true", help="print the list as JSON")
     cameras.add_argument(
-        "--timeout", type=positive_seconds, default=30.0, help="seconds the backends may take to look (default 30)"
+        "--timeout", type=timeout_seconds, default=30.0, help="seconds the backends may take to look (default 30)"
     )
     cameras.set_defaults(func=cameras_command)
 

@@ -49,14 +49,30 @@ def _interrupted(signum, frame) -> NoReturn:
     raise KeyboardInterrupt
 
 
+def _quiet_stdout() -> None:
+    """stdout onto /dev/null: what is still buffered for a reader that left goes nowhere, silently."""
+    devnull = os.open(os.devnull, os.O_WRONLY)
+    os.dup2(devnull, sys.stdout.fileno())
+    os.close(devnull)
+
+
 def main(argv: list[str] | None = None) -> int:
-    args = parser().parse_args(argv)
+    top = parser()
+    args, extra = top.parse_known_args(argv)
+    if extra:  # said by the command's parser: "fxis get: unrecognized arguments ...", as its other usage errors
+        (sub,) = [a for a in top._actions if isinstance(a, argparse._SubParsersAction)]
+        sub.choices[args.command].error(f"unrecognized arguments: {' '.join(extra)}")
     # SIGTERM ends a command as Ctrl-C does (code 130); a command with handlers of its own
     # (fxis run, record) sets them over this one
     in_main = threading.current_thread() is threading.main_thread()  # where Python handles signals
     previous = signal.signal(signal.SIGTERM, _interrupted) if in_main else None
     try:
-        return args.func(args)
+        code = args.func(args)
+        sys.stdout.flush()  # a reader that went away is found here, not in the interpreter's exit
+        return code
+    except BrokenPipeError:  # the reader of stdout went away (fxis get --json | head -2): not an error
+        _quiet_stdout()
+        return exitcodes.DONE
     except SystemExit:
         raise
     except BaseException as exc:

@@ -10,15 +10,16 @@ CurveZMQ keys of a service that requires them, from flags, the environment or a 
 from __future__ import annotations
 
 import argparse
-import math
 import os
+from collections.abc import Callable
 from typing import TYPE_CHECKING
 
 from fxis_shm.cli import exitcodes
-from fxis_shm.errors import ConfigError
+from fxis_shm.errors import ConfigError, InvalidArgument
 from fxis_shm.service.config import load_toml
-from fxis_shm.wire import defaults
+from fxis_shm.wire import defaults, ranges
 from fxis_shm.wire.endpoints import check_endpoint, check_host_known
+from fxis_shm.wire.ranges import Range
 from fxis_shm.wire.security import ClientKeys
 
 if TYPE_CHECKING:
@@ -28,47 +29,37 @@ EXIT_USAGE = exitcodes.USAGE
 ENV_SERVER_KEY, ENV_CLIENT_KEY = "FXIS_SERVER_KEY", "FXIS_CLIENT_KEY"
 
 
-def _number(text: str, kind: type, lowest: float, words: str, *, above: bool = False) -> float:
-    """``text`` as ``kind`` if finite and >= ``lowest`` (> with ``above``); else argparse's
+def ranged(limits: Range) -> Callable[[str], float]:
+    """argparse's ``type`` for a number of ``limits`` (fxis_shm.wire.ranges): out of it,
     ArgumentTypeError, which makes it a usage error (exit code 2) naming the flag."""
-    try:
-        value = kind(text)
-    except ValueError:
-        value = None
-    if value is None or not math.isfinite(value) or value < lowest or (above and value == lowest):
-        raise argparse.ArgumentTypeError(f"must be {words}, got {text!r}")
-    return value
+
+    def parse(text: str) -> float:
+        try:
+            return limits.parse(text, "it")
+        except InvalidArgument:
+            raise argparse.ArgumentTypeError(f"must be {limits.words}, got {text!r}") from None
+
+    parse.__name__ = limits.noun  # argparse names the type by it in a few messages
+    return parse
 
 
-def seconds(text: str) -> float:
-    """A flag's seconds, finite and >= 0 (argparse's ``type``)."""
-    return _number(text, float, 0, "seconds >= 0")
-
-
-def positive_seconds(text: str) -> float:
-    return _number(text, float, 0, "seconds > 0", above=True)
-
-
-def positive_number(text: str) -> float:
-    return _number(text, float, 0, "a number > 0", above=True)
-
-
-def percent(text: str) -> float:
-    """A share in %, 0 to 100."""
-    value = _number(text, float, 0, "a percentage from 0 to 100")
-    if value > 100:
-        raise argparse.ArgumentTypeError(f"must be a percentage from 0 to 100, got {text!r}")
-    return value
-
-
-def nanoseconds(text: str) -> int:
-    """A time in ns of a clock such as CLOCK_MONOTONIC (its count since boot), >= 0."""
-    return int(_number(text, int, 0, "a whole number of ns >= 0"))
+seconds = ranged(ranges.WINDOW_S)  # a snapshot's --before and --after
+timeout_seconds = ranged(ranges.TIMEOUT_S)  # every --timeout
+duration_seconds = ranged(ranges.DURATION_S)  # how long a command runs
+rate_hz = ranged(ranges.RATE_HZ)
+milliseconds = ranged(ranges.MILLISECONDS)
+percent = ranged(ranges.PERCENT)
+nanoseconds = ranged(ranges.AT_NS)  # a time in ns of a clock such as CLOCK_MONOTONIC (its count since boot)
 
 
 def add_client_options(sp) -> None:
     sp.add_argument("--endpoint", help=f"service endpoint (default: the config file's, else {defaults.ENDPOINT})")
-    sp.add_argument("--timeout", type=positive_seconds, default=3.0, help="seconds to wait for the reply (default 3)")
+    sp.add_argument(
+        "--timeout",
+        type=timeout_seconds,
+        default=3.0,
+        help="seconds to wait for the service's answer, on every command (default 3; at most 3600)",
+    )
     add_key_options(sp)
 
 

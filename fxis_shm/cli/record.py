@@ -2,14 +2,15 @@
 
 from __future__ import annotations
 
-import sys
+from dataclasses import replace
 
 from fxis_shm.cli import exitcodes
-from fxis_shm.cli.options import EXIT_USAGE, add_client_options, client_for
+from fxis_shm.cli.options import EXIT_USAGE, add_client_options, client_for, duration_seconds, ranged, rate_hz
 from fxis_shm.cli.stopsignals import as_interrupts, interrupted
 from fxis_shm.cli.videoflags import add_encoding_option, add_video_options, video_settings
 from fxis_shm.errors import ConfigError
 from fxis_shm.formats.outfolder import check_out_folder
+from fxis_shm.wire import ranges
 
 
 def record_command(args) -> int:
@@ -18,7 +19,7 @@ def record_command(args) -> int:
     from fxis_shm.wire import encoding
 
     def usage(message: str) -> int:
-        print(f"fxis record: {message}", file=sys.stderr)
+        exitcodes.say("record", message)
         return EXIT_USAGE
 
     if args.recover is not None:
@@ -60,6 +61,7 @@ def record_command(args) -> int:
     recorder = None
     try:
         with as_interrupts(), client_for(args) as client:
+            settings = replace(settings, endpoint=client.endpoint)  # --endpoint's, or the config file's
             try:
                 recorder = Recorder(settings, client)
             except ConfigError as exc:
@@ -76,10 +78,10 @@ def record_command(args) -> int:
     if summary["interrupted_by"]:
         return interrupted("record", f"interrupted by {summary['interrupted_by']}: {kept_line(summary)}")
     if summary.get("stopped_by"):  # a camera restarted as its video track cannot go on
-        print(f"fxis record: {summary['stopped_by']}: the recording stopped and {kept_line(summary)}", file=sys.stderr)
+        exitcodes.say("record", f"{summary['stopped_by']}: the recording stopped and {kept_line(summary)}")
         return exitcodes.FAILED
     if any(c["lost_to_restarts"] for c in summary["cameras"].values()):
-        print("fxis record: done, but frames are missing where cameras restarted (above)", file=sys.stderr)
+        exitcodes.say("record", "done, but frames are missing where cameras restarted (above)")
         return exitcodes.MISSING
     return exitcodes.DONE
 
@@ -141,13 +143,18 @@ def add_parser(sub) -> None:
     )
     record.add_argument("--cameras", metavar="A,B", help="comma-separated cameras (default all)")
     until = record.add_mutually_exclusive_group()
-    until.add_argument("--seconds", type=float, metavar="S", help="stop after S seconds (default: at Ctrl-C)")
     until.add_argument(
-        "--frames", type=int, metavar="N", help="stop after N frames per camera (N tuples with --tuples)"
+        "--seconds", type=duration_seconds, metavar="S", help="stop after S seconds (default: at Ctrl-C)"
+    )
+    until.add_argument(
+        "--frames",
+        type=ranged(ranges.FRAMES),
+        metavar="N",
+        help="stop after N frames per camera (N tuples with --tuples)",
     )
     record.add_argument(
         "--rate",
-        type=float,
+        type=rate_hz,
         metavar="HZ",
         help="thin each camera to HZ on purpose (default every frame); with --tuples, "
         "the step rate (default the slowest camera's)",
@@ -159,6 +166,8 @@ def add_parser(sub) -> None:
         "and /fxis/tuples lists their frame ids",
     )
     add_encoding_option(record, "raw: sensor_msgs/Image (default); jpeg: sensor_msgs/CompressedImage")
-    record.add_argument("--quality", type=int, metavar="Q", help="JPEG quality 1-100 (default 90)")
+    record.add_argument(
+        "--quality", type=ranged(ranges.JPEG_QUALITY), metavar="Q", help="JPEG quality 1-100 (default 90)"
+    )
     add_video_options(record, "record the frames")
     record.set_defaults(func=record_command)

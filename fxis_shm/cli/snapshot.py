@@ -4,7 +4,6 @@
 from __future__ import annotations
 
 import os
-import sys
 
 from fxis_shm.cli import exitcodes
 from fxis_shm.cli.options import add_client_options, client_for, nanoseconds, seconds
@@ -40,11 +39,11 @@ def snapshot_command(args) -> int:
                     gop_s=video.gop_s,
                 )
     except (InvalidArgument, ConfigError) as exc:
-        print(f"fxis snapshot: {exc}", file=sys.stderr)
+        exitcodes.say("snapshot", exitcodes.message(exc))
         return exitcodes.USAGE
     except FxisError as exc:  # said by the command's error handler; what the bag kept, here
         for note in getattr(exc, "__notes__", []):
-            print(f"fxis snapshot: {note}", file=sys.stderr)
+            exitcodes.say("snapshot", note)
         raise
     except Interrupted as exc:
         report(exc.result)
@@ -81,11 +80,11 @@ def recover_command(partial: str) -> int:
 
     folder = os.path.normpath(partial)
     if not folder.endswith(".partial") or not os.path.isdir(folder):
-        print(f"fxis snapshot: --recover takes the OUT.partial folder a snapshot left, got {partial}", file=sys.stderr)
+        exitcodes.say("snapshot", f"--recover takes the OUT.partial folder a snapshot left, got {partial}")
         return exitcodes.USAGE
     out = folder[: -len(".partial")]
     if os.path.exists(out) and (not os.path.isdir(out) or os.listdir(out)):
-        print(f"fxis snapshot: {out} exists: move it away, then recover {folder} again", file=sys.stderr)
+        exitcodes.say("snapshot", f"{out} exists: move it away, then recover {folder} again")
         return exitcodes.USAGE
     done = recover_bag(folder)
     if done != exitcodes.DONE:

@@ -9,7 +9,7 @@ import json
 import os
 
 from fxis_shm.cli import exitcodes
-from fxis_shm.cli.options import add_client_options, client_for, percent, positive_number, positive_seconds
+from fxis_shm.cli.options import add_client_options, client_for, duration_seconds, milliseconds, percent, rate_hz
 from fxis_shm.cli.query import ptp_text
 from fxis_shm.cli.stopsignals import as_interrupts, interrupted
 from fxis_shm.cli.table import aligned
@@ -20,13 +20,15 @@ FALLBACK_RATE_HZ = 10.0  # when no camera says its rate
 
 
 def sync_report_command(args) -> int:
-    from fxis_shm.client.syncsampler import take
+    from fxis_shm.client.syncsampler import planned_slots, take
 
     for path, flag in ((args.json, "--json"), (args.plot, "--plot")):
         if path is not None:
             _check_writable(path, flag)
     if args.plot is not None and not args.plot.lower().endswith(".png"):
         raise InvalidArgument(f"--plot {args.plot}: the plot is a PNG; give a path ending in .png")
+    if args.rate is not None:  # the plan's size, before a service is asked (else once its rate is known)
+        planned_slots(args.seconds, args.rate)
     thresholds = syncstats.Thresholds(args.threshold_ms, args.max_p95_ms, args.min_synced_pct, args.max_dropped_pct)
     endpoints = [*args.endpoints, *([args.endpoint] if args.endpoint else [])] if args.endpoints else None
     with as_interrupts(), client_for(args, endpoints) as client:
@@ -34,10 +36,11 @@ def sync_report_command(args) -> int:
         cameras = _chosen(args.cameras, status["cameras"])
         periods = {n: 1e9 / status["cameras"][n]["fps"] for n in cameras if status["cameras"][n].get("fps")}
         rate = args.rate or (1e9 / max(periods.values()) if periods else FALLBACK_RATE_HZ)
+        slots = planned_slots(args.seconds, rate)  # before the schedule: a plan of 10^9 is refused
         where = list(getattr(client, "endpoints", None) or [client.endpoint])
         print(
             f"sync report: {len(cameras)} camera(s) ({', '.join(cameras)}) of {', '.join(where)}: "
-            f"{max(1, round(args.seconds * rate))} tuples asked at {rate:g} Hz over {args.seconds:g} s, "
+            f"{slots} tuples asked at {rate:g} Hz over {args.seconds:g} s, "
             "times in this host's clock",
             flush=True,  # a caller watching the output knows the schedule has begun
         )
@@ -138,13 +141,13 @@ def add_parser(sub) -> None:
     )
     report.add_argument("endpoints", nargs="*", metavar="ENDPOINT", help="services (default: --endpoint's)")
     add_client_options(report)
-    report.add_argument("--seconds", type=positive_seconds, default=10.0, help="how long (default 10)")
-    report.add_argument("--rate", type=positive_number, metavar="HZ", help="tuples per second (default: the "
+    report.add_argument("--seconds", type=duration_seconds, default=10.0, help="how long (default 10)")
+    report.add_argument("--rate", type=rate_hz, metavar="HZ", help="tuples per second (default: the "
                         "slowest camera's rate)")  # fmt: skip
     report.add_argument("--cameras", metavar="A,B", help="comma-separated cameras (default all)")
-    report.add_argument("--threshold-ms", type=positive_number, default=syncstats.DEFAULT_THRESHOLD_MS, metavar="X",
+    report.add_argument("--threshold-ms", type=milliseconds, default=syncstats.DEFAULT_THRESHOLD_MS, metavar="X",
                         help="a tuple is synced when its gap is at most this (default 3)")  # fmt: skip
-    report.add_argument("--max-p95-ms", type=positive_number, default=syncstats.DEFAULT_MAX_P95_MS, metavar="X",
+    report.add_argument("--max-p95-ms", type=milliseconds, default=syncstats.DEFAULT_MAX_P95_MS, metavar="X",
                         help="PASS needs the 95th percentile gap at most this (default 3)")  # fmt: skip
     report.add_argument("--min-synced-pct", type=percent, default=syncstats.DEFAULT_MIN_SYNCED_PCT, metavar="P",
                         help="PASS needs at least this %% of tuples synced (default 95)")  # fmt: skip

@@ -4,12 +4,11 @@
 from __future__ import annotations
 
 import json
-import sys
 
 from fxis_shm.cli import exitcodes
 from fxis_shm.cli.options import add_client_options, client_for
 from fxis_shm.core.tuning import UNCHANGED, limits_text
-from fxis_shm.errors import ConfigError, RequestTimeout, ServiceError, UnknownCamera
+from fxis_shm.errors import ConfigError
 from fxis_shm.service.configedit import camera_table, save_camera_values
 
 
@@ -45,28 +44,14 @@ def _feature_line(feature: dict) -> str:
     return f"  {name:<32} {kind:<8} {access:<3} {limits:<28} {feature.get('value', '')}"
 
 
-def _failed(command: str, exc: Exception) -> int:
-    print(f"fxis {command}: {exc}", file=sys.stderr)
-    if isinstance(exc, RequestTimeout):
-        return exitcodes.NO_SERVICE
-    if isinstance(exc, (UnknownCamera, ConfigError)):
-        return exitcodes.USAGE
-    return exitcodes.FAILED
-
-
 def get_command(args) -> int:
-    try:
-        with client_for(args) as client:
-            answer = client.settings(args.camera, features=args.features)
-    except (ServiceError, RequestTimeout) as exc:
-        return _failed("get", exc)
+    with client_for(args) as client:  # an error: its line and code (fxis_shm.cli.main, ERROR_TABLE)
+        answer = client.settings(args.camera, features=args.features)
     keys = args.keys or list(answer["values"])
     unknown = [k for k in keys if k not in answer["values"]]
     if unknown:
-        print(
-            f"fxis get: camera {args.camera!r} has no setting {', '.join(unknown)}; "
-            f"it has {', '.join(answer['values'])}",
-            file=sys.stderr,
+        exitcodes.say(
+            "get", f"camera {args.camera!r} has no setting {', '.join(unknown)}; it has {', '.join(answer['values'])}"
         )
         return exitcodes.USAGE
     if args.json:
@@ -86,18 +71,15 @@ def get_command(args) -> int:
 
 
 def set_command(args) -> int:
-    try:
-        values = dict(parse_assignment(a) for a in args.assignments)
-        if args.save and not args.config:
-            raise ConfigError("--save writes into the service's config file: give it with --config FILE")
-        if args.save:  # before the change: a change that cannot be saved is not made
-            camera_table(args.config, args.camera)
-        with client_for(args) as client:
-            answer = client.configure(args.camera, **values)
-        if args.save:
-            save_camera_values(args.config, args.camera, answer["changed"], given=values)
-    except (ServiceError, RequestTimeout, ConfigError) as exc:
-        return _failed("set", exc)
+    values = dict(parse_assignment(a) for a in args.assignments)
+    if args.save and not args.config:
+        raise ConfigError("--save writes into the service's config file: give it with --config FILE")
+    if args.save:  # before the change: a change that cannot be saved is not made
+        camera_table(args.config, args.camera)
+    with client_for(args) as client:  # a refused value: SettingRejected, code 2 (ERROR_TABLE)
+        answer = client.configure(args.camera, **values)
+    if args.save:
+        save_camera_values(args.config, args.camera, answer["changed"], given=values)
     if args.json:
         print(json.dumps(answer, indent=2))
         return exitcodes.DONE

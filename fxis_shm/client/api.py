@@ -11,7 +11,7 @@ from abc import ABC, abstractmethod
 from collections.abc import Callable
 from typing import Any
 
-from fxis_shm.client import snapshot as snapshots
+from fxis_shm.client import arguments, snapshot as snapshots
 from fxis_shm.client.fastreads import FastReads
 from fxis_shm.client.frames import Frame, FrameTuple, frames_of, sequence_of, tuple_of
 from fxis_shm.core.clockmap import ClockEstimate
@@ -102,11 +102,15 @@ class ClientApi(ABC):
         Overrun
             The ring came round during every copy: ask for newer frames or keep more history.
         """
+        camera = arguments.camera_name(camera)
+        if at is not None or timeout is not None:
+            arguments.check_numbers(timeout, at=at)
         if self._fast is not None and not capture and encoding is quality is timeout is timeout_ms is None:
             frame = self._compiled(self._fast.image(camera, at, wait, copy))
             if frame is not None:
                 return frame
         fields = {"camera": camera, "at": at, "wait": wait, "capture": capture or None}
+        arguments.check_request("image", **fields)
         return frames_of(*self._answer("image", timeout, timeout_ms, copy, encoding, quality, **fields))[0]
 
     def tuple(
@@ -164,28 +168,18 @@ class ClientApi(ABC):
         SkewExceeded
             With ``max_skew_ms``: no tuple near t* was that well synchronized.
         """
+        cameras = arguments.camera_names(cameras)
+        if at is not None or timeout is not None or max_skew_ms is not None:
+            arguments.check_numbers(timeout, at=at, max_skew_ms=max_skew_ms)
         fast = not capture and encoding is quality is timeout is timeout_ms is max_skew_ms is None
         if self._fast is not None and fast:
             tuple_ = self._compiled(self._fast.tuple(cameras, at, sync, wait, copy))
             if tuple_ is not None:
                 return tuple_
-        return tuple_of(
-            *self._answer(
-                "tuple",
-                timeout,
-                timeout_ms,
-                copy,
-                encoding,
-                quality,
-                cameras=cameras,
-                at=at,
-                sync=sync,
-                wait=wait,
-                max_skew_ms=max_skew_ms,
-                partial=partial or None,
-                capture=capture or None,
-            )
-        )
+        fields = dict(cameras=cameras, at=at, sync=sync, wait=wait, max_skew_ms=max_skew_ms)
+        fields.update(partial=partial or None, capture=capture or None)
+        arguments.check_request("tuple", **fields)
+        return tuple_of(*self._answer("tuple", timeout, timeout_ms, copy, encoding, quality, **fields))
 
     def latest(
         self,
@@ -214,10 +208,12 @@ class ClientApi(ABC):
         RequestTimeout, UnknownCamera, CameraDown, ServiceError
             As for ``image``; ``NO_FRAMES`` (a ServiceError) while a camera has stored none.
         """
+        cameras = arguments.camera_names(cameras)
         if self._fast is not None and encoding is quality is None:
             tuple_ = self._compiled(self._fast.latest(cameras, copy))
             if tuple_ is not None:
                 return tuple_
+        arguments.check_request("latest", cameras=cameras)
         return tuple_of(*self._answer("latest", None, None, copy, encoding, quality, cameras=cameras))
 
     def sequence(
@@ -270,6 +266,11 @@ class ClientApi(ABC):
         InvalidArgument, RequestTimeout, UnknownCamera, CameraDown, FrameTimeout, ServiceError, Overrun
             As for ``image``.
         """
+        cameras = arguments.camera_names(cameras)
+        arguments.check_numbers(timeout, at=at, start=start, end=end, count=count, interval_ms=interval_ms)
+        fields = dict(camera=camera, cameras=cameras, kind=kind, count=count, direction=direction)
+        fields.update(interval_ms=interval_ms, start=start, end=end, at=at, sync=sync)
+        arguments.check_request("sequence", **fields)
         header, images, check = self._answer(
             "sequence",
             timeout,
@@ -277,16 +278,7 @@ class ClientApi(ABC):
             copy,
             encoding,
             quality,
-            camera=camera,
-            cameras=cameras,
-            kind=kind,
-            count=count,
-            direction=direction,
-            interval_ms=interval_ms,
-            start=start,
-            end=end,
-            at=at,
-            sync=sync,
+            **fields,
         )
         return sequence_of(header, images, check, single=camera is not None)
 
@@ -341,19 +333,22 @@ class ClientApi(ABC):
             As for ``image`` (``OUT_OF_RANGE`` when the rings no longer hold the window's start).
         """
         encoding, codec = split_encoding(encoding, codec)
-        owners = self._owners(cameras)
+        owners = self._owners(arguments.camera_names(cameras))
         settings = VideoSettings(codec, encoder, crf, preset, gop_s) if codec is not None else None
         return snapshots.take(owners, self.clock, out, at, before, after, encoding, quality, self._clock_name, settings)
 
     def subscribe(self, timeout: float = 2.0, queue: int = 16) -> Any:
         """A subscriber of the streams (``frames(camera)``, and joint ``tuples(rate_hz)``), every
         time in this client's clock; a context manager like the client."""
-        return self._subscriber(timeout, queue)
+        arguments.check_numbers(timeout)
+        return self._subscriber(timeout, arguments.check_queue(queue))
 
     def frame_times(self, cameras: list[str] | None = None) -> dict:
         """Each camera's frames without pixels (the ``frames`` op): liveness, period and a row
         per valid frame with the fields named in ``columns``, times in the clock of the camera's
         service."""
+        cameras = arguments.camera_names(cameras)
+        arguments.check_request("frames", cameras=cameras)
         return self._frame_times(cameras)
 
     @abstractmethod

@@ -19,6 +19,7 @@ from fxis_shm.client.single import SingleClient
 from fxis_shm.client.sockets import wire_timeout_ms
 from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.errors import ConfigError, FxisError, InvalidArgument, RequestTimeout
+from fxis_shm.wire import ranges
 from fxis_shm.wire.endpoints import check_endpoint
 
 
@@ -36,6 +37,7 @@ class MultiClient(ClientApi):
         clock: Callable[[], int] | str | None = None,
         **client_options,
     ):
+        ranges.TIMEOUT_S.check(timeout, "timeout")
         if not endpoints:
             raise ConfigError("a client over several services needs at least one endpoint")
         for endpoint in endpoints:  # all checked before any socket is made

@@ -19,13 +19,13 @@ reads the same clock.
 from __future__ import annotations
 
 import itertools
-import math
 import time
 from collections.abc import Callable
 
 import numpy as np
 import zmq
 
+from fxis_shm.client import arguments
 from fxis_shm.client.api import ClientApi
 from fxis_shm.client.clocktracker import ClockTracker
 from fxis_shm.client.fastreads import FastReads
@@ -40,7 +40,7 @@ from fxis_shm.core import timebase
 from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.errors import InvalidArgument, RequestTimeout, service_error
 from fxis_shm.shm.localpath import LocalRings, boot_id
-from fxis_shm.wire import commands, defaults, encoding as codec, protocol
+from fxis_shm.wire import commands, defaults, encoding as codec, protocol, ranges
 from fxis_shm.wire.endpoints import check_endpoint, unknown_host
 from fxis_shm.wire.multipart import recv_parts, send_parts
 from fxis_shm.wire.security import ClientKeys
@@ -88,9 +88,7 @@ class SingleClient(RequestPaths, SocketOwner, ClientApi):
         if not (callable(clock) or clock is None or isinstance(clock, str)):
             raise InvalidArgument(f"clock must be a clock's name or a function returning int ns, got {clock!r}")
         self.endpoint = check_endpoint(endpoint)
-        if isinstance(timeout, bool) or not isinstance(timeout, (int, float)) or not 0 < timeout < math.inf:
-            raise InvalidArgument(f"timeout must be seconds > 0, got {timeout!r}")
-        self.timeout = timeout
+        self.timeout = ranges.TIMEOUT_S.check(timeout, "timeout")
         self.local = local
         self.encoding, self.quality = checked_encoding(encoding, quality)
         self._clock_name = timebase.name_of(clock)
@@ -100,6 +98,7 @@ class SingleClient(RequestPaths, SocketOwner, ClientApi):
         watches: list[HandshakeWatch] = []  # says why, when a request times out
         self._sock = connected_socket(context, zmq.DEALER, endpoint, keys, lambda s: watches.append(HandshakeWatch(s)))
         self._handshake = watches[0]
+        self._heard = False  # the service has answered a request of this client
         self._identity: dict | None = None  # the service's kernel, time namespace and clock, from its status
         self._mapping: ClockEstimate | None = None  # fixed: the service reads our clock (or one shared)
         self._tracker: ClockTracker | None = None  # else: estimated
@@ -187,7 +186,7 @@ class SingleClient(RequestPaths, SocketOwner, ClientApi):
         """The camera's settings: ``values`` (key: value), ``limits`` (key: type, access, cost
         "live" or "restart", min/max/inc or choices, unit) and ``generation``; with
         ``features``, also ``features``: every node-map feature (GenICam cameras)."""
-        return self._call("settings", commands.SETTINGS_TIMEOUT_S, camera=camera, features=features or None)[0]
+        return self._settings(camera=arguments.camera_name(camera), features=features or None)
 
     def configure(self, camera: str, **values) -> dict:
         """Change settings of ``camera``, all or none (``client.configure("left", exposure_us=2000,
@@ -195,7 +194,15 @@ class SingleClient(RequestPaths, SocketOwner, ClientApi):
         ("live": applied between two frames; "restart": a new ring, the generation + 1),
         ``values``, ``limits`` and ``generation``. A key the camera lacks, a read-only one or a
         value out of range raises SettingRejected naming the limits; the camera keeps its settings."""
-        return self._call("settings", commands.SETTINGS_TIMEOUT_S, camera=camera, set=values)[0]
+        return self._settings(camera=arguments.camera_name(camera), set=arguments.setting_values(values))
+
+    def _settings(self, **fields) -> dict:
+        """A settings request: the camera may take SETTINGS_TIMEOUT_S more than the client's
+        timeout to answer (a stream restarting), once the service has answered at all: a
+        service that does not answer is said within the timeout, as for every other request."""
+        if not self._heard:
+            self._call("time", 0.0)
+        return self._call("settings", commands.SETTINGS_TIMEOUT_S, **fields)[0]
 
     def _service_identity(self) -> dict:
         if self._identity is None:
@@ -274,6 +281,7 @@ class SingleClient(RequestPaths, SocketOwner, ClientApi):
             if not header["ok"]:
                 err = header.get("error") or {}
                 raise service_error(err.get("code", "UNKNOWN"), err.get("message", ""))
+            self._heard = True
             return header, images
 
     def _unsendable(self, op: str) -> str:

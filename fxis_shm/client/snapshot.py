@@ -30,7 +30,6 @@ from __future__ import annotations
 
 import fcntl
 import json
-import math
 import os
 import queue
 import threading
@@ -41,13 +40,22 @@ from dataclasses import dataclass, field
 from typing import Any
 
 from fxis_shm.core import timebase
-from fxis_shm.errors import CameraDown, DiskFull, FxisError, InvalidArgument, Overwritten, ServiceError
+from fxis_shm.errors import (
+    CameraDown,
+    Code,
+    DiskFull,
+    FxisError,
+    InvalidArgument,
+    Overwritten,
+    ServiceError,
+    UnknownCamera,
+)
 from fxis_shm.formats import rosmsgs
 from fxis_shm.formats.bagfile import BagWriter
 from fxis_shm.formats.outfolder import check_out_folder
 from fxis_shm.formats.videoencoder import StreamEncoder
 from fxis_shm.formats.videotracks import VideoPlan, VideoSettings, write_packets
-from fxis_shm.wire import encoding as codec
+from fxis_shm.wire import encoding as codec, ranges
 
 ID, T_CAPTURE, GENERATION = 0, 1, 4  # columns of a ``frames`` row
 CHUNK = 16  # frames copied per request: bounds the memory a long window takes at once
@@ -116,8 +124,14 @@ def take(
     bag is written then: an empty bag would say nothing and reads badly). ``video``: each
     camera's frames as video instead (as ``fxis record --codec`` writes it), the window's
     first frame a keyframe."""
-    t = clock() if at is None else at
     _check(at, before, after, out, encoding, quality, video)
+    now = clock()
+    t = now if at is None else at
+    if t - now > ranges.WINDOW_S.highest * 1e9:
+        raise InvalidArgument(
+            f"at is {(t - now) / 1e9:.0f} s from now: a snapshot's t is at most {ranges.WINDOW_S.highest:g} s ahead"
+        )
+    _check_cameras(owners, before)
     plan = _video_plan(owners, video)  # before anything is made: bad settings leave nothing behind
     out = os.path.normpath(out)
     partial = out + ".partial"
@@ -305,17 +319,35 @@ def _video_plan(owners: dict[str, Any], video: VideoSettings | None) -> VideoPla
 
 def _check(at, before, after, out, encoding, quality, video) -> None:
     for name, value in (("before", before), ("after", after)):
-        if isinstance(value, bool) or not isinstance(value, (int, float)) or not math.isfinite(value) or value < 0:
-            raise InvalidArgument(f"{name} must be seconds >= 0, got {value!r}")
+        ranges.WINDOW_S.check(value, name)
     if before + after <= 0:
         raise InvalidArgument("a snapshot needs a window: before + after must be > 0")
-    if at is not None and (isinstance(at, bool) or not isinstance(at, int)):
-        raise InvalidArgument(f"at must be int ns of the caller's clock, got {at!r}")
+    if at is not None:
+        ranges.AT_NS.check(at, "at")
     if encoding not in (codec.RAW, codec.JPEG):
         raise InvalidArgument(f"encoding must be raw or jpeg (images) or h264, h265, av1 (video), got {encoding!r}")
     if video is not None and (encoding != codec.RAW or quality is not None):
         raise InvalidArgument(f"codec {video.codec} writes video: it takes no encoding {encoding} or quality")
     check_out_folder(out)
+
+
+def _check_cameras(owners: dict[str, Any], before: float) -> None:
+    """UnknownCamera for a camera its service lacks; InvalidArgument if ``before`` is longer
+    than any of the cameras' rings holds (their ``history_s``, as their services' status
+    says: O(1), before a frame is looked at)."""
+    held: dict[str, float] = {}
+    for client in {id(c): c for c in owners.values()}.values():
+        cameras = client.status()["cameras"]
+        unknown = [name for name, owner in owners.items() if owner is client and name not in cameras]
+        if unknown:  # before the bag is begun: nothing made, one line
+            raise UnknownCamera(Code.UNKNOWN_CAMERA, f"unknown camera(s) {unknown}; known: {sorted(cameras)}")
+        held.update({name: cameras[name]["history_s"] for name in owners if cameras.get(name, {}).get("history_s")})
+    if held and before > max(held.values()):
+        rings = ", ".join(f"{name} {seconds:g} s" for name, seconds in held.items())
+        raise InvalidArgument(
+            f"before {before:g} s: the rings hold at most {max(held.values()):g} s ({rings}); give a shorter "
+            "before, or run the service with a longer --history"
+        )
 
 
 def _poll_s(cameras: dict[str, _Camera]) -> float:

@@ -21,7 +21,8 @@ import numpy as np
 from fxis_shm.client.api import ClientApi
 from fxis_shm.client.frames import FrameTuple
 from fxis_shm.core.syncstats import ABSENT, CAPTURE_METHODS, Samples
-from fxis_shm.errors import FxisError
+from fxis_shm.errors import FxisError, InvalidArgument
+from fxis_shm.wire import ranges
 
 LEAD_NS = 50_000_000  # the first slot: this far ahead of the moment the schedule is made
 
@@ -46,7 +47,7 @@ def take(
     """``seconds * rate_hz`` slots (at least one) of joint tuples of ``cameras``. Ends by the last
     slot's time plus ``grace_s``, whatever the services do; Ctrl-C ends it early with what came
     (``interrupted``), the slots not reached left out."""
-    n = max(1, round(seconds * rate_hz))
+    n = planned_slots(seconds, rate_hz)
     interval = round(1e9 / rate_hz)
     slots = _first_slot(client, cameras, interval) + np.arange(n, dtype=np.int64) * interval
     rows: list[Row | None] = []
@@ -73,6 +74,20 @@ def take(
     except KeyboardInterrupt:
         interrupted = True
     return Taken(samples_of(cameras, slots[: len(rows)], rows), errors, interrupted)
+
+
+def planned_slots(seconds: float, rate_hz: float) -> int:
+    """The slots of ``seconds`` at ``rate_hz`` (at least one); InvalidArgument if either is out
+    of its range (fxis_shm.wire.ranges) or they make more than MAX_TUPLES."""
+    ranges.DURATION_S.check(seconds, "seconds")
+    ranges.RATE_HZ.check(rate_hz, "rate")
+    n = max(1, round(seconds * rate_hz))
+    if n > ranges.MAX_TUPLES:
+        raise InvalidArgument(
+            f"{seconds:g} s at {rate_hz:g} Hz is {n} tuples, more than {ranges.MAX_TUPLES} a report takes: "
+            "give fewer seconds or a lower rate"
+        )
+    return n
 
 
 def _first_slot(client: ClientApi, cameras: list[str], interval: int) -> int:

@@ -47,6 +47,9 @@ def tuple_json(frames, saved: list[str], ended: str = "complete") -> bytes:
             "t_capture": frame.t_capture,
             "t_stored": frame.t_stored,
             "generation": frame.generation,
+            "capture": frame.capture,  # free, scheduled or lockstep (docs/sync.md)
+            "t_target": frame.t_target,  # the moment it was to be captured at (None: free)
+            "residual_ns": frame.residual_ns,  # t_capture - t_target (None: free)
             "shape": list(frame.image.shape),
             "dtype": frame.image.dtype.name,
         }

@@ -13,6 +13,7 @@ pts, capture time, frame id and generation (from ``/NAME/video/frames``).
 from __future__ import annotations
 
 import csv
+import io
 import os
 from dataclasses import dataclass
 from fractions import Fraction
@@ -24,6 +25,7 @@ from fxis_shm.formats.videodecoder import DECODERS
 from fxis_shm.formats.videoencoder import require_av
 
 STREAMS = {"h264": "h264", "h265": "hevc", "av1": "av1"}  # the format field -> FFmpeg's codec name
+RAW_FORMATS = {"h264": "h264", "h265": "hevc", "av1": "obu"}  # FFmpeg's demuxer of each raw bitstream
 TIME_BASE = Fraction(1, 1_000_000)  # pts in microseconds of capture time
 _US = 1000
 
@@ -86,7 +88,7 @@ def _write(av, bag: BagReader, topic: str, out: str, frames: dict) -> Exported:
     t0 = last = count = skipped = 0
     codec = ""
     with open(sidecar_path(out), "w", newline="") as side:
-        rows = csv.writer(side)
+        rows = csv.writer(side, lineterminator="\n")  # (csv's default ends lines in CRLF)
         rows.writerow(["pts_us", "capture_ns", "frame_id", "generation"])
         for _, message in bag.messages(topic):
             t_ns, data, codec = rosmsgs.stamp_ns(message.timestamp), bytes(message.data), message.format
@@ -99,7 +101,7 @@ def _write(av, bag: BagReader, topic: str, out: str, frames: dict) -> Exported:
                     continue
                 t0 = t_ns
                 said = f"{topic}: pts 0 is capture time {t0} ns ({_clock(bag)})"
-                container, stream = _open(av, out, codec, _size(av, codec, data), said)
+                container, stream = _open(av, out, codec, data, said)
             packet = av.Packet(data)
             packet.stream, packet.time_base, packet.is_keyframe = stream, TIME_BASE, keyframe
             packet.pts = packet.dts = (t_ns - t0) // _US
@@ -117,11 +119,15 @@ def _clock(bag: BagReader) -> str:
     return bag.metadata.get(RECORD, {}).get("clock", "the bag's clock")
 
 
-def _open(av, out: str, codec: str, size: tuple[int, int], comment: str):
-    container = av.open(out, "w", format="mp4")
-    container.metadata["comment"] = f"fxis export of {comment}"
-    stream = container.add_stream(STREAMS[codec])
-    stream.width, stream.height = size
+def _open(av, out: str, codec: str, keyframe: bytes, comment: str):
+    """The MP4 and its one stream, whose parameters FFmpeg's demuxer of the raw bitstream reads
+    from ``keyframe``: a stream copied as it is, with no encoder opened (an encoder's open
+    printed libx265's and SVT-AV1's banners, 21 lines, though nothing is encoded)."""
+    _size(av, codec, keyframe)  # a damaged keyframe: ConfigError, before the file is made
+    with av.open(io.BytesIO(keyframe), "r", format=RAW_FORMATS[codec]) as raw:
+        container = av.open(out, "w", format="mp4")
+        container.metadata["comment"] = f"fxis export of {comment}"
+        stream = container.add_stream_from_template(raw.streams.video[0], opaque=True)
     stream.time_base = TIME_BASE
     return container, stream
 

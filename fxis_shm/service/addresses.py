@@ -78,3 +78,23 @@ def _check_ipc(endpoint: str, setting: str) -> None:
     folder = os.path.dirname(endpoint[len("ipc://") :]) or "."
     if not os.path.isdir(folder) or not os.access(folder, os.W_OK):
         raise ConfigError(f"{OPTIONS[setting]} {endpoint}: {folder} is not a folder this user can write to")
+
+
+def remove_stale_ipc_files(config: ServiceConfig) -> list[str]:
+    """Unlink the socket files of the service's ``ipc://`` endpoints that nothing listens on any
+    more (its coordinator has stopped: ZeroMQ leaves them when a process ends without closing its
+    sockets); the paths removed."""
+    removed = []
+    for endpoint in (config.endpoint, config.pub, config.events):
+        path = endpoint[len("ipc://") :] if endpoint.startswith("ipc://") else None
+        if path is None or not os.path.exists(path):
+            continue
+        with socket.socket(socket.AF_UNIX, socket.SOCK_STREAM) as probe:
+            try:
+                probe.connect(path)
+            except ConnectionRefusedError:  # a socket file no one listens on: ours, left
+                os.unlink(path)
+                removed.append(path)
+            except OSError:  # not a socket, or not ours to judge: left as it is
+                pass
+    return removed

@@ -16,13 +16,13 @@ from typing import Any
 
 from fxis_shm.core.requestdefaults import REQUEST_DEFAULTS
 from fxis_shm.core.schedule import check_grid_clock, parse_lockstep
-from fxis_shm.errors import ConfigError
+from fxis_shm.errors import ConfigError, InvalidArgument
 from fxis_shm.service.camerakinds import camera_options
 from fxis_shm.service.options import split_key_values
 from fxis_shm.service.ros2config import KEYS as ROS2_KEYS, Ros2Settings, ros2_settings
 from fxis_shm.service.rtpolicy import Realtime, parse_realtime
 from fxis_shm.shm.naming import check_name
-from fxis_shm.wire import defaults
+from fxis_shm.wire import defaults, ranges
 from fxis_shm.wire.endpoints import check_endpoint
 
 if sys.version_info >= (3, 11):
@@ -264,10 +264,13 @@ def _check_foxglove_sdk() -> None:
         ) from None
 
 
-def _check_int(setting: str, value: Any, minimum: int) -> int:
-    if isinstance(value, bool) or not isinstance(value, int) or value < minimum:
-        raise ConfigError(f"{setting} must be an integer >= {minimum}, got {value!r}")
-    return value
+def _in_range(setting: str, value: Any, limits: ranges.Range, *, text: bool = False) -> Any:
+    """A number of the config file or a flag within ``limits`` (``text``: a flag's text taken
+    too), else ConfigError."""
+    try:
+        return limits.parse(value, setting) if text and isinstance(value, str) else limits.check(value, setting)
+    except InvalidArgument as exc:
+        raise ConfigError(str(exc)) from None
 
 
 def load_toml(path: str) -> dict:
@@ -278,6 +281,8 @@ def load_toml(path: str) -> dict:
         raise ConfigError(f"--config {path}: {exc.strerror}") from None
     except tomllib.TOMLDecodeError as exc:
         raise ConfigError(f"--config {path}: not valid TOML: {exc}") from None
+    except UnicodeDecodeError as exc:  # TOML is UTF-8
+        raise ConfigError(f"--config {path}: not UTF-8 text (byte {exc.start}): a config file is TOML") from None
 
 
 def build_config(file_values: dict | None = None, flags: dict | None = None) -> ServiceConfig:
@@ -332,8 +337,12 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
             raise ConfigError(f'[cameras.{name}] needs kind = "..."')
         raw = dict(raw)
         cameras[name] = _camera(name, raw.pop("kind"), raw)
+    flagged: set[str] = set()
     for flag in flags.pop("cameras", []):
         spec = parse_camera_flag(flag)
+        if spec.name in flagged:  # (a flag may replace the file's camera of its name, not another flag's)
+            raise ConfigError(f"--camera {flag!r}: a camera named {spec.name!r} is given twice; give each a name")
+        flagged.add(spec.name)
         cameras[spec.name] = spec
     if not cameras:
         cameras = {s.name: s for s in map(parse_camera_flag, defaults.CAMERAS)}
@@ -369,9 +378,9 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
     if len(set(endpoints.values())) < len(endpoints):
         raise ConfigError(f"endpoint, pub and events need an address each; got {endpoints}")
     if "slots" in values:
-        config = replace(config, slots=_check_int("slots", values["slots"], 2))
+        config = replace(config, slots=_in_range("slots", values["slots"], ranges.SLOTS))
     if values.get("history") is not None:
-        config = replace(config, history=_setting("history", float, values["history"]))
+        config = replace(config, history=_in_range("history", values["history"], ranges.HISTORY_S, text=True))
     if values.get("lockstep") is not None:
         try:
             config = replace(config, lockstep=parse_lockstep(str(values["lockstep"])))
@@ -385,7 +394,9 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
     if "realtime" in values:
         config = replace(config, realtime=parse_realtime(values["realtime"]))
     if "restart_limit" in values:
-        config = replace(config, restart_limit=_check_int("restart_limit", values["restart_limit"], 0))
+        config = replace(
+            config, restart_limit=_in_range("restart_limit", values["restart_limit"], ranges.RESTART_LIMIT)
+        )
     if values.get("restart_window_s") is not None:
         config = replace(config, restart_window_s=_setting("restart_window_s", float, values["restart_window_s"]))
     config = _security(config, values)

@@ -21,6 +21,7 @@ import time
 from fxis_shm.core import timebase
 from fxis_shm.core.restarts import gives_up, recent_crashes
 from fxis_shm.errors import ConfigError, FxisError
+from fxis_shm.service.addresses import remove_stale_ipc_files
 from fxis_shm.service.changers import change_lines, dashboard_access, ros2_may_change
 from fxis_shm.service.childspec import (
     CameraWorkerSpec,
@@ -277,6 +278,7 @@ class Supervisor:
         finally:
             self._stop_all()
             naming.remove_leftovers(self.config.name)
+            remove_stale_ipc_files(self.config)
             lock.release()
 
     def _start_all(self) -> None:

@@ -4,6 +4,8 @@ gaps' histogram. Drawn with OpenCV, which the project already depends on."""
 
 from __future__ import annotations
 
+import math
+
 import cv2
 import numpy as np
 
@@ -23,7 +25,7 @@ def draw(samples: Samples, figures: Figures, threshold_ms: float, title: str) ->
     gaps_ms = gaps_ns(samples) / 1e6
     seconds = (samples.slots - samples.slots[0]) / 1e9 if len(samples.slots) else np.zeros(0)
     shown = gaps_ms[~np.isnan(gaps_ms)]
-    top = max(threshold_ms * 1.5, float(shown.max()) * 1.1 if len(shown) else 0.0, 1.0)
+    top = nice_ticks(max(threshold_ms * 1.5, float(shown.max()) * 1.1 if len(shown) else 0.0, 1.0))[-1]
     _text(image, title, (LEFT, 24), 0.55)
     _over_time(image, seconds, gaps_ms, top, threshold_ms)
     _histogram(image, shown, top, threshold_ms)
@@ -41,12 +43,27 @@ def _text(image: np.ndarray, text: str, at: tuple[int, int], scale: float = 0.45
     cv2.putText(image, text, at, FONT, scale, color, 1, cv2.LINE_AA)
 
 
+def nice_ticks(top: float, most: int = 6) -> list[float]:
+    """Evenly spaced round ticks from 0 (a step of 1, 2 or 5 times a power of ten), at most
+    ``most`` + 1 of them, the last at or above ``top``."""
+    if not top > 0:
+        return [0.0, 1.0]
+    power = 10.0 ** math.floor(math.log10(top / most))
+    step = next(m * power for m in (1, 2, 5, 10) if top / (m * power) <= most)
+    count = math.ceil(top / step - 1e-9)
+    return [round(k * step, 12) for k in range(count + 1)]
+
+
+def _label(value: float) -> str:
+    return f"{value:g}"
+
+
 def _axes(image: np.ndarray, x0: int, x1: int, top_ms: float, x_label: str, y_label: str) -> None:
     y0, y1 = TOP, HEIGHT - BOTTOM
-    for i in range(5):  # gridlines at fifths of the range, labelled
-        y = y1 - (y1 - y0) * i // 4
+    for tick in nice_ticks(top_ms):  # gridlines at round values, labelled
+        y = _y(tick, top_ms)
         cv2.line(image, (x0, y), (x1, y), GRID, 1)
-        _text(image, f"{top_ms * i / 4:.1f}", (x0 - 50, y + 4), 0.4)
+        _text(image, _label(tick), (x0 - 50, y + 4), 0.4)
     cv2.rectangle(image, (x0, y0), (x1, y1), INK, 1)
     _text(image, x_label, ((x0 + x1) // 2 - 40, HEIGHT - 15))
     _text(image, y_label, (x0 - 60, y0 - 8), 0.4)
@@ -60,7 +77,7 @@ def _y(value_ms: float, top_ms: float) -> int:
 def _over_time(image: np.ndarray, seconds: np.ndarray, gaps_ms: np.ndarray, top: float, threshold: float) -> None:
     x0, x1 = LEFT, SPLIT - 40
     _axes(image, x0, x1, top, "time since the first slot (s)", "gap (ms)")
-    span = float(seconds[-1]) if len(seconds) and seconds[-1] > 0 else 1.0
+    span = nice_ticks(float(seconds[-1]) if len(seconds) and seconds[-1] > 0 else 1.0)[-1]
     cv2.line(image, (x0, _y(threshold, top)), (x1, _y(threshold, top)), LIMIT, 1, cv2.LINE_AA)
     _text(image, f"threshold {threshold:g} ms", (x1 - 150, _y(threshold, top) - 6), 0.4, LIMIT)
     for s, gap in zip(seconds.tolist(), gaps_ms.tolist()):
@@ -69,7 +86,10 @@ def _over_time(image: np.ndarray, seconds: np.ndarray, gaps_ms: np.ndarray, top:
             cv2.line(image, (x, HEIGHT - BOTTOM + 3), (x, HEIGHT - BOTTOM + 12), DROP, 1)
         else:
             cv2.circle(image, (x, _y(gap, top)), 2, POINT, -1, cv2.LINE_AA)
-    _text(image, f"0 .. {span:.1f} s", (x0, HEIGHT - 32), 0.4)
+    for tick in nice_ticks(span):  # the time axis labelled at round seconds, not only its ends
+        x = int(round(x0 + (x1 - x0) * tick / span))
+        cv2.line(image, (x, HEIGHT - BOTTOM), (x, HEIGHT - BOTTOM + 4), INK, 1)
+        _text(image, _label(tick), (x - 8, HEIGHT - 32), 0.4)
 
 
 def _histogram(image: np.ndarray, gaps_ms: np.ndarray, top: float, threshold: float) -> None:

@@ -10,6 +10,7 @@ import socket
 from fxis_shm.errors import BadEndpoint
 
 FORM = "tcp://HOST:PORT or ipc://PATH"
+IPC_PATH_MAX = 107  # bytes of a Unix socket's path the kernel takes (sun_path, less its closing NUL)
 
 
 def check_endpoint(endpoint: object, setting: str = "endpoint", *, bind: bool = False) -> str:
@@ -26,15 +27,26 @@ def tcp_host_port(endpoint: str, setting: str, *, bind: bool = True) -> tuple[st
     """(host, port) of a ``tcp://HOST:PORT`` endpoint, None for ``ipc://``; BadEndpoint if the
     port is missing, not a number or out of range."""
     if endpoint.startswith("ipc://"):
-        if endpoint == "ipc://":
+        path = endpoint[len("ipc://") :]
+        if not path or "\0" in path:
             raise BadEndpoint(f"{setting} {endpoint!r}: expected ipc://PATH with a path")
+        size = len(path.encode(errors="surrogateescape"))
+        if size > IPC_PATH_MAX:
+            raise BadEndpoint(
+                f"{setting} ipc://...{path[-40:]!r}: its path is {size} bytes, the kernel takes at most "
+                f"{IPC_PATH_MAX}; give a shorter one (e.g. under /tmp)"
+            )
         return None
     host, sep, port = endpoint[len("tcp://") :].rpartition(":")
-    host = host[1:-1] if host.startswith("[") and host.endswith("]") else host
+    if ":" in host or host.startswith("["):  # ZeroMQ's sockets here are IPv4 (no IPV6 option set)
+        raise BadEndpoint(
+            f"{setting} {endpoint!r}: IPv6 addresses are not supported; give an IPv4 address or a host name "
+            "(e.g. tcp://127.0.0.1:PORT)"
+        )
     lowest = 0 if bind else 1
     if not sep or not host or not port.isdigit() or not lowest <= int(port) <= 65535:
         raise BadEndpoint(f"{setting} {endpoint!r}: expected tcp://HOST:PORT with a port from {lowest} to 65535")
-    if not bind and host in ("*", "0.0.0.0", "::"):
+    if not bind and host in ("*", "0.0.0.0"):
         raise BadEndpoint(
             f"{setting} {endpoint!r}: {host} is where a service listens; connect to tcp://HOST:PORT, HOST its "
             "name or address"
@@ -49,10 +61,11 @@ def unknown_host(endpoint: str, setting: str = "endpoint") -> str | None:
     if address is None:
         return None
     try:
-        socket.getaddrinfo(address[0], address[1], type=socket.SOCK_STREAM)
+        socket.getaddrinfo(address[0], address[1], socket.AF_INET, socket.SOCK_STREAM)
     except (socket.gaierror, UnicodeError):
         return (
-            f"{setting} {endpoint!r}: the host {address[0]!r} is not known here (check its name, or give its address)"
+            f"{setting} {endpoint!r}: the host {address[0]!r} is not known here (no IPv4 address: check its name, "
+            "or give its address)"
         )
     return None
 

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import ipaddress
 import os
+import shutil
 from dataclasses import dataclass
 from urllib.parse import urlsplit
 
@@ -24,6 +25,8 @@ from fxis_shm.errors import ConfigError
 def create_keys(folder: str, name: str, *, force: bool = False) -> tuple[str, str]:
     """Write NAME.key and NAME.key_secret into ``folder`` (0700); returns their paths. A pair
     already there is replaced only with ``force``: every copy of it handed out would stop working."""
+    if not name or name in (".", "..") or "/" in name or "\0" in name or len(name.encode()) > 200:
+        raise ConfigError(f"--name {name!r}: a key pair's name is a file name (no '/', at most 200 bytes)")
     paths = [os.path.join(folder, f"{name}.key{suffix}") for suffix in ("", "_secret")]
     there = [p for p in paths if os.path.lexists(p)]
     if there and not force:
@@ -31,11 +34,14 @@ def create_keys(folder: str, name: str, *, force: bool = False) -> tuple[str, st
             f"{' and '.join(there)} exist: replacing them locks out every side that holds them; "
             "give another --name, or --force to replace them"
         )
+    made = not os.path.exists(folder)
     try:
         os.makedirs(folder, mode=0o700, exist_ok=True)
         public, secret = zmq.auth.create_certificates(folder, name)
         os.chmod(secret, 0o600)
     except OSError as exc:
+        if made:  # a folder this call made stays only with the pair in it
+            shutil.rmtree(folder, ignore_errors=True)
         raise ConfigError(
             f"cannot write keys into {folder}: {exc.strerror}; give a folder this user can write to"
         ) from None

@@ -135,7 +135,7 @@ def table() -> list[tuple[list[str], int, tuple[str, ...]]]:
         (["snapshot", "--out", NEW, "--at", "-5"], USAGE, ("--at", ">= 0")),
         (["record", "--out", NEW, "--seconds", "-1"], USAGE, ("--seconds", "> 0")),
         (["record", "--out", NEW, "--seconds", "nan"], USAGE, ("--seconds", "> 0")),
-        (["record", "--out", NEW, "--frames", "-1"], USAGE, ("--frames", "> 0")),
+        (["record", "--out", NEW, "--frames", "-1"], USAGE, ("--frames", ">= 1")),
         (["record", "--out", NEW, "--rate", "nan"], USAGE, ("--rate", "> 0")),
         (["record", "--out", NEW, "--encoding", "jpeg", "--quality", "0"], USAGE, ("--quality",)),
         (["record", "--recover", f"{TMP}/nobag"], USAGE, ("nobag",)),
@@ -162,10 +162,10 @@ def table() -> list[tuple[list[str], int, tuple[str, ...]]]:
         (["no-such-command"], USAGE, ("invalid choice",)),
         (["set", "cam0", "gain"], USAGE, ("KEY=VALUE",)),
         (["sync-report", "--seconds", "-1"], USAGE, ("--seconds", "seconds > 0", "'-1'")),
-        (["sync-report", "--rate", "nan"], USAGE, ("--rate", "a number > 0", "'nan'")),
-        (["sync-report", "--threshold-ms", "0"], USAGE, ("--threshold-ms", "a number > 0")),
-        (["sync-report", "--min-synced-pct", "150"], USAGE, ("--min-synced-pct", "percentage from 0 to 100")),
-        (["sync-report", "--max-dropped-pct", "-1"], USAGE, ("--max-dropped-pct", "percentage from 0 to 100")),
+        (["sync-report", "--rate", "nan"], USAGE, ("--rate", "a number of Hz > 0", "'nan'")),
+        (["sync-report", "--threshold-ms", "0"], USAGE, ("--threshold-ms", "ms > 0")),
+        (["sync-report", "--min-synced-pct", "150"], USAGE, ("--min-synced-pct", "a percentage >= 0 and at most 100")),
+        (["sync-report", "--max-dropped-pct", "-1"], USAGE, ("--max-dropped-pct", "a percentage >= 0 and at most 100")),
         (["sync-report", NOWHERE, "--plot", f"{TMP}/out.jpg"], USAGE, ("--plot", "a path ending in .png")),
         (["sync-report", NOWHERE, "--json", "/proc/x/r.json"], USAGE, ("--json /proc/x/r.json", "cannot write")),
         (["sync-report", "127.0.0.1:6500"], USAGE, ("ENDPOINT", "expected tcp://HOST:PORT")),
@@ -389,7 +389,7 @@ def test_the_dev_shm_refusal_suggests_the_size_needed(capsys, tmp_path):
     anywhere = ["--endpoint", "tcp://127.0.0.1:0", "--pub", f"ipc://{tmp_path}/p", "--events", f"ipc://{tmp_path}/e"]
     code, _, err = run_fxis(
         capsys,
-        ["run", "--name", name, "--http", "off", *anywhere, "--camera", "a=synthetic:fps=30", "--history", "80000"],
+        ["run", "--name", name, "--http", "off", *anywhere, "--camera", "a=synthetic:fps=30", "--history", "3600"],
     )
     assert code == USAGE and "size=4G" not in err
     line = err.strip()

@@ -169,7 +169,7 @@ def test_a_window_wholly_older_than_the_history_writes_no_bag_and_names_every_fr
         ({"before": -1}, "before must be seconds >= 0"),
         ({"after": float("nan")}, "after must be seconds >= 0"),
         ({"before": 0, "after": 0}, "needs a window"),
-        ({"at": "now"}, "at must be int ns"),
+        ({"at": "now"}, "at must be a whole number of ns"),
         ({"encoding": "png"}, "encoding must be raw or jpeg"),
     ],
 )

@@ -51,7 +51,7 @@ def test_get_set_and_save(start_service, tmp_path):
     assert "exposure_us" not in saved["right"]
 
     refused = fxis("set", "left", "exposure_us=0", *at)
-    assert refused.returncode == exitcodes.FAILED
+    assert refused.returncode == exitcodes.USAGE  # a refused value: change the command (issue 43)
     assert "SETTING_REFUSED: exposure_us=0 is out of range: it allows 1..1000000 us" in refused.stderr
     unknown = fxis("set", "centre", "gain=1", *at)
     assert unknown.returncode == exitcodes.USAGE and "UNKNOWN_CAMERA" in unknown.stderr

@@ -1,0 +1,76 @@
+"""The arguments of every client operation checked before anything is sent or read: a bad one
+is InvalidArgument naming it and its range (fxis_shm.wire.ranges), never a TypeError from
+deep inside, an OverflowError or a ProtocolError of the wire's own check."""
+
+from __future__ import annotations
+
+import math
+from typing import Any
+
+from fxis_shm.errors import InvalidArgument, ProtocolError, SettingRejected
+from fxis_shm.wire import protocol, ranges
+
+TIMES = ("at", "start", "end")  # ns of the caller's clock
+
+
+def camera_names(cameras: Any) -> list[str] | None:
+    """``cameras`` as the list the wire takes (a list or tuple of names; None: all)."""
+    if cameras is None:
+        return None
+    if not isinstance(cameras, (list, tuple)) or not all(isinstance(c, str) and c for c in cameras):
+        raise InvalidArgument(f"cameras must be a list of camera names (or None: all), got {cameras!r}")
+    return list(cameras)
+
+
+def camera_name(camera: Any) -> str:
+    if not isinstance(camera, str) or not camera:
+        raise InvalidArgument(f"camera must be a camera's name, got {camera!r}")
+    return camera
+
+
+def check_numbers(timeout: Any, **fields: Any) -> None:
+    """InvalidArgument if a number of a request is out of its range (cheap: before the local
+    fast path, which must not pay for the wire's whole check)."""
+    if timeout is not None:
+        ranges.TIMEOUT_S.check(timeout, "timeout")
+    for key in TIMES:
+        if fields.get(key) is not None:
+            ranges.AT_NS.check(fields[key], key)
+    if fields.get("count") is not None:
+        ranges.SEQUENCE_COUNT.check(fields["count"], "count")
+    if fields.get("max_skew_ms") is not None:
+        ranges.MILLISECONDS.check(fields["max_skew_ms"], "max_skew_ms")
+    interval = fields.get("interval_ms")
+    if interval is not None:  # either sign: before or after t*
+        ranges.MILLISECONDS.check(abs(interval) if isinstance(interval, (int, float)) else interval, "interval_ms")
+
+
+def check_request(op: str, **fields: Any) -> None:
+    """InvalidArgument if the request ``op`` with these fields is not one a service takes
+    (before it is sent: the wire's own check, fxis_shm.wire.protocol)."""
+    try:
+        protocol.request_of(op, **fields)
+    except ProtocolError as exc:
+        raise InvalidArgument(exc.message) from None
+
+
+def setting_values(values: dict[str, Any]) -> dict[str, Any]:
+    """A settings change as the wire carries it: SettingRejected for a value no camera takes (not
+    a finite number, a string or a boolean), InvalidArgument for none at all."""
+    if not values:
+        raise InvalidArgument("configure needs at least one KEY=VALUE")
+    for key, value in values.items():
+        finite = not isinstance(value, float) or math.isfinite(value)
+        if not isinstance(value, (str, int, float, bool)) or not finite:
+            raise SettingRejected(
+                "SETTING_REFUSED", f"{key}={value!r}: a setting takes a finite number, a string or true/false"
+            )
+    if len(values) > protocol.MAX_SETTINGS:
+        raise InvalidArgument(f"configure takes at most {protocol.MAX_SETTINGS} settings at once, got {len(values)}")
+    return values
+
+
+def check_queue(queue: Any) -> int:
+    if isinstance(queue, bool) or not isinstance(queue, int) or not 1 <= queue <= 1_000_000:
+        raise InvalidArgument(f"queue must be a whole number of messages from 1 to 1000000, got {queue!r}")
+    return queue
