@@ -8,7 +8,8 @@ import asyncio
 import threading
 
 from fxis_shm.service.childspec import DashboardSpec
-from fxis_shm.service.config import ViewerAccess, http_address
+from fxis_shm.service.config import http_address
+from fxis_shm.service.viewertokens import ViewerAccess
 
 from ._child import Ready, child_main
 

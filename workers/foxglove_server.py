@@ -7,7 +7,8 @@ from __future__ import annotations
 import threading
 
 from fxis_shm.service.childspec import FoxgloveSpec
-from fxis_shm.service.config import ViewerAccess, http_address
+from fxis_shm.service.config import http_address
+from fxis_shm.service.viewertokens import ViewerAccess
 
 from ._child import Ready, child_main
 

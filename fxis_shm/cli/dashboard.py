@@ -12,9 +12,10 @@ import threading
 
 from fxis_shm.cli.options import add_key_options, client_keys_for, timeout_seconds
 from fxis_shm.errors import ConfigError
-from fxis_shm.service.config import ViewerAccess, check_viewer_files, http_address, read_token_file, viewer_token
+from fxis_shm.service.config import http_address
 from fxis_shm.service.stopsignals import stop_on
 from fxis_shm.service.supervisor import link_host
+from fxis_shm.service.viewertokens import ViewerAccess, check_viewer_files, read_token_file, viewer_token
 from fxis_shm.wire.endpoints import check_endpoint, check_host_known
 from fxis_shm.wire.security import is_loopback
 

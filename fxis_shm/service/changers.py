@@ -12,7 +12,8 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from fxis_shm.service.config import ServiceConfig, ViewerAccess, read_token_file
+from fxis_shm.service.config import ServiceConfig
+from fxis_shm.service.viewertokens import ViewerAccess, read_token_file
 
 SETTING = "operator_token_file"
 

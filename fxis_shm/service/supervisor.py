@@ -31,11 +31,12 @@ from fxis_shm.service.childspec import (
     FoxgloveSpec,
     Ros2Spec,
 )
-from fxis_shm.service.config import ServiceConfig, ViewerAccess, http_address, viewer_accesses
+from fxis_shm.service.config import ServiceConfig, http_address, viewer_accesses
 from fxis_shm.service.forkstart import ForkedProcess, fork_child, fork_wanted
 from fxis_shm.service.memory import ring_lines
 from fxis_shm.service.servicelock import ServiceLock
 from fxis_shm.service.stopsignals import StopSignals
+from fxis_shm.service.viewertokens import ViewerAccess
 from fxis_shm.shm import naming
 
 log = logging.getLogger("supervisor")

@@ -23,7 +23,7 @@ from urllib.parse import urlencode
 
 from aiohttp import hdrs, web
 
-from fxis_shm.service.config import ViewerAccess
+from fxis_shm.service.viewertokens import ViewerAccess
 
 TOKEN_PARAMETER = "token"
 COOKIE_PREFIX = "fxis-token-"

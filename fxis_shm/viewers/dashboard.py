@@ -31,7 +31,7 @@ from importlib import resources
 from aiohttp import web
 
 from fxis_shm.errors import Code, FxisError, InvalidArgument, ServiceError, UnknownCamera
-from fxis_shm.service.config import ViewerAccess
+from fxis_shm.service.viewertokens import ViewerAccess
 from fxis_shm.viewers.access import middlewares, ssl_context
 from fxis_shm.viewers.guard import changes, guard_middleware
 from fxis_shm.viewers.livefeed import SAMPLE_PERIOD_S, LiveFeed

@@ -28,7 +28,8 @@ from foxglove.messages import RawImage, Timestamp
 from foxglove.websocket import ServerListener
 
 from fxis_shm.errors import ConfigError, FxisError
-from fxis_shm.service.config import ViewerAccess, check_foxglove_rate
+from fxis_shm.service.config import check_foxglove_rate
+from fxis_shm.service.viewertokens import ViewerAccess
 from fxis_shm.viewers.livefeed import SAMPLE_PERIOD_S, LiveFeed
 from fxis_shm.viewers.preview import displayable
 from fxis_shm.viewers.wsfront import BACKEND_HOST, start_front

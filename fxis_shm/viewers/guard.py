@@ -26,7 +26,7 @@ from urllib.parse import urlsplit
 
 from aiohttp import hdrs, web
 
-from fxis_shm.service.config import ViewerAccess
+from fxis_shm.service.viewertokens import ViewerAccess
 from fxis_shm.viewers.access import NO_STORE, token_matches
 
 log = logging.getLogger("dashboard")

@@ -18,7 +18,7 @@ import logging
 import aiohttp
 from aiohttp import WSMsgType, hdrs, web
 
-from fxis_shm.service.config import ViewerAccess
+from fxis_shm.service.viewertokens import ViewerAccess
 from fxis_shm.viewers.access import is_websocket, middlewares, ssl_context
 
 log = logging.getLogger("foxglove")

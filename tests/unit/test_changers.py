@@ -12,8 +12,9 @@ from fxis_shm.errors import ConfigError
 from fxis_shm.ros2.follow import Counts
 from fxis_shm.ros2.settings import READ_ONLY, SettingsRequests
 from fxis_shm.service.changers import change_lines, dashboard_access, ros2_may_change
-from fxis_shm.service.config import ServiceConfig, ViewerAccess, build_config
+from fxis_shm.service.config import ServiceConfig, build_config
 from fxis_shm.service.ros2config import Ros2Settings
+from fxis_shm.service.viewertokens import ViewerAccess
 from fxis_shm.viewers.guard import RefusalLog, changes, host_allowed, same_origin
 
 NAMES = {"localhost", "cellpc", "cellpc.lab"}

@@ -13,8 +13,9 @@ from aiohttp import web
 from aiohttp.test_utils import TestClient, TestServer
 
 from fxis_shm.errors import ConfigError
-from fxis_shm.service.config import VIEWER_ACCESS_ENV, ViewerAccess, build_config, read_token_file, viewer_accesses
+from fxis_shm.service.config import build_config, viewer_accesses
 from fxis_shm.service.supervisor import link_host, viewer_lines
+from fxis_shm.service.viewertokens import VIEWER_ACCESS_ENV, ViewerAccess, read_token_file
 from fxis_shm.viewers.access import UNAUTHORIZED, cookie_name, header_token, middlewares, token_matches, without_token
 from fxis_shm.viewers.wsfront import offered_protocols
 
