@@ -11,6 +11,11 @@
   stored never waits.
 - ``none``: answer from what is stored.
 
+A camera that captures only on a trigger (``CameraState.triggered``) delivers no frame by
+itself: for a t* already past, none of its frames is predicted or waited for (``auto``), and
+the engine refuses at once a request that needs one where it has stored none
+(``never_coming``).
+
 Pure: the camera states, timelines and ``now`` are passed in; nothing reads a clock.
 """
 
@@ -36,6 +41,19 @@ class CameraState:
     period_ns: int  # measured frame period, 0 if not known yet
     delay_ns: int = 0  # typical time from capture to storage
     newest_stored: int | None = None  # t_stored of the newest stored frame
+    triggered: bool = False  # captures only on a trigger (trigger=software): no frame comes on its own
+
+
+def comes_by_itself(cam: CameraState, t_star: int, now: int) -> bool:
+    """Whether a frame for ``t_star`` may still come without this request triggering one: not
+    for a t* already past on a camera that captures only on a trigger (its period is only the
+    spacing of the triggers so far, and no frame is due)."""
+    return not cam.triggered or t_star > now
+
+
+def never_coming(t_star: int, now: int, cameras: Mapping[str, CameraState]) -> list[str]:
+    """The cameras that have stored no frame and will store none for ``t_star`` by themselves."""
+    return [name for name, cam in cameras.items() if cam.newest is None and not comes_by_itself(cam, t_star, now)]
 
 
 def overdue_time(t_frame: int, cam: CameraState) -> int:
@@ -63,7 +81,7 @@ def waiting_for(
         raise ValueError(f"unknown wait mode {mode!r}; use one of {WAIT_MODES}")
     waits: dict[str, int | None] = {}
     for name, cam in cameras.items():
-        if mode == NONE:
+        if mode == NONE or (mode == AUTO and not comes_by_itself(cam, t_star, now)):
             continue
         if mode == NEXT:
             if cam.newest_stored is None or cam.newest_stored < t_arrival:
@@ -115,7 +133,11 @@ def waiting_for_selection(
         return waits
     extended, stored_count, any_predicted = {}, {}, False
     for name, tl in timelines.items():
-        extended[name], predicted = with_predictions(tl, cameras[name], now, t_star + radius_ns)
+        cam = cameras[name]
+        predicted: list[int] = []
+        extended[name] = tl
+        if comes_by_itself(cam, t_star, now):
+            extended[name], predicted = with_predictions(tl, cam, now, t_star + radius_ns)
         stored_count[name] = len(tl)
         any_predicted = any_predicted or bool(predicted)
     if not any_predicted:  # every frame the request can use is stored

@@ -123,7 +123,11 @@ class CameraHandle:
     def state(self, snapshot: Snapshot) -> CameraState:
         period_ns, delay_ns = self.reader.timing()
         return CameraState(
-            newest=snapshot.newest, period_ns=period_ns, delay_ns=max(0, delay_ns), newest_stored=snapshot.newest_stored
+            newest=snapshot.newest,
+            period_ns=period_ns,
+            delay_ns=max(0, delay_ns),
+            newest_stored=snapshot.newest_stored,
+            triggered=self.triggered,
         )
 
     def status(self, now: int) -> dict:
