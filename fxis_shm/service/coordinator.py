@@ -394,6 +394,8 @@ class Coordinator:
         for name, info in cameras.items():
             info["restarts"] = processes.get(f"camera:{name}", {}).get("restarts")
             info["settings"] = self._settings_of(name, info.get("generation"))
+            if info.get("trigger") == "software" and info.get("fps") is None:  # captures on request: its set rate
+                info["fps"] = (info["settings"] or {}).get("fps")
             info["ptp"] = self.camera_ptp.get(name)  # None: the camera cannot say (or not yet asked)
         return cameras
 
