@@ -7,8 +7,9 @@
   the request's own selection runs over stored plus predicted frames, and the
   request waits for exactly the cameras whose chosen frame is still to come,
   each until that frame is overdue (then taken as dropped). For one camera this
-  is: wait while t* >= newest + period/2. A t* whose best frames are already
-  stored never waits.
+  is: wait while t* >= newest + period/2 (with a sync tolerance, + tolerance/2:
+  a predicted frame nearer by less than the tolerance may be so by jitter alone).
+  A t* whose best frames are already stored never waits.
 - ``none``: answer from what is stored.
 
 A camera that captures only on a trigger (``CameraState.triggered``) delivers no frame by
@@ -124,10 +125,12 @@ def waiting_for_selection(
     """``auto`` for a request answered by ``choose``: the cameras whose frame in the
     best selection over stored and predicted frames is not stored yet.
 
-    Predicted frames carry no timing jitter, so a tuple of them may look less skewed
-    than a stored one by noise alone: when the best stored tuple is nearer to t* and
-    at most twice ``tolerance_ns`` more skewed, it is answered at once. ``stored``: the
-    selection over the stored frames, if the caller made it already (it answers with it)."""
+    Predicted frames carry no timing jitter, so a tuple of them may look less skewed, or
+    nearer to t*, than a stored one by noise alone: when the best stored tuple is at most
+    ``tolerance_ns`` farther from t* and at most twice ``tolerance_ns`` more skewed, it is
+    answered at once. (Waiting for a tuple only as near as the jitter says, the request once
+    got the stored one anyway, a period late: issue 41.) ``stored``: the selection over the
+    stored frames, if the caller made it already (it answers with it)."""
     waits: dict[str, int | None] = {n: None for n, c in cameras.items() if c.newest is None}
     if waits:
         return waits
@@ -148,7 +151,7 @@ def waiting_for_selection(
         return {}
     if stored is None:
         stored = choose(dict(timelines))
-    stored_nearer = stored.max_abs_error_ns(t_star) < chosen.max_abs_error_ns(t_star)
-    if stored_nearer and stored.skew_ns <= chosen.skew_ns + 2 * tolerance_ns:
+    as_near = stored.max_abs_error_ns(t_star) < chosen.max_abs_error_ns(t_star) + tolerance_ns
+    if as_near and stored.skew_ns <= chosen.skew_ns + 2 * tolerance_ns:
         return {}
     return {n: overdue_time(extended[n].at(chosen.index[n]), cameras[n]) for n in future}

@@ -95,7 +95,10 @@ def picked_times(reply: Reply) -> dict[str, int]:
         (10 * PERIOD, True, 10 * PERIOD),  # a stored frame is exactly t*
         (10 * PERIOD + PERIOD // 2 - 1, True, 10 * PERIOD),  # the stored frame stays the nearest
         (19 * PERIOD + 1, True, 19 * PERIOD),
-        (19 * PERIOD + PERIOD // 2, False, 20 * PERIOD),  # halfway to a frame not stored yet: wait
+        # halfway to a frame not stored yet: it may be nearer only by its jitter, so the stored
+        # one answers at once (issue 41: waiting a period for it, the stored one often won anyway)
+        (19 * PERIOD + PERIOD // 2, True, 19 * PERIOD),
+        (19 * PERIOD + PERIOD // 2 + MS, False, 20 * PERIOD),  # nearer by the sync tolerance (2 ms): wait
         (21 * PERIOD, False, 21 * PERIOD),  # the future
     ],
 )

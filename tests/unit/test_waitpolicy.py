@@ -195,6 +195,26 @@ def test_no_wait_for_a_tuple_that_only_looks_less_skewed():
     assert set(waiting_for_selection(t_star, now, timelines, states, strict, PERIOD, 0)) == {"c0", "c10"}
 
 
+def test_no_wait_for_a_tuple_only_as_much_nearer_as_the_jitter_allows():
+    # As in bench/latency/wake.py (phases 0, 1 ms, jitter 0.3 ms, tolerance 2 ms): stored
+    # {c0 1000.2, c1 1000.9}, t* about halfway to the predicted {c0 1050.2, c1 1050.9}, which is
+    # 0.8 ms nearer (24.95 against 25.75 ms): within what the frames' jitter moves. It was waited
+    # for; the real frames came farther than predicted and the stored tuple answered after all,
+    # a period late (a 50.5 ms local wait in the demo).
+    timelines = {"c0": flat([1_000_200_000]), "c1": flat([1_000_900_000])}
+    states = {n: camera(newest=tl.at(0)) for n, tl in timelines.items()}
+    now = 1002 * MS
+
+    def wait_for(t_star, tolerance_ns=2 * MS):
+        choose = lambda tls: select_joint(tls, t_star, PERIOD, tolerance_ns=tolerance_ns)  # noqa: E731
+        return set(waiting_for_selection(t_star, now, timelines, states, choose, PERIOD, tolerance_ns))
+
+    halfway = 1_025_950_000
+    assert wait_for(halfway) == set()
+    assert wait_for(halfway, tolerance_ns=0) == {"c0", "c1"}  # without a tolerance: strictly nearer waits
+    assert wait_for(halfway + 2 * MS) == {"c0", "c1"}  # nearer by more than the tolerance: worth a period
+
+
 def test_an_empty_camera_waits_until_the_deadline():
     states = {"a": camera(newest=None), "b": camera()}
     got = waiting_for_selection(
