@@ -57,7 +57,7 @@ def status_command(args) -> int:
                 "yes" if cam["alive"] else "NO",
                 shape,
                 _measured(cam, window_s),
-                _fixed(cam.get("fps"), 3, "g"),
+                set_rate(cam),
                 cam.get("frames_stored"),
                 cam.get("frames_dropped"),
                 _fixed(cam.get("last_frame_age_ms"), 1),
@@ -113,6 +113,15 @@ def ptp_text(state: dict | None) -> str:
         return "disabled"
     offset = "" if state.get("offset_ns") is None else f", offset {state['offset_ns']} ns"
     return f"{state.get('status') or 'unknown'}{' (locked)' if state.get('locked') else ''}{offset}"
+
+
+def set_rate(cam: dict) -> str | None:
+    """The camera's set fps; a camera that captures only on a trigger says so (its rate is the
+    requests', not this one)."""
+    rate = _fixed(cam.get("fps"), 3, "g")
+    if cam.get("trigger") == "software":
+        return f"{rate or '-'}, captures on request"
+    return rate
 
 
 def _fixed(value, decimals: int, kind: str = "f") -> str | None:

@@ -34,18 +34,22 @@ def sync_report_command(args) -> int:
     with as_interrupts(), client_for(args, endpoints) as client:
         status = client.status()
         cameras = _chosen(args.cameras, status["cameras"])
-        periods = {n: 1e9 / status["cameras"][n]["fps"] for n in cameras if status["cameras"][n].get("fps")}
-        rate = args.rate or (1e9 / max(periods.values()) if periods else FALLBACK_RATE_HZ)
+        set_periods = {n: 1e9 / status["cameras"][n]["fps"] for n in cameras if status["cameras"][n].get("fps")}
+        rate = args.rate or (1e9 / max(set_periods.values()) if set_periods else FALLBACK_RATE_HZ)
         slots = planned_slots(args.seconds, rate)  # before the schedule: a plan of 10^9 is refused
+        # cameras that capture only on a trigger: asked to capture at each t_k, judged on those moments
+        on_request = [n for n in cameras if status["cameras"][n].get("trigger") == "software"]
+        periods = {n: p for n, p in set_periods.items() if n not in on_request}
         where = list(getattr(client, "endpoints", None) or [client.endpoint])
+        asked = f"; {', '.join(on_request)} capture on request: each t_k asked as a capture at T" if on_request else ""
         print(
             f"sync report: {len(cameras)} camera(s) ({', '.join(cameras)}) of {', '.join(where)}: "
             f"{slots} tuples asked at {rate:g} Hz over {args.seconds:g} s, "
-            "times in this host's clock",
+            f"times in this host's clock{asked}",
             flush=True,  # a caller watching the output knows the schedule has begun
         )
-        taken = take(client, cameras, args.seconds, rate)
-    figures = syncstats.figures(taken.samples, thresholds, periods)
+        taken = take(client, cameras, args.seconds, rate, capture=bool(on_request))
+    figures = syncstats.figures(taken.samples, thresholds, periods, on_request)
     ptp = {n: status["cameras"][n].get("ptp") for n in cameras}
     services = {n: status["cameras"][n].get("service") or where[0] for n in cameras}
     print("\n".join(report_lines(figures, thresholds, ptp, services, taken.errors)))
@@ -101,7 +105,8 @@ def report_lines(
              "residual p50/p99 ms", "ptp"]]  # fmt: skip
     for name, cam in figures.cameras.items():
         residual = f"{cam.residual_ms['p50']:.3f}/{cam.residual_ms['p99']:.3f}" if cam.residual_ms else "-"
-        cells = [name, services.get(name) or "-", "-" if cam.period_ms is None else f"{cam.period_ms:g}"]
+        period = "on request" if cam.on_request else "-" if cam.period_ms is None else f"{cam.period_ms:g}"
+        cells = [name, services.get(name) or "-", period]
         cells += [str(cam.missing), str(cam.repeated), str(cam.skipped)]
         cells += [str(cam.captures[m]) for m in syncstats.CAPTURE_METHODS] + [residual, ptp_text(ptp.get(name))]
         rows.append(cells)

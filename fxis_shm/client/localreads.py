@@ -9,8 +9,8 @@ hands out read-only views of the slots.
 
 Waiting for a frame that is not stored yet costs no CPU until just before it is
 due: the client sleeps until the camera's next frame is expected (its newest
-frame's storage time plus its period, both in the ring) less a margin, then
-watches the rings' write counters. Any number of readers can wait this way; a
+frame's capture time plus its period, plus the usual delay to storage, all in the
+ring) less a margin, then watches the rings' write counters. Any number of readers can wait this way; a
 reader leaves nothing behind in the ring, and the writer never knows it exists.
 
 What only the coordinator can do (software triggers) still goes to it.
@@ -35,6 +35,7 @@ from fxis_shm.wire import protocol
 
 WAKE_MARGIN_NS = 1_500_000  # stop sleeping this long before a frame is due
 POLL_S = 0.0001  # then look at the write counters this often
+_DELAY_FRAMES = 4  # the newest frames whose least capture-to-storage delay says when the next is stored
 _TIMES = ("at", "t_call")  # checked on every call; the other fields once per form of request
 _UNCHECKED = (*_TIMES, "encoding", "quality")  # encoding, quality: the frames stay raw here
 _REQUEST_FORMS = 256  # validated forms kept
@@ -243,9 +244,16 @@ def settled(actions: list) -> Reply | None:
 
 
 def _next_due(reader) -> int:
-    """When the ring's next frame should be stored: its newest frame's storage time plus a period."""
+    """When the ring's next frame should be stored: its newest frame's capture time plus a
+    period, plus the shortest capture-to-storage delay of the last few frames. Not the newest
+    frame's storage time plus a period: a frame its worker stored late (held up by the
+    machine) does not hold the camera's next capture back, and a nap planned from that
+    storage slept past the next frame, by up to a period (issue 41)."""
     count = reader.field("write_count")
     if count == 0:
         return 0
-    newest_stored = int(reader.table["t_stored"][(count - 1) % reader.slots])
-    return newest_stored + reader.field("period_ns")
+    captured, stored, slots = reader.table["t_capture"], reader.table["t_stored"], reader.slots
+    # slots the writer is not filling (it fills write count's), read plainly: only a nap's length rests on them
+    recent = [w % slots for w in range(max(0, count - min(_DELAY_FRAMES, slots - 1)), count)]
+    usual_delay = max(0, min(int(stored[s]) - int(captured[s]) for s in recent))
+    return int(captured[recent[-1]]) + reader.field("period_ns") + usual_delay

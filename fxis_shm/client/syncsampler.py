@@ -25,6 +25,9 @@ from fxis_shm.errors import FxisError, InvalidArgument
 from fxis_shm.wire import ranges
 
 LEAD_NS = 50_000_000  # the first slot: this far ahead of the moment the schedule is made
+# a capture at t_k (cameras that capture on request) is asked this far ahead at most: room for
+# the service's 5 ms and a camera's trigger latency (the Aravis fake camera's: about 20 ms)
+CAPTURE_LEAD_NS = 100_000_000
 
 
 @dataclass
@@ -43,13 +46,17 @@ def take(
     rate_hz: float,
     grace_s: float = 5.0,
     sleep: Callable[[float], None] = time.sleep,
+    capture: bool = False,
 ) -> Taken:
     """``seconds * rate_hz`` slots (at least one) of joint tuples of ``cameras``. Ends by the last
     slot's time plus ``grace_s``, whatever the services do; Ctrl-C ends it early with what came
-    (``interrupted``), the slots not reached left out."""
+    (``interrupted``), the slots not reached left out. With ``capture`` each t_k is asked ahead
+    as a capture at T: the cameras that capture on request are triggered for it."""
     n = planned_slots(seconds, rate_hz)
     interval = round(1e9 / rate_hz)
-    slots = _first_slot(client, cameras, interval) + np.arange(n, dtype=np.int64) * interval
+    first = client.clock() + CAPTURE_LEAD_NS if capture else _first_slot(client, cameras, interval)
+    lead = CAPTURE_LEAD_NS if capture else 0
+    slots = first + np.arange(n, dtype=np.int64) * interval
     rows: list[Row | None] = []
     errors: Counter[str] = Counter()
     end = int(slots[-1]) + round(grace_s * 1e9)
@@ -61,10 +68,10 @@ def take(
                 errors[f"no time left to ask (the schedule ended {grace_s:g} s after its last slot)"] += n - k
                 rows += [None] * (n - k)
                 break
-            if now < t_k:
-                sleep((t_k - now) / 1e9)
+            if now < t_k - lead:
+                sleep((t_k - lead - now) / 1e9)
             try:
-                tuple_ = client.tuple(cameras, at=t_k, partial=True)
+                tuple_ = client.tuple(cameras, at=t_k, partial=True, capture=capture)
             except FxisError as exc:
                 errors[" ".join(str(exc).split())] += 1
                 rows.append(None)

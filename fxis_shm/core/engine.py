@@ -28,7 +28,7 @@ from fxis_shm.core import sequences
 from fxis_shm.core.decisions import Context, Plan, Reject, Wait, check_size, decide, newest_frames, sequence_spec
 from fxis_shm.core.requestdefaults import REQUEST_DEFAULTS
 from fxis_shm.core.snapshot import Snapshot
-from fxis_shm.core.waitpolicy import CameraState
+from fxis_shm.core.waitpolicy import CameraState, never_coming
 from fxis_shm.errors import Code
 
 log = logging.getLogger("engine")
@@ -290,6 +290,8 @@ class RequestEngine:
                 decision: Wait | Plan = newest_frames(p.cameras, snaps)
             else:
                 states = {c: self.cameras[c].state(snaps[c]) for c in p.cameras}
+                if p.request.get("at") is not None and not p.scheduled:
+                    refuse_never_coming(p.t_star, now, states)
                 decision = decide(p, now, snaps, states, self._context(p))
             for cam in p.cameras:
                 if not isinstance(decision, Wait) or cam not in decision.until:
@@ -330,4 +332,17 @@ class RequestEngine:
             sync_tolerance_ms=self.settings["sync_tolerance_ms"],
             max_skew_ms=self.setting(p.request, "max_skew_ms"),
             max_sequence_frames=self.settings["max_sequence_frames"],
+        )
+
+
+def refuse_never_coming(t_star: int, now: int, states: Mapping[str, CameraState]) -> None:
+    """A t* already past on cameras that capture only on a trigger and have stored nothing:
+    no frame will come for it, so the request is refused now rather than at its timeout."""
+    cameras = never_coming(t_star, now, states)
+    if cameras:
+        raise Reject(
+            Code.NO_FRAMES,
+            f"camera(s) {cameras} capture only on a trigger (trigger=software) and have stored no frame: "
+            f"none will come for a moment {(now - t_star) / 1e6:.1f} ms past; ask for a moment ahead "
+            "with capture=True, or without a moment to trigger them now",
         )

@@ -232,8 +232,9 @@ static int auto_wait(PickCam *cams, int n, int joint, const PickRequest *r, int6
         future |= cams[k].waits = chosen.index[k] >= cams[k].stored;
     if (!future)
         return PICK_PLAN;
-    int stored_nearer = max_abs_error(stored, n, r->t_star) < max_abs_error(&chosen, n, r->t_star);
-    if (stored_nearer && skew_of(stored, n) <= skew_of(&chosen, n) + 2 * tolerance)
+    /* predicted frames carry no jitter: a tuple of them nearer by less than the tolerance may not be */
+    int as_near = max_abs_error(stored, n, r->t_star) < max_abs_error(&chosen, n, r->t_star) + tolerance;
+    if (as_near && skew_of(stored, n) <= skew_of(&chosen, n) + 2 * tolerance)
         return PICK_PLAN;
     return PICK_WAIT;
 }

@@ -61,6 +61,7 @@ class RemoteCamera:
             period_ns=self.period_ns,
             delay_ns=int(self._info.get("delay_ns", 0)),
             newest_stored=snapshot.newest_stored,
+            triggered=self.triggered,
         )
 
     @property

@@ -21,6 +21,10 @@ The definitions, per slot k of the schedule (one tuple asked for at t_k, every 1
   camera's. Ids of different generations (a camera restarted) are not compared. The percentage
   is of all slots. At the default rate (the slowest camera's) r = 1 for the slowest camera and
   every camera of its rate: librealsense's "frame number did not advance by 1".
+- a camera that captures on request (trigger=software, not on a lockstep grid) has no rate of
+  its own: the report asks it to capture at each t_k (capture at T), and it is judged on those
+  moments: a slot whose frame was not captured for t_k (a frame of an earlier request read
+  again) counts as a repeat, and so as dropped; its frame ids are not judged by a period.
 
 Pure: arrays in, figures out; no I/O.
 """
@@ -48,6 +52,9 @@ Ints = npt.NDArray[np.int64]
 # a slot interval within this share of a period of a whole number of periods counts as that
 # whole number (rounded rates: 1e9 / 30 ns is not a whole number of ns)
 WHOLE = 1e-3
+# a frame's t_target within this of t_k was captured for slot k (both mapped through the
+# caller's clock estimate, which may round by a few ns)
+TARGET_SLACK_NS = 1_000
 
 
 @dataclass(frozen=True)
@@ -87,6 +94,7 @@ class CameraFigures:
     skipped: int  # frames lost: advances beyond what its period says, summed
     captures: dict[str, int]  # frames per capture method
     residual_ms: dict[str, float] | None  # |t_capture - t_target|: p50, p99, max (scheduled/lockstep frames)
+    on_request: bool = False  # captures on request: judged on the slots' moments, not a period
 
 
 @dataclass(frozen=True)
@@ -185,13 +193,25 @@ def advance_faults(
     return faulty, int(repeat.sum()), int(np.where(skip, advance - most, 0).sum())
 
 
+def missed_moments(samples: Samples, c: int) -> npt.NDArray[np.bool_]:
+    """Camera ``c``'s slots whose frame was not captured for the slot's moment t_k (a camera that
+    captures on request, asked to capture at each t_k)."""
+    target = samples.t_capture[:, c].astype(np.float64) - samples.residual_ns[:, c]
+    scheduled = samples.capture[:, c] == CAPTURE_METHODS.index("scheduled")
+    captured_for_slot = scheduled & (np.abs(np.nan_to_num(target - samples.slots, nan=np.inf)) <= TARGET_SLACK_NS)
+    missed: npt.NDArray[np.bool_] = samples.present[:, c] & ~captured_for_slot
+    return missed
+
+
 def figures(
     samples: Samples,
     thresholds: Thresholds | None = None,
     nominal_period_ns: Mapping[str, float | None] | None = None,
+    on_request: Sequence[str] = (),
 ) -> Figures:
     """The report's figures and its checks. ``nominal_period_ns``: each camera's set period (its
-    status' fps), which its frame ids are judged by; where not given, estimated from its frames."""
+    status' fps), which its frame ids are judged by; where not given, estimated from its frames.
+    ``on_request``: the cameras that capture on request, judged on the slots' moments instead."""
     thresholds = thresholds or Thresholds()
     n = len(samples.slots)
     present = samples.present
@@ -203,6 +223,9 @@ def figures(
     for c, name in enumerate(samples.cameras):
         mine = present[:, c]
         ids, times, gens = samples.frame_id[mine, c], samples.t_capture[mine, c], samples.generation[mine, c]
+        if name in on_request:
+            periods[name] = None
+            continue
         periods[name] = (nominal_period_ns or {}).get(name) or estimated_period_ns(ids, times, gens)
     slowest = max((p for p in periods.values() if p), default=None)
     for c, name in enumerate(samples.cameras):
@@ -212,6 +235,9 @@ def figures(
         faulty, repeated, skipped = advance_faults(
             samples.slots, samples.frame_id[:, c], samples.generation[:, c], mine, period, slack
         )
+        if name in on_request:
+            faulty = missed_moments(samples, c)
+            repeated = int(faulty.sum())
         dropped |= faulty
         methods = samples.capture[mine, c]
         residuals = np.abs(samples.residual_ns[mine, c])
@@ -223,6 +249,7 @@ def figures(
             skipped=skipped,
             captures={m: int((methods == i).sum()) for i, m in enumerate(CAPTURE_METHODS)},
             residual_ms=_percentiles_ms(residuals, {"p50": 50, "p99": 99}) if len(residuals) else None,
+            on_request=name in on_request,
         )
     synced = complete & (np.nan_to_num(gaps, nan=np.inf) <= thresholds.threshold_ms * 1e6)
     gap_ms = _percentiles_ms(gaps[complete], {"p50": 50, "p95": 95, "p99": 99}) if complete.any() else None

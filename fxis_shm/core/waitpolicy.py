@@ -7,9 +7,15 @@
   the request's own selection runs over stored plus predicted frames, and the
   request waits for exactly the cameras whose chosen frame is still to come,
   each until that frame is overdue (then taken as dropped). For one camera this
-  is: wait while t* >= newest + period/2. A t* whose best frames are already
-  stored never waits.
+  is: wait while t* >= newest + period/2 (with a sync tolerance, + tolerance/2:
+  a predicted frame nearer by less than the tolerance may be so by jitter alone).
+  A t* whose best frames are already stored never waits.
 - ``none``: answer from what is stored.
+
+A camera that captures only on a trigger (``CameraState.triggered``) delivers no frame by
+itself: for a t* already past, none of its frames is predicted or waited for (``auto``), and
+the engine refuses at once a request that needs one where it has stored none
+(``never_coming``).
 
 Pure: the camera states, timelines and ``now`` are passed in; nothing reads a clock.
 """
@@ -36,6 +42,19 @@ class CameraState:
     period_ns: int  # measured frame period, 0 if not known yet
     delay_ns: int = 0  # typical time from capture to storage
     newest_stored: int | None = None  # t_stored of the newest stored frame
+    triggered: bool = False  # captures only on a trigger (trigger=software): no frame comes on its own
+
+
+def comes_by_itself(cam: CameraState, t_star: int, now: int) -> bool:
+    """Whether a frame for ``t_star`` may still come without this request triggering one: not
+    for a t* already past on a camera that captures only on a trigger (its period is only the
+    spacing of the triggers so far, and no frame is due)."""
+    return not cam.triggered or t_star > now
+
+
+def never_coming(t_star: int, now: int, cameras: Mapping[str, CameraState]) -> list[str]:
+    """The cameras that have stored no frame and will store none for ``t_star`` by themselves."""
+    return [name for name, cam in cameras.items() if cam.newest is None and not comes_by_itself(cam, t_star, now)]
 
 
 def overdue_time(t_frame: int, cam: CameraState) -> int:
@@ -63,7 +82,7 @@ def waiting_for(
         raise ValueError(f"unknown wait mode {mode!r}; use one of {WAIT_MODES}")
     waits: dict[str, int | None] = {}
     for name, cam in cameras.items():
-        if mode == NONE:
+        if mode == NONE or (mode == AUTO and not comes_by_itself(cam, t_star, now)):
             continue
         if mode == NEXT:
             if cam.newest_stored is None or cam.newest_stored < t_arrival:
@@ -106,16 +125,22 @@ def waiting_for_selection(
     """``auto`` for a request answered by ``choose``: the cameras whose frame in the
     best selection over stored and predicted frames is not stored yet.
 
-    Predicted frames carry no timing jitter, so a tuple of them may look less skewed
-    than a stored one by noise alone: when the best stored tuple is nearer to t* and
-    at most twice ``tolerance_ns`` more skewed, it is answered at once. ``stored``: the
-    selection over the stored frames, if the caller made it already (it answers with it)."""
+    Predicted frames carry no timing jitter, so a tuple of them may look less skewed, or
+    nearer to t*, than a stored one by noise alone: when the best stored tuple is at most
+    ``tolerance_ns`` farther from t* and at most twice ``tolerance_ns`` more skewed, it is
+    answered at once. (Waiting for a tuple only as near as the jitter says, the request once
+    got the stored one anyway, a period late: issue 41.) ``stored``: the selection over the
+    stored frames, if the caller made it already (it answers with it)."""
     waits: dict[str, int | None] = {n: None for n, c in cameras.items() if c.newest is None}
     if waits:
         return waits
     extended, stored_count, any_predicted = {}, {}, False
     for name, tl in timelines.items():
-        extended[name], predicted = with_predictions(tl, cameras[name], now, t_star + radius_ns)
+        cam = cameras[name]
+        predicted: list[int] = []
+        extended[name] = tl
+        if comes_by_itself(cam, t_star, now):
+            extended[name], predicted = with_predictions(tl, cam, now, t_star + radius_ns)
         stored_count[name] = len(tl)
         any_predicted = any_predicted or bool(predicted)
     if not any_predicted:  # every frame the request can use is stored
@@ -126,7 +151,7 @@ def waiting_for_selection(
         return {}
     if stored is None:
         stored = choose(dict(timelines))
-    stored_nearer = stored.max_abs_error_ns(t_star) < chosen.max_abs_error_ns(t_star)
-    if stored_nearer and stored.skew_ns <= chosen.skew_ns + 2 * tolerance_ns:
+    as_near = stored.max_abs_error_ns(t_star) < chosen.max_abs_error_ns(t_star) + tolerance_ns
+    if as_near and stored.skew_ns <= chosen.skew_ns + 2 * tolerance_ns:
         return {}
     return {n: overdue_time(extended[n].at(chosen.index[n]), cameras[n]) for n in future}

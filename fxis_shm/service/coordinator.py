@@ -401,6 +401,8 @@ class Coordinator:
             process = processes.get(f"camera:{name}", {})
             info["restarts"], info["sched"] = process.get("restarts"), process.get("sched")
             info["settings"] = self.desk.values(name, info.get("generation"))
+            if info.get("trigger") == "software" and info.get("fps") is None:  # captures on request: its set rate
+                info["fps"] = (info["settings"] or {}).get("fps")
             info["ptp"] = self.desk.ptp(name)  # None: the camera cannot say (or not yet asked)
         return cameras
 

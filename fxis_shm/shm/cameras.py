@@ -125,7 +125,11 @@ class CameraHandle:
     def state(self, snapshot: Snapshot) -> CameraState:
         period_ns, delay_ns = self.reader.timing()
         return CameraState(
-            newest=snapshot.newest, period_ns=period_ns, delay_ns=max(0, delay_ns), newest_stored=snapshot.newest_stored
+            newest=snapshot.newest,
+            period_ns=period_ns,
+            delay_ns=max(0, delay_ns),
+            newest_stored=snapshot.newest_stored,
+            triggered=self.triggered,
         )
 
     def status(self, now: int) -> dict:
@@ -138,11 +142,15 @@ class CameraHandle:
             return info
         snap = ring.snapshot()
         period = ring.field("period_ns")
+        triggered = self.triggered
+        # a triggered camera's measured period is only the spacing of the triggers so far: its set
+        # rate is the nominal one, if any (the coordinator adds the configured one)
+        set_period = ring.field("nominal_period_ns") if triggered else period
         newest_stored = snap.newest_stored
         info.update(
             shape=list(ring.layout.shape),
             dtype=ring.layout.dtype,
-            fps=round(1e9 / period, 3) if period > 0 else None,  # the camera's set rate (its period)
+            fps=round(1e9 / set_period, 3) if set_period > 0 else None,  # the camera's set rate
             **measured_rate(snap, now),
             frames_stored=ring.field("write_count"),
             frames_dropped=ring.field("frames_dropped"),
@@ -155,7 +163,7 @@ class CameraHandle:
             generation=ring.field("generation"),
             writer_pid=ring.field("writer_pid"),
             delay_ms=round(ring.field("delay_ns") / 1e6, 3),
-            trigger="software" if self.triggered else "free",
+            trigger="software" if triggered else "free",
             hook_errors=ring.field("hook_errors"),
             note=ring.header["status_text"].item().decode(errors="replace"),
             sync=sync_status(ring),

@@ -1,12 +1,18 @@
 """Software-triggered cameras: a request triggers every camera of its tuple at once."""
 
+import json
+import re
 import time
 
 import pytest
 
 from fxis_shm import read_stamp
+from fxis_shm.errors import ServiceError
 
+from ..conftest import fxis, wait_until
 from .conftest import SMALL
+
+MS = 1_000_000
 
 pytestmark = pytest.mark.integration
 
@@ -64,3 +70,57 @@ def test_an_image_request_triggers_its_camera_and_returns_that_frame(start_servi
         again = client.image("a", at=previous.t_capture)
         assert again.frame_id == previous.frame_id
         assert client.status()["cameras"]["a"]["frames_stored"] == 3
+
+
+def test_a_past_moment_is_answered_from_what_is_stored_and_never_waits_for_a_trigger(start_service):
+    """Issue 41: cameras that capture only on a trigger bring no frame for a moment already past.
+    With nothing stored the request is refused at once (it once waited its 1 s timeout); after
+    captures at T it is answered at once from the stored frames, also once the spacing of those
+    captures, taken for the cameras' period, predicts a frame nearer the moment (it once waited
+    for that frame until the timeout)."""
+    svc = start_service(
+        "--camera", f"a=synthetic:trigger=software,{SMALL}", "--camera", f"b=synthetic:trigger=software,{SMALL}"
+    )
+    with svc.client() as client:
+        wait_until(lambda: _up_and_configured(client), what="both cameras up, their configured rate known")
+        with pytest.raises(ServiceError, match=r"\['a', 'b'\] capture only on a trigger") as refused:
+            client.tuple(at=time.monotonic_ns() - MS)
+        assert refused.value.code == "NO_FRAMES" and "capture=True" in str(refused.value)
+        captured = [client.tuple(at=time.monotonic_ns() + 200 * MS, capture=True) for _ in range(3)]
+        status = client.status()["cameras"]
+        spacing = 1e9 / (status["a"]["measured_fps"] or 1)  # what the rings measured as the "period"
+        newest = max(f.t_capture for f in captured[-1].values())
+        wait_until(lambda: time.monotonic_ns() > newest + 0.6 * spacing, what="the spacing's frame to seem nearer")
+        past = client.tuple(at=time.monotonic_ns() - MS)
+        assert {c: f.frame_id for c, f in past.items()} == {c: f.frame_id for c, f in captured[-1].items()}
+        assert past.timing["waited"] == past.timing["received"]  # decided as it arrived: no wait
+        shown = fxis("status", "--endpoint", svc.endpoint).stdout
+    for name in ("a", "b"):
+        assert status[name]["fps"] == 20.0  # as configured (the default), not the captures' spacing
+        assert re.search(rf"^{name} .* 20, captures on request ", shown, re.M), shown
+
+
+def test_sync_report_asks_cameras_that_capture_on_request_at_its_own_moments(start_service, tmp_path):
+    svc = start_service(
+        "--camera", f"a=synthetic:trigger=software,{SMALL}", "--camera", f"b=synthetic:trigger=software,{SMALL}"
+    )
+    with svc.client() as client:
+        wait_until(lambda: _up_and_configured(client), what="both cameras up, their configured rate known")
+        client.tuple(at=time.monotonic_ns() + 200 * MS, capture=True)  # a spacing to mislead the report
+    out = fxis("sync-report", svc.endpoint, "--seconds", "2", "--json", str(tmp_path / "r.json"), timeout=90)
+    report = json.loads((tmp_path / "r.json").read_text())
+    assert "a, b capture on request: each t_k asked as a capture at T" in out.stdout.splitlines()[0], out.stdout
+    assert report["rate_hz"] == 20.0  # the configured rate
+    assert report["complete"] > 0, out.stdout
+    for cam in report["cameras"].values():
+        assert cam["on_request"] and cam["period_ms"] is None
+        # every frame it gave was captured for its own slot's moment: none read again from an
+        # earlier request (a slot asked too late on a loaded machine is refused: missing, not a repeat)
+        assert cam["captures"]["scheduled"] == report["slots"] - cam["missing"] and cam["repeated"] == 0
+        assert cam["residual_ms"] is not None
+
+
+def _up_and_configured(client) -> bool:
+    """Every camera's worker runs and has told the coordinator its settings (a triggered camera's
+    set fps comes from them: status shows "-" until then)."""
+    return all(cam["alive"] and cam.get("fps") for cam in client.status()["cameras"].values())

@@ -161,6 +161,25 @@ def test_residuals_and_capture_methods_per_camera():
     assert b.residual_ms["p50"] <= b.residual_ms["p99"] <= b.residual_ms["max"]
 
 
+def test_cameras_that_capture_on_request_are_judged_on_the_slots_moments_not_a_period():
+    # each slot asks both cameras to capture at t_k: their frames say "scheduled", t_target = t_k
+    n = 10
+    parts = schedule(n, [0.0, 0.0])
+    parts["frame_id"] = np.stack([np.arange(n), np.arange(n) + 100], axis=1)  # one new frame per request
+    parts["t_capture"] = parts["slots"][:, None] + np.array([[10_000, 30_000]])  # captured 10 and 30 us late
+    parts["capture"][:] = SCHEDULED
+    parts["residual_ns"] = (parts["t_capture"] - parts["slots"][:, None]).astype(float)
+    # b's capture for slot 6 never came: the tuple holds its frame of slot 5 again
+    parts["frame_id"][6, 1], parts["t_capture"][6, 1] = parts["frame_id"][5, 1], parts["t_capture"][5, 1]
+    parts["residual_ns"][6, 1] = parts["residual_ns"][5, 1]
+    spacing = {"a": 154 * MS, "b": 154 * MS}  # a "period" measured from earlier triggers, as status gave it
+    report = figures(samples(parts), None, spacing, on_request=["a", "b"])
+    a, b = report.cameras["a"], report.cameras["b"]
+    assert (a.on_request, a.period_ms, a.repeated, a.skipped) == (True, None, 0, 0)
+    assert (b.repeated, b.skipped) == (1, 0)
+    assert report.dropped_pct == 10.0 and report.gap_ms["p50"] == pytest.approx(0.02)
+
+
 def test_no_tuple_at_all_fails_every_check():
     parts = schedule(5, [0.0, 0.0])
     parts["capture"][:] = ABSENT
