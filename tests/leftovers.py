@@ -48,8 +48,16 @@ def survivors(mark: str, me: int) -> dict[int, procstat.ProcStat]:
             continue
         stat = procstat.read(int(name))
         if stat is not None and stat.running and (stat.pid in below or _marked(stat.pid, entry)):
-            found[stat.pid] = stat
+            if not _ends_with(stat, me):
+                found[stat.pid] = stat
     return found
+
+
+def _ends_with(stat: procstat.ProcStat, me: int) -> bool:
+    """Multiprocessing's resource tracker started by this pytest itself (a test used
+    multiprocessing in-process): it reads a pipe only this process holds open, so it ends when
+    this process does, and cannot end before."""
+    return stat.ppid == me and "multiprocessing.resource_tracker" in " ".join(procstat.cmdline(stat.pid))
 
 
 @pytest.hookimpl(trylast=True)  # after xdist ended its workers

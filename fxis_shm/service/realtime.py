@@ -13,6 +13,7 @@ import errno
 import os
 import resource
 import threading
+import time
 from collections.abc import Callable
 
 from fxis_shm.service import rtpolicy
@@ -91,7 +92,7 @@ def raise_threads(role_of: Callable[[str | None, str], str], priority: int) -> l
     names = {t.native_id: t.name for t in threading.enumerate()}
     names[os.getpid()] = threading.main_thread().name
     failed = []
-    for tid in _tasks("self"):
+    for tid in _settled_tasks(names):
         wanted = rtpolicy.priority_of(role_of(names.get(tid), _comm(tid)), priority)
         if wanted is None:
             continue
@@ -100,6 +101,23 @@ def raise_threads(role_of: Callable[[str | None, str], str], priority: int) -> l
         except OSError as exc:
             failed.append(f"thread {tid} ({names.get(tid) or _comm(tid)}): {exc.strerror}")
     return failed
+
+
+def _settled_tasks(names: dict[int, str], wait_s: float = 1.0) -> list[int]:
+    """This process's threads but those still being born. A thread libzmq starts sets its own
+    scheduling first thing (pthread_getschedparam, then pthread_setschedparam) and only then its
+    name: set to FIFO between those two calls, it reads the old priority with the new policy, the
+    kernel refuses the pair (EINVAL) and libzmq aborts the process. Such a newborn still carries
+    the name of the thread that made it; it is waited for (``wait_s`` at most) and else left as it
+    is, never changed mid-birth."""
+    deadline = time.monotonic() + wait_s
+    while True:
+        python_comms = {_comm(tid) for tid in names}
+        tids = _tasks("self")
+        newborn = [tid for tid in tids if tid not in names and _comm(tid) in python_comms]
+        if not newborn or time.monotonic() > deadline:
+            return [tid for tid in tids if tid not in newborn]
+        time.sleep(0.005)
 
 
 def threads_of(pid: int) -> dict[int, tuple[int, int]]:
