@@ -153,7 +153,7 @@ def test_a_grab_stopped_by_a_signal_keeps_the_images_written_and_says_which(larg
 
 def test_kill_9_leaves_a_partial_snapshot_that_a_rerun_keeps_and_recover_repairs(cell, tmp_path):
     out, partial = tmp_path / "k", tmp_path / "k.partial"
-    proc = start("snapshot", "--endpoint", cell.endpoint, "--out", str(out), "--before", "1", "--after", "5")
+    proc = start("snapshot", "--endpoint", cell.endpoint, "--out", str(out), "--before", "0.5", "--after", "5")
     mcap = partial / "k_0.mcap"
     kill_9_once_written(proc, mcap, 2_000_000)
     size = mcap.stat().st_size
