@@ -1,0 +1,93 @@
+"""The LeRobot camera plugin (issue 44, items 1 and 4) with the real lerobot 0.4.4, in its own
+venv (.venv-lerobot, made by `make test`): LeRobot imports lerobot_camera_fxis through
+register_third_party_plugins(), builds 3 fxis cameras from config dicts with
+make_cameras_from_configs (2 on one emulated host, 1 on another, each host with its own clock)
+and a loop of read_latest() gets, every tick, the frames of one joint tuple: the frame ids
+stamped into the pixels are the tuple's, and its skew is the least the cameras' phases allow.
+bench/compare/lerobot_sync.py measures it beside LeRobot-style independent reads."""
+
+import json
+import os
+import subprocess
+
+import pytest
+
+pytestmark = pytest.mark.integration
+
+ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+LEROBOT_PYTHON = os.path.join(ROOT, ".venv-lerobot", "bin", "python")
+FPS = 30
+PERIOD_NS = 1e9 / FPS
+TICKS = 40
+MARGIN_NS = 2_000_000  # the clocks' estimate across hosts and the cameras' timer lateness
+TIMEOUT_S = 15.0  # CurveZMQ handshakes on a loaded machine
+
+needs_venv = pytest.mark.skipif(
+    not os.path.exists(os.path.join(ROOT, ".venv-lerobot", ".installed")),
+    reason="no .venv-lerobot (lerobot 0.4.4 with the plugin): `make .venv-lerobot/.installed` makes it",
+)
+
+
+@pytest.fixture(scope="module")
+def robot_cameras(module_hosts):
+    """Two cameras on one emulated host, one on another, each host with its own clock."""
+    station = module_hosts.host(clock_offset_s=1000)
+    arm = module_hosts.host(clock_offset_s=3000)
+    overview = station.service(
+        "--camera", f"top=synthetic:fps={FPS},width=64,height=48",
+        "--camera", f"side=synthetic:fps={FPS},phase_ms=9,width=64,height=48",
+    )  # fmt: skip
+    wrist = arm.service("--camera", f"wrist=synthetic:fps={FPS},width=80,height=60")
+    server_key, client_key = module_hosts.key_files
+    endpoints = [overview.endpoint, wrist.endpoint]
+    common = {"type": "fxis", "endpoint": endpoints, "server_key": server_key, "client_key": client_key}
+    common |= {"fps": FPS, "request_timeout_s": TIMEOUT_S, "warmup_s": TIMEOUT_S, "max_skew_ms": 1e3 / FPS}
+    cameras = {
+        "top": {**common, "camera": "top", "width": 64, "height": 48},
+        "side": {**common, "camera": "side"},
+        "wrist": {**common, "camera": "wrist", "width": 80, "height": 60},
+    }
+    yield {"cameras": cameras, "find_endpoints": endpoints, "keys": [server_key, client_key]}
+
+
+@needs_venv
+def test_lerobot_reads_one_joint_tuple_per_tick_across_hosts(robot_cameras):
+    spec = {**robot_cameras, "ticks": TICKS, "fps": FPS}
+    seen = _run_in_lerobot(spec)
+    assert seen["types"] == {"top": "fxis", "side": "fxis", "wrist": "fxis"}
+    assert seen["classes"] == {"top": "FxisCamera", "side": "FxisCamera", "wrist": "FxisCamera"}
+    assert "configured width=1" in seen["wrong_width"]
+    assert seen["found"] == ["side", "top", "wrist"]
+    ticks = seen["ticks"]
+    assert len(ticks) == TICKS
+    for tick in ticks:
+        assert tick["top"]["shape"] == [48, 64, 3] and tick["wrist"]["shape"] == [60, 80, 3]
+        records = [cam["record"] for cam in tick.values()]
+        assert all(r == records[0] for r in records), "the cameras of a tick answered from different tuples"
+        record = records[0]
+        for key, cam in tick.items():
+            assert cam["stamp"] == record["frame_id"][key], f"{key}'s pixels are not the tuple's frame"
+        times = list(record["t_capture"].values())
+        assert record["skew_ns"] == max(times) - min(times)
+        assert record["skew_ns"] <= _least_skew(times) + MARGIN_NS, f"tick {record['tick']} is not the joint tuple"
+    assert len({tick["top"]["record"]["tick"] for tick in ticks}) == TICKS  # a new tuple every tick
+    assert seen["kept_stamps"] == {key: ticks[0][key]["stamp"] for key in ticks[0]}  # images LeRobot keeps stay
+    assert seen["connected_after"] == [False, False, False]
+
+
+def _least_skew(times: list[int]) -> float:
+    """The least spread of one frame per camera that the cameras' phases allow (same fps, no
+    jitter: each camera's frames lie on its own phase, once a period)."""
+    phases = sorted(t % PERIOD_NS for t in times)
+    gaps = [b - a for a, b in zip(phases, phases[1:])] + [phases[0] + PERIOD_NS - phases[-1]]
+    return PERIOD_NS - max(gaps)
+
+
+def _run_in_lerobot(spec: dict) -> dict:
+    env = {**os.environ, "FXIS_PURE_PYTHON": "1"}
+    script = os.path.join(ROOT, "tests", "integration", "lerobot_reads.py")
+    done = subprocess.run(
+        [LEROBOT_PYTHON, script, json.dumps(spec)], capture_output=True, text=True, timeout=120, env=env, cwd=ROOT
+    )
+    assert done.returncode == 0, done.stderr[-3000:]
+    return json.loads(done.stdout.strip().splitlines()[-1])
