@@ -56,7 +56,8 @@ def main(spec: dict) -> dict:
         )
     seen["ticks"] = ticks
     seen["kept_stamps"] = {key: stamp_of(image) for key, image in first_images.items()}
-    seen["found"] = sorted(c["name"] for c in type(next(iter(cameras.values()))).find_cameras(spec["find_endpoints"]))
+    found = type(next(iter(cameras.values()))).find_cameras(spec["find_endpoints"], *spec["keys"])
+    seen["found"] = sorted(c["name"] for c in found)
     for cam in cameras.values():
         cam.disconnect()
     seen["connected_after"] = [cam.is_connected for cam in cameras.values()]

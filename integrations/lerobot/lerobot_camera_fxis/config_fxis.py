@@ -25,7 +25,7 @@ class FxisCameraConfig(CameraConfig):  # type: ignore[misc]
     one tuple per tick."""
 
     camera: str
-    endpoint: str | list[str] = "tcp://127.0.0.1:5555"
+    endpoint: list[str] | str = "tcp://127.0.0.1:5555"  # list first: draccus tries the union in order
     server_key: str | None = None
     client_key: str | None = None
     sync: str = "tuple"

@@ -30,6 +30,7 @@ class FxisCamera(Camera):  # type: ignore[misc]
         self.color_mode = ColorMode(config.color_mode)
         self.rotation: int | None = get_cv2_rotation(config.rotation)
         self._source: TupleSource | None = None
+        self._period_ns = 0
         self.last_record: TickRecord | None = None
 
     def __str__(self) -> str:
@@ -84,18 +85,15 @@ class FxisCamera(Camera):  # type: ignore[misc]
             if not source.members:
                 source.leave(c.camera)  # closes the client this camera alone made
             raise
-        source.join(c.camera)
+        source.join(c.camera, self._period_ns)
         self._source = source
-        if warmup:
-            deadline = time.monotonic() + c.warmup_s
-            while True:
-                try:
-                    self.async_read(timeout_ms=max(c.warmup_s * 1e3, 200))
-                    break
-                except (TimeoutError, RuntimeError):
-                    if time.monotonic() > deadline:
-                        self.disconnect()
-                        raise
+        if warmup:  # one frame of this camera alone, through the colour and rotation steps; no tick
+            try:
+                frame = source.client.image(c.camera, wait="next", timeout=c.warmup_s)
+                self._postprocess(frame.image, None)
+            except FxisError as exc:
+                self.disconnect()
+                raise TimeoutError(f"{self}: no frame within warmup_s={c.warmup_s}: {exc}") from exc
 
     def _check_against_service(self, source: TupleSource) -> None:
         """Width, height and fps as configured (LeRobot fixed its features' shapes from them)."""
@@ -118,33 +116,34 @@ class FxisCamera(Camera):  # type: ignore[misc]
         if self.fps is not None and fps and abs(self.fps - fps) > 0.01 * self.fps:
             raise RuntimeError(f"{self}: configured fps={self.fps}, but the fxis camera runs at fps={fps}")
         self.width, self.height = width, height
+        self._period_ns = round(1e9 / (fps or self.fps or 30))
         if self.fps is None and fps:
             self.fps = round(fps)
 
     def read(self, color_mode: ColorMode | None = None) -> np.ndarray:
         """A frame of a new tuple (blocking up to the request timeout)."""
-        return self._read("next", self.config.request_timeout_s, color_mode)
+        return self._read(False, self.config.request_timeout_s, color_mode)
 
     def async_read(self, timeout_ms: float = 200) -> np.ndarray:
         """A frame of the next tuple, waiting for new frames up to ``timeout_ms`` (TimeoutError)."""
-        return self._read("next", timeout_ms / 1e3, None)
+        return self._read(False, timeout_ms / 1e3, None)
 
     def read_latest(self, max_age_ms: int = 500) -> np.ndarray:
-        """This tick's frame, without waiting for new frames: the joint tuple nearest now.
-        TimeoutError when the frame is older than ``max_age_ms``."""
-        frame_image, record = self._take("none", None)
+        """This tick's frame, of the best tuple already stored (TupleSource.take), without
+        waiting for new frames. TimeoutError when the frame is older than ``max_age_ms``."""
+        frame_image, record = self._take(True, None)
         age_ms = (time.monotonic_ns() - record.t_capture[self.config.camera]) / 1e6
         if age_ms > max_age_ms:
             raise TimeoutError(f"{self} latest frame is too old: {age_ms:.1f} ms (max allowed: {max_age_ms} ms).")
         return self._postprocess(frame_image, None)
 
-    def _read(self, wait: str, timeout_s: float | None, color_mode: ColorMode | None) -> np.ndarray:
-        frame_image, _ = self._take(wait, timeout_s)
+    def _read(self, stored: bool, timeout_s: float | None, color_mode: ColorMode | None) -> np.ndarray:
+        frame_image, _ = self._take(stored, timeout_s)
         return self._postprocess(frame_image, color_mode)
 
-    def _take(self, wait: str, timeout_s: float | None) -> tuple[np.ndarray, TickRecord]:
+    def _take(self, stored: bool, timeout_s: float | None) -> tuple[np.ndarray, TickRecord]:
         try:
-            frame, record = self.source.take(self.config.camera, wait=wait, timeout_s=timeout_s)
+            frame, record = self.source.take(self.config.camera, stored=stored, timeout_s=timeout_s)
         except (FrameTimeout, RequestTimeout) as exc:
             raise TimeoutError(f"Timed out waiting for frame from camera {self}: {exc}") from exc
         except FxisError as exc:

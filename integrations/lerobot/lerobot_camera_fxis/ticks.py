@@ -49,6 +49,7 @@ class TupleSource:
         self.client: Any = Client(target, timeout=timeout_s, keys=keys)
         self.capture_lead_ns = int(lead_ms * 1e6)
         self.members: set[str] = set()
+        self._periods: dict[str, int] = {}  # each member's frame period, ns
         self.current: FrameTuple | None = None
         self.record: TickRecord | None = None
         self._taken: set[str] = set()
@@ -56,38 +57,46 @@ class TupleSource:
         self._lock = threading.Lock()
         self._on_empty = on_empty
 
-    def join(self, camera: str) -> None:
+    def join(self, camera: str, period_ns: int) -> None:
+        """``camera`` is in every tuple from the next tick on, which starts with the next read."""
         with self._lock:
             self.members.add(camera)
+            self._periods[camera] = period_ns
+            self.current = None
 
     def leave(self, camera: str) -> None:
         with self._lock:
             self.members.discard(camera)
+            self._periods.pop(camera, None)
             empty = not self.members
         if empty:
             self._on_empty(self.key)
             self.client.close()
 
-    def take(self, camera: str, *, wait: str, timeout_s: float | None) -> tuple[Any, TickRecord]:
+    def take(self, camera: str, *, stored: bool, timeout_s: float | None) -> tuple[Any, TickRecord]:
         """``camera``'s frame of the current tick's tuple, fetching the next tuple first when
-        ``camera`` already took its frame of this one (or there is none yet)."""
+        ``camera`` already took its frame of this one (or there is none yet). ``stored``: the
+        best tuple among the frames already stored (t* one period of the slowest camera ago:
+        its frames are in the rings, so the request does not wait, and the skew is the least
+        the phases allow); else the tuple of new frames nearest now (waits for them)."""
         with self._lock:
             if self.current is None or camera in self._taken or camera not in self.current:
-                self._fetch(wait, timeout_s)
+                self._fetch(stored, timeout_s)
             self._taken.add(camera)
             assert self.current is not None and self.record is not None
             return self.current[camera], self.record
 
-    def _fetch(self, wait: str, timeout_s: float | None) -> None:
+    def _fetch(self, stored: bool, timeout_s: float | None) -> None:
         cameras = sorted(self.members)
         now = self.client.clock()
+        at, wait = (now - max(self._periods.values(), default=0), "auto") if stored else (now, "next")
         if self.sync == "capture":
             tuple_ = self.client.tuple(
                 cameras, at=now + self.capture_lead_ns, capture=True, timeout=timeout_s, max_skew_ms=self.max_skew_ms
             )
         else:
             tuple_ = self.client.tuple(
-                cameras, at=now, sync="joint", wait=wait, timeout=timeout_s, max_skew_ms=self.max_skew_ms
+                cameras, at=at, sync="joint", wait=wait, timeout=timeout_s, max_skew_ms=self.max_skew_ms
             )
         self._ticks += 1
         self.current = tuple_
