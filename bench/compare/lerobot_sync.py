@@ -13,8 +13,9 @@ mono8 cameras at --fps. Each tick (a control loop at --fps) first reads the came
 independently, as LeRobot's OpenCVCamera.read_latest does (here `client.latest([cam])`, each
 camera's newest stored frame, in turn), then reads them through three FxisCamera made by
 LeRobot's make_cameras_from_configs (read_latest each). Printed: the per-tick skew (max minus
-min capture time of the tick's frames) of both, p50/p99/max in ms, and the plugin's read
-cost per tick (the three read_latest calls: one tuple request and three image copies with
+min capture time of the tick's frames) of both, p50/p99/max in ms, the age of each tick's oldest
+frame when its reads end (the plugin reads the best tuple already stored: about a period older),
+and the plugin's read cost per tick (the three read_latest calls: one tuple request and three image copies with
 their colour conversion) beside the independent reads' cost.
 """
 
@@ -32,6 +33,7 @@ def main() -> None:
     parser.add_argument("--ticks", type=int, default=600, help="control ticks measured (default 600)")
     parser.add_argument("--fps", type=int, default=30, help="the cameras' and the control loop's rate (default 30)")
     parser.add_argument("--size", default="640x480", help="the cameras' WIDTHxHEIGHT (default 640x480)")
+    parser.add_argument("--jitter-ms", type=float, default=1.0, help="the cameras' capture jitter (default 1 ms)")
     args = parser.parse_args()
     try:
         import lerobot  # noqa: F401
@@ -40,7 +42,7 @@ def main() -> None:
     from fxis_shm.service.launch import ServiceProcess
 
     width, height = (int(v) for v in args.size.split("x"))
-    small = f"fps={args.fps},width={width},height={height}"
+    small = f"fps={args.fps},width={width},height={height},jitter_ms={args.jitter_ms}"
     services = [
         ServiceProcess(["--camera", f"top=synthetic:{small}", "--camera", f"side=synthetic:{small},phase_ms=9"]),
         ServiceProcess(["--camera", f"wrist=synthetic:{small}"]),
@@ -69,7 +71,7 @@ def measure(endpoints: list[str], args: argparse.Namespace) -> None:
     owners = [Client(endpoint) for endpoint in endpoints]
     for cam in cameras.values():
         cam.connect()
-    independent, plugin, independent_cost, plugin_cost = [], [], [], []
+    independent, plugin, independent_cost, plugin_cost, independent_age, plugin_age = [], [], [], [], [], []
     period = 1 / args.fps
     next_tick = time.monotonic()
     try:
@@ -80,20 +82,28 @@ def measure(endpoints: list[str], args: argparse.Namespace) -> None:
             times = [owners[service].latest([cam])[cam].t_capture for cam, service in CAMERAS.items()]
             independent_cost.append(time.perf_counter_ns() - start)
             independent.append(max(times) - min(times))
+            independent_age.append(time.monotonic_ns() - min(times))
             start = time.perf_counter_ns()
             for cam in cameras.values():
                 cam.read_latest()
             plugin_cost.append(time.perf_counter_ns() - start)
-            plugin.append(next(iter(cameras.values())).last_record.skew_ns)
+            record = next(iter(cameras.values())).last_record
+            plugin.append(record.skew_ns)
+            plugin_age.append(time.monotonic_ns() - min(record.t_capture.values()))
     finally:
         for cam in cameras.values():
             cam.disconnect()
         for client in owners:
             client.close()
-    print(f"3 synthetic cameras {args.size} mono8 at {args.fps} fps on 2 services, {args.ticks} ticks at {args.fps} Hz")
+    print(
+        f"3 synthetic cameras {args.size} mono8 at {args.fps} fps (jitter {args.jitter_ms} ms) on 2 services, "
+        f"{args.ticks} ticks at {args.fps} Hz"
+    )
     print(f"{'per tick':44s} {'p50':>8s} {'p99':>8s} {'max':>8s}  (ms)")
     row("skew, LeRobot-style independent read_latest", independent)
     row("skew, fxis plugin (one joint tuple a tick)", plugin)
+    row("age of the oldest frame, independent", independent_age)
+    row("age of the oldest frame, fxis plugin", plugin_age)
     row("read cost, independent newest frames", independent_cost)
     row("read cost, fxis plugin (3 x read_latest)", plugin_cost)
 
