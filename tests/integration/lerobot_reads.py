@@ -64,5 +64,45 @@ def main(spec: dict) -> dict:
     return seen
 
 
+def behaviour(spec: dict) -> dict:
+    """How one camera answers as LeRobot's cameras document: errors, colour order, rotation."""
+
+    register_third_party_plugins()
+    conf = spec["camera"]
+    seen: dict = {}
+
+    def make(**changes):
+        return make_cameras_from_configs({"cam": draccus.decode(CameraConfig, {**conf, **changes})})["cam"]
+
+    def error_of(call) -> str:
+        try:
+            call()
+        except Exception as exc:  # the kind is what is checked
+            return type(exc).__name__
+        return "none"
+
+    cam = make()
+    seen["read_before_connect"] = error_of(cam.read_latest)
+    cam.connect()
+    seen["connect_twice"] = error_of(cam.connect)
+    seen["too_old"] = error_of(lambda: cam.read_latest(max_age_ms=0))
+    rgb = cam.async_read(timeout_ms=5000)
+    cam.disconnect()
+    seen["disconnect_twice"] = error_of(cam.disconnect)
+    bgr_cam = make(color_mode="bgr")
+    bgr_cam.connect()
+    bgr = bgr_cam.read()
+    bgr_cam.disconnect()
+    seen["stamp_bgr"] = read_stamp(bgr)  # fxis's bgr8 as stored: the stamp reads
+    seen["stamp_rgb_reversed"] = read_stamp(np.ascontiguousarray(rgb[:, :, ::-1]))
+    turned = make(rotation=90, width=conf["height"], height=conf["width"])
+    turned.connect()
+    seen["rotated_shape"] = list(turned.read().shape)
+    turned.disconnect()
+    seen["unknown_camera"] = error_of(lambda: make(camera="nosuch").connect())
+    return seen
+
+
 if __name__ == "__main__":
-    print(json.dumps(main(json.loads(sys.argv[1]))))
+    request = json.loads(sys.argv[1])
+    print(json.dumps(behaviour(request) if request.get("behaviour") else main(request)))

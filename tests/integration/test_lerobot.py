@@ -37,7 +37,10 @@ def robot_cameras(module_hosts):
         "--camera", f"top=synthetic:fps={FPS},width=64,height=48",
         "--camera", f"side=synthetic:fps={FPS},phase_ms=9,width=64,height=48",
     )  # fmt: skip
-    wrist = arm.service("--camera", f"wrist=synthetic:fps={FPS},width=80,height=60")
+    wrist = arm.service(
+        "--camera", f"wrist=synthetic:fps={FPS},width=80,height=60",
+        "--camera", f"colour=synthetic:fps={FPS},width=64,height=48,pixel_format=bgr8",
+    )  # fmt: skip
     server_key, client_key = module_hosts.key_files
     endpoints = [overview.endpoint, wrist.endpoint]
     common = {"type": "fxis", "endpoint": endpoints, "server_key": server_key, "client_key": client_key}
@@ -47,17 +50,19 @@ def robot_cameras(module_hosts):
         "side": {**common, "camera": "side"},
         "wrist": {**common, "camera": "wrist", "width": 80, "height": 60},
     }
-    yield {"cameras": cameras, "find_endpoints": endpoints, "keys": [server_key, client_key]}
+    colour = {**common, "camera": "colour", "width": 64, "height": 48}
+    yield {"cameras": cameras, "find_endpoints": endpoints, "keys": [server_key, client_key], "colour": colour}
 
 
 @needs_venv
 def test_lerobot_reads_one_joint_tuple_per_tick_across_hosts(robot_cameras):
     spec = {**robot_cameras, "ticks": TICKS, "fps": FPS}
+    del spec["colour"]
     seen = _run_in_lerobot(spec)
     assert seen["types"] == {"top": "fxis", "side": "fxis", "wrist": "fxis"}
     assert seen["classes"] == {"top": "FxisCamera", "side": "FxisCamera", "wrist": "FxisCamera"}
     assert "configured width=1" in seen["wrong_width"]
-    assert seen["found"] == ["side", "top", "wrist"]
+    assert seen["found"] == ["colour", "side", "top", "wrist"]
     ticks = seen["ticks"]
     assert len(ticks) == TICKS
     for tick in ticks:
@@ -73,6 +78,19 @@ def test_lerobot_reads_one_joint_tuple_per_tick_across_hosts(robot_cameras):
     assert len({tick["top"]["record"]["tick"] for tick in ticks}) == TICKS  # a new tuple every tick
     assert seen["kept_stamps"] == {key: ticks[0][key]["stamp"] for key in ticks[0]}  # images LeRobot keeps stay
     assert seen["connected_after"] == [False, False, False]
+
+
+@needs_venv
+def test_a_camera_answers_as_lerobots_cameras_do(robot_cameras):
+    seen = _run_in_lerobot({"behaviour": True, "camera": robot_cameras["colour"]})
+    assert seen["read_before_connect"] == "DeviceNotConnectedError"
+    assert seen["connect_twice"] == "DeviceAlreadyConnectedError"
+    assert seen["too_old"] == "TimeoutError"
+    assert seen["disconnect_twice"] == "DeviceNotConnectedError"
+    assert seen["stamp_bgr"] is not None  # bgr: fxis's bytes as stored
+    assert seen["stamp_rgb_reversed"] is not None  # rgb (the default): the channels reversed
+    assert seen["rotated_shape"] == [64, 48, 3]
+    assert seen["unknown_camera"] == "ValueError"
 
 
 def _least_skew(times: list[int]) -> float:
