@@ -102,10 +102,9 @@ def _least_skew(times: list[int]) -> float:
 
 
 def _run_in_lerobot(spec: dict) -> dict:
-    env = {**os.environ, "FXIS_PURE_PYTHON": "1"}
     script = os.path.join(ROOT, "tests", "integration", "lerobot_reads.py")
     done = subprocess.run(
-        [LEROBOT_PYTHON, script, json.dumps(spec)], capture_output=True, text=True, timeout=120, env=env, cwd=ROOT
+        [LEROBOT_PYTHON, script, json.dumps(spec)], capture_output=True, text=True, timeout=120, cwd=ROOT
     )
     assert done.returncode == 0, done.stderr[-3000:]
     return json.loads(done.stdout.strip().splitlines()[-1])
