@@ -15,7 +15,8 @@ import pytest
 pytestmark = pytest.mark.integration
 
 ROOT = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-LEROBOT_PYTHON = os.path.join(ROOT, ".venv-lerobot", "bin", "python")
+# another lerobot's venv (with fxis-shm and the plugin) by hand: FXIS_LEROBOT_PYTHON=/path/bin/python
+LEROBOT_PYTHON = os.environ.get("FXIS_LEROBOT_PYTHON", os.path.join(ROOT, ".venv-lerobot", "bin", "python"))
 FPS = 30
 PERIOD_NS = 1e9 / FPS
 TICKS = 40
