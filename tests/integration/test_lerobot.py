@@ -94,6 +94,24 @@ def test_a_camera_answers_as_lerobots_cameras_do(robot_cameras):
     assert seen["unknown_camera"] == "ValueError"
 
 
+@needs_venv
+def test_capture_mode_triggers_the_robots_cameras_at_each_tick(start_service):
+    spec = [f"synthetic:trigger=software,fps={FPS},width=64,height=48", f"synthetic:fps={FPS},width=64,height=48"]
+    a = start_service("--camera", f"trig_a={spec[0]}")
+    b = start_service("--camera", f"trig_b={spec[0]}", "--camera", f"free={spec[1]}")
+    common = {"type": "fxis", "endpoint": [a.endpoint, b.endpoint], "sync": "capture", "warmup_s": TIMEOUT_S}
+    cameras = {name: {**common, "camera": name} for name in ("trig_a", "trig_b", "free")}
+    seen = _run_in_lerobot({"cameras": cameras, "ticks": 10, "fps": FPS, "find_endpoints": [a.endpoint], "keys": []})
+    assert len({tick["free"]["record"]["tick"] for tick in seen["ticks"]}) == 10  # a capture every tick
+    for tick in seen["ticks"]:
+        record = tick["trig_a"]["record"]
+        assert all(cam["record"] == record for cam in tick.values())
+        assert all(cam["stamp"] == record["frame_id"][key] for key, cam in tick.items())
+        assert record["capture"] == {"trig_a": "scheduled", "trig_b": "scheduled", "free": "free"}
+        assert record["t_target"]["trig_a"] == record["t_target"]["trig_b"]  # one moment for both hosts' cameras
+        assert record["t_target"]["trig_a"] == record["t_request"]  # captured at the moment the tick asked for
+
+
 def _least_skew(times: list[int]) -> float:
     """The least spread of one frame per camera that the cameras' phases allow (same fps, no
     jitter: each camera's frames lie on its own phase, once a period)."""

@@ -21,13 +21,16 @@ SourceKey = tuple[tuple[str, ...], str | None, str | None, str, float | None, fl
 @dataclass(frozen=True)
 class TickRecord:
     """What one tick's tuple was: each camera's capture time and frame id (capture times in
-    the caller's clock, time.monotonic_ns), the tuple's skew and request time, and its number."""
+    the caller's clock, time.monotonic_ns), how it was captured, the tuple's skew and request
+    time, and its number."""
 
     tick: int
     t_request: int | None
     skew_ns: int
     t_capture: dict[str, int] = field(default_factory=dict)
     frame_id: dict[str, int] = field(default_factory=dict)
+    capture: dict[str, str] = field(default_factory=dict)  # "free", "scheduled" (capture at T) or "lockstep"
+    t_target: dict[str, int | None] = field(default_factory=dict)  # the moment a scheduled frame was due
 
 
 def capture_time_features(record: TickRecord, prefix: str = "observation.fxis") -> dict[str, int]:
@@ -107,6 +110,8 @@ class TupleSource:
             skew_ns=tuple_.skew_ns,
             t_capture={cam: tuple_[cam].t_capture for cam in tuple_},
             frame_id={cam: tuple_[cam].frame_id for cam in tuple_},
+            capture={cam: tuple_[cam].capture for cam in tuple_},
+            t_target={cam: tuple_[cam].t_target for cam in tuple_},
         )
 
 
