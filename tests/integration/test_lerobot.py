@@ -100,6 +100,7 @@ def test_capture_mode_triggers_the_robots_cameras_at_each_tick(start_service):
     a = start_service("--camera", f"trig_a={spec[0]}")
     b = start_service("--camera", f"trig_b={spec[0]}", "--camera", f"free={spec[1]}")
     common = {"type": "fxis", "endpoint": [a.endpoint, b.endpoint], "sync": "capture", "warmup_s": TIMEOUT_S}
+    common["capture_lead_ms"] = 300  # T must still be ahead when the request reaches both services, under load
     cameras = {name: {**common, "camera": name} for name in ("trig_a", "trig_b", "free")}
     seen = _run_in_lerobot({"cameras": cameras, "ticks": 10, "fps": FPS, "find_endpoints": [a.endpoint], "keys": []})
     assert len({tick["free"]["record"]["tick"] for tick in seen["ticks"]}) == 10  # a capture every tick
