@@ -51,6 +51,19 @@ ros-venvs: $(ROS_VENVS)
 	.venv-ros-jazzy/bin/python -m pip install --quiet $(ROS_JAZZY)
 	touch $@
 
+# lerobot 0.4.4 (the newest on Python 3.11) with the LeRobot camera plugin (integrations/lerobot), for
+# tests/integration/test_lerobot.py and bench/compare/lerobot_sync.py: torch is the CPU 2.13.0 wheel,
+# lerobot is installed without its torch<2.11 pin and its other requirements are installed as listed.
+.venv-lerobot/.installed: $(VENV)/.installed integrations/lerobot/pyproject.toml integrations/lerobot/lerobot-0.4.4-requirements.txt
+	$(PYTHON) -m venv .venv-lerobot
+	.venv-lerobot/bin/python -m pip install --quiet --upgrade pip
+	.venv-lerobot/bin/python -m pip install --quiet torch==2.13.0
+	.venv-lerobot/bin/python -m pip install --quiet --no-deps lerobot==0.4.4
+	.venv-lerobot/bin/python -m pip install --quiet -r integrations/lerobot/lerobot-0.4.4-requirements.txt
+	FXIS_PURE_PYTHON=1 .venv-lerobot/bin/python -m pip install --quiet -e .
+	.venv-lerobot/bin/python -m pip install --quiet --no-deps -e integrations/lerobot
+	touch $@
+
 demo: setup
 	$(BIN)/python bench/latency/paper.py
 
@@ -91,7 +104,7 @@ REALTIME := -p no:xdist -m realtime -raR --reruns 1 -p tests.rerunlog --rerun-lo
 # Last, the release wheel of this machine's Python, built from the sdist and smoke-tested in a fresh
 # venv as a user installs it (`make wheels` builds every CPython 3.10-3.13 installed here).
 PURE_LOG := .pytest_cache/pure-python.log
-test: setup lint docs $(ROS_VENVS)
+test: setup lint docs $(ROS_VENVS) .venv-lerobot/.installed
 	$(BIN)/python -c "import fxis_shm, os, sys; sys.exit(not (fxis_shm.compiled or os.environ.get('FXIS_PURE_PYTHON') == '1'))"
 	$(BIN)/python -m compileall -q fxis_shm workers tests bench examples > /dev/null
 	@mkdir -p .pytest_cache && rm -f $(RERUN_LOG)
