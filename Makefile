@@ -83,9 +83,9 @@ XDIST := $(if $(filter 0,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist 
 # No test of the parallel pass is rerun: the sync logic is tested in virtual time (tests/virtualtime,
 # tests/unit/test_virtual_sync.py), exact whatever the load, and a failure there is a defect.
 # The real-time tier: the tests marked `realtime` (pyproject.toml), which judge a real timer's
-# residuals, skews across real clocks and a file's playback rate, 7 tests today
+# residuals, skews across real clocks and a file's playback rate, 9 tests today
 # (tests/integration/test_lockstep.py 3, tests/integration/test_capture_at.py 2,
-# tests/backends/test_aravis.py 1, tests/backends/test_opencv.py 1). They run after the
+# tests/integration/test_lerobot.py 2, tests/backends/test_aravis.py 1, tests/backends/test_opencv.py 1). They run after the
 # parallel pass, alone, one at a time, their services at SCHED_FIFO (--realtime, as a cell that
 # needs its cameras in step runs them); a failed one runs once more, and every rerun is written to
 # RERUN_LOG (tests/rerunlog.py), which the run ends by listing (issue 41).

@@ -8,6 +8,9 @@ from fxis_shm.service.launch import ServiceProcess
 
 from ..conftest import assert_nothing_left, start_service, wait_until  # noqa: F401  (shared fixtures)
 
+# run by tests/integration/test_lerobot.py in the lerobot venv, never imported here (it imports lerobot)
+collect_ignore = ["lerobot_reads.py"]
+
 SMALL = "width=64,height=48"
 
 

@@ -31,14 +31,17 @@ needs_venv = pytest.mark.skipif(
 
 @pytest.fixture(scope="module")
 def robot_cameras(module_hosts):
-    """Two cameras on one emulated host, one on another, each host with its own clock."""
+    """Two cameras on one emulated host, one on another, each host with its own clock, their
+    services at SCHED_FIFO (--realtime) as a cell that needs them in step runs them."""
     station = module_hosts.host(clock_offset_s=1000)
     arm = module_hosts.host(clock_offset_s=3000)
     overview = station.service(
+        "--realtime",
         "--camera", f"top=synthetic:fps={FPS},width=64,height=48",
         "--camera", f"side=synthetic:fps={FPS},phase_ms=9,width=64,height=48",
     )  # fmt: skip
     wrist = arm.service(
+        "--realtime",
         "--camera", f"wrist=synthetic:fps={FPS},width=80,height=60",
         "--camera", f"colour=synthetic:fps={FPS},width=64,height=48,pixel_format=bgr8",
     )  # fmt: skip
@@ -99,8 +102,8 @@ def test_a_camera_answers_as_lerobots_cameras_do(robot_cameras):
 @pytest.mark.realtime  # T must still be ahead when the request reaches the services
 def test_capture_mode_triggers_the_robots_cameras_at_each_tick(start_service):
     spec = [f"synthetic:trigger=software,fps={FPS},width=64,height=48", f"synthetic:fps={FPS},width=64,height=48"]
-    a = start_service("--camera", f"trig_a={spec[0]}")
-    b = start_service("--camera", f"trig_b={spec[0]}", "--camera", f"free={spec[1]}")
+    a = start_service("--realtime", "--camera", f"trig_a={spec[0]}")
+    b = start_service("--realtime", "--camera", f"trig_b={spec[0]}", "--camera", f"free={spec[1]}")
     common = {"type": "fxis", "endpoint": [a.endpoint, b.endpoint], "sync": "capture", "warmup_s": TIMEOUT_S}
     common["capture_lead_ms"] = 300  # T must still be ahead when the request reaches both services, under load
     cameras = {name: {**common, "camera": name} for name in ("trig_a", "trig_b", "free")}
