@@ -88,7 +88,7 @@ class SettingsRequests:
         except FxisError as exc:
             return self._refused(head, str(exc))
         self.counts.published += 1
-        return {**head, **reply}
+        return {**reply, **head}  # the request's own id, never the wire's (a reply header may carry one)
 
     def _refused(self, head: dict[str, Any], why: str) -> dict[str, Any]:
         self.counts.failed("settings request", ValueError(why))

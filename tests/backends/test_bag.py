@@ -183,7 +183,7 @@ def video_bags(tmp_path_factory):
     try:
         record(svc, tmp / "rec", "--frames", "20", "--codec", "h264", "--gop", "0.3")
         with Client(svc.endpoint) as client:
-            client.snapshot(before=1.0, after=0.0, out=str(tmp / "snap"), codec="h264", cameras=["left"])
+            client.snapshot(before=0.8, after=0.0, out=str(tmp / "snap"), codec="h264", cameras=["left"])
     finally:
         stop(svc)
     return {name: (str(tmp / name), read_bag(tmp / name)) for name in ("rec", "snap")}

@@ -14,7 +14,7 @@ import pytest
 
 from fxis_shm import Client, handshake, read_stamp
 from fxis_shm.core.schedule import CAPTURE_TOLERANCE_MS
-from fxis_shm.errors import ProtocolError, ServiceError
+from fxis_shm.errors import InvalidArgument, ProtocolError, ServiceError
 
 from ..conftest import wait_until
 from .conftest import SMALL
@@ -108,7 +108,7 @@ def test_a_moment_that_cannot_be_kept_gets_a_clear_error_and_the_service_runs_on
         with pytest.raises(ServiceError, match="the horizon is 10000.0 ms") as far:
             client.image("trig", at=time.monotonic_ns() + 20 * 10**9, capture=True)
         assert past.value.code == near.code == far.value.code == "OUT_OF_RANGE"
-        with pytest.raises((ProtocolError, ServiceError), match="'capture' needs 'at'"):
+        with pytest.raises((InvalidArgument, ProtocolError, ServiceError), match="'capture' needs 'at'"):
             client.image("trig", capture=True)
         at = time.monotonic_ns() + AHEAD_NS
         assert client.image("trig", at=at, capture=True).t_target == at  # still serving

@@ -19,7 +19,9 @@ from fxis_shm.shm import procstat
 
 from .conftest import SMALL
 
-pytestmark = pytest.mark.integration
+# what runs at SCHED_FIFO, read back from /proc: in the real-time tier, alone in a fresh pytest (in the
+# parallel pass a camera worker started beside other tests once showed threads at FIFO 99)
+pytestmark = [pytest.mark.integration, pytest.mark.realtime]
 
 OTHER = (0, 0)
 TIMER, PATH = (1, DEFAULT_PRIORITY), (1, DEFAULT_PRIORITY - 1)  # SCHED_FIFO, priority

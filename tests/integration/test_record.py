@@ -115,7 +115,7 @@ def test_ctrl_c_ends_the_recording_with_a_valid_bag(cell, tmp_path):
         (["--seconds", "-1"], ["--seconds", "> 0"]),
         (["--frames", "0"], ["--frames"]),
         (["--quality", "50"], ["--quality", "jpeg"]),
-        (["--encoding", "jpeg", "--quality", "101"], ["--quality", "1 to 100"]),
+        (["--encoding", "jpeg", "--quality", "101"], ["--quality", "at most 100"]),
         (["--cameras", "left,centre"], ["--cameras", "centre", "left, right"]),
         (["--seconds", "1", "--frames", "3"], ["not allowed with"]),
         (["--encoding", "png"], ["--encoding", "invalid choice"]),

@@ -265,3 +265,20 @@ def test_a_past_moment_on_triggered_cameras_waits_for_no_frame_the_trigger_spaci
 def test_an_unknown_mode_is_an_error(cameras):
     with pytest.raises(ValueError, match="wait mode"):
         waiting_for("soon", NEWEST, NEWEST, cameras)
+
+
+def test_a_triggered_camera_asked_for_a_past_moment_waits_for_nothing_beside_a_free_camera_that_does():
+    # t* 29 ms after both newest frames, 1 ms ago: the free camera's next frame (21 ms from t*)
+    # is coming and nearer, so it is waited for; the triggered one's never comes by itself. The
+    # triggered camera is named first: the free one after it is still looked at.
+    period = 50 * MS
+    now = NEWEST + 30 * MS
+    t_star = now - MS
+    timelines = {"trig": flat([NEWEST - period, NEWEST]), "free": flat([NEWEST - period, NEWEST])}
+    states = {
+        "trig": camera(newest=NEWEST, period_ns=period, triggered=True),
+        "free": camera(newest=NEWEST, period_ns=period),
+    }
+    assert set(waiting_for(AUTO, t_star, now, states)) == {"free"}
+    choose = lambda tls: select_independent(tls, t_star)  # noqa: E731
+    assert set(waiting_for_selection(t_star, now, timelines, states, choose, period)) == {"free"}
