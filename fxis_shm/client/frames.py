@@ -27,8 +27,38 @@ FREE, SCHEDULED, LOCKSTEP, LATE = "free", "scheduled", "lockstep", "late"
 
 @dataclass(slots=True)
 class Frame:
-    """One image and what the service knows of it. Times (``t_*``) are int ns of the caller's
-    clock; ``service_t_*`` are the same moments in the service's clock."""
+    """One image and what the service knows of it.
+
+    Times (``t_*``) are int ns of the caller's clock; ``service_t_*`` are the same moments in
+    the service's clock.
+
+    Attributes
+    ----------
+    image : numpy.ndarray
+        ``(h, w)`` for mono8, ``(h, w, 3)`` BGR for bgr8; a copy the caller may keep, or a
+        read-only view of the ring slot with ``copy=False`` (check ``still_valid()``).
+    camera : str
+        The camera's name.
+    frame_id : int
+        The camera's frame counter (the synthetic camera stamps it into the pixels:
+        ``read_stamp(image) == frame_id``).
+    t_capture, t_stored, t_available : int
+        When the sensor captured it, when the ring stored it, when the worker had it whole.
+    generation : int
+        Changes when the camera's worker restarts or its stream restarts at new settings.
+    capture : str
+        ``"free"``, ``"scheduled"`` (captured for ``t_target``), ``"late"`` (captured for
+        ``t_target`` but further from it than the camera's ``capture_tolerance_ms``) or
+        ``"lockstep"`` (on the service's grid point ``t_target``).
+    t_target : int or None
+        The moment it was captured for (None for a free frame); ``residual_ns`` is how far it missed.
+    path : str
+        ``"local"`` (copied from the ring on this host) or ``"network"``.
+    encoding : str
+        How the pixels travelled: ``"raw"``, ``"jpeg"`` or ``"png"``.
+    timing : dict
+        Where the request's time went (docs/protocol.md, the timing record).
+    """
 
     image: np.ndarray
     camera: str
@@ -90,7 +120,23 @@ class ReleasedImage:
 
 
 class FrameTuple(Mapping):
-    """One frame per camera, chosen together for the request time ``t_request``."""
+    """One frame per camera, chosen together for the request time ``t_request``.
+
+    A mapping of camera name to ``Frame`` (``tuple_["left"]``, ``for name in tuple_``).
+
+    Attributes
+    ----------
+    t_request : int or None
+        t*, int ns of the caller's clock (``service_t_request``: the same in the service's).
+    skew_ns : int
+        Max minus min ``t_capture`` of its frames.
+    missing : list of str
+        Cameras left out of a ``partial=True`` tuple because they were down.
+    timing : dict
+        Where the request's time went (docs/protocol.md, the timing record).
+    path : str
+        ``"local"`` or ``"network"``, as its frames say.
+    """
 
     __slots__ = ("_frames", "t_request", "service_t_request", "timing", "missing")
 
