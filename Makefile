@@ -8,7 +8,7 @@ PYTHON ?= python3
 VENV   := .venv
 BIN    := $(VENV)/bin
 
-.PHONY: setup demo test test-quick lint clean mutation
+.PHONY: setup demo test test-quick lint clean mutation mutation-changed
 
 setup: $(VENV)/.installed
 
@@ -84,7 +84,7 @@ RERUN := --reruns 2 -raR
 # Last, scripts/test-aarch64.sh's steps on this machine's own CPU (its emulated ARM64 run is by
 # hand, 25 minutes): the ordering mode, and its pytest call over one file (its list ran above).
 PURE_LOG := .pytest_cache/pure-python.log
-test: setup lint $(ROS_VENVS)
+test: setup lint mutation-changed $(ROS_VENVS)
 	$(BIN)/python -c "import fxis_shm, os, sys; sys.exit(not (fxis_shm.compiled or os.environ.get('FXIS_PURE_PYTHON') == '1'))"
 	$(BIN)/python -m compileall -q fxis_shm workers tests bench examples > /dev/null
 	@mkdir -p .pytest_cache
@@ -110,8 +110,8 @@ lint: setup
 	$(BIN)/mypy
 	$(BIN)/lint-imports
 
-# Mutation testing of the pure core's decision modules (not part of `make test`; a few minutes on
-# 2 cores): mutmut plants one fault at a time ([tool.mutmut] in pyproject.toml) and runs the unit
+# Mutation testing of the pure core's decision modules (the full run: minutes on 2 cores; `make
+# test` runs mutation-changed, below): mutmut plants one fault at a time ([tool.mutmut] in pyproject.toml) and runs the unit
 # tests that cover it; fails if a mutant survives that docs/mutation.md does not explain.
 # Its work is left in mutants/ (`.venv/bin/mutmut show NAME` shows a mutant).
 $(VENV)/.mutation-installed: $(VENV)/.installed pyproject.toml
@@ -127,6 +127,14 @@ mutation: $(VENV)/.mutation-installed
 	@if grep -vxF -f mutants/explained.txt mutants/survivors.txt; then \
 		echo "make mutation: the mutants above survived and docs/mutation.md does not explain them"; exit 1; fi
 	@echo "make mutation: $$(wc -l < mutants/survivors.txt) surviving mutants, each explained in docs/mutation.md"
+	$(BIN)/python scripts/mutation_changed.py record
+
+# Part of `make test` (and CI): mutation over what changed since the last full run, as
+# docs/mutation-record.json (written by `make mutation`, committed) has it: every mutant of a
+# function changed since, and those a changed test killed. Fails on a survivor docs/mutation.md
+# does not explain; nothing changed: nothing to run (docs/mutation.md, "In make test").
+mutation-changed: $(VENV)/.mutation-installed
+	$(BIN)/python scripts/mutation_changed.py run
 
 clean:
 	rm -rf $(VENV) .venv-ros .venv-ros-jazzy build *.egg-info bench/results

@@ -12,13 +12,12 @@ from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.core.decisions import Context, Plan, Reject, decide
 from fxis_shm.core.engine import Pending
 from fxis_shm.core.selection import INDEPENDENT, JOINT, on_grid, select_joint
-from fxis_shm.core.snapshot import CAPTURE_FREE, CAPTURE_LOCKSTEP, SLOT, Snapshot
-from fxis_shm.core.timesearch import Timeline
+from fxis_shm.core.snapshot import CAPTURE_FREE, CAPTURE_LOCKSTEP, Snapshot
 from fxis_shm.core.waitpolicy import NONE, CameraState
 from fxis_shm.errors import Code
 from fxis_shm.wire.protocol import request_of
 
-from .timeline_helpers import MS, ring
+from .timeline_helpers import MS, ring, snapshot_of
 
 P = 50 * MS  # a 20 Hz grid
 G = 1_000 * MS  # a grid point: the others are G + k P
@@ -26,10 +25,7 @@ G = 1_000 * MS  # a grid point: the others are G + k P
 
 def lockstep(frames, capture=CAPTURE_LOCKSTEP) -> Snapshot:
     """A ring of frames ``(t_capture, grid point)``, oldest first, stored 2 ms after capture."""
-    meta = np.zeros(len(frames), dtype=SLOT)
-    for w, (t, point) in enumerate(frames):
-        meta[w] = (2 * w + 2, w, t, t + 2 * MS, t, 1, point, capture)
-    return Snapshot.of_table(Timeline([t for t, _ in frames], 0, len(frames)), 0, meta)
+    return snapshot_of([(t, point, capture) for t, point in frames])
 
 
 def tuple_reply(snaps, t_star, sync=JOINT, max_skew_ms=None) -> Plan:
