@@ -1,6 +1,7 @@
 """Mutation testing of what changed since the last full run (docs/mutation.md, "In make test").
 
-    python scripts/mutation_changed.py record   after a passing `make mutation` (its mutants/):
+    python scripts/mutation_changed.py record   after `make mutation`'s mutmut run (its mutants/): fail
+                                                 on a survivor docs/mutation.md does not explain, else
                                                  write docs/mutation-record.json
     python scripts/mutation_changed.py run      `make mutation-changed`: run mutmut over the mutants
                                                  the changes since that record may have let survive
@@ -24,8 +25,9 @@ import os
 import re
 import subprocess
 import sys
-import tomllib
 from pathlib import Path
+
+import tomllib
 
 ROOT = Path(__file__).resolve().parent.parent
 RECORD = ROOT / "docs" / "mutation-record.json"
@@ -89,12 +91,25 @@ def explained() -> set[str]:
     return set(re.findall(r"fxis_shm\.core\.[^` ]*__mutmut_[0-9]+", EXPLAINED.read_text()))
 
 
-def record() -> None:
+def unexplained(survivors: list[str], what: str) -> bool:
+    """Says which of ``survivors`` docs/mutation.md does not explain (with ``what`` they are), if any."""
+    missing = sorted(set(survivors) - explained())
+    for mutant in missing:
+        print(subprocess.run([*MUTMUT, "show", mutant], cwd=ROOT, capture_output=True, text=True).stdout)
+    if missing:
+        print("\n".join(missing))
+        print(f"{what} and docs/mutation.md does not explain them")
+    return bool(missing)
+
+
+def record() -> int:
+    survivors = sorted(m for m, s in statuses().items() if s in NOT_KILLED)
+    if unexplained(survivors, "make mutation: the mutants above survived"):
+        return 1
     killed_by: dict[str, set[str]] = {}
     for line in (ROOT / "mutants" / "killers.txt").read_text().splitlines():
         mutant, nodeid = line.split(" ", 1)
         killed_by.setdefault(test_key(nodeid), set()).add(mutant)
-    survivors = sorted(m for m, s in statuses().items() if s in NOT_KILLED)
     RECORD.write_text(
         json.dumps(
             {
@@ -109,7 +124,8 @@ def record() -> None:
         )
         + "\n"
     )
-    print(f"mutation record: {len(survivors)} survivors, killers of {sum(map(len, killed_by.values()))} mutants")
+    print(f"make mutation: {len(survivors)} surviving mutants, each explained in docs/mutation.md; recorded")
+    return 0
 
 
 def changes(old: dict) -> tuple[list[str], list[str]]:
@@ -122,16 +138,13 @@ def changes(old: dict) -> tuple[list[str], list[str]]:
 
 def run() -> int:
     old = json.loads(RECORD.read_text())
-    unexplained = sorted(set(old["survivors"]) - explained())
-    if unexplained:
-        print("\n".join(unexplained))
-        print("make mutation-changed: these mutants survived the last full run and docs/mutation.md does not explain them")
+    if unexplained(old["survivors"], "make mutation-changed: the mutants above survived the last full run"):
         return 1
     functions, tests = changes(old)
     again = {m for t in tests for m in old["killed_by"].get(t, ())}
     again = sorted(m for m in again if m.split("__mutmut_")[0] not in functions)  # those run whole below
     if not functions and not again:
-        print("make mutation-changed: no mutated function and no test that killed a mutant changed since the last full run")
+        print("make mutation-changed: no mutated function, nor a test that killed a mutant, changed since the full run")
         return 0
     print(f"make mutation-changed: {len(functions)} functions changed or new: {' '.join(functions) or '-'}")
     print(f"  {len(tests)} tests changed or removed, which killed {len(again)} mutants of unchanged functions")
@@ -139,21 +152,17 @@ def run() -> int:
         subprocess.run(["rm", "-rf", str(ROOT / "mutants")], check=True)
     names = [f"{f}__mutmut_*" for f in functions] + again
     env = {**os.environ, "FXIS_PURE_PYTHON": "1"}
-    done = subprocess.run([*MUTMUT, "run", "--max-children", "2", *names], cwd=ROOT, env=env, capture_output=True, text=True)
+    command = [*MUTMUT, "run", "--max-children", "2", *names]
+    done = subprocess.run(command, cwd=ROOT, env=env, capture_output=True, text=True)
     if done.returncode != 0 and "nothing matches" not in done.stdout + done.stderr:
         print(done.stdout[-3000:], done.stderr[-3000:], sep="\n")
         return done.returncode
-    ran = statuses()
-    survivors = sorted(m for m, s in ran.items() if s in NOT_KILLED and (m in again or m.split("__mutmut_")[0] in functions))
-    checked = sum(1 for m, s in ran.items() if s != "not checked" and (m in again or m.split("__mutmut_")[0] in functions))
-    unexplained = sorted(set(survivors) - explained())
-    for mutant in unexplained:
-        print(subprocess.run([*MUTMUT, "show", mutant], cwd=ROOT, capture_output=True, text=True).stdout)
-    if unexplained:
-        print("\n".join(unexplained))
-        print("make mutation-changed: the mutants above survived and docs/mutation.md does not explain them")
+    ran = {m: s for m, s in statuses().items() if m in again or m.split("__mutmut_")[0] in functions}
+    survivors = sorted(m for m, s in ran.items() if s in NOT_KILLED)
+    checked = sum(1 for s in ran.values() if s != "not checked")
+    if unexplained(survivors, "make mutation-changed: the mutants above survived"):
         return 1
-    print(f"make mutation-changed: {checked} mutants run, {len(survivors)} survived, each explained in docs/mutation.md")
+    print(f"make mutation-changed: {checked} mutants run, {len(survivors)} survived, each explained (docs/mutation.md)")
     return 0
 
 

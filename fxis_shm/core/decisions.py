@@ -155,12 +155,18 @@ def _near(
         for cam in p.cameras:
             if cam not in p.triggered and cam not in p.scheduled:
                 check_history(cam, snaps[cam], p.t_star, p.t_received, ctx.periods[cam])
-    grid, radius = _grid_of(snaps, first), ctx.radius_ns  # lockstep frames: held to one grid point
-    sel = on_grid(stored or choose(timelines, p.t_star), timelines, p.t_star, radius, ctx.tolerance_ns, grid, mode)
+    grid = _grid_of(snaps, first)
+
+    def answer(tolerance_ns: int, chosen: Selection | None = None) -> Selection:
+        """The reply's selection: lockstep frames held to one grid point (selection.on_grid)."""
+        sel = chosen or choose(timelines, p.t_star, tolerance_ns)
+        return on_grid(sel, timelines, p.t_star, ctx.radius_ns, tolerance_ns, grid, mode)
+
+    sel = answer(ctx.tolerance_ns, stored)
     limit = None if ctx.max_skew_ms is None else ctx.max_skew_ms * 1e6
     if p.op == "tuple" and limit is not None and sel.skew_ns > limit:
         if sel.best_skew_ns <= limit:  # the least-skew tuple meets the limit
-            sel = on_grid(choose(timelines, p.t_star, 0), timelines, p.t_star, radius, 0, grid, mode)
+            sel = answer(0)
         if sel.skew_ns > limit:
             raise Reject(
                 Code.SKEW_EXCEEDED,

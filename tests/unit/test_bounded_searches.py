@@ -72,3 +72,10 @@ def test_predictions_step_one_period_at_a_time_up_to_the_bound():
     extended, predicted = with_predictions(Timeline([90, 100], 0, 2), camera, now=121, up_to=up_to)
     assert predicted == [120, 130]  # 110 is overdue from 121 on (110 + period + delay): taken as dropped
     assert [extended.at(i) for i in range(len(extended))] == [90, 100, 120, 130]
+
+
+def test_a_camera_of_unknown_period_predicts_nothing_without_looping():
+    camera = CameraState(newest=100, period_ns=0, delay_ns=1, newest_stored=101)
+    up_to = CountedBound(135, limit=0)  # not a single step: a period of 0 would never reach it
+    timeline = Timeline([90, 100], 0, 2)
+    assert with_predictions(timeline, camera, now=0, up_to=up_to) == (timeline, [])

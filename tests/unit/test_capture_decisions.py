@@ -8,7 +8,7 @@ import pytest
 
 from fxis_shm.core.decisions import Context, Plan, Reject, Wait, decide
 from fxis_shm.core.engine import Pending
-from fxis_shm.core.snapshot import CAPTURE_FREE, CAPTURE_LOCKSTEP, CAPTURE_SCHEDULED
+from fxis_shm.core.snapshot import CAPTURE_FREE, CAPTURE_LOCKSTEP, CAPTURE_SCHEDULED, Snapshot
 from fxis_shm.core.waitpolicy import AUTO, NONE, CameraState, give_up_time
 from fxis_shm.errors import Code
 from fxis_shm.wire.protocol import request_of
@@ -27,7 +27,9 @@ def free(*times):
 
 
 def scheduled_request(cameras, scheduled, wait=AUTO, t_received=ARRIVED) -> tuple[Pending, Context]:
-    p = Pending(None, request_of("tuple", id=None, cameras=list(cameras), at=T, capture=True), list(cameras), t_received, T)
+    p = Pending(
+        None, request_of("tuple", id=None, cameras=list(cameras), at=T, capture=True), list(cameras), t_received, T
+    )
     p.scheduled = frozenset(scheduled)
     return p, Context({c: P for c in cameras}, wait, "joint", 1.0, None, 500)
 
@@ -136,3 +138,37 @@ def test_a_triggered_frame_is_never_too_old_for_the_ring():
     snaps = {"t": free(T + 300 * MS), "f": free(T - P, T, T + P)}
     plan = triggered(T + 400 * MS, snaps, {"t"}, wait=NONE)
     assert isinstance(plan, Plan) and plan.picks == [("t", 0), ("f", 2)]
+
+
+def test_a_ring_not_full_yet_without_the_scheduled_frame_waits_for_it():
+    # every frame stored after the request came, none for T, and free slots in the ring
+    snaps = {"s": snapshot_of([FOR_ANOTHER, (T + 30 * MS, 0, CAPTURE_FREE)], slots=5), "f": free(T)}
+    assert at(T + 100 * MS, snaps, {"s"}) == Wait({"s": None}, "the frames awaited from ['s']")
+
+
+class CountedRows(list):
+    """A snapshot's rows that count the reads of a scan and fail past ``limit``."""
+
+    def __init__(self, rows, limit: int):
+        super().__init__(rows)
+        self.reads, self.limit = 0, limit
+
+    def __getitem__(self, i):
+        self.reads += 1
+        assert self.reads <= self.limit, f"the scan read more than {self.limit} frames: it does not end"
+        return super().__getitem__(i)
+
+
+@pytest.mark.parametrize("stored_from", [0, 1, 3])
+def test_the_scan_for_frames_stored_after_the_trigger_ends(stored_from):
+    # frames 0 .. 2 stored from `stored_from` on after the trigger (3: none); the decision reads
+    # each a few times at most (the scan, the newest frame, the chosen one's grid point): not in a loop
+    frames = [(T + k * P, 0, CAPTURE_FREE, T - MS if k < stored_from else T + k * P) for k in range(3)]
+    snap = snapshot_of(frames)
+    counted = Snapshot(snap.timeline, snap.first_write, CountedRows(snap.rows, limit=8))
+    snaps = {"t": counted, "f": free(T, T + P, T + 2 * P)}
+    decision = triggered(T + 400 * MS, snaps, {"t"}, wait=NONE)
+    if stored_from == 3:
+        assert decision == Wait({"t": None}, "the frames awaited from ['t']")
+    else:
+        assert decision.picks[0] == ("t", stored_from)

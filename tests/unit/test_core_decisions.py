@@ -574,3 +574,12 @@ def test_timeline_errors_say_what_is_wrong():
         Timeline([1, 2, 3], 0, 4)
     with pytest.raises(ValueError, match="^no frames to search$"):
         Timeline([], 0, 0).nearest(5)
+
+
+def test_each_reference_frame_of_a_sequence_is_paired_with_the_others_frames_nearest_it_alone():
+    # b's frame 8 ms before a's frame at 5 P is its partner, though b's frame 3 ms before a's next
+    # frame (6 P) is nearer that one: each tuple is led by its own reference frame
+    snaps = two_cameras([k * P for k in range(10)], [5 * P - 8 * MS, 6 * P - 3 * MS])
+    p = pending("sequence", ["a", "b"], 5 * P, kind="consecutive", count=1, direction="after")
+    plan = decide_on(p, 20 * P, snaps, ctx({"a": P, "b": P}))
+    assert plan.groups == [[("a", 5), ("b", 0)]]

@@ -11,7 +11,7 @@ from fxis_shm.client.frames import in_caller_clock, tuple_of
 from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.core.decisions import Context, Plan, Reject, decide
 from fxis_shm.core.engine import Pending
-from fxis_shm.core.selection import INDEPENDENT, JOINT, on_grid, select_joint
+from fxis_shm.core.selection import INDEPENDENT, JOINT, Selection, on_grid, select_joint
 from fxis_shm.core.snapshot import CAPTURE_FREE, CAPTURE_LOCKSTEP, Snapshot
 from fxis_shm.core.waitpolicy import NONE, CameraState
 from fxis_shm.errors import Code
@@ -28,11 +28,11 @@ def lockstep(frames, capture=CAPTURE_LOCKSTEP) -> Snapshot:
     return snapshot_of([(t, point, capture) for t, point in frames])
 
 
-def tuple_reply(snaps, t_star, sync=JOINT, max_skew_ms=None) -> Plan:
+def tuple_reply(snaps, t_star, sync=JOINT, max_skew_ms=None, tolerance_ms=1.0) -> Plan:
     names = list(snaps)
     p = Pending(None, request_of("tuple", id=None, cameras=names, at=t_star), names, t_star + 500 * MS, t_star)
     states = {c: CameraState(s.newest, P, 2 * MS, s.newest_stored) for c, s in snaps.items()}
-    context = Context({c: P for c in names}, NONE, sync, 1.0, max_skew_ms, 500)
+    context = Context({c: P for c in names}, NONE, sync, tolerance_ms, max_skew_ms, 500)
     decision = decide(p, t_star + 500 * MS, snaps, states, context)
     assert isinstance(decision, Plan)
     return decision
@@ -157,3 +157,69 @@ def test_a_frame_tuple_says_its_grid_mismatch_in_the_callers_clock():
     assert got.grid_mismatch == {"left": G + P - 1_000, "right": G - 1_000}
     assert got.grid_mismatch == {c: got[c].t_target for c in got}  # the frames' own points
     assert "grid_mismatch={'left'" in repr(got)
+
+
+# ---- the edges of the search for a tuple of one point (each kills a mutant of make mutation) ----
+
+
+def test_a_flagged_tuple_keeps_the_least_skew_its_search_saw():
+    timelines = {"a": ring([0, 100]), "b": ring([30, 130])}
+    points = {"a": [1, 2], "b": [0, 3]}  # no point has a frame of both
+    chosen = select_joint(timelines, 116, 100, 0)
+    flagged = on_grid(Selection(chosen.index, chosen.t, 5), timelines, 116, 100, 0, lambda c, i: points[c][i], JOINT)
+    assert flagged.grid_mismatch == {"a": 2, "b": 3} and flagged.least_skew_ns == 5
+
+
+def test_a_frame_of_the_point_farther_than_a_period_from_every_candidate_is_not_matched():
+    # right captured G 200 ms late (a stalled worker) and nothing since; left's frame of G is 200 ms
+    # before every centre (t*, and the nearest frames): not a candidate, so the tuple is flagged
+    left = [(G + k * P, G + k * P) for k in range(5)]
+    snaps = {"left": lockstep(left), "right": lockstep([(G + 200 * MS, G)])}
+    plan = tuple_reply(snaps, G + 200 * MS)
+    assert picked(plan, snaps) == {"left": G + 4 * P, "right": G + 200 * MS}
+    assert plan.body["grid_mismatch"] == {"left": G + 4 * P, "right": G}
+
+
+def test_a_later_point_of_every_camera_is_found_past_an_earlier_point_one_camera_lacks():
+    # left lost G; right captured G 35 ms and G + P 30 ms late: (G + P, G + P) is the tuple of one point
+    snaps = {
+        "left": lockstep([(G - P, G - P), (G + P, G + P), (G + 2 * P, G + 2 * P)]),
+        "right": lockstep([(G + 35 * MS, G), (G + 80 * MS, G + P)]),
+    }
+    plan = tuple_reply(snaps, G + 40 * MS)
+    assert plan.picks == [("left", 1), ("right", 1)] and "grid_mismatch" not in plan.body
+    assert plan.body["skew_ns"] == 30 * MS
+
+
+def test_the_least_skewed_tuple_of_one_point_wins_when_an_earlier_point_is_more_skewed():
+    points = {"a": [1, 2, 3], "b": [0, 1, 2]}
+    skewed = {"a": ring([0, 100, 200]), "b": ring([40, 140, 220])}  # point 1: 140 apart; point 2: 120
+    least = select_joint(skewed, 116, 120, 0)
+    sel = on_grid(least, skewed, 116, 120, 0, lambda c, i: points[c][i], JOINT)
+    assert sel.t == {"a": 100, "b": 220} and sel.least_skew_ns == 120
+
+
+def test_a_free_cameras_frame_beside_a_point_is_a_candidate_only_within_a_period_of_a_centre():
+    # the tuple of point G (left's, right's captured 35 ms late); free's frame 5 ms after G is within
+    # a period of left's frame, so (G, G + 35, G + 5) with 35 ms of skew beats (.., G + 62) with 62
+    snaps = {
+        "left": lockstep([(G - P, G - P), (G, G), (G + P, G + P), (G + 2 * P, G + 2 * P)]),
+        "right": lockstep(LATE_RIGHT),
+        "free": lockstep([(G + 5 * MS, 0), (G + 62 * MS, 0)], CAPTURE_FREE),
+    }
+    plan = tuple_reply(snaps, G + 40 * MS, tolerance_ms=3.0)
+    assert plan.picks == [("left", 1), ("right", 0), ("free", 0)] and "grid_mismatch" not in plan.body
+
+
+def test_a_free_camera_beside_a_point_gets_its_frame_by_the_requests_t_star_and_tolerance():
+    # with the tuple of point G (left's G, right's G + 35): free's frame 10 ms before G makes 45 ms
+    # of skew, its frame 47 ms after G 47 ms; within the 3 ms tolerance the one nearer t* wins
+    snaps = {
+        "left": lockstep([(G - P, G - P), (G, G), (G + P, G + P), (G + 2 * P, G + 2 * P)]),
+        "right": lockstep(LATE_RIGHT),
+        "free": lockstep([(G - 10 * MS, 0), (G + 47 * MS, 0)], CAPTURE_FREE),
+    }
+    plan = tuple_reply(snaps, G + 40 * MS, tolerance_ms=3.0)
+    assert plan.picks == [("left", 1), ("right", 0), ("free", 1)] and plan.body["skew_ns"] == 47 * MS
+    strict = tuple_reply(snaps, G + 40 * MS, tolerance_ms=1.0)  # 2 ms more skew is too much
+    assert strict.picks == [("left", 1), ("right", 0), ("free", 0)] and strict.body["skew_ns"] == 45 * MS

@@ -31,10 +31,12 @@ def brute_nearest(times, t_star: int) -> int:
     return min(range(len(times)), key=lambda i: (abs(times[i] - t_star), -i))
 
 
-def snapshot_of(frames, delay_ns: int = 2 * MS) -> Snapshot:
+def snapshot_of(frames, delay_ns: int = 2 * MS, slots: int = 0) -> Snapshot:
     """A Snapshot of a ring holding ``frames``, oldest first: each ``(t_capture, t_target,
-    capture)`` (stored ``delay_ns`` after capture) or ``(t_capture, t_target, capture, t_stored)``."""
-    meta = np.zeros(max(1, len(frames)), dtype=SLOT)
+    capture)`` (stored ``delay_ns`` after capture) or ``(t_capture, t_target, capture, t_stored)``;
+    ``slots``: a ring of that many slots (default: as many as frames, a full ring)."""
+    meta = np.zeros(max(1, slots, len(frames)), dtype=SLOT)
     for w, (t, target, capture, *stored) in enumerate(frames):
         meta[w] = (2 * w + 2, w, t, stored[0] if stored else t + delay_ns, t, 1, target, capture)
-    return Snapshot.of_table(Timeline([f[0] for f in frames], 0, len(frames)), 0, meta)
+    times = [f[0] for f in frames] + [POISON] * (len(meta) - len(frames))
+    return Snapshot.of_table(Timeline(times, 0, len(frames)), 0, meta)
