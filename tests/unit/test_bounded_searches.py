@@ -12,20 +12,7 @@ import pytest
 from fxis_shm.core.timesearch import Timeline
 from fxis_shm.core.waitpolicy import CameraState, with_predictions
 
-from .timeline_helpers import ring
-
-
-class CountedReads(list):
-    """A ring's time slots that count the reads of a search and fail past ``limit``."""
-
-    def __init__(self, slots, limit: int):
-        super().__init__(slots)
-        self.reads, self.limit = 0, limit
-
-    def __getitem__(self, i):
-        self.reads += 1
-        assert self.reads <= self.limit, f"a search read more than {self.limit} slots: it does not converge"
-        return super().__getitem__(i)
+from .timeline_helpers import CountedReads, ring
 
 
 def wrapped(times: list[int], n: int, start: int) -> Timeline:

@@ -13,7 +13,7 @@ from fxis_shm.core.waitpolicy import AUTO, NONE, CameraState, give_up_time
 from fxis_shm.errors import Code
 from fxis_shm.wire.protocol import request_of
 
-from .timeline_helpers import MS, snapshot_of
+from .timeline_helpers import MS, CountedReads, snapshot_of
 
 P = 50 * MS  # frame period
 DELAY = 2 * MS  # capture to storage
@@ -146,26 +146,13 @@ def test_a_ring_not_full_yet_without_the_scheduled_frame_waits_for_it():
     assert at(T + 100 * MS, snaps, {"s"}) == Wait({"s": None}, "the frames awaited from ['s']")
 
 
-class CountedRows(list):
-    """A snapshot's rows that count the reads of a scan and fail past ``limit``."""
-
-    def __init__(self, rows, limit: int):
-        super().__init__(rows)
-        self.reads, self.limit = 0, limit
-
-    def __getitem__(self, i):
-        self.reads += 1
-        assert self.reads <= self.limit, f"the scan read more than {self.limit} frames: it does not end"
-        return super().__getitem__(i)
-
-
 @pytest.mark.parametrize("stored_from", [0, 1, 3])
 def test_the_scan_for_frames_stored_after_the_trigger_ends(stored_from):
     # frames 0 .. 2 stored from `stored_from` on after the trigger (3: none); the decision reads
     # each a few times at most (the scan, the newest frame, the chosen one's grid point): not in a loop
     frames = [(T + k * P, 0, CAPTURE_FREE, T - MS if k < stored_from else T + k * P) for k in range(3)]
     snap = snapshot_of(frames)
-    counted = Snapshot(snap.timeline, snap.first_write, CountedRows(snap.rows, limit=8))
+    counted = Snapshot(snap.timeline, snap.first_write, CountedReads(snap.rows, limit=8))
     snaps = {"t": counted, "f": free(T, T + P, T + 2 * P)}
     decision = triggered(T + 400 * MS, snaps, {"t"}, wait=NONE)
     if stored_from == 3:

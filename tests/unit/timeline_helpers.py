@@ -40,3 +40,17 @@ def snapshot_of(frames, delay_ns: int = 2 * MS, slots: int = 0) -> Snapshot:
         meta[w] = (2 * w + 2, w, t, stored[0] if stored else t + delay_ns, t, 1, target, capture)
     times = [f[0] for f in frames] + [POISON] * (len(meta) - len(frames))
     return Snapshot.of_table(Timeline(times, 0, len(frames)), 0, meta)
+
+
+class CountedReads(list):
+    """Slots (times, or a snapshot's rows) that count the reads of a loop over them and fail past
+    ``limit``: a loop that stops moving fails at once instead of hanging."""
+
+    def __init__(self, slots, limit: int):
+        super().__init__(slots)
+        self.reads, self.limit = 0, limit
+
+    def __getitem__(self, i):
+        self.reads += 1
+        assert self.reads <= self.limit, f"read more than {self.limit} slots: the loop does not end"
+        return super().__getitem__(i)
