@@ -138,7 +138,7 @@ class FrameTuple(Mapping):
         ``"local"`` or ``"network"``, as its frames say.
     """
 
-    __slots__ = ("_frames", "t_request", "service_t_request", "timing", "missing")
+    __slots__ = ("_frames", "t_request", "service_t_request", "timing", "missing", "_grid_mismatch")
 
     def __init__(
         self,
@@ -147,12 +147,22 @@ class FrameTuple(Mapping):
         timing: dict,
         missing: list[str] = (),
         service_t_request: int | None = None,
+        grid_mismatch: dict[str, int] | None = None,
     ):
         self._frames = frames
         self.t_request = t_request  # t*, in the caller's clock
         self.service_t_request = t_request if service_t_request is None else service_t_request
         self.timing = timing
         self.missing = list(missing)  # cameras left out of a partial tuple (they were down)
+        self._grid_mismatch = dict(grid_mismatch or {})
+
+    @property
+    def grid_mismatch(self) -> dict[str, int]:
+        """Empty when the tuple's lockstep frames share one grid point (or it has fewer than two).
+        Else no tuple of one point was stored near t*, and this names each lockstep camera's
+        grid point (its frame's ``t_target``, in the caller's clock): the frames are of
+        different triggers (docs/sync.md, "Tuples of one grid point")."""
+        return dict(self._grid_mismatch)
 
     @property
     def path(self) -> str:
@@ -190,7 +200,8 @@ class FrameTuple(Mapping):
 
     def __repr__(self) -> str:
         ids = {c: f.frame_id for c, f in self._frames.items()}
-        return f"FrameTuple({ids}, skew_ns={self.skew_ns})"
+        mismatch = f", grid_mismatch={self._grid_mismatch}" if self._grid_mismatch else ""
+        return f"FrameTuple({ids}, skew_ns={self.skew_ns}{mismatch})"
 
 
 # ---- decoding replies and stream messages into Frames ----
@@ -242,6 +253,8 @@ def in_caller_clock(header: dict, clock: ClockEstimate) -> dict:
         header["t_request"] = clock.to_caller(header["t_request"])
     if header.get("targets"):
         header["targets"] = [clock.to_caller(t) for t in header["targets"]]
+    if header.get("grid_mismatch"):
+        header["grid_mismatch"] = {c: clock.to_caller(t) for c, t in header["grid_mismatch"].items()}
     return header
 
 
@@ -255,6 +268,7 @@ def tuple_of(header: dict, images: list[np.ndarray], still_valid: Callable | Non
         header.get("timing", {}),
         header.get("missing", ()),
         header.get("service_t_request"),
+        header.get("grid_mismatch"),
     )
 
 
