@@ -27,8 +27,38 @@ FREE, SCHEDULED, LOCKSTEP, LATE = "free", "scheduled", "lockstep", "late"
 
 @dataclass(slots=True)
 class Frame:
-    """One image and what the service knows of it. Times (``t_*``) are int ns of the caller's
-    clock; ``service_t_*`` are the same moments in the service's clock."""
+    """One image and what the service knows of it.
+
+    Times (``t_*``) are int ns of the caller's clock; ``service_t_*`` are the same moments in
+    the service's clock.
+
+    Attributes
+    ----------
+    image : numpy.ndarray
+        ``(h, w)`` for mono8, ``(h, w, 3)`` BGR for bgr8; a copy the caller may keep, or a
+        read-only view of the ring slot with ``copy=False`` (check ``still_valid()``).
+    camera : str
+        The camera's name.
+    frame_id : int
+        The camera's frame counter (the synthetic camera stamps it into the pixels:
+        ``read_stamp(image) == frame_id``).
+    t_capture, t_stored, t_available : int
+        When the sensor captured it, when the ring stored it, when the worker had it whole.
+    generation : int
+        Changes when the camera's worker restarts or its stream restarts at new settings.
+    capture : str
+        ``"free"``, ``"scheduled"`` (captured for ``t_target``), ``"late"`` (captured for
+        ``t_target`` but further from it than the camera's ``capture_tolerance_ms``) or
+        ``"lockstep"`` (on the service's grid point ``t_target``).
+    t_target : int or None
+        The moment it was captured for (None for a free frame); ``residual_ns`` is how far it missed.
+    path : str
+        ``"local"`` (copied from the ring on this host) or ``"network"``.
+    encoding : str
+        How the pixels travelled: ``"raw"``, ``"jpeg"`` or ``"png"``.
+    timing : dict
+        Where the request's time went (docs/protocol.md, the timing record).
+    """
 
     image: np.ndarray
     camera: str
@@ -90,9 +120,25 @@ class ReleasedImage:
 
 
 class FrameTuple(Mapping):
-    """One frame per camera, chosen together for the request time ``t_request``."""
+    """One frame per camera, chosen together for the request time ``t_request``.
 
-    __slots__ = ("_frames", "t_request", "service_t_request", "timing", "missing")
+    A mapping of camera name to ``Frame`` (``tuple_["left"]``, ``for name in tuple_``).
+
+    Attributes
+    ----------
+    t_request : int or None
+        t*, int ns of the caller's clock (``service_t_request``: the same in the service's).
+    skew_ns : int
+        Max minus min ``t_capture`` of its frames.
+    missing : list of str
+        Cameras left out of a ``partial=True`` tuple because they were down.
+    timing : dict
+        Where the request's time went (docs/protocol.md, the timing record).
+    path : str
+        ``"local"`` or ``"network"``, as its frames say.
+    """
+
+    __slots__ = ("_frames", "t_request", "service_t_request", "timing", "missing", "_grid_mismatch")
 
     def __init__(
         self,
@@ -101,12 +147,22 @@ class FrameTuple(Mapping):
         timing: dict,
         missing: list[str] = (),
         service_t_request: int | None = None,
+        grid_mismatch: dict[str, int] | None = None,
     ):
         self._frames = frames
         self.t_request = t_request  # t*, in the caller's clock
         self.service_t_request = t_request if service_t_request is None else service_t_request
         self.timing = timing
         self.missing = list(missing)  # cameras left out of a partial tuple (they were down)
+        self._grid_mismatch = dict(grid_mismatch or {})
+
+    @property
+    def grid_mismatch(self) -> dict[str, int]:
+        """Empty when the tuple's lockstep frames share one grid point (or it has fewer than two).
+        Else no tuple of one point was stored near t*, and this names each lockstep camera's
+        grid point (its frame's ``t_target``, in the caller's clock): the frames are of
+        different triggers (docs/sync.md, "Tuples of one grid point")."""
+        return dict(self._grid_mismatch)
 
     @property
     def path(self) -> str:
@@ -144,7 +200,8 @@ class FrameTuple(Mapping):
 
     def __repr__(self) -> str:
         ids = {c: f.frame_id for c, f in self._frames.items()}
-        return f"FrameTuple({ids}, skew_ns={self.skew_ns})"
+        mismatch = f", grid_mismatch={self._grid_mismatch}" if self._grid_mismatch else ""
+        return f"FrameTuple({ids}, skew_ns={self.skew_ns}{mismatch})"
 
 
 # ---- decoding replies and stream messages into Frames ----
@@ -196,6 +253,8 @@ def in_caller_clock(header: dict, clock: ClockEstimate) -> dict:
         header["t_request"] = clock.to_caller(header["t_request"])
     if header.get("targets"):
         header["targets"] = [clock.to_caller(t) for t in header["targets"]]
+    if header.get("grid_mismatch"):
+        header["grid_mismatch"] = {c: clock.to_caller(t) for c, t in header["grid_mismatch"].items()}
     return header
 
 
@@ -209,6 +268,7 @@ def tuple_of(header: dict, images: list[np.ndarray], still_valid: Callable | Non
         header.get("timing", {}),
         header.get("missing", ()),
         header.get("service_t_request"),
+        header.get("grid_mismatch"),
     )
 
 

@@ -183,17 +183,58 @@ class SingleClient(RequestPaths, SocketOwner, ClientApi):
         return self._call("time", 0.0)[0]["now"]
 
     def settings(self, camera: str, *, features: bool = False) -> dict:
-        """The camera's settings: ``values`` (key: value), ``limits`` (key: type, access, cost
-        "live" or "restart", min/max/inc or choices, unit) and ``generation``; with
-        ``features``, also ``features``: every node-map feature (GenICam cameras)."""
+        """The camera's settings, as its worker last reported them.
+
+        Parameters
+        ----------
+        camera
+            The camera's name.
+        features
+            True: also ``features``, every node-map feature (Aravis and GenTL cameras).
+
+        Returns
+        -------
+        dict
+            ``values`` (key: value), ``limits`` (key: type, access, cost ``"live"`` or
+            ``"restart"``, min/max/inc or choices, unit, a note where a key does not apply in the
+            camera's mode) and ``generation``.
+
+        Raises
+        ------
+        UnknownCamera, CameraDown, RequestTimeout, ServiceError
+            As for ``image``.
+        """
         return self._settings(camera=arguments.camera_name(camera), features=features or None)
 
     def configure(self, camera: str, **values) -> dict:
-        """Change settings of ``camera``, all or none (``client.configure("left", exposure_us=2000,
-        gain=6)``). Returns ``changed`` (the values the camera took: it may round), ``cost``
-        ("live": applied between two frames; "restart": a new ring, the generation + 1),
-        ``values``, ``limits`` and ``generation``. A key the camera lacks, a read-only one or a
-        value out of range raises SettingRejected naming the limits; the camera keeps its settings."""
+        """Change settings of ``camera``, all or none: ``client.configure("left", exposure_us=2000, gain=6)``.
+
+        Parameters
+        ----------
+        camera
+            The camera's name.
+        **values
+            Setting name to new value (``client.settings(camera)["limits"]`` lists them).
+
+        Returns
+        -------
+        dict
+            ``changed`` (the values the camera took: it may round), ``cost`` (``"none"``: it had
+            them already; ``"live"``: applied between two frames; ``"restart"``: a new ring, the
+            generation + 1), ``values``, ``limits`` and ``generation``.
+
+        Raises
+        ------
+        SettingRejected
+            A key the camera lacks, a read-only one (``fps`` on the lockstep grid) or a value out
+            of range, named with its limits; the camera keeps its settings.
+        Forbidden
+            Under ``--curve-operators``, a client whose key is not an operator's.
+        Busy
+            Too many changes of this camera are waiting; ask again later.
+        InvalidArgument, UnknownCamera, CameraDown, RequestTimeout
+            As for ``image``.
+        """
         return self._settings(camera=arguments.camera_name(camera), set=arguments.setting_values(values))
 
     def _settings(self, **fields) -> dict:

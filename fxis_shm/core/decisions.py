@@ -16,8 +16,8 @@ from dataclasses import dataclass
 from typing import Any, Protocol
 
 from fxis_shm.core import sequences
-from fxis_shm.core.selection import INDEPENDENT, Selection, radius_for, select, tolerance_for
-from fxis_shm.core.snapshot import CAPTURE_LATE, CAPTURE_SCHEDULED, Snapshot
+from fxis_shm.core.selection import INDEPENDENT, GridOf, Selection, on_grid, radius_for, select, tolerance_for
+from fxis_shm.core.snapshot import CAPTURE_LATE, CAPTURE_LOCKSTEP, CAPTURE_SCHEDULED, Snapshot
 from fxis_shm.core.timesearch import Timeline
 from fxis_shm.core.waitpolicy import AUTO, NEXT, CameraState, waiting_for, waiting_for_selection
 from fxis_shm.errors import Code
@@ -155,11 +155,18 @@ def _near(
         for cam in p.cameras:
             if cam not in p.triggered and cam not in p.scheduled:
                 check_history(cam, snaps[cam], p.t_star, p.t_received, ctx.periods[cam])
-    sel = stored or choose(timelines, p.t_star)
+    grid = _grid_of(snaps, first)
+
+    def answer(tolerance_ns: int, chosen: Selection | None = None) -> Selection:
+        """The reply's selection: lockstep frames held to one grid point (selection.on_grid)."""
+        sel = chosen or choose(timelines, p.t_star, tolerance_ns)
+        return on_grid(sel, timelines, p.t_star, ctx.radius_ns, tolerance_ns, grid, mode)
+
+    sel = answer(ctx.tolerance_ns, stored)
     limit = None if ctx.max_skew_ms is None else ctx.max_skew_ms * 1e6
     if p.op == "tuple" and limit is not None and sel.skew_ns > limit:
         if sel.best_skew_ns <= limit:  # the least-skew tuple meets the limit
-            sel = choose(timelines, p.t_star, 0)
+            sel = answer(0)
         if sel.skew_ns > limit:
             raise Reject(
                 Code.SKEW_EXCEEDED,
@@ -172,7 +179,22 @@ def _near(
         body.update(skew_ns=sel.skew_ns, sync=mode)
         if p.missing:
             body["missing"] = p.missing
+        if sel.grid_mismatch:
+            body["grid_mismatch"] = dict(sel.grid_mismatch)
     return Plan(body, picks)
+
+
+def _grid_of(snaps: Mapping[str, Snapshot], first: Mapping[str, int]) -> GridOf:
+    """The grid point of a camera's frame by its index in the request's timeline of the
+    camera (which starts at snapshot index ``first[cam]``): its t_target if it was captured
+    on the lockstep grid, else 0."""
+
+    def grid(cam: str, i: int) -> int:
+        snap = snaps[cam]
+        row = snap.rows[snap.slot(first[cam] + i)]
+        return row.t_target if row is not None and row.capture == CAPTURE_LOCKSTEP else 0
+
+    return grid
 
 
 def _usable(p: Request, cam: str, snap: Snapshot) -> tuple[Timeline, int] | None:
@@ -260,8 +282,10 @@ def check_not_empty(snaps: Mapping[str, Snapshot]) -> None:
 
 
 def check_history(cam: str, snap: Snapshot, t_earliest: int, t_received: int, period_ns: int) -> None:
+    """OUT_OF_RANGE for a time more than half a period older than the camera's oldest frame:
+    the frame nearest it was overwritten, and the oldest held is not it."""
     oldest = snap.timeline.at(0)
-    if t_earliest < oldest - period_ns:
+    if 2 * (oldest - t_earliest) > period_ns:
         raise Reject(
             Code.OUT_OF_RANGE,
             f"asks for frames {(oldest - t_earliest) / 1e6:.1f} ms older than the oldest "

@@ -115,15 +115,37 @@ static int select_joint(PickCam *cams, int n, int extended, int64_t t_star, int6
     static __thread Event events[PICK_MAX_EVENTS];
     static __thread int starts[PICK_MAX_EVENTS], ends[PICK_MAX_EVENTS];
     int n_events = 0;
-    for (int k = 0; k < n; k++) { /* _candidates: the frames within radius of t*, and the nearest */
+    int64_t centres[PICK_MAX_CAMS + 1]; /* _centres: t* and each camera's nearest frame */
+    centres[0] = t_star;
+    for (int k = 0; k < n; k++)
+        centres[k + 1] = at(&cams[k], nearest(&cams[k], extended, t_star));
+    for (int k = 0; k < n; k++) { /* _candidates: the frames within radius of a centre, runs merged */
         PickCam *c = &cams[k];
-        int64_t lo = bisect_left(c, extended, t_star - radius), hi = bisect_right(c, extended, t_star + radius);
-        int64_t near = nearest(c, extended, t_star);
-        int64_t start = near < lo ? near : lo, stop = near + 1 > hi ? near + 1 : hi;
-        if (stop - start > PICK_MAX_EVENTS - n_events)
-            return PICK_UNSUPPORTED;
-        for (int64_t i = start; i < stop; i++)
-            events[n_events++] = (Event){at(c, i), i, c->rank, k};
+        int64_t lo[PICK_MAX_CAMS + 1], hi[PICK_MAX_CAMS + 1];
+        int runs = 0;
+        for (int j = 0; j <= n; j++) { /* each centre's run, kept in order of start (insertion) */
+            int64_t start = bisect_left(c, extended, centres[j] - radius);
+            int64_t stop = bisect_right(c, extended, centres[j] + radius);
+            if (start == stop)
+                continue;
+            int r = runs++;
+            for (; r > 0 && lo[r - 1] > start; r--) {
+                lo[r] = lo[r - 1];
+                hi[r] = hi[r - 1];
+            }
+            lo[r] = start;
+            hi[r] = stop;
+        }
+        int64_t emitted = 0; /* every index below this one is in events already */
+        for (int r = 0; r < runs; r++) {
+            int64_t start = lo[r] > emitted ? lo[r] : emitted;
+            if (hi[r] - start > PICK_MAX_EVENTS - n_events)
+                return PICK_UNSUPPORTED;
+            for (int64_t i = start; i < hi[r]; i++)
+                events[n_events++] = (Event){at(c, i), i, c->rank, k};
+            if (hi[r] > emitted)
+                emitted = hi[r];
+        }
     }
     qsort(events, (size_t)n_events, sizeof(Event), by_time_name_index);
     /* Two pointers: for every right end, the shortest window holding every camera. */
@@ -190,6 +212,19 @@ static int choose(PickCam *cams, int n, int joint, int extended, int64_t t_star,
         return PICK_PLAN;
     }
     return select_joint(cams, n, extended, t_star, radius, tolerance, s);
+}
+
+/* on_grid's test: do the chosen lockstep frames come from different grid points? */
+static int off_grid(PickCam *cams, int n, const Selection *s) {
+    int64_t point = 0;
+    for (int k = 0; k < n; k++) {
+        int64_t g = cams[k].grid == NULL ? 0 : cams[k].grid(&cams[k], s->index[k]);
+        if (g != 0 && point != 0 && g != point)
+            return 1;
+        if (g != 0)
+            point = g;
+    }
+    return 0;
 }
 
 /* ---- waitpolicy.py ---- */
@@ -278,18 +313,23 @@ static int decide(PickCam *cams, int n, const PickRequest *r, PickResult *result
             return PICK_REJECT;
         }
     }
-    for (int k = 0; r->check_history && k < n; k++) { /* check_history */
-        if (r->t_star < at(&cams[k], 0) - cams[k].period_ns) {
+    for (int k = 0; r->check_history && k < n; k++) { /* check_history: over half a period older */
+        if (2 * (at(&cams[k], 0) - r->t_star) > cams[k].period_ns) {
             result->reject = "OUT_OF_RANGE";
             return PICK_REJECT;
         }
     }
     if (!r->wait_auto && (status = choose(cams, n, joint, 0, r->t_star, radius, tolerance, &sel)) != PICK_PLAN)
         return status;
+    if (off_grid(cams, n, &sel))
+        return PICK_UNSUPPORTED;
     if (r->tuple && r->max_skew_ns >= 0 && (double)skew_of(&sel, n) > r->max_skew_ns) {
-        if ((double)best_skew_of(&sel, n) <= r->max_skew_ns &&
-            (status = choose(cams, n, joint, 0, r->t_star, radius, 0, &sel)) != PICK_PLAN)
-            return status;
+        if ((double)best_skew_of(&sel, n) <= r->max_skew_ns) {
+            if ((status = choose(cams, n, joint, 0, r->t_star, radius, 0, &sel)) != PICK_PLAN)
+                return status;
+            if (off_grid(cams, n, &sel))
+                return PICK_UNSUPPORTED;
+        }
         if ((double)skew_of(&sel, n) > r->max_skew_ns) {
             result->reject = "SKEW_EXCEEDED";
             return PICK_REJECT;

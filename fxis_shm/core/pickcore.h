@@ -7,7 +7,9 @@
  *
  * Pure: timelines (read through each camera's `read`) and numbers in, a decision out. What
  * the Python answers with an error, or by waiting, this answers with PICK_REJECT or
- * PICK_WAIT, and the caller lets the Python engine do it (and say why). */
+ * PICK_WAIT, and the caller lets the Python engine do it (and say why). A tuple whose
+ * lockstep frames come from different grid points (selection.on_grid: the Python then looks
+ * for a tuple of one point, or flags the reply) is PICK_UNSUPPORTED: rare, and the Python's. */
 #ifndef FXIS_PICKCORE_H
 #define FXIS_PICKCORE_H
 
@@ -29,6 +31,8 @@ typedef struct PickCam PickCam;
 struct PickCam {
     /* in */
     int64_t (*read)(PickCam *cam, int64_t i); /* t_capture of stored logical index i, oldest first */
+    int64_t (*grid)(PickCam *cam, int64_t i); /* its t_target if captured on the lockstep grid, else 0;
+                                                 NULL: no lockstep frames */
     void *source;                             /* what `read` reads */
     int64_t base;                             /* for `read`: e.g. the write index of logical index 0 */
     int64_t stored;                           /* how many frames are stored */
@@ -49,7 +53,7 @@ typedef struct {
     int tuple;                    /* op tuple (else image: independent, no skew limit) */
     int joint;                    /* sync joint (else independent) */
     int wait_auto;                /* wait auto (else none) */
-    int check_history;            /* `at` was given: a t* older than the rings is an error */
+    int check_history;            /* `at` was given: a t* over half a period older than a ring is an error */
     int64_t tolerance_setting_ns; /* int(sync_tolerance_ms * 1e6) */
     double max_skew_ns;           /* max_skew_ms * 1e6; < 0: no limit */
 } PickRequest;

@@ -19,7 +19,7 @@
  *       `now`: when the request arrived, in the service's clock (0: read the clock).
  *   decide_near(cams, t_star, now, tuple, joint, wait_auto, check_history, tolerance_ns,   (plainpick.c)
  *       max_skew_ns)  pickcore over plain timelines, for the differential tests: cams are
- *       (times, rank, period_ns, delay_ns); returns (PLAN, indices, skew_ns), (WAIT, waited
+ *       (times, rank, period_ns, delay_ns[, grid points: each frame's t_target if lockstep, else 0]); returns (PLAN, indices, skew_ns), (WAIT, waited
  *       camera positions), (REJECT, code) or (UNSUPPORTED, None).
  *
  * Liveness follows CameraHandle.down_reason: a retired ring, a worker not running (a look at
@@ -41,6 +41,7 @@
 
 
 enum { FALLBACK_RETIRED = 5, FALLBACK_DOWN = 6, FALLBACK_TORN = 7 };
+enum { CAPTURE_LOCKSTEP = 2 }; /* a slot record's `capture` (fxis_shm.core.snapshot.CAPTURES) */
 enum { OP_IMAGE = 0, OP_TUPLE = 1, OP_LATEST = 2 };
 
 typedef struct {
@@ -92,6 +93,16 @@ static int64_t ring_time(PickCam *cam, int64_t i) {
     return rec.t_capture;
 }
 
+/* pickcore's grid: t_target of write base + i if captured on the lockstep grid, else 0. */
+static int64_t ring_grid(PickCam *cam, int64_t i) {
+    Record rec;
+    if (record_of_write((const Ring *)cam->source, cam->base + i, &rec)) {
+        cam->failed = 1;
+        return 0;
+    }
+    return rec.capture == CAPTURE_LOCKSTEP ? rec.t_target : 0;
+}
+
 /* procstat.read(pid).running: the process exists and is not a zombie (or dead). */
 static int process_running(int64_t pid) {
     char path[64], buf[512];
@@ -141,6 +152,7 @@ static int look(Rings *self, Ring *r, int64_t now, PickCam *cam) {
     int64_t first = (int64_t)count > r->slots ? (int64_t)count - r->slots : 0;
     int64_t delay = load_plain(h + self->delay_at);
     cam->read = ring_time;
+    cam->grid = ring_grid;
     cam->source = r;
     cam->base = first;
     cam->stored = (int64_t)count - first;
@@ -408,7 +420,7 @@ static PyTypeObject RingsType = {
 static PyMethodDef methods[] = {
     {"decide_near", decide_near, METH_VARARGS,
      "decide_near(cams, t_star, now, tuple, joint, wait_auto, check_history, tolerance_ns, max_skew_ns): "
-     "pickcore's decision over plain timelines (cams: [(times, rank, period_ns, delay_ns), ...])."},
+     "pickcore's decision over plain timelines (cams: [(times, rank, period_ns, delay_ns[, grid]), ...])."},
     {NULL, NULL, 0, NULL},
 };
 

@@ -6,7 +6,19 @@
 #include "../core/pickcore.h"
 #include "plainpick.h"
 
+/* source: the capture times, then (with grid points) as many grid points */
 static int64_t array_time(PickCam *cam, int64_t i) { return ((const int64_t *)cam->source)[i]; }
+
+static int64_t array_grid(PickCam *cam, int64_t i) { return ((const int64_t *)cam->source)[cam->stored + i]; }
+
+static int read_ints(PyObject *list, int64_t *into) {
+    for (Py_ssize_t i = 0; i < PyList_GET_SIZE(list); i++) {
+        into[i] = PyLong_AsLongLong(PyList_GET_ITEM(list, i));
+        if (PyErr_Occurred())
+            return -1;
+    }
+    return 0;
+}
 
 PyObject *decide_near(PyObject *module, PyObject *args) {
     PyObject *cams_arg;
@@ -24,22 +36,25 @@ PyObject *decide_near(PyObject *module, PyObject *args) {
     PyObject *out = NULL;
     int k;
     for (k = 0; k < n; k++) {
-        PyObject *list;
-        if (!PyArg_ParseTuple(PyList_GET_ITEM(cams_arg, k), "O!iLL;decide_near: (times, rank, period_ns, delay_ns)",
-                              &PyList_Type, &list, &cams[k].rank, &cams[k].period_ns, &cams[k].delay_ns))
+        PyObject *list, *grid = NULL;
+        if (!PyArg_ParseTuple(PyList_GET_ITEM(cams_arg, k),
+                              "O!iLL|O!;decide_near: (times, rank, period_ns, delay_ns[, grid])", &PyList_Type, &list,
+                              &cams[k].rank, &cams[k].period_ns, &cams[k].delay_ns, &PyList_Type, &grid))
             goto done;
         Py_ssize_t count = PyList_GET_SIZE(list);
-        times[k] = PyMem_Malloc(sizeof(int64_t) * (size_t)(count ? count : 1));
+        if (grid != NULL && PyList_GET_SIZE(grid) != count) {
+            PyErr_SetString(PyExc_ValueError, "decide_near: a grid point per frame");
+            goto done;
+        }
+        times[k] = PyMem_Malloc(sizeof(int64_t) * (size_t)(count ? 2 * count : 1));
         if (times[k] == NULL) {
             PyErr_NoMemory();
             goto done;
         }
-        for (Py_ssize_t i = 0; i < count; i++) {
-            times[k][i] = PyLong_AsLongLong(PyList_GET_ITEM(list, i));
-            if (PyErr_Occurred())
-                goto done;
-        }
+        if (read_ints(list, times[k]) < 0 || (grid != NULL && read_ints(grid, times[k] + count) < 0))
+            goto done;
         cams[k].read = array_time;
+        cams[k].grid = grid == NULL ? NULL : array_grid;
         cams[k].source = times[k];
         cams[k].base = 0;
         cams[k].stored = count;

@@ -257,11 +257,13 @@ def test_interval_and_range_sequences_older_than_a_ring_are_refused_naming_the_c
     )
 
 
-def test_interval_and_range_sequences_one_period_older_than_the_ring_are_answered():
+def test_interval_and_range_sequences_half_a_period_older_than_the_ring_are_answered():
+    # b's ring starts at 5 P; the sequences reach back to 4.5 P: b's frame nearest is its oldest
     snaps = two_cameras([k * P for k in range(10)], [k * P for k in range(5, 10)])
-    for fields in ({"kind": "interval", "count": 2, "interval_ms": 50.0}, {"kind": "range", "start": 4 * P}):
+    start = 5 * P - P // 2
+    for fields in ({"kind": "interval", "count": 2, "interval_ms": 25.0}, {"kind": "range", "start": start}):
         fields.setdefault("end", 6 * P) if fields["kind"] == "range" else None
-        p = pending("sequence", ["a", "b"], 4 * P, t_received=10 * P, **fields)
+        p = pending("sequence", ["a", "b"], start, t_received=10 * P, **fields)
         assert isinstance(decide_on(p, 10 * P, snaps, ctx({"a": P, "b": P})), Plan)
 
 
@@ -447,9 +449,14 @@ def test_a_trigger_waits_for_its_frame_and_the_free_cameras_for_theirs():
 # ---- checks -----------------------------------------------------------------------------------------
 
 
-def test_history_reaches_back_one_period_before_the_oldest_frame():
+def test_history_reaches_back_half_a_period_before_the_oldest_frame():
     s = snap([10 * P, 11 * P, 12 * P])
-    check_history("a", s, 9 * P, 13 * P, P)  # exactly one period before the oldest: still answered
+    check_history("a", s, 10 * P - 25 * MS, 13 * P, P)  # exactly half a period before the oldest: answered
+    check_history("a", s, 10 * P - 12_500_000, 13 * P, 25_000_001)  # half an odd period, rounded down
+    for t_star, period in ((10 * P - 25 * MS - 1, P), (10 * P - 12_500_001, 25_000_001)):
+        with pytest.raises(Reject) as more:
+            check_history("a", s, t_star, 13 * P, period)
+        assert more.value.code == Code.OUT_OF_RANGE
     with pytest.raises(Reject) as raised:
         check_history("a", s, 10 * P - 150_050_001, 10 * P + 250_050_001, P)
     assert raised.value.code == Code.OUT_OF_RANGE
@@ -567,3 +574,12 @@ def test_timeline_errors_say_what_is_wrong():
         Timeline([1, 2, 3], 0, 4)
     with pytest.raises(ValueError, match="^no frames to search$"):
         Timeline([], 0, 0).nearest(5)
+
+
+def test_each_reference_frame_of_a_sequence_is_paired_with_the_others_frames_nearest_it_alone():
+    # b's frame 8 ms before a's frame at 5 P is its partner, though b's frame 3 ms before a's next
+    # frame (6 P) is nearer that one: each tuple is led by its own reference frame
+    snaps = two_cameras([k * P for k in range(10)], [5 * P - 8 * MS, 6 * P - 3 * MS])
+    p = pending("sequence", ["a", "b"], 5 * P, kind="consecutive", count=1, direction="after")
+    plan = decide_on(p, 20 * P, snaps, ctx({"a": P, "b": P}))
+    assert plan.groups == [[("a", 5), ("b", 0)]]

@@ -39,3 +39,14 @@ def test_the_requests_say_what_they_take_return_and_raise():
         named = {n for line in documented for n in line.split(", ")}
         parameters = set(inspect.signature(getattr(ClientApi, name)).parameters) - {"self"}
         assert parameters - named == set(), f"ClientApi.{name} does not document {parameters - named}"
+
+
+def test_the_settings_calls_and_the_frames_say_what_they_are():
+    from fxis_shm.client.frames import Frame, FrameTuple
+    from fxis_shm.client.single import SingleClient
+
+    for call in (SingleClient.settings, SingleClient.configure):
+        doc = inspect.getdoc(call) or ""
+        assert all(s in doc for s in ("Parameters\n----------", "Returns\n-------", "Raises\n------")), call
+    for kind in (Frame, FrameTuple):
+        assert "Attributes\n----------" in (inspect.getdoc(kind) or ""), kind

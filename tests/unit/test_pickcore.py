@@ -24,7 +24,7 @@ from hypothesis import event, given, settings, strategies as st
 
 from fxis_shm.core.decisions import Context, Reject, Wait, decide
 from fxis_shm.core.engine import Pending
-from fxis_shm.core.snapshot import Snapshot
+from fxis_shm.core.snapshot import CAPTURE_LOCKSTEP as LOCKSTEP, SlotMeta, Snapshot
 from fxis_shm.core.waitpolicy import CameraState
 
 from .timeline_helpers import brute_nearest, ring
@@ -46,6 +46,7 @@ class Camera:
     times: tuple[int, ...]  # capture times of the stored frames, oldest first
     period_ns: int = 100  # as measured; 0: not known yet (100: the examples' frame period)
     delay_ns: int = 0  # capture to storage
+    grid: tuple[int, ...] | None = None  # per frame: its lockstep grid point (t_target), 0 if not lockstep
 
 
 @dataclass(frozen=True)
@@ -71,7 +72,10 @@ class Case:
 def c_decision(case: Case) -> tuple:
     ranks = {name: rank for rank, name in enumerate(sorted(c.name for c in case.cameras))}
     return _fastpick.decide_near(
-        [(list(c.times), ranks[c.name], c.period_ns, c.delay_ns) for c in case.cameras],
+        [
+            (list(c.times), ranks[c.name], c.period_ns, c.delay_ns, *([list(c.grid)] if c.grid else []))
+            for c in case.cameras
+        ],
         case.t_star,
         case.now,
         int(case.op == "tuple"),
@@ -85,7 +89,12 @@ def c_decision(case: Case) -> tuple:
 
 def python_snapshot(camera: Camera, ring_start: int) -> Snapshot:
     slots = len(camera.times) + SPARE_SLOTS
-    return Snapshot(ring(list(camera.times), slots, ring_start), 0, [None] * slots)
+    rows: list[SlotMeta | None] = [None] * slots  # without a grid: never read
+    for i, point in enumerate(camera.grid or ()):
+        rows[(ring_start + i) % slots] = SlotMeta(
+            i, camera.times[i], camera.times[i], camera.times[i], 1, point, LOCKSTEP
+        )
+    return Snapshot(ring(list(camera.times), slots, ring_start), ring_start, rows)
 
 
 def python_state(camera: Camera) -> CameraState:
@@ -95,6 +104,8 @@ def python_state(camera: Camera) -> CameraState:
 
 
 def python_decision(case: Case) -> tuple:
+    """The Python's decision as the C says it; a plan whose lockstep frames are of different grid
+    points also says so: (PLAN, indices, skew_ns, {camera: grid point})."""
     names = [c.name for c in case.cameras]
     request = Pending(None, {"op": case.op, "at": case.t_star if case.at_given else None}, names, case.now, case.t_star)
     snaps = {c.name: python_snapshot(c, case.ring_start) for c in case.cameras}
@@ -108,7 +119,8 @@ def python_decision(case: Case) -> tuple:
     if isinstance(decision, Wait):
         return WAIT, tuple(sorted(names.index(name) for name in decision.until))
     assert [name for name, _ in decision.picks] == names  # the frames in the order asked
-    return PLAN, tuple(index for _, index in decision.picks), decision.body.get("skew_ns", 0)
+    plan = PLAN, tuple(index for _, index in decision.picks), decision.body.get("skew_ns", 0)
+    return (*plan, decision.body["grid_mismatch"]) if "grid_mismatch" in decision.body else plan
 
 
 def decided_alike(case: Case) -> tuple:
@@ -117,6 +129,22 @@ def decided_alike(case: Case) -> tuple:
     assert in_c[0] != UNSUPPORTED, "pickcore gave up on a case within its caps"
     assert in_c == python_decision(case)
     return in_c
+
+
+def decided_alike_on_grid(case: Case) -> tuple:
+    """The decision both make, or the Python's where the C leaves it to the Python: a tuple whose
+    lockstep frames are of different grid points (the Python then answers with a tuple of one
+    point, or flags it). Off the grid, the C decides as without grid points."""
+    in_c, in_python = c_decision(case), python_decision(case)
+    without_grid = replace(case, cameras=tuple(replace(c, grid=None) for c in case.cameras))
+    if in_c[0] != UNSUPPORTED:
+        assert in_c == in_python == c_decision(without_grid)
+        return in_c
+    if in_python[0] == REJECT:  # a tuple of one point, more skewed than max_skew_ms allows
+        assert in_python[1] == "SKEW_EXCEEDED"
+    else:
+        assert in_python[0] == PLAN and (len(in_python) == 4 or in_python != python_decision(without_grid))
+    return in_python
 
 
 # ---- the cases hypothesis draws ----------------------------------------------------------------
@@ -282,6 +310,40 @@ def test_c_and_python_decide_alike_at_the_tolerance_and_max_skew_boundaries(case
     event(outcome(decided_alike(case)))
 
 
+@st.composite
+def lockstep_cases(draw) -> Case:
+    """Synchronized cameras on one lockstep grid (each frame's grid point its pulse's time), some
+    frames captured late (by up to 80 % of the spacing), now and then a camera free-running."""
+    case = draw(cases(SYNCHRONIZED_TUPLES))
+    cameras = []
+    for camera in case.cameras:
+        if not camera.times or draw(st.integers(0, 4)) == 0:
+            cameras.append(camera)
+            continue
+        spacing = max(1, camera.period_ns)
+        late, times = (
+            draw(
+                st.lists(
+                    st.sampled_from([0, 0, 0, 1, spacing // 3, spacing * 4 // 5]),
+                    min_size=len(camera.times),
+                    max_size=len(camera.times),
+                )
+            ),
+            [],
+        )
+        for t, lateness in zip(camera.times, late):
+            times.append(max(t + lateness, times[-1] if times else t))
+        cameras.append(replace(camera, times=tuple(times), grid=camera.times))
+    return replace(case, cameras=tuple(cameras))
+
+
+@settings(max_examples=200, deadline=None)
+@given(lockstep_cases())
+def test_c_and_python_decide_alike_on_lockstep_cameras_or_the_c_leaves_it_off_the_grid(case):
+    decision = decided_alike_on_grid(case)
+    event(outcome(decision) + (" off the grid" if len(decision) == 4 or c_decision(case)[0] == UNSUPPORTED else ""))
+
+
 # ---- the tricky spots ------------------------------------------------------------------------
 
 
@@ -321,11 +383,56 @@ def test_a_camera_without_frames():
     assert decided_alike(Case(cameras, t_star=50, now=1000, wait="auto")) == (WAIT, (1,))
 
 
-def test_a_t_star_older_than_the_ring_by_more_than_a_period_is_out_of_range_when_at_is_given():
+def test_a_t_star_older_than_the_ring_by_more_than_half_a_period_is_out_of_range_when_at_is_given():
+    # the frame nearest 949 (at 900) was overwritten: the oldest held (1000) is not it
     cameras = (Camera("a", (1000, 1100)),)
-    assert decided_alike(Case(cameras, t_star=899, now=2000, at_given=True)) == (REJECT, "OUT_OF_RANGE")
-    assert decided_alike(Case(cameras, t_star=900, now=2000, at_given=True)) == (PLAN, (0,), 0)
-    assert decided_alike(Case(cameras, t_star=899, now=2000, at_given=False)) == (PLAN, (0,), 0)
+    assert decided_alike(Case(cameras, t_star=949, now=2000, at_given=True)) == (REJECT, "OUT_OF_RANGE")
+    assert decided_alike(Case(cameras, t_star=950, now=2000, at_given=True)) == (PLAN, (0,), 0)
+    assert decided_alike(Case(cameras, t_star=949, now=2000, at_given=False)) == (PLAN, (0,), 0)
+    odd = (Camera("a", (1000, 1101), period_ns=101),)  # half of 101 ns: 50.5
+    assert decided_alike(Case(odd, t_star=950, now=2000, at_given=True)) == (PLAN, (0,), 0)
+    assert decided_alike(Case(odd, t_star=949, now=2000, at_given=True)) == (REJECT, "OUT_OF_RANGE")
+
+
+# the case of issue 41 (tests/unit/test_selection.py), in units of 0.1 ms: lockstep grid points
+# at 10000, 10500, 11000, 11500; left and right captured 10000 1.52 and 1.57 ms late, right missed two
+ISSUE_41 = (
+    Camera("left", (10152, 10500, 11000), period_ns=500, grid=(10000, 10500, 11000)),
+    Camera("right", (10157, 11500), period_ns=500, grid=(10000, 11500)),
+)
+
+
+def test_the_tuple_of_one_grid_point_hidden_by_the_window_is_chosen_by_both():
+    assert decided_alike(Case(ISSUE_41, t_star=10700, now=20000)) == (PLAN, (0, 0), 5)
+
+
+def test_lockstep_frames_of_different_grid_points_are_left_to_the_python_which_flags_them():
+    # right's frame of 10000 was captured late, 3.5 ms after left's of 10500: the least skew pairs
+    # two grid points, and no point near t* has a frame of both (left dropped 10000)
+    cameras = (
+        Camera("left", (10500, 11000), period_ns=500, grid=(10500, 11000)),
+        Camera("right", (10465, 11500), period_ns=500, grid=(10000, 11500)),
+    )
+    case = Case(cameras, t_star=10500, now=20000)
+    assert c_decision(case) == (UNSUPPORTED, None)
+    assert python_decision(case) == (PLAN, (0, 0), 35, {"left": 10500, "right": 10000})
+    on_one_point = (cameras[0], replace(cameras[1], grid=(10500, 11500)))  # had it been captured early for 10500
+    assert decided_alike(replace(case, cameras=on_one_point)) == (PLAN, (0, 0), 35)
+
+
+def test_a_tuple_of_one_grid_point_is_preferred_to_a_less_skewed_one_of_two():
+    # right's frame of 10000 captured 3.5 ms late pairs best with left's of 10500 (skew 0.35 ms),
+    # but left's frame of 10000 is stored: the tuple of one point (skew 4.65 ms... ) wins
+    cameras = (
+        Camera("left", (10000, 10500, 11000), period_ns=500, grid=(10000, 10500, 11000)),
+        Camera("right", (10465, 11500), period_ns=500, grid=(10000, 11500)),
+    )
+    case = Case(cameras, t_star=10500, now=20000)
+    assert c_decision(case) == (UNSUPPORTED, None)
+    assert python_decision(case) == (PLAN, (0, 0), 465)
+
+
+# ---- the tricky spots ---
 
 
 def test_max_skew_rejects_or_reselects_at_zero_tolerance():

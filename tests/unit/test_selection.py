@@ -9,7 +9,7 @@ from hypothesis import given, settings, strategies as st
 
 from fxis_shm.core.selection import INDEPENDENT, JOINT, select, select_independent, select_joint
 
-from .timeline_helpers import MS, periodic, ring
+from .timeline_helpers import MS, brute_nearest, periodic, ring
 
 PERIOD_20FPS = 50 * MS
 PERIOD_60FPS = 16_666_667
@@ -142,11 +142,30 @@ def test_a_dropped_frame_is_bridged_by_the_neighbouring_tuple():
     assert joint.skew_ns == 500_000
 
 
-def test_a_camera_without_frames_near_t_star_still_gets_its_nearest_frame():
+def test_a_camera_without_frames_near_t_star_gets_its_nearest_frame_and_the_others_theirs_near_it():
     rig = {"a": ring(periodic(PERIOD_20FPS, 10)), "b": ring([5 * MS])}  # b stopped long ago
     sel = select_joint(rig, 400 * MS, radius_ns=PERIOD_20FPS)
-    # a's candidates are 350, 400 and 450 ms; the one closest to b's only frame is 350
-    assert chosen_times(sel) == {"a": 350 * MS, "b": 5 * MS}
+    # a's frames within a period of b's only frame (0 and 50 ms) are candidates beside those
+    # near t* (350, 400, 450 ms): the tuple of least skew is (0, 5)
+    assert chosen_times(sel) == {"a": 0, "b": 5 * MS}
+    assert sel.best_skew_ns == sel.skew_ns == 5 * MS
+
+
+# The case of issue 41, on its numbers: two 20 Hz lockstep cameras, grid points g .. g + 3 at
+# 1000, 1050, 1100, 1150 ms; both captured g 15 ms late (15.2 and 15.7 ms), right missed g + 1
+# and g + 2. For t* at 1070 ms, right's nearest frame (1015.7) lies outside t* +- one period, and
+# so did left's frame of g: the least-skew search paired right's g with left's g + 1, 34.3 ms
+# apart, and reported 34.3 ms as the least skew possible, while the pair of g, 0.5 ms apart, was stored.
+ISSUE_41_LEFT = [1_015_200_000, 1_050 * MS, 1_100 * MS]
+ISSUE_41_RIGHT = [1_015_700_000, 1_150 * MS]
+ISSUE_41_T_STAR = 1_070 * MS
+
+
+def test_the_window_does_not_hide_a_tuple_of_less_skew_issue_41_replayed():
+    rig = {"left": ring(ISSUE_41_LEFT), "right": ring(ISSUE_41_RIGHT)}
+    sel = select_joint(rig, ISSUE_41_T_STAR, radius_ns=PERIOD_20FPS)
+    assert chosen_times(sel) == {"left": 1_015_200_000, "right": 1_015_700_000}
+    assert sel.skew_ns == sel.best_skew_ns == 500_000
 
 
 @pytest.mark.parametrize("t_star", [-MS, 0, 25 * MS, 26 * MS, 74 * MS, 75 * MS, 10**12])
@@ -195,10 +214,11 @@ def test_select_dispatches_on_the_sync_mode():
 # ---- properties, against brute force over every combination of candidate frames ----
 
 
-def candidates(times, t_star, radius):
-    """Indices of a camera's candidate frames: within radius of t*, plus its nearest frame."""
-    nearest = min(range(len(times)), key=lambda i: (abs(times[i] - t_star), -i))
-    return sorted({i for i, t in enumerate(times) if abs(t - t_star) <= radius} | {nearest})
+def candidates(times, t_star, radius, every_times):
+    """Indices of a camera's candidate frames: within radius of t* or of any camera's nearest
+    frame (``every_times``: each camera's capture times)."""
+    centres = [t_star] + [ts[brute_nearest(ts, t_star)] for ts in every_times]
+    return sorted({i for i, t in enumerate(times) if any(abs(t - c) <= radius for c in centres)})
 
 
 def skew(ts):
@@ -234,12 +254,13 @@ def test_joint_is_the_closest_tuple_among_those_of_near_minimal_skew(scene):
     cams = sorted(logical)
     sel = select_joint(timelines, t_star, radius, tolerance)
     assert_consistent(sel, timelines)
+    every = list(logical.values())
     for cam in cams:
-        assert sel.index[cam] in candidates(logical[cam], t_star, radius)
+        assert sel.index[cam] in candidates(logical[cam], t_star, radius, every)
 
     combos = [
         [logical[cam][i] for cam, i in zip(cams, pick)]
-        for pick in itertools.product(*(candidates(logical[c], t_star, radius) for c in cams))
+        for pick in itertools.product(*(candidates(logical[c], t_star, radius, every) for c in cams))
     ]
     least_skew = min(skew(ts) for ts in combos)
     admissible = [ts for ts in combos if skew(ts) <= least_skew + tolerance]

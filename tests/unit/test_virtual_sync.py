@@ -115,7 +115,6 @@ def test_a_t_star_within_half_a_period_before_the_oldest_frame_gets_it(paper_cel
     assert paper_cell.ask(op, at=first - PERIOD - MS, **cameras).code == Code.OUT_OF_RANGE
 
 
-@pytest.mark.xfail(strict=True, reason="fixed on branch core-sync")
 @pytest.mark.parametrize("op", ["image", "tuple"])
 @pytest.mark.parametrize("before", [PERIOD, 3 * PERIOD // 5], ids=["the overwritten frame", "0.6 period"])
 def test_a_t_star_more_than_half_a_period_before_the_oldest_frame_is_refused(paper_cell, op, before):
@@ -212,7 +211,6 @@ def test_the_scripted_lockstep_gaps_happen(variant):
             assert times.at(len(times) - 1) < cell.now - 4 * PERIOD  # a's newest: five points back
 
 
-@pytest.mark.xfail(strict=True, reason="fixed on branch core-sync")
 @pytest.mark.parametrize("variant", ["late timer", "worker stall"])
 def test_lockstep_frames_of_two_grid_points_are_never_paired_silently(variant):
     """Issue 41, item 2: where camera a missed grid points, a tuple at a t* among them paired a's
