@@ -80,8 +80,8 @@ PURE_INTEGRATION := tests/integration/test_ring.py tests/integration/test_localp
 # first (tests/filetimes.py). TEST_WORKERS=0: one process, in order.
 TEST_WORKERS ?= 5
 XDIST := $(if $(filter 0,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist loadscope)
-# No test of the parallel pass is rerun: the sync logic is tested in virtual time (tests/virtualtime,
-# tests/unit/test_virtual_sync.py), exact whatever the load, and a failure there is a defect.
+# The sync logic is tested in virtual time (tests/virtualtime, tests/unit/test_virtual_sync.py),
+# exact whatever the load, and a failure there is a defect.
 # The real-time tier: the tests marked `realtime` (pyproject.toml), which judge a real timer's
 # residuals, skews across real clocks and a file's playback rate, 9 tests today
 # (tests/integration/test_lockstep.py 3, tests/integration/test_capture_at.py 2,
@@ -90,6 +90,10 @@ XDIST := $(if $(filter 0,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist 
 # needs its cameras in step runs them); a failed one runs once more, and every rerun is written to
 # RERUN_LOG (tests/rerunlog.py), which the run ends by listing (issue 41).
 RERUN_LOG := .pytest_cache/reruns.log
+# Until the parallel pass has run clean on a loaded machine three times in a row (issue 41), a test
+# of it that fails runs once more; every such rerun is in RERUN_LOG too, listed at the end of the
+# run: a test that shows there is a defect to find, in the product or the test.
+SAFETY_RERUN := --reruns 1 -p tests.rerunlog --rerun-log $(RERUN_LOG)
 REALTIME := -p no:xdist -m realtime -raR --reruns 1 -p tests.rerunlog --rerun-log $(RERUN_LOG) tests
 
 # Every process the suite starts (services, workers, `fxis` commands: over a thousand) imports the
@@ -101,8 +105,8 @@ REALTIME := -p no:xdist -m realtime -raR --reruns 1 -p tests.rerunlog --rerun-lo
 # idle, and the unit tests (55 CPU-s) get what it leaves, no more. Its report follows the main one's.
 # Then scripts/test-aarch64.sh's steps on this machine's own CPU (its emulated ARM64 run is by
 # hand, 25 minutes): the ordering mode, and its pytest call over one file (its list ran above).
-# Last, the release wheel of this machine's Python, built from the sdist and smoke-tested in a fresh
-# venv as a user installs it (`make wheels` builds every CPython 3.10-3.13 installed here).
+# Last, the release wheels of every CPython 3.10-3.13 installed here (`make wheels`), built from the
+# sdist and each smoke-tested in a fresh venv as a user installs it (scripts/build-wheels.sh).
 PURE_LOG := .pytest_cache/pure-python.log
 test: setup lint docs mutation-changed $(ROS_VENVS) .venv-lerobot/.installed
 	$(BIN)/python -c "import fxis_shm, os, sys; sys.exit(not (fxis_shm.compiled or os.environ.get('FXIS_PURE_PYTHON') == '1'))"
@@ -111,14 +115,14 @@ test: setup lint docs mutation-changed $(ROS_VENVS) .venv-lerobot/.installed
 	( export FXIS_PURE_PYTHON=1; PURE="$(BIN)/python -m pytest -q -p no:xdist -o cache_dir=.pytest_cache/pure"; \
 	  $$PURE $(PURE_INTEGRATION); services=$$?; nice -n 19 $$PURE tests/unit; exit $$((services || $$?)) \
 	) > $(PURE_LOG) 2>&1 & pure=$$!; trap 'kill $$pure 2>/dev/null' INT TERM; \
-	$(BIN)/python -m pytest $(XDIST) -m "not realtime"; main=$$?; \
+	$(BIN)/python -m pytest $(XDIST) -m "not realtime" $(SAFETY_RERUN); main=$$?; \
 	wait $$pure; pure_code=$$?; \
 	echo "== the pure-Python pass, beside the main one (FXIS_PURE_PYTHON=1; exit code $$pure_code):"; cat $(PURE_LOG); \
 	echo "== the real-time tier, alone:"; $(BIN)/python -m pytest $(REALTIME); realtime=$$?; \
 	echo "== reruns ($(RERUN_LOG)): $$(cat $(RERUN_LOG) 2>/dev/null | wc -l)"; cat $(RERUN_LOG) 2>/dev/null; \
 	test $$main -eq 0 -a $$pure_code -eq 0 -a $$realtime -eq 0
 	scripts/test-aarch64.sh --quick -q tests/unit/test_ordering.py
-	WHEEL_PYTHONS=$$($(PYTHON) -c 'import sys; print("%d.%d" % sys.version_info[:2])') scripts/build-wheels.sh .pytest_cache/wheels
+	scripts/build-wheels.sh .pytest_cache/wheels
 
 # The inner loop: every unit test and one smoke test of a real service (a tuple's pixels checked
 # against its metadata), without lint; `make test` (and CI) still runs everything.
