@@ -84,8 +84,18 @@ def client_binary(tmp_path_factory) -> Path:
 
 @pytest.fixture(scope="module")
 def cameras():
+    # 2 s of history: a moment 200 ms before the client started is still held however long the
+    # client takes to start and exchange its clock on a loaded machine (400 ms once, and a ring of
+    # 0.4 s had moved on)
     yield from module_service(
-        ["--camera", f"cam0=synthetic:fps={FPS},{SMALL}", "--camera", f"cam1=synthetic:fps={FPS},phase_ms=1,{SMALL}"]
+        [
+            "--history",
+            "2",
+            "--camera",
+            f"cam0=synthetic:fps={FPS},{SMALL}",
+            "--camera",
+            f"cam1=synthetic:fps={FPS},phase_ms=1,{SMALL}",
+        ]
     )
 
 

@@ -100,9 +100,14 @@ def test_a_past_moment_is_answered_from_what_is_stored_and_never_waits_for_a_tri
         assert re.search(rf"^{name} .* 20, captures on request ", shown, re.M), shown
 
 
+@pytest.mark.realtime  # every one of its 40 captures must land on its moment: real timers, alone, at FIFO
 def test_sync_report_asks_cameras_that_capture_on_request_at_its_own_moments(start_service, tmp_path):
     svc = start_service(
-        "--camera", f"a=synthetic:trigger=software,{SMALL}", "--camera", f"b=synthetic:trigger=software,{SMALL}"
+        "--realtime",
+        "--camera",
+        f"a=synthetic:trigger=software,{SMALL}",
+        "--camera",
+        f"b=synthetic:trigger=software,{SMALL}",
     )
     with svc.client() as client:
         wait_until(lambda: _up_and_configured(client), what="both cameras up, their configured rate known")
