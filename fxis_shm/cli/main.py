@@ -13,7 +13,7 @@ import threading
 import traceback
 from typing import NoReturn
 
-from fxis_shm.cli import dashboard, exitcodes, export, local, query, record, run, snapshot, syncreport, tune
+from fxis_shm.cli import dashboard, exitcodes, export, local, query, record, run, snapshot, syncreport, tune, view
 
 DEBUG_ENV = "FXIS_DEBUG"
 
@@ -38,6 +38,7 @@ def parser() -> argparse.ArgumentParser:
     export.add_parser(sub)
     syncreport.add_parser(sub)
     dashboard.add_parser(sub)
+    view.add_parser(sub)
     local.add_parsers(sub)
     tune.add_parsers(sub)
     for command in sub.choices.values():  # --debug after the command too (SUPPRESS: keeps one given before)

@@ -33,7 +33,7 @@ def sync_report_command(args) -> int:
     endpoints = [*args.endpoints, *([args.endpoint] if args.endpoint else [])] if args.endpoints else None
     with as_interrupts(), client_for(args, endpoints) as client:
         status = client.status()
-        cameras = _chosen(args.cameras, status["cameras"])
+        cameras = chosen_cameras(args.cameras, status["cameras"])
         set_periods = {n: 1e9 / status["cameras"][n]["fps"] for n in cameras if status["cameras"][n].get("fps")}
         rate = args.rate or (1e9 / max(set_periods.values()) if set_periods else FALLBACK_RATE_HZ)
         slots = planned_slots(args.seconds, rate)  # before the schedule: a plan of 10^9 is refused
@@ -65,7 +65,7 @@ def sync_report_command(args) -> int:
     return exitcodes.DONE if figures.passed else exitcodes.SYNC_FAILED
 
 
-def _chosen(names: str | None, known: dict) -> list[str]:
+def chosen_cameras(names: str | None, known: dict) -> list[str]:
     if not names:
         return list(known)
     chosen = [n.strip() for n in names.split(",") if n.strip()]
