@@ -21,7 +21,7 @@ $(VENV)/.installed: pyproject.toml setup.py $(COMPILED_SOURCES) scripts/install-
 	bash scripts/install-system-packages.sh
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[aravis,genicam,record,video,foxglove,ros2]" --group test --group lint --group bench --group docs --group mutation
+	$(BIN)/python -m pip install --quiet -e ".[aravis,genicam,record,video,foxglove,ros2,rerun]" --group test --group lint --group bench --group docs --group mutation
 	touch $@
 
 # Real ROS 2 nodes for the bridge's tests (tests/rclpy_peer.py), each distribution from its wheels in

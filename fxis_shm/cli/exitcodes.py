@@ -46,7 +46,8 @@ MEANINGS: dict[int, tuple[str, str, str]] = {
         "setting the camera refuses (a width beyond its maximum, a file that is not there); `fxis clean` "
         "while that service runs; video settings out of range (`--codec`, `--crf`, ... of `record` and "
         "`snapshot`); a snapshot window longer than the rings hold; `fxis export` of a bag without that "
-        "camera's video, or to an `--out` that exists",
+        "camera's video, or to an `--out` that exists; `fxis export --rerun` or `fxis view --rerun` without the "
+        "extra `rerun`, or to a file that exists",
     ),
     NO_SERVICE: (
         "a service did not answer: it is down, the endpoint is wrong, or it refuses this client's keys",
@@ -60,7 +61,7 @@ MEANINGS: dict[int, tuple[str, str, str]] = {
         "recording, refused before it starts; a camera restarted during a video recording at a size or format "
         "video cannot carry (the bag kept what came before); a refusal by the service (`CAMERA_DOWN`, "
         "`OVERRUN`, ...); a camera that did not become ready in time; `fxis cameras` whose backends did not "
-        "finish looking",
+        "finish looking; a Rerun viewer that did not take what `fxis view --rerun` logged",
     ),
     SYNC_FAILED: (
         "done, measured, and a figure missed its limit",

@@ -78,7 +78,9 @@ def add_parser(sub) -> None:
     view.add_argument("--rate", type=rate_hz, metavar="HZ", help="tuples per second (default: the slowest "
                       "camera's rate)")  # fmt: skip
     until = view.add_mutually_exclusive_group()
-    until.add_argument("--seconds", type=duration_seconds, metavar="S", help="stop after S seconds (default: at Ctrl-C)")
+    until.add_argument(
+        "--seconds", type=duration_seconds, metavar="S", help="stop after S seconds (default: at Ctrl-C)"
+    )
     until.add_argument("--tuples", type=ranged(ranges.FRAMES), metavar="N", help="stop after asking N tuples "
                        "(default: at Ctrl-C)")  # fmt: skip
     view.add_argument("--threshold-ms", type=milliseconds, default=syncstats.DEFAULT_THRESHOLD_MS, metavar="X",

@@ -20,7 +20,7 @@ from __future__ import annotations
 
 import numpy as np
 
-from fxis_shm.errors import ConfigError
+from fxis_shm.errors import ConfigError, FxisError
 
 APPLICATION_ID = "fxis"
 CAPTURE_TIME, FRAME_ID = "capture_time", "frame_id"
@@ -29,6 +29,7 @@ VIDEO_CODECS = {"h264": "H264", "h265": "H265", "av1": "AV1"}  # a CompressedVid
 # The Rerun color model of each channel count of the rings' layouts (bgr8, bgra8; mono8, mono16, 32FC1)
 COLOR_MODELS = {1: "L", 3: "BGR", 4: "BGRA"}
 WALL_CLOCKS = ("realtime", "tai")
+FLUSH_TIMEOUT_S = 10.0  # a viewer that has not taken the data by then is not there
 
 
 def require_rerun(flag: str):
@@ -121,6 +122,11 @@ class RerunLog:
         return synced
 
     def close(self) -> None:
-        """Everything logged is written (a file gets its footer) and the sink let go."""
-        self.recording.flush()
-        self.recording.disconnect()
+        """Everything logged is written (a file gets its footer) and the sink let go; FxisError
+        when a viewer did not take it within FLUSH_TIMEOUT_S (none at the URL, or it closed)."""
+        try:
+            self.recording.flush(timeout_sec=FLUSH_TIMEOUT_S)
+        except RuntimeError as exc:  # what rerun-sdk raises for a sink it cannot reach
+            raise FxisError(f"Rerun did not take what was logged: {' '.join(str(exc).split())}") from None
+        finally:
+            self.recording.disconnect()

@@ -13,11 +13,12 @@
 
 from __future__ import annotations
 
+import contextlib
 import os
 from dataclasses import dataclass, field
 
 from fxis_shm.core.syncstats import DEFAULT_THRESHOLD_MS
-from fxis_shm.errors import ConfigError, InvalidArgument
+from fxis_shm.errors import ConfigError, FxisError, InvalidArgument
 from fxis_shm.formats import rosmsgs
 from fxis_shm.formats.bagfile import RECORD, BagReader
 from fxis_shm.formats.rerunlog import RerunLog, require_rerun
@@ -36,7 +37,11 @@ class RerunExported:
 
     def describe(self) -> str:
         cameras = ", ".join(f"{cam} {n} {what}" for cam, (what, n) in self.frames.items())
-        sync = f"; {self.tuples} tuples' skew and sync verdict" if self.tuples else "; no tuples (recorded without --tuples)"
+        sync = (
+            f"; {self.tuples} tuples' skew and sync verdict"
+            if self.tuples
+            else "; no tuples (recorded without --tuples)"
+        )
         return f"{self.out}: {cameras}{sync}; timeline capture_time in {self.clock}"
 
 
@@ -62,11 +67,12 @@ def export_rerun(bag_path: str, out: str, threshold_ms: float = DEFAULT_THRESHOL
         for camera, (topic, kind) in tracks.items():
             count = _pictures(bag, log, camera, topic, kind, captures)
             done.frames[camera] = (KINDS[kind], count)
-        log.close()
     except BaseException:
-        log.close()
+        with contextlib.suppress(FxisError):
+            log.close()
         os.remove(out)  # half a recording is no export
         raise
+    log.close()
     return done
 
 

@@ -51,7 +51,9 @@ def test_a_video_bag_becomes_video_streams_of_the_same_packets_at_their_capture_
         assert rrd.static[f"/cameras/{cam}"]["VideoStream:codec"] == H264
         assert len(rows) == len(video) > 30
         assert [r.capture_ns for r in rows] == [rosmsgs.stamp_ns(m.msg.timestamp) for m in video]
-        assert [bytes(r.cells["VideoStream:sample"]) for r in rows] == [bytes(m.msg.data) for m in video]  # not re-encoded
+        assert [bytes(r.cells["VideoStream:sample"]) for r in rows] == [
+            bytes(m.msg.data) for m in video
+        ]  # not re-encoded
         assert [r.frame_id for r in rows] == [f.msg.frame_id for f in frames]
         assert [r.cells["VideoStream:is_keyframe"] for r in rows] == [f.msg.keyframe for f in frames]
         assert rows[0].cells["VideoStream:is_keyframe"]
@@ -67,7 +69,10 @@ def test_a_bag_of_jpeg_tuples_puts_each_frame_at_its_capture_time_and_logs_each_
     for cam in CAMERAS:
         images = bag.messages[rosmsgs.image_topic(cam, compressed=True)]
         of_tuples = [
-            (rosmsgs.stamp_ns(t.msg.capture_stamps[t.msg.cameras.index(cam)]), t.msg.frame_ids[t.msg.cameras.index(cam)])
+            (
+                rosmsgs.stamp_ns(t.msg.capture_stamps[t.msg.cameras.index(cam)]),
+                t.msg.frame_ids[t.msg.cameras.index(cam)],
+            )
             for t in tuples
         ]
         rows = rrd.entities[f"/cameras/{cam}"]
@@ -130,12 +135,15 @@ def test_bad_inputs_exit_2_in_one_line(cell, tmp_path):
     one_line_error(fxis("export", str(tmp_path / "bag"), "--rerun", str(taken)), "--rerun", "exists")
     one_line_error(fxis("export", str(tmp_path / "bag"), "--rerun", str(tmp_path / "no" / "a.rrd")), "does not exist")
     one_line_error(
-        fxis("export", str(tmp_path / "bag"), "--rerun", str(tmp_path / "b.rrd"), "--camera", "left"), "without --camera"
+        fxis("export", str(tmp_path / "bag"), "--rerun", str(tmp_path / "b.rrd"), "--camera", "left"),
+        "without --camera",
     )
     one_line_error(fxis("export", str(tmp_path / "bag")), "--rerun OUT.rrd")
     one_line_error(fxis("view", cell.endpoint, "--rerun-save", str(tmp_path / "c.rrd")), "--rerun")
     one_line_error(fxis("view", cell.endpoint, "--rerun", "--rerun-save", str(taken)), "--rerun-save", "exists")
-    one_line_error(fxis("view", cell.endpoint, "--rerun", "--cameras", "nosuch", "--rerun-save", str(tmp_path / "d.rrd")), "nosuch")
+    one_line_error(
+        fxis("view", cell.endpoint, "--rerun", "--cameras", "nosuch", "--rerun-save", str(tmp_path / "d.rrd")), "nosuch"
+    )
     assert not any((tmp_path / n).exists() for n in ("a.rrd", "b.rrd", "c.rrd", "d.rrd"))
     assert taken.read_bytes() == b""
 
