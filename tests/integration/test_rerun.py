@@ -164,3 +164,13 @@ def test_without_rerun_sdk_fxis_works_and_says_how_to_install_it(cell, tmp_path)
     one_line_error(run("export", str(tmp_path / "bag"), "--rerun", str(tmp_path / "a.rrd")), "extra 'rerun'", "pip")
     one_line_error(run("view", cell.endpoint, "--rerun", "--rerun-save", str(tmp_path / "b.rrd")), "extra 'rerun'")
     assert not (tmp_path / "a.rrd").exists() and not (tmp_path / "b.rrd").exists()
+
+
+def test_a_viewer_that_is_not_there_ends_the_view_in_a_line_not_a_hang(cell):
+    from fxis_shm.service.launch import free_tcp_port
+
+    url = f"rerun+http://127.0.0.1:{free_tcp_port()}/proxy"
+    result = fxis("view", cell.endpoint, "--rerun", "--rerun-connect", url, "--tuples", "3", timeout=60)
+    assert result.returncode == 4, (result.stdout, result.stderr)  # FAILED: the data went nowhere
+    last = result.stderr.strip().splitlines()[-1]  # above it: rerun-sdk's own warnings of the connection
+    assert last.startswith("fxis view: Rerun did not take what was logged") and url in last, result.stderr
