@@ -156,9 +156,9 @@ def test_view_of_a_cell_of_two_services_logs_both_in_one_recording(start_service
 
 
 def test_bad_inputs_exit_2_in_one_line(cell, tmp_path):
+    """Those that need a bag or a service (the others: test_cli_errors.py's table)."""
     taken = tmp_path / "taken.rrd"
     taken.write_bytes(b"")
-    one_line_error(fxis("export", str(tmp_path / "nobag"), "--rerun", str(tmp_path / "a.rrd")), "no bag at")
     record(cell, tmp_path / "bag", "--frames", "2")
     one_line_error(fxis("export", str(tmp_path / "bag"), "--rerun", str(taken)), "--rerun", "exists")
     one_line_error(fxis("export", str(tmp_path / "bag"), "--rerun", str(tmp_path / "no" / "a.rrd")), "does not exist")
@@ -167,7 +167,6 @@ def test_bad_inputs_exit_2_in_one_line(cell, tmp_path):
         "without --camera",
     )
     one_line_error(fxis("export", str(tmp_path / "bag")), "--rerun OUT.rrd")
-    one_line_error(fxis("view", cell.endpoint, "--rerun-save", str(tmp_path / "c.rrd")), "--rerun")
     one_line_error(fxis("view", cell.endpoint, "--rerun", "--rerun-save", str(taken)), "--rerun-save", "exists")
     one_line_error(
         fxis("view", cell.endpoint, "--rerun", "--cameras", "nosuch", "--rerun-save", str(tmp_path / "d.rrd")), "nosuch"
