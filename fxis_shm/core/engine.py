@@ -331,9 +331,11 @@ class RequestEngine:
             return False
         except Reject as exc:
             actions.append(failure(p, exc.code, exc.message))
-        except Exception as exc:  # a bug must not take the service down
+        except Exception as bug:  # a bug must not take the service down
+            # (a name of its own: compiled, ``exc`` above is typed Reject, and another exception
+            # bound to it raised TypeError out of the engine)
             log.exception("internal error on %s", p.op)
-            actions.append(failure(p, Code.INTERNAL, repr(exc)))
+            actions.append(failure(p, Code.INTERNAL, repr(bug)))
         return True
 
     def _snapshots(self, p: Pending, now: int) -> dict[str, Snapshot]:
