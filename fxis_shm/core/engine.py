@@ -29,8 +29,16 @@ from typing import Any, Protocol
 from fxis_shm.core import sequences
 from fxis_shm.core.decisions import Context, Plan, Reject, Wait, check_size, decide, newest_frames, sequence_spec
 from fxis_shm.core.requestdefaults import REQUEST_DEFAULTS
-from fxis_shm.core.requeststate import ANSWERED, CANCELLED, FAILED, RECEIVED, WAITING_STATES, RequestState
-from fxis_shm.core.requeststate import checked_move, waiting_state
+from fxis_shm.core.requeststate import (
+    ANSWERED,
+    CANCELLED,
+    FAILED,
+    RECEIVED,
+    WAITING_STATES,
+    RequestState,
+    checked_move,
+    waiting_state,
+)
 from fxis_shm.core.snapshot import Snapshot
 from fxis_shm.core.waitpolicy import CameraState, never_coming
 from fxis_shm.errors import Code
