@@ -57,6 +57,7 @@ import time
 if not __package__:  # run as a script (python bench/cameras/gige.py): the project root on the path
     sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 from bench.shared import common
+from tests.hosts import loopback_address
 
 BENCH_DIR = os.path.dirname(os.path.abspath(__file__))
 EMULATOR = "arv-fake-gv-camera-0.8"
@@ -95,27 +96,6 @@ def parser() -> argparse.ArgumentParser:
 
 
 # ---- the emulators ---------------------------------------------------------------------------
-
-
-@contextlib.contextmanager
-def loopback_address(address: str):
-    """``address`` on lo for the duration (added with `ip`, as root, if missing)."""
-    shown = subprocess.run(
-        ["ip", "-o", "-4", "addr", "show", "dev", "lo"], capture_output=True, text=True, check=True
-    ).stdout
-    added = f" {address}/" not in shown
-    if added:
-        done = subprocess.run(["ip", "addr", "add", f"{address}/8", "dev", "lo"], capture_output=True, text=True)
-        if done.returncode:
-            raise RuntimeError(
-                f"the second emulator needs {address} on lo: `ip addr add {address}/8 dev lo` "
-                f"failed (root?): {done.stderr.strip()}"
-            )
-    try:
-        yield
-    finally:
-        if added:
-            subprocess.run(["ip", "addr", "del", f"{address}/8", "dev", "lo"], check=False)
 
 
 @contextlib.contextmanager
