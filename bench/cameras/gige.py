@@ -366,10 +366,7 @@ def main(argv: list[str] | None = None) -> int:
     common.write_json(
         json_path,
         {
-            "benchmark": "gige",
-            "started_unix": started,
-            "argv": sys.argv[1:] if argv is None else list(argv),
-            "settings": vars(args),
+            **common.run_record("gige", started, argv, args),
             "host": host,
             "hook": {"process": HOOK, "cost_ms": HOOK_COST_MS},
             "clock": "CLOCK_MONOTONIC ns; t_capture: "

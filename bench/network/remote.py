@@ -170,9 +170,7 @@ def main(argv: list[str] | None = None) -> int:
     ]
     host_info, started = common.host_info(), time.time()
     result = {
-        "benchmark": "network",
-        "started_unix": started,
-        "settings": vars(args),
+        **common.run_record("network", started, argv, args),
         "host": host_info,
         "experiment": exp.as_dict(),
         "targets": {},
