@@ -80,7 +80,11 @@ def parser() -> argparse.ArgumentParser:
         help="t_capture: the frame's arrival on the host, or the emulator's own clock mapped onto the host's",
     )
     p.add_argument(
-        "--loss", type=int, default=0, metavar="N", help="the emulators drop N GVSP packets per thousand (-r N)"
+        "--loss",
+        type=common.int_between(0, 1000),
+        default=0,
+        metavar="N",
+        help="the emulators drop N GVSP packets per thousand (-r N)",
     )
     p.add_argument("--slots", type=common.positive_int, default=64, help="frames per camera ring")
     p.add_argument(
@@ -276,13 +280,10 @@ def plot(runs: list[dict], path: str, title: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = parser()
-    args = common.parse_args(p, argv)
-    if isinstance(args, int):
-        return args
-    if not 0 <= args.loss <= 1000:
-        return common.usage_error(p, f"--loss must be 0..1000 packets per thousand, got {args.loss}")
-    out = common.ensure_dir(args.out)
+    parsed = common.parse_args_and_out(parser(), argv)
+    if isinstance(parsed, int):
+        return parsed
+    args, out = parsed
     os.environ["PYTHONPATH"] = BENCH_DIR + os.pathsep + os.environ.get("PYTHONPATH", "")
     host = common.host_info()
     started = time.time()

@@ -144,6 +144,18 @@ def nonnegative_float(text: str) -> float:
     return value
 
 
+def int_between(low: int, high: int):
+    """An argparse type: an integer from ``low`` to ``high``, both included."""
+
+    def parse(text: str) -> int:
+        value = int(text)
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"must be {low}..{high}, got {value}")
+        return value
+
+    return parse
+
+
 def int_list(text: str) -> list[int]:
     """An argparse type: comma-separated integers >= 0."""
     values = [int(v) for v in text.split(",") if v.strip()]
