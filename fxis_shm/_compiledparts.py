@@ -14,6 +14,7 @@ MYPYC_MODULES = (
     "fxis_shm.core.waitpolicy",
     "fxis_shm.core.sequences",
     "fxis_shm.core.decisions",
+    "fxis_shm.core.requeststate",
     "fxis_shm.core.engine",
 )
 GROUP = "fxis_shm.core._hot"  # mypyc names the shared library GROUP + "__mypyc"

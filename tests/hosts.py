@@ -414,6 +414,27 @@ class Lab:
         self.close()
 
 
+@contextlib.contextmanager
+def loopback_address(address: str):
+    """``address`` (127.x.y.z) on lo while the block runs: added if missing (needs root), removed
+    afterwards; HostsUnavailable if it cannot be added. For emulated cameras and devices of their
+    own address (tests/backends, bench/cameras/gige.py)."""
+    shown = _run("ip", "-o", "-4", "addr", "show", "dev", "lo").stdout
+    added = f" {address}/" not in shown
+    if added:
+        done = _run("ip", "addr", "add", f"{address}/8", "dev", "lo", check=False)
+        if done.returncode != 0:
+            raise HostsUnavailable(
+                f"{address} is not on lo and `ip addr add {address}/8 dev lo` failed (needs root): "
+                f"{done.stderr.strip()}"
+            )
+    try:
+        yield address
+    finally:
+        if added:
+            _run("ip", "addr", "del", f"{address}/8", "dev", "lo", check=False)
+
+
 def main(argv: list[str] | None = None) -> int:
     """``python -m tests.hosts clean``: remove what crashed runs left behind; ``list``: show
     the namespaces and links of emulated hosts that exist now."""

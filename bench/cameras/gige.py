@@ -57,6 +57,7 @@ import time
 if not __package__:  # run as a script (python bench/cameras/gige.py): the project root on the path
     sys.path.insert(0, os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__)))))
 from bench.shared import common
+from tests.hosts import loopback_address
 
 BENCH_DIR = os.path.dirname(os.path.abspath(__file__))
 EMULATOR = "arv-fake-gv-camera-0.8"
@@ -79,7 +80,11 @@ def parser() -> argparse.ArgumentParser:
         help="t_capture: the frame's arrival on the host, or the emulator's own clock mapped onto the host's",
     )
     p.add_argument(
-        "--loss", type=int, default=0, metavar="N", help="the emulators drop N GVSP packets per thousand (-r N)"
+        "--loss",
+        type=common.int_between(0, 1000),
+        default=0,
+        metavar="N",
+        help="the emulators drop N GVSP packets per thousand (-r N)",
     )
     p.add_argument("--slots", type=common.positive_int, default=64, help="frames per camera ring")
     p.add_argument(
@@ -95,27 +100,6 @@ def parser() -> argparse.ArgumentParser:
 
 
 # ---- the emulators ---------------------------------------------------------------------------
-
-
-@contextlib.contextmanager
-def loopback_address(address: str):
-    """``address`` on lo for the duration (added with `ip`, as root, if missing)."""
-    shown = subprocess.run(
-        ["ip", "-o", "-4", "addr", "show", "dev", "lo"], capture_output=True, text=True, check=True
-    ).stdout
-    added = f" {address}/" not in shown
-    if added:
-        done = subprocess.run(["ip", "addr", "add", f"{address}/8", "dev", "lo"], capture_output=True, text=True)
-        if done.returncode:
-            raise RuntimeError(
-                f"the second emulator needs {address} on lo: `ip addr add {address}/8 dev lo` "
-                f"failed (root?): {done.stderr.strip()}"
-            )
-    try:
-        yield
-    finally:
-        if added:
-            subprocess.run(["ip", "addr", "del", f"{address}/8", "dev", "lo"], check=False)
 
 
 @contextlib.contextmanager
@@ -296,13 +280,10 @@ def plot(runs: list[dict], path: str, title: str) -> None:
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = parser()
-    args = common.parse_args(p, argv)
-    if isinstance(args, int):
-        return args
-    if not 0 <= args.loss <= 1000:
-        return common.usage_error(p, f"--loss must be 0..1000 packets per thousand, got {args.loss}")
-    out = common.ensure_dir(args.out)
+    parsed = common.parse_args_and_out(parser(), argv)
+    if isinstance(parsed, int):
+        return parsed
+    args, out = parsed
     os.environ["PYTHONPATH"] = BENCH_DIR + os.pathsep + os.environ.get("PYTHONPATH", "")
     host = common.host_info()
     started = time.time()
@@ -386,10 +367,7 @@ def main(argv: list[str] | None = None) -> int:
     common.write_json(
         json_path,
         {
-            "benchmark": "gige",
-            "started_unix": started,
-            "argv": sys.argv[1:] if argv is None else list(argv),
-            "settings": vars(args),
+            **common.run_record("gige", started, argv, args),
             "host": host,
             "hook": {"process": HOOK, "cost_ms": HOOK_COST_MS},
             "clock": "CLOCK_MONOTONIC ns; t_capture: "

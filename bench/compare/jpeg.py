@@ -365,10 +365,7 @@ def main(argv: list[str] | None = None) -> int:
     common.write_json(
         json_path,
         {
-            "benchmark": "jpeg_codecs",
-            "started_unix": started,
-            "argv": sys.argv[1:] if argv is None else list(argv),
-            "settings": vars(args),
+            **common.run_record("jpeg_codecs", started, argv, args),
             "host": host,
             "load_average_after": os.getloadavg(),
             "contenders": {c.name: {"version": c.version, "mono_input": c.mono_input} for c in contenders},

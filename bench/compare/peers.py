@@ -98,10 +98,9 @@ def scenario_list(text: str) -> list[str]:
 
 def parser() -> argparse.ArgumentParser:
     p = common.parser_for(__file__, __doc__)
-    p.add_argument(
-        "-n", "--samples", type=common.positive_int, default=300, help="measured samples of each contender per scenario"
+    common.add_pacing_args(
+        p, "of each contender per scenario", count=300, warmup=10, sleep_max_ms=5.0, flag="--samples", what="sample"
     )
-    p.add_argument("--warmup", type=int, default=10, help="unrecorded samples of each contender first")
     p.add_argument(
         "--hot-calls",
         type=int,
@@ -110,12 +109,6 @@ def parser() -> argparse.ArgumentParser:
     )
     p.add_argument(
         "--scenarios", type=scenario_list, default=list(SCENARIOS), help="comma-separated: " + ", ".join(SCENARIOS)
-    )
-    p.add_argument(
-        "--sleep-max-ms",
-        type=common.nonnegative_float,
-        default=5.0,
-        help="each sample follows a sleep drawn from U[0, this] ms",
     )
     p.add_argument("--slots", type=common.positive_int, default=20, help="frames per camera ring")
     common.add_output_args(p.add_argument_group("output"), seed_help="seed of the order and sleeps")
@@ -197,10 +190,7 @@ def main(argv: list[str] | None = None) -> int:
     common.write_json(
         json_path,
         {
-            "benchmark": "compare",
-            "started_unix": started,
-            "argv": sys.argv[1:] if argv is None else list(argv),
-            "settings": dict(vars(args)),
+            **common.run_record("compare", started, argv, args),
             "seed": args.seed,
             "host": host,
             "clock": "samples are time.perf_counter_ns() around the timed call, in ms; None = failed",

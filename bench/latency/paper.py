@@ -323,10 +323,7 @@ def main(argv: list[str] | None = None) -> int:
     common.write_json(
         json_path,
         {
-            "benchmark": "latency",
-            "started_unix": started,
-            "argv": sys.argv[1:] if argv is None else list(argv),
-            "settings": vars(args),
+            **common.run_record("latency", started, argv, args),
             "experiment": exp.as_dict(),
             "policies": {pol: POLICIES[pol] for pol in args.policies},
             "paths": {path: f"Client(local={PATHS[path]!r})" for path in args.paths},

@@ -39,14 +39,7 @@ SERVICE_STEPS = (("received", "waited"), ("waited", "searched"), ("searched", "c
 
 def parser() -> argparse.ArgumentParser:
     p = common.parser_for(__file__, __doc__)
-    p.add_argument("-n", "--requests", type=common.positive_int, default=300, help="measured requests of each kind")
-    p.add_argument(
-        "--sleep-max-ms",
-        type=common.nonnegative_float,
-        default=50.0,
-        help="each request follows a sleep drawn from U[0, this] ms",
-    )
-    p.add_argument("--warmup", type=int, default=5, help="unrecorded requests of each kind before measuring")
+    common.add_pacing_args(p, "of each kind", count=300, warmup=5, sleep_max_ms=50.0)
     cams = p.add_argument_group("the launched service (ignored with --endpoint)")
     cams.add_argument("--cameras", type=common.positive_int, default=2, help="synthetic cameras cam0, cam1, ...")
     cams.add_argument("--fps", type=common.positive_float, default=20.0)
@@ -227,10 +220,7 @@ def main(argv: list[str] | None = None) -> int:
     common.write_json(
         json_path,
         {
-            "benchmark": "request_latency",
-            "started_unix": started,
-            "argv": sys.argv[1:] if argv is None else list(argv),
-            "settings": {k: v for k, v in vars(args).items()},
+            **common.run_record("request_latency", started, argv, args),
             "service": info,
             "host": host,
             "status_before": status,

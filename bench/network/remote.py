@@ -97,7 +97,7 @@ def parser() -> argparse.ArgumentParser:
         default=1000,
         help="host A's clock is this many seconds ahead of ours, host B's twice as many",
     )
-    p.add_argument("--quality", type=int, default=90, help="JPEG quality")
+    p.add_argument("--quality", type=common.int_between(1, 100), default=90, help="JPEG quality")
     t2 = p.add_argument_group("table2 (as bench/latency/paper.py)")
     t2.add_argument(
         "-n",
@@ -154,13 +154,10 @@ def keep_asking(args, client: Client, cams: list[str], watch: ClockWatch, rng: r
 
 
 def main(argv: list[str] | None = None) -> int:
-    p = parser()
-    args = common.parse_args(p, argv)
-    if isinstance(args, int):
-        return args
-    if not 1 <= args.quality <= 100:
-        return common.usage_error(p, f"--quality must be 1..100, got {args.quality}")
-    out = common.ensure_dir(args.out)
+    parsed = common.parse_args_and_out(parser(), argv)
+    if isinstance(parsed, int):
+        return parsed
+    args, out = parsed
     rng = random.Random(args.seed)
     names = ["cam0", "cam1"]
     exp = paper.Experiment(names, args.fps, [0.0, 1.0], args.jitter_ms)
@@ -170,9 +167,7 @@ def main(argv: list[str] | None = None) -> int:
     ]
     host_info, started = common.host_info(), time.time()
     result = {
-        "benchmark": "network",
-        "started_unix": started,
-        "settings": vars(args),
+        **common.run_record("network", started, argv, args),
         "host": host_info,
         "experiment": exp.as_dict(),
         "targets": {},

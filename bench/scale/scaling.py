@@ -77,20 +77,9 @@ def parser() -> argparse.ArgumentParser:
         metavar="LIST",
         help=f"sections to run, comma-separated, of {','.join(SECTIONS)}",
     )
-    p.add_argument(
-        "-n",
-        "--requests",
-        type=common.positive_int,
-        default=200,
-        help="timed requests per point and transport (cameras, size, idle clients)",
+    common.add_pacing_args(
+        p, "per point and transport (cameras, size, idle clients)", count=200, warmup=5, sleep_max_ms=10.0
     )
-    p.add_argument(
-        "--sleep-max-ms",
-        type=common.nonnegative_float,
-        default=10.0,
-        help="each timed request follows a sleep drawn from U[0, this] ms",
-    )
-    p.add_argument("--warmup", type=int, default=5, help="unrecorded requests before each point")
     p.add_argument(
         "--paths",
         type=shared.name_list(shared.PATHS),
@@ -273,10 +262,7 @@ def main(argv: list[str] | None = None) -> int:
             results[section] = {"error": f"{type(exc).__name__}: {exc}"}
         report(section, results[section], args)
         document = {
-            "benchmark": "scaling",
-            "started_unix": started,
-            "argv": sys.argv[1:] if argv is None else list(argv),
-            "settings": vars(args),
+            **common.run_record("scaling", started, argv, args),
             "host": host,
             "local_supported": shared.local_supported(),
             "clock": "CLOCK_MONOTONIC ns; t_send is the bench's time.monotonic_ns()",

@@ -70,6 +70,22 @@ def add_output_args(
     )
 
 
+def add_pacing_args(
+    g, each: str, count: int, warmup: int, sleep_max_ms: float, flag: str = "--requests", what: str = "request"
+) -> None:
+    """-n/--requests (``flag``), --warmup and --sleep-max-ms into ``g`` (a parser or a group): how
+    many timed requests (``what``) each point (``each``) measures, how many unrecorded ones run
+    first, and the random sleep U[0, this] before each timed one."""
+    g.add_argument("-n", flag, type=positive_int, default=count, help=f"timed {what}s {each}")
+    g.add_argument("--warmup", type=int, default=warmup, help=f"unrecorded {what}s {each} first")
+    g.add_argument(
+        "--sleep-max-ms",
+        type=nonnegative_float,
+        default=sleep_max_ms,
+        help=f"each timed {what} follows a sleep drawn from U[0, this] ms",
+    )
+
+
 def parser_for(path: str, description: str | None) -> argparse.ArgumentParser:
     """A bench's command line, named as it is run from the project root (bench/FOLDER/NAME.py)."""
     prog = os.path.relpath(os.path.abspath(path), os.path.dirname(BENCH))
@@ -126,6 +142,18 @@ def nonnegative_float(text: str) -> float:
     if not value >= 0:
         raise argparse.ArgumentTypeError(f"must be >= 0, got {value}")
     return value
+
+
+def int_between(low: int, high: int):
+    """An argparse type: an integer from ``low`` to ``high``, both included."""
+
+    def parse(text: str) -> int:
+        value = int(text)
+        if not low <= value <= high:
+            raise argparse.ArgumentTypeError(f"must be {low}..{high}, got {value}")
+        return value
+
+    return parse
 
 
 def int_list(text: str) -> list[int]:
@@ -356,6 +384,17 @@ def table(
 def ensure_dir(path: str) -> str:
     os.makedirs(path, exist_ok=True)
     return path
+
+
+def run_record(benchmark: str, started: float, argv: Sequence[str] | None, args: argparse.Namespace) -> dict:
+    """The head of every bench's JSON: which bench, when it started (``time.time()``), its command
+    line (``argv`` as main got it; None: the process's) and its settings (the parsed arguments)."""
+    return {
+        "benchmark": benchmark,
+        "started_unix": started,
+        "argv": sys.argv[1:] if argv is None else list(argv),
+        "settings": dict(vars(args)),
+    }
 
 
 def write_json(path: str, obj) -> None:

@@ -7,11 +7,13 @@ it what happens and carries out what it returns::
     actions = engine.on_frames({"cam0"}, now)        # cameras stored frames
     actions = engine.on_tick(now)                   # engine.next_wake() has passed
 
-An action is a ``Trigger`` (fire these software triggers now), a ``Plan`` (copy
+An action is a ``Trigger`` (fire these software triggers now), a ``Reply`` (copy
 these frames out and reply; should a copy find its slot overwritten, hand the plan
 to ``engine.retry``) or a ``Failure`` (reply with this error). Whether a request
 must wait is decided in one place, ``decide`` (fxis_shm.core.decisions), from one look
-at each camera, and the selection that decides it is the one the reply carries.
+at each camera, and the selection that decides it is the one the reply carries. Each
+request's life is a named state, moved only along the table of fxis_shm.core.requeststate
+(which also says what a failure does to it).
 
 Pure: cameras are read through the ``CameraSource`` protocol, and the clock is an
 integer passed in.
@@ -27,6 +29,16 @@ from typing import Any, Protocol
 from fxis_shm.core import sequences
 from fxis_shm.core.decisions import Context, Plan, Reject, Wait, check_size, decide, newest_frames, sequence_spec
 from fxis_shm.core.requestdefaults import REQUEST_DEFAULTS
+from fxis_shm.core.requeststate import (
+    ANSWERED,
+    CANCELLED,
+    FAILED,
+    RECEIVED,
+    WAITING_STATES,
+    RequestState,
+    checked_move,
+    waiting_state,
+)
 from fxis_shm.core.snapshot import Snapshot
 from fxis_shm.core.waitpolicy import CameraState, never_coming
 from fxis_shm.errors import Code
@@ -63,7 +75,8 @@ class CameraSource(Protocol):
 
 @dataclass
 class Pending:
-    """A request on its way to a reply. ``ticket`` is the caller's: where the reply goes."""
+    """A request on its way to a reply. ``ticket`` is the caller's: where the reply goes.
+    ``state`` changes only through ``move`` (the moves fxis_shm.core.requeststate allows)."""
 
     ticket: Any
     request: dict[str, Any]
@@ -80,6 +93,17 @@ class Pending:
     t_trigger: int | None = None
     scheduled: frozenset[str] = frozenset()  # cameras triggered for a capture at t* (capture=True)
     attempts: int = 0  # plans made for it
+    state: RequestState = RECEIVED
+
+    def move(self, to: RequestState) -> None:
+        """Become ``to``; IllegalMove if the state table does not allow it."""
+        self.state = checked_move(self.state, to)
+
+    def wait(self) -> None:
+        """Wait (again) the way its admission chose; no move if it waits so already."""
+        to = waiting_state(self.triggered, self.scheduled)
+        if self.state is not to:
+            self.move(to)
 
     @property
     def op(self) -> str:
@@ -141,9 +165,9 @@ class RequestEngine:
         try:
             self._admit(p, now, actions)
         except Reject as exc:
-            return [Failure(p, exc.code, exc.message)]
-        done = self._evaluate(p, now, actions)
-        if not done:
+            return [failure(p, exc.code, exc.message)]
+        p.wait()
+        if not self._evaluate(p, now, actions):
             self.pending.append(p)
         return actions
 
@@ -163,24 +187,29 @@ class RequestEngine:
         return self.on_frames(frozenset(), now)
 
     def retry(self, reply: Reply, now: int) -> list[Action]:
-        """A chosen slot was overwritten while ``reply`` was being copied: plan again."""
+        """A chosen slot was overwritten while ``reply`` was being copied: plan again (it may
+        also wait again, or fail). IllegalMove if ``reply``'s request is not ANSWERED."""
         p = reply.pending
         if p.attempts >= COPY_ATTEMPTS:
-            return [Failure(p, Code.OVERRUN, OVERRUN_MESSAGE)]
+            return [failure(p, Code.OVERRUN, OVERRUN_MESSAGE)]
         actions: list[Action] = []
         if not self._evaluate(p, now, actions):
+            p.wait()
             self.pending.append(p)
         return actions
 
     def fail(self, p: Pending, code: str, message: str) -> list[Action]:
-        """Fail a waiting request (its capture could not be scheduled); nothing if it was answered."""
-        if not any(q is p for q in self.pending):
+        """Fail a waiting request (its capture could not be scheduled); nothing if it is not
+        waiting (answered, failed or cancelled already)."""
+        if p.state not in WAITING_STATES:
             return []
         self.pending = [q for q in self.pending if q is not p]
-        return [Failure(p, code, message)]
+        return [failure(p, code, message)]
 
     def cancel_all(self) -> None:
-        """Forget every waiting request (their caller gave up on them)."""
+        """Forget every waiting request (their caller gave up on them): each is CANCELLED."""
+        for p in self.pending:
+            p.move(CANCELLED)
         self.pending.clear()
 
     def next_wake(self) -> int | None:
@@ -299,6 +328,7 @@ class RequestEngine:
                     p.ready_at.setdefault(cam, max(now, snaps[cam].newest_stored or now))
             if isinstance(decision, Plan):
                 p.attempts += 1
+                p.move(ANSWERED)
                 actions.append(Reply(p, decision, snaps, now))
                 return True
             if now >= p.deadline:
@@ -308,10 +338,12 @@ class RequestEngine:
             p.wake_at = min(p.deadline, now + LIVENESS_CHECK_NS, *give_ups)
             return False
         except Reject as exc:
-            actions.append(Failure(p, exc.code, exc.message))
-        except Exception as exc:  # a bug must not take the service down
+            actions.append(failure(p, exc.code, exc.message))
+        except Exception as bug:  # a bug must not take the service down
+            # (a name of its own: compiled, ``exc`` above is typed Reject, and another exception
+            # bound to it raised TypeError out of the engine)
             log.exception("internal error on %s", p.op)
-            actions.append(Failure(p, Code.INTERNAL, repr(exc)))
+            actions.append(failure(p, Code.INTERNAL, repr(bug)))
         return True
 
     def _snapshots(self, p: Pending, now: int) -> dict[str, Snapshot]:
@@ -333,6 +365,13 @@ class RequestEngine:
             max_skew_ms=self.setting(p.request, "max_skew_ms"),
             max_sequence_frames=self.settings["max_sequence_frames"],
         )
+
+
+def failure(p: Pending, code: str, message: str) -> Failure:
+    """Every failure of a request goes through here: it becomes FAILED, for good, and its
+    caller gets this one Failure to reply with (fxis_shm.core.requeststate)."""
+    p.move(FAILED)
+    return Failure(p, code, message)
 
 
 def refuse_never_coming(t_star: int, now: int, states: Mapping[str, CameraState]) -> None:

@@ -20,6 +20,9 @@
 #define PICK_MAX_EVENTS 1024    /* candidate frames of a joint selection (more: PICK_UNSUPPORTED) */
 
 enum {
+    /* PLAN, WAIT and REJECT move a waiting request as the engine's decisions do (its states,
+     * fxis_shm/core/requeststate.py): to ANSWERED, not at all, to FAILED; the differential
+     * tests check the engine's request is in that state (tests/virtualtime/cell.py) */
     PICK_PLAN = 0,        /* the frames are chosen: each camera's `index` and `t` */
     PICK_WAIT = 1,        /* the request must wait: each camera's `waits` */
     PICK_REJECT = 2,      /* the request fails: PickResult.reject names the error code */

@@ -8,7 +8,6 @@ fail saying what to install (`make test` installs both).
 
 from __future__ import annotations
 
-import contextlib
 import itertools
 import os
 import shutil
@@ -21,11 +20,12 @@ import time
 import pytest
 
 from fxis_shm.service.tether import die_with_parent
+from fxis_shm.wire.gvcp_action import GVCP_PORT
 
 from ..conftest import fxis, start_service  # noqa: F401  (shared with the integration tests)
+from ..hosts import loopback_address
 
 EMULATOR = "arv-fake-gv-camera-0.8"
-GVCP_PORT = 3956
 SECOND_ADDRESS = "127.0.0.2"
 START_TIMEOUT_S = 10.0
 
@@ -123,27 +123,6 @@ class Emulator:
         if self.proc is not None and self.proc.poll() is None:
             self.proc.send_signal(signal.SIGKILL)
             self.proc.wait(5)
-
-
-@contextlib.contextmanager
-def loopback_address(address: str):
-    """``address`` on lo while the block runs: added (root) if missing, removed afterwards."""
-    shown = subprocess.run(
-        ["ip", "-o", "-4", "addr", "show", "dev", "lo"], capture_output=True, text=True, check=True
-    ).stdout
-    added = f" {address}/" not in shown
-    if added:
-        done = subprocess.run(["ip", "addr", "add", f"{address}/8", "dev", "lo"], capture_output=True, text=True)
-        if done.returncode != 0:
-            pytest.fail(
-                f"this test needs {address} on lo: `ip addr add {address}/8 dev lo` failed (needs root): "
-                f"{done.stderr.strip()}"
-            )
-    try:
-        yield address
-    finally:
-        if added:
-            subprocess.run(["ip", "addr", "del", f"{address}/8", "dev", "lo"], check=False)
 
 
 @pytest.fixture(scope="session")

@@ -11,19 +11,11 @@ import pytest
 
 from fxis_shm.client.actions import ActionFailed, ActionSender, check
 from fxis_shm.core.ptp import ClockNotLocked
-from fxis_shm.wire.gvcp_action import (
-    GVCP_PORT,
-    STATUS_ACTION_LATE,
-    STATUS_NO_REF_TIME,
-    STATUS_OVERFLOW,
-    STATUS_SUCCESS,
-    ActionAck,
-    ActionCommand,
-)
+from fxis_shm.wire import gvcp_action as gvcp
 
 from ..aravis_trigger import TriggeredCamera
 from ..gvcp_responder import ActionResponder
-from .conftest import loopback_address
+from ..hosts import loopback_address
 
 pytestmark = pytest.mark.integration
 CAMERA_ADDRESS, DEVICE_ADDRESS = "127.0.0.34", "127.0.0.35"
@@ -71,7 +63,7 @@ def test_a_scheduled_action_fires_the_camera_at_the_device_clocks_time_and_its_f
     device = responder(fire=camera.trigger)
     at = device.now() + LEAD_NS
     outcome = check(sender.fire([DEVICE_ADDRESS], action_time=at))[DEVICE_ADDRESS]
-    assert outcome.status == STATUS_SUCCESS
+    assert outcome.status == gvcp.STATUS_SUCCESS
     [fired] = device.wait_fired(1, timeout=5)
     assert fired.action_time == at and fired.called_ns >= at  # never early, on the device's clock
     assert device.errors == []
@@ -94,7 +86,7 @@ def test_an_immediate_action_fires_at_once(camera, responder, sender):
 def test_a_time_already_past_is_answered_late_and_nothing_fires(responder, sender):
     device = responder()
     outcome = sender.fire([DEVICE_ADDRESS], action_time=device.now() - 1_000_000)[DEVICE_ADDRESS]
-    assert outcome.status == STATUS_ACTION_LATE
+    assert outcome.status == gvcp.STATUS_ACTION_LATE
     assert "GEV_STATUS_ACTION_LATE" in outcome.error and "already past" in outcome.error
     assert device.fired == []  # answered before anything was queued
     with pytest.raises(ActionFailed, match=f"{DEVICE_ADDRESS}: GEV_STATUS_ACTION_LATE"):
@@ -104,7 +96,7 @@ def test_a_time_already_past_is_answered_late_and_nothing_fires(responder, sende
 def test_a_device_whose_clock_is_not_locked_answers_no_reference_time(responder, sender):
     device = responder(locked=False)
     outcome = sender.fire([DEVICE_ADDRESS], action_time=device.now() + LEAD_NS)[DEVICE_ADDRESS]
-    assert outcome.status == STATUS_NO_REF_TIME and "not locked to a PTP master" in outcome.error
+    assert outcome.status == gvcp.STATUS_NO_REF_TIME and "not locked to a PTP master" in outcome.error
     assert device.fired == []
     assert sender.fire([DEVICE_ADDRESS])[DEVICE_ADDRESS].ok  # an immediate action needs no clock
 
@@ -114,7 +106,7 @@ def test_a_full_queue_of_scheduled_actions_answers_overflow(responder, sender):
     far = device.now() + 60 * 10**9
     assert sender.fire([DEVICE_ADDRESS], action_time=far)[DEVICE_ADDRESS].ok
     outcome = sender.fire([DEVICE_ADDRESS], action_time=far + 1)[DEVICE_ADDRESS]
-    assert outcome.status == STATUS_OVERFLOW and "queue of scheduled actions is full" in outcome.error
+    assert outcome.status == gvcp.STATUS_OVERFLOW and "queue of scheduled actions is full" in outcome.error
 
 
 def test_no_answer_is_retried_then_reported(responder, sender):
@@ -137,12 +129,12 @@ def test_a_lost_command_is_resent_and_fires_once(responder, sender):
 
 def test_a_retransmission_the_device_already_had_is_answered_again_and_not_carried_out_twice(responder, sender):
     device = responder()
-    packet = ActionCommand(**KEYS, req_id=4242).encode()
+    packet = gvcp.ActionCommand(**KEYS, req_id=4242).encode()
     with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as raw:
         raw.settimeout(5)
         for _ in range(2):  # the same command twice, as a sender that missed the first ACK resends it
-            raw.sendto(packet, (DEVICE_ADDRESS, GVCP_PORT))
-            assert ActionAck.decode(raw.recv(64)) == ActionAck(STATUS_SUCCESS, 4242)
+            raw.sendto(packet, (DEVICE_ADDRESS, gvcp.GVCP_PORT))
+            assert gvcp.ActionAck.decode(raw.recv(64)) == gvcp.ActionAck(gvcp.STATUS_SUCCESS, 4242)
     assert len(device.received) == 2
     device.wait_fired(1, timeout=5)
     # one more action through the sender: it fires as the second, so the copy never fired

@@ -31,6 +31,19 @@ def module_services(*arg_lists: list[str], **options):
         assert_nothing_left(svc.name)
 
 
+@pytest.fixture(scope="module")
+def two_services(request):
+    """The module's ``TWO_SERVICES`` (two argument lists), shared by its tests that only read
+    from the services."""
+    yield from module_services(*request.module.TWO_SERVICES)
+
+
+@pytest.fixture
+def two_services_to_stop(request, start_service):  # noqa: F811  (the fixture, by name)
+    """The module's ``TWO_SERVICES``, a test's own, for the tests that stop a service's coordinator."""
+    return [start_service(*args) for args in request.module.TWO_SERVICES]
+
+
 def module_service(args: list[str]):
     """A service shared by a module's tests (yield from it in a module-scoped fixture)."""
     for (svc,) in module_services(args):

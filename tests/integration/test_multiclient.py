@@ -13,27 +13,15 @@ from fxis_shm import CameraDown, Client, InvalidArgument, read_stamp
 from fxis_shm.client.pubsub import handshake
 
 from ..conftest import wait_until
-from .conftest import SMALL, child_pids, module_services
+from .conftest import SMALL, child_pids
 
 pytestmark = pytest.mark.integration
 
 
-TWO_SERVICES = (
+TWO_SERVICES = (  # the two_services fixtures (conftest.py) start these
     ["--camera", f"left=synthetic:fps=50,{SMALL}"],
     ["--camera", f"right=synthetic:fps=25,phase_ms=7,{SMALL}"],
 )
-
-
-@pytest.fixture(scope="module")
-def two_services():
-    """Shared by the tests that only read from the services."""
-    yield from module_services(*TWO_SERVICES)
-
-
-@pytest.fixture
-def two_services_to_stop(start_service):
-    """A test's own, for the tests that stop a service's coordinator."""
-    return [start_service(*args) for args in TWO_SERVICES]
 
 
 def test_status_is_each_services_and_the_cameras_of_all_and_a_silent_one_is_named(two_services_to_stop):

@@ -11,27 +11,15 @@ from fxis_shm.client.multiclient import MultiClient
 from fxis_shm.errors import ConfigError
 
 from ..conftest import wait_until
-from .conftest import SMALL, child_pids, module_services
+from .conftest import SMALL, child_pids
 
 pytestmark = pytest.mark.integration
 
 
-TWO_SERVICES = (
+TWO_SERVICES = (  # the two_services fixtures (conftest.py) start these
     ["--camera", f"left=synthetic:fps=50,{SMALL}"],
     ["--camera", f"right=synthetic:fps=50,phase_ms=7,{SMALL}", "--camera", f"top=synthetic:fps=25,phase_ms=3,{SMALL}"],
 )
-
-
-@pytest.fixture(scope="module")
-def two_services():
-    """Shared by the tests that only read from the services."""
-    yield from module_services(*TWO_SERVICES)
-
-
-@pytest.fixture
-def two_services_to_stop(start_service):
-    """A test's own, for the test that stops a service's coordinator."""
-    return [start_service(*args) for args in TWO_SERVICES]
 
 
 def _least_skew_near(times: dict[str, list[int]], t_star: int, radius: int) -> int:

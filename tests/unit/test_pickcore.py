@@ -24,9 +24,11 @@ from hypothesis import event, given, settings, strategies as st
 
 from fxis_shm.core.decisions import Context, Reject, Wait, decide
 from fxis_shm.core.engine import Pending
+from fxis_shm.core.requeststate import MOVES, WAITING
 from fxis_shm.core.snapshot import CAPTURE_LOCKSTEP as LOCKSTEP, SlotMeta, Snapshot
 from fxis_shm.core.waitpolicy import CameraState
 
+from ..virtualtime.cell import TWIN_STATES
 from .timeline_helpers import brute_nearest, ring
 
 # _fastpick imported directly, so that FXIS_PURE_PYTHON=1 (the Python decision then runs as its
@@ -124,10 +126,12 @@ def python_decision(case: Case) -> tuple:
 
 
 def decided_alike(case: Case) -> tuple:
-    """The decision both make (failing if they differ)."""
+    """The decision both make (failing if they differ): a move of the waiting request that the
+    state table allows (a wait leaves it waiting)."""
     in_c = c_decision(case)
     assert in_c[0] != UNSUPPORTED, "pickcore gave up on a case within its caps"
     assert in_c == python_decision(case)
+    assert TWIN_STATES[in_c[0]] in MOVES[WAITING] | {WAITING}
     return in_c
 
 

@@ -22,6 +22,7 @@ from typing import Any
 
 from fxis_shm.core.engine import Failure, Reply, RequestEngine, Schedule, Trigger
 from fxis_shm.core.requestdefaults import REQUEST_DEFAULTS
+from fxis_shm.core.requeststate import ANSWERED, FAILED, WAITING
 from fxis_shm.core.snapshot import SlotMeta, Snapshot
 from fxis_shm.errors import Code, ProtocolError
 from fxis_shm.service.streams import Streams
@@ -40,6 +41,9 @@ except ImportError as not_built:
 SECOND = 1000 * MS
 SMALL = {"width": 64, "height": 48}
 _NEAR_OPS = ("image", "tuple")
+# The state a waiting request is moved to by each decision of the C twin (pickcore.h), as the
+# engine moves it by the same decision (fxis_shm.core.requeststate): plan, wait on, or fail.
+TWIN_STATES = {_fastpick.PLAN: ANSWERED, _fastpick.WAIT: WAITING, _fastpick.REJECT: FAILED}
 _names = itertools.count()
 
 
@@ -168,8 +172,9 @@ class Cell:
 
     def check_twin(self, pending, outcome, snapshots: Mapping[str, Snapshot] | None = None) -> None:
         """The C twin decides as the engine did: the same frames (``outcome`` a list of indices),
-        a wait ("waits") or a refusal (the error code). Asked for the requests it decides: image
-        and tuple, sync joint or independent, wait auto or none, nothing triggered."""
+        a wait ("waits") or a refusal (the error code), and so the same state of the request.
+        Asked for the requests it decides: image and tuple, sync joint or independent, wait auto
+        or none, nothing triggered."""
         request = pending.request
         sync, wait = (request.get(k) or self.settings[k] for k in ("sync", "wait"))
         if (
@@ -206,6 +211,7 @@ class Cell:
         else:
             skew = pending.ticket.skew_ns if pending.op == "tuple" else 0
             assert decided == (_fastpick.PLAN, tuple(outcome), skew), (decided, outcome, request)
+        assert pending.state is TWIN_STATES[decided[0]], (pending.state, decided, request)
         self.decisions += 1
 
     # ---- streams ----
