@@ -228,6 +228,40 @@ def test_lockstep_frames_of_two_grid_points_are_never_paired_silently(variant):
                 assert bounded.code is not None or bounded.skew_ns <= MS
 
 
+@pytest.mark.parametrize("variant", ["late timer", "worker stall"])
+@pytest.mark.parametrize(
+    "sequence",
+    [
+        {"kind": "consecutive", "count": 18, "cameras": ["b", "a"]},
+        {"kind": "consecutive", "count": 12, "cameras": ["a", "b"]},
+        {"kind": "interval", "count": 18, "interval_ms": -50},
+    ],
+    ids=["b's frames", "a's frames", "interval"],
+)
+def test_a_sequence_of_tuples_holds_each_to_one_grid_point_or_says_it_could_not(variant, sequence):
+    """The rule of a tuple (above) in each tuple of a sequence: where camera a missed grid points,
+    a tuple pairs a's frame with b's of another point only when no pair of one point was stored
+    near its reference time, and then the reply's ``grid_mismatch`` names the two points at the
+    tuple's place. Each tuple of b's frame of a point a never stored is such a tuple."""
+    with Cell() as cell:
+        lockstep_gap(cell, variant)
+        t_star = cell.ask(op="latest").frames["b"].t_target - 10 * MS
+        answer = cell.ask(op="sequence", at=t_star, **sequence)
+        a = cell.handles["a"].ring().snapshot()
+        a_points = {a.frame_meta(i).t_target for i in range(len(a.timeline))}
+    assert answer.code is None and len(answer.tuples) == sequence["count"], answer.message
+    flags = answer.body.get("grid_mismatch", [None] * len(answer.tuples))
+    for tuple_, flag in zip(answer.tuples, flags):
+        points = {c: f.t_target for c, f in tuple_.items() if f.capture == CAPTURE_LOCKSTEP}
+        if len(set(points.values())) == 1:  # (no lateness scripted: one point, one moment)
+            assert flag is None and tuple_["a"].t_capture == tuple_["b"].t_capture
+        else:
+            assert flag == points
+    if sequence.get("cameras") == ["b", "a"]:  # b's frames are the reference times
+        unmatched = [flag for tuple_, flag in zip(answer.tuples, flags) if tuple_["b"].t_target not in a_points]
+        assert unmatched and all(unmatched)
+
+
 def test_a_dropped_frame_is_waited_for_until_it_is_overdue_then_its_neighbour_answers():
     """cam1 loses the frame nearest a future t*: the request waits for it a period plus the
     storage delay past its moment (then it counts as dropped), not longer."""

@@ -28,6 +28,7 @@ from fxis_shm.service.streams import Streams
 from fxis_shm.shm import naming
 from fxis_shm.shm.cameras import CameraHandle
 from fxis_shm.shm.copyout import CopyOut
+from fxis_shm.wire.protocol import request_of
 
 from .camera import MS, Script, VirtualCamera
 from .clock import VirtualClock
@@ -52,6 +53,7 @@ class Answer:
     asked_at: int
     answered_at: int | None = None
     frames: dict[str, SlotMeta] = field(default_factory=dict)
+    tuples: list[dict[str, SlotMeta]] = field(default_factory=list)  # a sequence's, in order
     body: dict = field(default_factory=dict)
     code: str | None = None
     message: str = ""
@@ -127,8 +129,9 @@ class Cell:
     # ---- requests ----
 
     def ask(self, op: str = "tuple", **request) -> Answer:
-        """A request now, answered in virtual time (the engine's deadline bounds the wait)."""
-        answer = Answer({"op": op, **request}, self.now)
+        """A request now, checked and completed as the service does (wire.protocol), answered in
+        virtual time (the engine's deadline bounds the wait)."""
+        answer = Answer(request_of(op, **request), self.now)
         actions = self.engine.submit(answer.request, self.now, answer)
         pending = next((p for p in self.engine.pending if p.ticket is answer), None)
         if pending is not None:
@@ -154,6 +157,8 @@ class Cell:
             elif isinstance(action, Reply):
                 answer = action.pending.ticket
                 answer.frames = {c: action.snapshots[c].frame_meta(i) for c, i in action.plan.picks}
+                for group in action.plan.groups or ():
+                    answer.tuples.append({c: action.snapshots[c].frame_meta(i) for c, i in group})
                 answer.body, answer.answered_at = dict(action.plan.body), self.now
                 self.check_twin(action.pending, [i for _, i in action.plan.picks], action.snapshots)
 
