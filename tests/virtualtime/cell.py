@@ -174,7 +174,9 @@ class Cell:
     def check_twin(self, pending, outcome, snapshots: Mapping[str, Snapshot] | None = None) -> None:
         """The C twin decides as the engine did: the same frames (``outcome`` a list of indices),
         a wait ("waits") or a refusal (the error code). Asked for the requests it decides: image
-        and tuple, sync joint or independent, wait auto or none, nothing triggered."""
+        and tuple, sync joint or independent, wait auto or none, no camera that captures on a
+        trigger (it does not know them: where it would wait for a frame they will not bring, the
+        compiled path leaves the request to the engine, which answers from what is stored)."""
         request = pending.request
         sync, wait = (request.get(k) or self.settings[k] for k in ("sync", "wait"))
         if (
@@ -183,6 +185,7 @@ class Cell:
             or wait not in ("auto", "none")
             or pending.triggered
             or pending.scheduled
+            or any(self.handles[c].triggered for c in pending.cameras)
         ):
             return
         snaps = snapshots or {c: self.handles[c].snapshot() for c in pending.cameras}
