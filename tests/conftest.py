@@ -142,10 +142,11 @@ def fxis_run_alone(*args: str, timeout: float = 60.0) -> subprocess.CompletedPro
 
 
 # A test whose end finds this pytest process's main thread at a real-time policy: something it ran
-# (a library of a backend, most likely) left it there without SCHED_RESET_ON_FORK, and every
-# service a later test of the same worker started then ran all its threads at SCHED_FIFO 99 (seen
-# twice in full runs, in `fxis status`'s scheduling line; issue 41, open). The process is put back
-# at normal priority and the test named in the run's warnings summary, so that the culprit shows.
+# left it there without SCHED_RESET_ON_FORK, and every service a later test of the same worker
+# started then ran all its threads at SCHED_FIFO 99 (seen twice in full runs, in `fxis status`'s
+# scheduling line). The one source found was SVT-AV1's encoder as root (issue 41; kept away by
+# fxis_shm/formats/threadsched.py). The process is put back at normal priority and the test named
+# in the run's warnings summary, so that another culprit shows.
 @pytest.fixture(autouse=True)
 def _normal_priority_after_each_test(request):
     yield

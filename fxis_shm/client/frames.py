@@ -253,9 +253,16 @@ def in_caller_clock(header: dict, clock: ClockEstimate) -> dict:
         header["t_request"] = clock.to_caller(header["t_request"])
     if header.get("targets"):
         header["targets"] = [clock.to_caller(t) for t in header["targets"]]
-    if header.get("grid_mismatch"):
-        header["grid_mismatch"] = {c: clock.to_caller(t) for c, t in header["grid_mismatch"].items()}
+    mismatch = header.get("grid_mismatch")
+    if isinstance(mismatch, dict):  # a tuple's
+        header["grid_mismatch"] = _points_to_caller(mismatch, clock)
+    elif mismatch:  # a sequence's: one per tuple
+        header["grid_mismatch"] = [m and _points_to_caller(m, clock) for m in mismatch]
     return header
+
+
+def _points_to_caller(points: dict[str, int], clock: ClockEstimate) -> dict[str, int]:
+    return {c: clock.to_caller(t) for c, t in points.items()}
 
 
 def tuple_of(header: dict, images: list[np.ndarray], still_valid: Callable | None = None) -> FrameTuple:
@@ -280,7 +287,9 @@ def sequence_of(
     timing = header.get("timing", {})
     if single:
         return [frames[g[0]] for g in groups]
+    targets = header.get("targets", [None] * len(groups))
+    mismatches = header.get("grid_mismatch") or [None] * len(groups)
     return [
-        FrameTuple({frames[i].camera: frames[i] for i in g}, t, timing)
-        for g, t in zip(groups, header.get("targets", [None] * len(groups)))
+        FrameTuple({frames[i].camera: frames[i] for i in g}, t, timing, grid_mismatch=m)
+        for g, t, m in zip(groups, targets, mismatches)
     ]

@@ -237,10 +237,21 @@ def _sequence(
             check_history(cam, snaps[cam], sequences.earliest_needed(spec, period), p.t_received, period)
     choose = _chooser(ctx.sync, ctx)
     timelines = {c: snaps[c].timeline for c in p.cameras}
+    whole = dict.fromkeys(p.cameras, 0)  # the timelines start at snapshot index 0
+
+    def held(tls: dict[str, Timeline], t: int, first: dict[str, int]) -> Selection:
+        """The tuple at ``t``, its lockstep frames held to one grid point as a tuple's are."""
+        grid = _grid_of(snaps, first)
+        return on_grid(choose(tls, t), tls, t, ctx.radius_ns, ctx.tolerance_ns, grid, ctx.sync)
+
     groups: list[dict[str, int]] = []
+    mismatches: list[dict[str, int] | None] = []
     if spec.kind == sequences.INTERVAL:
         targets = sequences.target_times(spec)
-        groups = [dict(choose(timelines, t).index) for t in targets]
+        for t in targets:
+            sel = held(timelines, t, whole)
+            groups.append(dict(sel.index))
+            mismatches.append(dict(sel.grid_mismatch) if sel.grid_mismatch else None)
     else:
         try:
             indices = sequences.reference_indices(spec, timelines[ref])
@@ -255,11 +266,14 @@ def _sequence(
                 return Wait({cam: None}, f"the frame of camera {cam!r} near the last reference time")
         for i, t in zip(indices, targets):
             only_this = {ref: Timeline(timelines[ref].times, timelines[ref].physical(i), 1)}
-            chosen = choose({**timelines, **only_this}, t).index
-            groups.append({**chosen, ref: i})
+            sel = held({**timelines, **only_this}, t, {**whole, ref: i})
+            groups.append({**sel.index, ref: i})
+            mismatches.append(dict(sel.grid_mismatch) if sel.grid_mismatch else None)
     check_size(len(groups) * len(p.cameras), ctx.max_sequence_frames)
     tuples = [[(c, g[c]) for c in p.cameras] for g in groups]
-    body = {"op": "sequence", "t_request": p.t_star, "targets": targets}
+    body: dict[str, Any] = {"op": "sequence", "t_request": p.t_star, "targets": targets}
+    if len(p.cameras) > 1 and any(mismatches):
+        body["grid_mismatch"] = mismatches  # per tuple: None, or each lockstep camera's point
     return Plan(body, [pick for t in tuples for pick in t], tuples)
 
 

@@ -22,6 +22,7 @@ import numpy as np
 
 from fxis_shm.errors import ConfigError, InvalidArgument
 from fxis_shm.formats import rosmsgs
+from fxis_shm.formats.threadsched import normal_scheduling_kept
 from fxis_shm.formats.videochoice import Choice, check_camera
 
 QUEUE_FRAMES = 16  # frames waiting for an encoder; more and the camera's frames are skipped
@@ -84,7 +85,8 @@ def open_context(av, choice: Choice, width: int, height: int, fps: float, option
     context.gop_size = 1 << 20  # keyframes are forced by capture time (CameraEncoder._keyframe_due)
     context.max_b_frames = 0
     context.options = options
-    context.open()
+    with normal_scheduling_kept():  # SVT-AV1 as root leaves the opener and its threads at FIFO 99
+        context.open()
     return context
 
 

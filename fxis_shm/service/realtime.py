@@ -16,6 +16,7 @@ import threading
 import time
 from collections.abc import Callable
 
+from fxis_shm.formats.threadsched import tasks, threads_of
 from fxis_shm.service import rtpolicy
 
 _MCL_CURRENT, _MCL_FUTURE = 1, 2
@@ -113,26 +114,11 @@ def _settled_tasks(names: dict[int, str], wait_s: float = 1.0) -> list[int]:
     deadline = time.monotonic() + wait_s
     while True:
         python_comms = {_comm(tid) for tid in names}
-        tids = _tasks("self")
+        tids = tasks("self")
         newborn = [tid for tid in tids if tid not in names and _comm(tid) in python_comms]
         if not newborn or time.monotonic() > deadline:
             return [tid for tid in tids if tid not in newborn]
         time.sleep(0.005)
-
-
-def threads_of(pid: int) -> dict[int, tuple[int, int]]:
-    """Each thread of ``pid`` -> its (policy, rt_priority) (proc(5): fields 41 and 40 of its
-    stat); {} if it is gone."""
-    found = {}
-    for tid in _tasks(str(pid)):
-        try:
-            with open(f"/proc/{pid}/task/{tid}/stat", "rb") as f:
-                raw = f.read()
-        except OSError:
-            continue
-        fields = raw[raw.rfind(b")") + 2 :].split()  # fields[0] is field 3 of proc(5)
-        found[tid] = (int(fields[38]), int(fields[37]))
-    return found
 
 
 def with_scheduling(state: dict | None) -> dict | None:
@@ -143,13 +129,6 @@ def with_scheduling(state: dict | None) -> dict | None:
         threads = threads_of(pid) if isinstance(pid, int) else {}
         process["sched"] = rtpolicy.summary(threads.values()) if threads else None
     return state
-
-
-def _tasks(pid: str) -> list[int]:
-    try:
-        return [int(t) for t in os.listdir(f"/proc/{pid}/task")]
-    except OSError:
-        return []
 
 
 def _comm(tid: int) -> str:

@@ -121,16 +121,18 @@ def test_one_subscriber_streams_the_frames_of_every_services_cameras(two_service
 
 
 def test_joint_tuples_across_services_stream_at_the_rate_asked(two_services):
+    """Each tuple is made by Client([a, b]).tuple(at=t*)'s own call (client/tuplestream.py); that
+    it is the tuple a request at its t* gets is checked in virtual time
+    (tests/unit/test_virtual_sync.py, test_each_tuple_of_a_stream_is_...): here a request comes
+    later, and a loaded machine then finds other frames (one stored late, or one gone)."""
     a, b = two_services
     with Client([a.endpoint, b.endpoint]) as client, client.subscribe(timeout=5) as sub:
         wait_until(lambda: client.latest(), what="frames")
         topic = sub.tuples(rate_hz=12.5)
         messages = []
-        for _ in range(25):  # each compared with a request while its frames are in the rings (0.4 s)
+        for _ in range(25):
             message = sub.receive()
             tup = message.tuple
-            asked = client.tuple(at=tup.t_request, wait="none")  # the same engine, the same choice
-            assert {c: f.frame_id for c, f in asked.items()} == {c: f.frame_id for c, f in tup.items()}
             assert set(tup) == {"left", "right"}
             assert all(read_stamp(f.image) == f.frame_id for f in tup.values())
             messages.append(message)

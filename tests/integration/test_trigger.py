@@ -92,8 +92,14 @@ def test_a_past_moment_is_answered_from_what_is_stored_and_never_waits_for_a_tri
         newest = max(f.t_capture for f in captured[-1].values())
         wait_until(lambda: time.monotonic_ns() > newest + 0.6 * spacing, what="the spacing's frame to seem nearer")
         past = client.tuple(at=time.monotonic_ns() - MS)
-        assert {c: f.frame_id for c, f in past.items()} == {c: f.frame_id for c, f in captured[-1].items()}
         assert past.timing["waited"] == past.timing["received"]  # decided as it arrived: no wait
+        # a stored capture's frames: the newest, unless a timer late under load made its pair more
+        # skewed than one before by more than the sync tolerance (the joint selection's rule; its
+        # every case in virtual time: test_virtual_sync.py, ..._triggered_cameras_gets_the_least_...)
+        assert ids(past) in [ids(c) for c in captured], (captured, past)
+        chosen = next(c for c in captured if ids(c) == ids(past))
+        tolerance = client.status()["settings"]["sync_tolerance_ms"] * MS
+        assert chosen is captured[-1] or captured[-1].skew_ns > past.skew_ns + tolerance, (captured, past)
         shown = fxis("status", "--endpoint", svc.endpoint).stdout
     for name in ("a", "b"):
         assert status[name]["fps"] == 20.0  # as configured (the default), not the captures' spacing
@@ -123,6 +129,10 @@ def test_sync_report_asks_cameras_that_capture_on_request_at_its_own_moments(sta
         # earlier request (a slot asked too late on a loaded machine is refused: missing, not a repeat)
         assert cam["captures"]["scheduled"] == report["slots"] - cam["missing"] and cam["repeated"] == 0
         assert cam["residual_ms"] is not None
+
+
+def ids(tuple_) -> dict[str, int]:
+    return {c: f.frame_id for c, f in tuple_.items()}
 
 
 def _up_and_configured(client) -> bool:

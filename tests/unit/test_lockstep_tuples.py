@@ -7,7 +7,7 @@ from __future__ import annotations
 import numpy as np
 import pytest
 
-from fxis_shm.client.frames import in_caller_clock, tuple_of
+from fxis_shm.client.frames import in_caller_clock, sequence_of, tuple_of
 from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.core.decisions import Context, Plan, Reject, decide
 from fxis_shm.core.engine import Pending
@@ -157,6 +157,23 @@ def test_a_frame_tuple_says_its_grid_mismatch_in_the_callers_clock():
     assert got.grid_mismatch == {"left": G + P - 1_000, "right": G - 1_000}
     assert got.grid_mismatch == {c: got[c].t_target for c in got}  # the frames' own points
     assert "grid_mismatch={'left'" in repr(got)
+
+
+def test_each_tuple_of_a_sequence_says_its_own_grid_mismatch_in_the_callers_clock():
+    """A sequence of two tuples, the second of two points (decisions._sequence: one entry per tuple)."""
+    one = reply_header()["frames"]
+    header = {
+        "op": "sequence",
+        "t_request": G,
+        "targets": [G, G + P],
+        "frames": [{**f, "t_target": G + P} for f in one] + one,
+        "groups": [[0, 1], [2, 3]],
+        "grid_mismatch": [None, {"left": G + P, "right": G}],
+    }
+    first, second = sequence_of(in_caller_clock(header, ClockEstimate(offset_ns=1_000)), [np.zeros((2, 2))] * 4)
+    assert first.grid_mismatch == {} and first.t_request == G - 1_000
+    assert second.grid_mismatch == {"left": G + P - 1_000, "right": G - 1_000}
+    assert second.grid_mismatch == {c: second[c].t_target for c in second}
 
 
 # ---- the edges of the search for a tuple of one point (each kills a mutant of make mutation) ----

@@ -29,6 +29,7 @@ from fxis_shm.service.streams import Streams
 from fxis_shm.shm import naming
 from fxis_shm.shm.cameras import CameraHandle
 from fxis_shm.shm.copyout import CopyOut
+from fxis_shm.wire.protocol import request_of
 
 from .camera import MS, Script, VirtualCamera
 from .clock import VirtualClock
@@ -56,6 +57,7 @@ class Answer:
     asked_at: int
     answered_at: int | None = None
     frames: dict[str, SlotMeta] = field(default_factory=dict)
+    tuples: list[dict[str, SlotMeta]] = field(default_factory=list)  # a sequence's, in order
     body: dict = field(default_factory=dict)
     code: str | None = None
     message: str = ""
@@ -131,8 +133,9 @@ class Cell:
     # ---- requests ----
 
     def ask(self, op: str = "tuple", **request) -> Answer:
-        """A request now, answered in virtual time (the engine's deadline bounds the wait)."""
-        answer = Answer({"op": op, **request}, self.now)
+        """A request now, checked and completed as the service does (wire.protocol), answered in
+        virtual time (the engine's deadline bounds the wait)."""
+        answer = Answer(request_of(op, **request), self.now)
         actions = self.engine.submit(answer.request, self.now, answer)
         pending = next((p for p in self.engine.pending if p.ticket is answer), None)
         if pending is not None:
@@ -158,6 +161,8 @@ class Cell:
             elif isinstance(action, Reply):
                 answer = action.pending.ticket
                 answer.frames = {c: action.snapshots[c].frame_meta(i) for c, i in action.plan.picks}
+                for group in action.plan.groups or ():
+                    answer.tuples.append({c: action.snapshots[c].frame_meta(i) for c, i in group})
                 answer.body, answer.answered_at = dict(action.plan.body), self.now
                 self.check_twin(action.pending, [i for _, i in action.plan.picks], action.snapshots)
 
@@ -174,7 +179,9 @@ class Cell:
         """The C twin decides as the engine did: the same frames (``outcome`` a list of indices),
         a wait ("waits") or a refusal (the error code), and so the same state of the request.
         Asked for the requests it decides: image and tuple, sync joint or independent, wait auto
-        or none, nothing triggered."""
+        or none, no camera that captures on a trigger (it does not know them: where it would wait
+        for a frame they will not bring, the compiled path leaves the request to the engine, which
+        answers from what is stored)."""
         request = pending.request
         sync, wait = (request.get(k) or self.settings[k] for k in ("sync", "wait"))
         if (
@@ -183,6 +190,7 @@ class Cell:
             or wait not in ("auto", "none")
             or pending.triggered
             or pending.scheduled
+            or any(self.handles[c].triggered for c in pending.cameras)
         ):
             return
         snaps = snapshots or {c: self.handles[c].snapshot() for c in pending.cameras}
