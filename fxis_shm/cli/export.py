@@ -1,12 +1,20 @@
 """``fxis export BAG --camera NAME --out FILE.mp4``: a camera's video track of a bag into an
-MP4 file, without re-encoding (fxis_shm.record.mp4export)."""
+MP4 file, without re-encoding (fxis_shm.record.mp4export); ``fxis export BAG --lerobot OUT
+--fps HZ``: the bag as a LeRobotDataset (fxis_shm.record.lerobotexport)."""
 
 from __future__ import annotations
 
 from fxis_shm.cli import exitcodes
+from fxis_shm.errors import InvalidArgument
 
 
 def export_command(args) -> int:
+    if args.lerobot is not None:
+        from fxis_shm.cli.lerobotexport import lerobot_command
+
+        return lerobot_command(args)
+    if args.camera is None or args.out is None:
+        raise InvalidArgument("give --camera NAME --out FILE.mp4 (an MP4), or --lerobot OUT --fps HZ (a dataset)")
     from fxis_shm.record.mp4export import export_mp4
 
     done = export_mp4(args.bag, args.camera, args.out)
@@ -30,6 +38,9 @@ def add_parser(sub) -> None:
         "or an --out that exists.",
     )
     export.add_argument("bag", metavar="BAG", help="the bag folder, or its .mcap file")
-    export.add_argument("--camera", required=True, metavar="NAME", help="the camera whose /NAME/video to export")
-    export.add_argument("--out", required=True, metavar="FILE.mp4", help="the MP4 file to write (a new one)")
+    export.add_argument("--camera", metavar="NAME", help="the camera whose /NAME/video to export")
+    export.add_argument("--out", metavar="FILE.mp4", help="the MP4 file to write (a new one)")
+    from fxis_shm.cli.lerobotexport import add_arguments
+
+    add_arguments(export)
     export.set_defaults(func=export_command)
