@@ -29,13 +29,17 @@ def export_command(args) -> int:
 def add_parser(sub) -> None:
     export = sub.add_parser(
         "export",
-        help="a camera's video track of a bag (fxis record --codec) into an MP4 file, without re-encoding",
+        help="a camera's video track of a bag (fxis record --codec) into an MP4 file, without re-encoding; "
+        "or the whole bag as a LeRobotDataset (--lerobot)",
         description="Copy the packets of BAG's /NAME/video (foxglove_msgs/CompressedVideo: h264, h265 or av1) "
         "into an MP4 file as they are, each frame presented at its capture time (a variable frame rate: pts "
         "in microseconds from the first frame's capture time, which the file's metadata names), and write "
         "FILE.frames.csv beside it: each frame's pts, capture time (ns), frame id and generation. Exit status 2, "
         "in one line, for a bag without that camera's video (the line names the cameras that have some), "
-        "or an --out that exists.",
+        "or an --out that exists. With --lerobot OUT --fps HZ instead: every camera of the bag (raw, JPEG or video) "
+        "as a LeRobotDataset v3.0, one frame per slot of the grid t0 + k/fps that fxis's joint selection fills "
+        "within --max-skew-ms (a slot it cannot fill is dropped and counted), each camera's true capture time "
+        "beside it (docs/lerobot.md).",
     )
     export.add_argument("bag", metavar="BAG", help="the bag folder, or its .mcap file")
     export.add_argument("--camera", metavar="NAME", help="the camera whose /NAME/video to export")

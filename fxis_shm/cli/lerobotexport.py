@@ -8,21 +8,26 @@ from fxis_shm.errors import InvalidArgument
 
 
 def lerobot_command(args) -> int:
-    from fxis_shm.record.lerobotexport import export_lerobot
+    from fxis_shm.record.lerobotexport import ExportOptions, export_lerobot
 
     if args.camera is not None or args.out is not None:
         raise InvalidArgument("--lerobot writes a dataset of every camera: leave out --camera and --out")
     if args.fps is None:
         raise InvalidArgument("--lerobot OUT needs --fps HZ (the dataset's frame rate)")
-    done = export_lerobot(args.bag, args.lerobot, args.fps, args.max_skew_ms, args.task)
+    options = ExportOptions(args.fps, args.max_skew_ms, args.task, args.state_topic, args.action_topic)
+    done = export_lerobot(args.bag, args.lerobot, options)
     grid = done.grid
     print(
         f"{done.out}: LeRobotDataset v3.0, 1 episode of {done.frames} frames at {done.fps} fps from cameras "
         f"{', '.join(done.cameras)}; {grid.dropped} of {grid.total} slots dropped (no tuple within "
-        f"{done.max_skew_ms:g} ms: {grid.dropped_skew}; frames over half a slot from it: {grid.dropped_far}); "
-        f"capture times in ns of {done.clock}"
+        f"{done.max_skew_ms:g} ms: {grid.dropped_skew}; frames over half a slot from it: {grid.dropped_far}; "
+        f"no joint state near it: {grid.dropped_joints}); capture times in ns of {done.clock}"
     )
-    print(f"{done.out}: observations only: the bag holds no robot state or action (no observation.state, no action)")
+    if done.joints:
+        said = "; ".join(f"{key} from {topic}" for key, topic in done.joints.items())
+        print(f"{done.out}: {said} (joint positions)")
+    else:
+        print(f"{done.out}: observations only: the bag holds no sensor_msgs/msg/JointState (no observation.state, no action)")
     return exitcodes.DONE
 
 
@@ -41,3 +46,11 @@ def add_arguments(export) -> None:
         help="with --lerobot: a slot whose best tuple is more skewed than this is dropped (default: half a slot)",
     )
     export.add_argument("--task", metavar="TEXT", help="with --lerobot: the episode's task (default: the bag's name)")
+    export.add_argument(
+        "--state-topic",
+        metavar="TOPIC",
+        help="with --lerobot: the sensor_msgs/msg/JointState topic of observation.state (default: the bag's one)",
+    )
+    export.add_argument(
+        "--action-topic", metavar="TOPIC", help="with --lerobot: the JointState topic of action (default: none)"
+    )

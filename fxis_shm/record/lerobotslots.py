@@ -37,10 +37,11 @@ class Grid:
     total: int  # slots on the grid
     dropped_skew: int  # no tuple within the skew bound
     dropped_far: int  # the tuple's frames lie more than half a slot period from the slot
+    dropped_joints: int = 0  # no robot state (or action) within half a slot period (record.bagjoints)
 
     @property
     def dropped(self) -> int:
-        return self.dropped_skew + self.dropped_far
+        return self.dropped_skew + self.dropped_far + self.dropped_joints
 
 
 def typical_period_ns(times: Sequence[int]) -> int:

@@ -30,6 +30,15 @@ def _torchvision_or_stand_in() -> bool:
     return True
 
 
+def _stamp(image) -> int | None:
+    """The frame id the synthetic camera drew into the picture (channels first, in [0, 1])."""
+    import numpy as np
+
+    from fxis_shm import read_stamp
+
+    return read_stamp(np.ascontiguousarray((image[0] * 255).round().byte().numpy()))
+
+
 def main(spec: dict) -> dict:
     real_torchvision = _torchvision_or_stand_in()
     from lerobot.datasets.lerobot_dataset import LeRobotDataset
@@ -46,7 +55,7 @@ def main(spec: dict) -> dict:
         row = {key: item[key].item() for key in ("timestamp", "frame_index", "index", "episode_index")}
         row["task"] = item["task"]
         row["shapes"] = {key: list(item[key].shape) for key in dataset.meta.video_keys}
-        row["means"] = {key: float(item[key].mean()) for key in dataset.meta.video_keys}
+        row["stamps"] = {key: _stamp(item[key]) for key in dataset.meta.video_keys}
         row["fxis"] = {key: int(item[key].item()) for key in item if key.startswith("observation.fxis.")}
         items.append(row)
     seen["items"] = items
