@@ -25,9 +25,9 @@ from ..conftest import fxis
 pytestmark = pytest.mark.integration
 
 FPS = 30
-# two mono cameras large enough for the drawn frame id to survive JPEG and H.264 (64x200 px)
-CAMERAS = ["--camera", f"top=synthetic:fps={FPS},width=256,height=64"]
-CAMERAS += ["--camera", f"side=synthetic:fps={FPS},phase_ms=9,width=256,height=64"]
+# two mono cameras large enough for the drawn frame id to survive JPEG and H.264 (its blocks: 72x200 px)
+CAMERAS = ["--camera", f"top=synthetic:fps={FPS},width=256,height=96"]
+CAMERAS += ["--camera", f"side=synthetic:fps={FPS},phase_ms=9,width=256,height=96"]
 
 
 def _record(start_service, out: Path, *args: str, cameras=CAMERAS) -> Path:
@@ -84,7 +84,7 @@ def test_a_recording_exported_loads_in_lerobot_frame_by_frame_at_its_capture_tim
         slot_t = t0 + round(extra["observation.fxis.slot"] * 1e9 / FPS)
         for cam in ("top", "side"):
             key = f"observation.images.{cam}"
-            assert item["shapes"][key] == [3, 64, 256]
+            assert item["shapes"][key] == [3, 96, 256]
             t_capture = extra[f"observation.fxis.t_capture.{cam}"]
             assert t_capture in ids[cam], f"frame {n}: {cam}'s capture time is none of the bag's"
             assert item["stamps"][key] == ids[cam][t_capture] & 0xFFFFFFFF, f"frame {n}: {cam} decoded another frame"
