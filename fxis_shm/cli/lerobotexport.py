@@ -27,7 +27,10 @@ def lerobot_command(args) -> int:
         said = "; ".join(f"{key} from {topic}" for key, topic in done.joints.items())
         print(f"{done.out}: {said} (joint positions)")
     else:
-        print(f"{done.out}: observations only: the bag holds no sensor_msgs/msg/JointState (no observation.state, no action)")
+        print(
+            f"{done.out}: observations only: the bag holds no sensor_msgs/msg/JointState "
+            "(no observation.state, no action)"
+        )
     return exitcodes.DONE
 
 

@@ -85,7 +85,8 @@ def export_lerobot(bag_path: str, out: str, options: ExportOptions) -> LeRobotEx
     bag = BagReader(bag_path)
     tracks = camera_tracks(bag)
     state, action = choose_topics(bag, options.state_topic, options.action_topic)
-    joints = {key: joint_track(bag, topic) for key, topic in (("observation.state", state), ("action", action)) if topic}
+    named = {"observation.state": state, "action": action}
+    joints = {key: joint_track(bag, topic) for key, topic in named.items() if topic}
     grid = slot_grid({t.camera: t.times for t in tracks}, rate, round(bound_ms * 1e6))
     grid, joint_rows = _with_joints(grid, joints, 5e8 / rate)
     if not grid.slots:

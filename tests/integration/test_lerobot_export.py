@@ -18,9 +18,9 @@ from fxis_shm import read_stamp
 from fxis_shm.formats import rosmsgs
 from fxis_shm.wire import encoding
 
+from ..conftest import fxis
 from .bags import read_bag
 from .test_lerobot import LEROBOT_PYTHON, ROOT, needs_venv
-from ..conftest import fxis
 
 pytestmark = pytest.mark.integration
 
@@ -68,7 +68,8 @@ def test_a_recording_exported_loads_in_lerobot_frame_by_frame_at_its_capture_tim
     info = json.loads((out / "meta" / "info.json").read_text())
     frames, fxis_info = info["total_frames"], info["fxis"]
     assert f"1 episode of {frames} frames at {FPS} fps" in done.stdout
-    assert f"{fxis_info['dropped_skew'] + fxis_info['dropped_far']} of {fxis_info['slots']} slots dropped" in done.stdout
+    dropped = fxis_info["dropped_skew"] + fxis_info["dropped_far"]
+    assert f"{dropped} of {fxis_info['slots']} slots dropped" in done.stdout
     assert "observations only" in done.stdout
     assert frames >= 40  # 45 frames a camera, 9 ms apart: every slot but an end one has its tuple
 
