@@ -21,7 +21,7 @@ $(VENV)/.installed: pyproject.toml setup.py $(COMPILED_SOURCES) scripts/install-
 	bash scripts/install-system-packages.sh
 	$(PYTHON) -m venv $(VENV)
 	$(BIN)/python -m pip install --quiet --upgrade pip
-	$(BIN)/python -m pip install --quiet -e ".[aravis,genicam,record,video,foxglove,ros2,rerun]" --group test --group lint --group bench --group docs --group mutation
+	$(BIN)/python -m pip install --quiet -e ".[aravis,genicam,record,video,foxglove,ros2,rerun,lerobot]" --group test --group lint --group bench --group docs --group mutation
 	touch $@
 
 # Real ROS 2 nodes for the bridge's tests (tests/rclpy_peer.py), each distribution from its wheels in
@@ -52,12 +52,14 @@ ros-venvs: $(ROS_VENVS)
 	touch $@
 
 # lerobot 0.4.4 (the newest on Python 3.11) with the LeRobot camera plugin (integrations/lerobot), for
-# tests/integration/test_lerobot.py and bench/compare/lerobot_sync.py: torch is the CPU 2.13.0 wheel,
-# lerobot is installed without its torch<2.11 pin and its other requirements are installed as listed.
+# tests/integration/test_lerobot.py, test_lerobot_export.py and bench/compare/lerobot_sync.py: torch is the
+# CPU 2.13.0 wheel, with torchcodec 0.13.0 built for it (LeRobotDataset's video decoder; lerobot 0.4.4 pins
+# torchcodec<0.11, built for the older torch), lerobot is installed without its torch<2.11 pin and its other
+# requirements are installed as listed.
 .venv-lerobot/.installed: $(VENV)/.installed integrations/lerobot/pyproject.toml integrations/lerobot/lerobot-0.4.4-requirements.txt
 	$(PYTHON) -m venv .venv-lerobot
 	.venv-lerobot/bin/python -m pip install --quiet --upgrade pip
-	.venv-lerobot/bin/python -m pip install --quiet torch==2.13.0
+	.venv-lerobot/bin/python -m pip install --quiet torch==2.13.0 torchcodec==0.13.0
 	.venv-lerobot/bin/python -m pip install --quiet --no-deps lerobot==0.4.4
 	.venv-lerobot/bin/python -m pip install --quiet -r integrations/lerobot/lerobot-0.4.4-requirements.txt
 	FXIS_PURE_PYTHON=1 .venv-lerobot/bin/python -m pip install --quiet -e .

@@ -17,6 +17,8 @@ TUPLES_TOPIC = "/fxis/tuples"
 # Video (fxis record --codec): Foxglove's CompressedVideo, as its ROS 2 package foxglove_msgs
 # defines it, one frame per message; and beside it, message for message, the frame each is.
 VIDEO, VIDEO_FRAME = "foxglove_msgs/msg/CompressedVideo", "fxis_msgs/msg/VideoFrame"
+# A robot's joints (fxis export --lerobot samples them as observation.state and action).
+JOINT_STATE = "sensor_msgs/msg/JointState"
 
 _SEP = "=" * 80 + "\n"
 _HEADER_DEPS = (
@@ -58,6 +60,10 @@ DEFINITIONS = {
     # What lossy video cannot be trusted to keep: the frame id and generation of the message of
     # the same stamp (and index) on the video topic, and whether it is a keyframe.
     VIDEO_FRAME: ("std_msgs/Header header\nuint64 frame_id\nuint32 generation\nbool keyframe\n" + _HEADER_DEPS),
+    JOINT_STATE: (
+        "std_msgs/Header header\nstring[] name\nfloat64[] position\nfloat64[] velocity\nfloat64[] effort\n"
+        + _HEADER_DEPS
+    ),
 }
 
 # ROS encoding names (sensor_msgs/image_encodings.hpp) of the layouts the rings hold.
