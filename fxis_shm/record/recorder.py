@@ -289,7 +289,10 @@ class Recorder:
         except (Overwritten, ServiceError) as exc:
             if not _frames_gone(exc):
                 raise
-            follower.lost(len(rows))  # the ring came round between listing and copying
+            if isinstance(exc, CameraDown):
+                follower.give_back()  # still in the ring: taken when the camera is back
+            else:
+                follower.lost(len(rows))  # the ring came round between listing and copying
             return
         kept = [f for f in frames if f.frame_id in wanted]
         follower.lost(len(rows) - len(kept))
