@@ -377,7 +377,7 @@ class Coordinator:
             "now": now,
             "boot_id": self.boot_id,
             "time_namespace": self.time_namespace,
-            "clock": timebase.service_clock(),
+            "clock": timebase.wire_name(),  # the header's spelling (issue 43)
             "encoded": self.copyout.encoded.status(),
             "ring_ordering": ordering.MODE,
             "uptime_s": round((now - self.started_ns) / 1e9, 3),
