@@ -17,7 +17,7 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import Protocol
+from typing import Any, Protocol
 
 from fxis_shm.errors import InvalidArgument
 
@@ -43,7 +43,7 @@ def check(name: str) -> str:
     return name
 
 
-def of_status(status: dict) -> str:
+def of_status(status: dict[str, Any]) -> str:
     """The short name of the clock a ``status`` reply names (either spelling; none: the default)."""
     return check(status.get("clock") or DEFAULT)
 

@@ -91,7 +91,12 @@ class Follower:
         if not fresh:
             return []
         same_generation = fresh[0][GENERATION] == self.generation
-        if same_generation and self.last_id is not None and self.last_t is not None and rows[0][T_CAPTURE] > self.last_t:
+        if (
+            same_generation
+            and self.last_id is not None
+            and self.last_t is not None
+            and rows[0][T_CAPTURE] > self.last_t
+        ):
             # the last frame taken has left the ring: everything up to the oldest held is lost
             self.missed += max(0, fresh[0][ID] - self.last_id - 1)
         for row in fresh:

@@ -102,5 +102,7 @@ def test_grab_of_a_lockstep_camera_gives_its_target_and_residual(start_service, 
     result = fxis("grab", "--endpoint", svc.endpoint, "--out", str(tmp_path / "g"))
     assert result.returncode == 0, result.stderr
     frame = json.loads((tmp_path / "g" / "tuple.json").read_text())["frames"]["trig"]
-    assert frame["capture"] == "lockstep" and isinstance(frame["t_target"], int)  # the grid point, in the service's clock
+    assert frame["capture"] == "lockstep" and isinstance(
+        frame["t_target"], int
+    )  # the grid point, in the service's clock
     assert frame["residual_ns"] == frame["t_capture"] - frame["t_target"]

@@ -128,7 +128,8 @@ SKEW_PLOT_JS = """(() => {
     xticks: Array.from(svg.querySelectorAll('text.xtick')).map(t => [num(t, 'data-value'), num(t, 'x'), t.textContent]),
     points: series ? series.getAttribute('points').trim().split(' ').map(p => p.split(',').map(Number)) : [],
     right: svg.width.baseVal.value - 8,
-    box: (b => ({x: b.left + scrollX, y: b.top + scrollY, width: b.width, height: b.height}))(svg.getBoundingClientRect()),
+    box: (b => ({x: b.left + scrollX, y: b.top + scrollY, width: b.width, height: b.height}))(
+      svg.getBoundingClientRect()),
   };
 })()"""
 

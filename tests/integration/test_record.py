@@ -184,7 +184,11 @@ def test_frames_a_camera_restart_cost_are_counted_and_the_exit_code_says_so(star
             # made, so after the recording began): the restart then lies inside the recording,
             # whether or not the recorder has polled them before the kill (it takes them after)
             first = client.image("a").frame_id
-            wait_until(lambda: client.image("a").frame_id >= first + 3, timeout=20, what="3 frames of a captured in the recording")
+            wait_until(
+                lambda: client.image("a").frame_id >= first + 3,
+                timeout=20,
+                what="3 frames of a captured in the recording",
+            )
             os.kill(svc.children()["camera:a"], signal.SIGKILL)
             wait_until(
                 lambda: client.status()["cameras"]["a"].get("generation", generation) > generation,

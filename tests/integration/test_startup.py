@@ -175,8 +175,9 @@ def test_a_clean_start_and_a_restart_log_no_unreachable_worker(start_service, tm
         generation = client.status()["cameras"]["a"]["generation"]
         os.kill(svc.children()["camera:a"], signal.SIGKILL)
         wait_until(
-            lambda: (a := client.status()["cameras"]["a"]).get("generation", generation) > generation
-            and a.get("settings"),
+            lambda: (
+                (a := client.status()["cameras"]["a"]).get("generation", generation) > generation and a.get("settings")
+            ),
             timeout=20,
             what="camera a's settings of its new generation, after its restart",
         )
