@@ -7,6 +7,7 @@ import json
 from fxis_shm.cli.options import add_client_options, client_for, nanoseconds
 from fxis_shm.cli.stopsignals import as_interrupts, interrupted
 from fxis_shm.cli.table import aligned
+from fxis_shm.core import timebase
 from fxis_shm.service.rtpolicy import sched_text
 from fxis_shm.shm.cameras import RATE_WINDOW_NS
 
@@ -26,7 +27,8 @@ def status_command(args) -> int:
     )
     mapping = status["clock_mapping"]
     print(
-        f"clock {status.get('clock', 'monotonic')}: {mapping['method']}, offset from this host's monotonic "
+        f"clock {timebase.WIRE_NAMES[timebase.of_status(status)]}: {mapping['method']}, offset from this host's "
+        "CLOCK_MONOTONIC "
         f"{mapping['offset_ns'] / 1e6:+.3f} ms, drift {mapping['drift_ppm']:+.2f} ppm, "
         f"uncertainty {mapping['uncertainty_ns'] / 1e3:.0f} us"
     )

@@ -9,6 +9,7 @@ import textwrap
 
 from fxis_shm import _compiled
 from fxis_shm.cli import exitcodes
+from fxis_shm.core import timebase
 from fxis_shm.errors import ConfigError
 from fxis_shm.service.camerakinds import COMMON_OPTIONS, KINDS
 from fxis_shm.service.config import DEFAULT_FOXGLOVE_RATE_HZ, MAX_FOXGLOVE_RATE_HZ, build_config, load_toml
@@ -132,9 +133,11 @@ def add_parser(sub) -> None:
     run.add_argument("--config", metavar="FILE.toml", help="settings file (flags override it)")
     run.add_argument(
         "--clock",
-        choices=("monotonic", "realtime", "tai"),
+        type=timebase.short_name,
+        choices=tuple(timebase.CLOCK_IDS),
         help="the clock of every time the service gives and takes (default monotonic); "
-        "realtime or tai where PTP or chrony keeps the cell's hosts in step "
+        "realtime or tai where PTP or chrony keeps the cell's hosts in step; the POSIX names "
+        "(CLOCK_MONOTONIC, the service's own spelling in what it says) are taken too "
         "(docs/deployment.md)",
     )
     run.add_argument(

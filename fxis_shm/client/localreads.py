@@ -46,7 +46,7 @@ def same_clock(status: dict, our_boot_id: str | None = None) -> str | None:
     ours = boot_id() if our_boot_id is None else our_boot_id
     if status.get("boot_id") is None or status.get("boot_id") != ours:
         return "the service runs on another kernel"
-    if (status.get("clock") or timebase.DEFAULT) != "monotonic":
+    if timebase.of_status(status) != "monotonic":
         return None  # time namespaces set CLOCK_MONOTONIC (and BOOTTIME) apart, not REALTIME or TAI
     namespace = time_namespace()
     if namespace is None or status.get("time_namespace") != namespace:
@@ -75,7 +75,7 @@ class LocalReads:
         except BaseException:
             self.close()
             raise
-        self.clock = status.get("clock") or timebase.DEFAULT  # the service's clock
+        self.clock = timebase.of_status(status)  # the service's clock
         self.now = timebase.reader(self.clock)
         self.wire_clock = timebase.WIRE_NAMES[self.clock]
         self.engine = RequestEngine(self.cameras, status.get("settings"))

@@ -29,7 +29,7 @@ def fixed_mapping(caller_clock: str | None, service: dict) -> ClockEstimate | No
     """The mapping when no estimate is needed: the service reads the very clock the caller
     does (same kernel, and for CLOCK_MONOTONIC the same time namespace), or both read a
     clock kept in step across hosts (realtime, tai). None: it must be estimated."""
-    service_clock = service.get("clock") or timebase.DEFAULT
+    service_clock = timebase.of_status(service)
     if caller_clock != service_clock:
         return None
     same_kernel = service.get("boot_id") is not None and service.get("boot_id") == boot_id()

@@ -6,13 +6,18 @@ host reading the same clock needs no estimate of the offset.
 
 A caller names its own clock the same way (``Client(clock="realtime")``) or passes a
 function returning int ns.
+
+Everything the service says names its clock one way, the POSIX name ("CLOCK_MONOTONIC"):
+every reply's header, ``status`` (and the dashboard's /status.json), the lockstep grid, bag
+metadata. What a user types may be either spelling, and what a peer's status says is read
+in either (services before issue 43 said "monotonic" in ``status``).
 """
 
 from __future__ import annotations
 
 import time
 from collections.abc import Callable
-from typing import Protocol
+from typing import Any, Protocol
 
 from fxis_shm.errors import InvalidArgument
 
@@ -22,15 +27,31 @@ WIRE_NAMES = {"monotonic": "CLOCK_MONOTONIC", "realtime": "CLOCK_REALTIME", "tai
 DEFAULT = "monotonic"
 
 
+_BY_WIRE_NAME = {wire: name for name, wire in WIRE_NAMES.items()}
+
+
+def short_name(name: str) -> str:
+    """``name`` as the short name ("monotonic") if it is a POSIX one ("CLOCK_MONOTONIC"); else as given."""
+    return _BY_WIRE_NAME.get(name, name) if isinstance(name, str) else name
+
+
 def check(name: str) -> str:
+    """The clock's short name ("monotonic") for ``name`` in either spelling ("CLOCK_MONOTONIC" too)."""
+    name = short_name(name)
     if name not in CLOCK_IDS:
         raise InvalidArgument(f"unknown clock {name!r}: use one of {', '.join(CLOCK_IDS)}")
     return name
 
 
+def of_status(status: dict[str, Any]) -> str:
+    """The short name of the clock a ``status`` reply names (either spelling; none: the default)."""
+    return check(status.get("clock") or DEFAULT)
+
+
 def reader(name: str) -> Callable[[], int]:
     """A function reading clock ``name`` in int ns."""
-    if check(name) == "monotonic":
+    name = check(name)
+    if name == "monotonic":
         return time.monotonic_ns
     if name == "realtime":
         return time.time_ns

@@ -72,7 +72,7 @@ class Recorder:
         self.t_start = self._polled_at = listing["now"]
         # The stamps are in the service's clock; MCAP log times are wall-clock (what Foxglove
         # and `ros2 bag info` show as dates): the stamp plus this offset.
-        self.service_clock = timebase.WIRE_NAMES[status.get("clock") or timebase.DEFAULT]
+        self.service_clock = timebase.WIRE_NAMES[timebase.of_status(status)]
         self.to_realtime = time.time_ns() - self.client.time()
         periods = {c: listing["cameras"][c].get("period_ns") or 0 for c in self.cameras}
         self.periods = periods
@@ -289,7 +289,10 @@ class Recorder:
         except (Overwritten, ServiceError) as exc:
             if not _frames_gone(exc):
                 raise
-            follower.lost(len(rows))  # the ring came round between listing and copying
+            if isinstance(exc, CameraDown):
+                follower.give_back()  # still in the ring: taken when the camera is back
+            else:
+                follower.lost(len(rows))  # the ring came round between listing and copying
             return
         kept = [f for f in frames if f.frame_id in wanted]
         follower.lost(len(rows) - len(kept))

@@ -18,6 +18,7 @@ Pure: frame rows and times in, decisions out.
 
 from __future__ import annotations
 
+import copy
 import json
 from dataclasses import asdict, dataclass, field
 
@@ -68,30 +69,52 @@ class Follower:
     taken: int = 0
     restarts: list[RestartGap] = field(default_factory=list)  # what each restart of its worker cost
     decimator: Decimator = field(init=False)
+    # what the last new_frames changed, for give_back: last_id, last_t, generation, restarts, missed
+    _before: tuple = field(init=False, repr=False)
+    _decimator_before: Decimator = field(init=False, repr=False)
 
     def __post_init__(self):
         self.decimator = Decimator(self.rate_hz)
+        self._before, self._decimator_before = (None, None, None, 0, 0), copy.copy(self.decimator)
 
     def new_frames(self, rows: list[list[int]], period_ns: int) -> list[list[int]]:
         """The rows (oldest first, as the ``frames`` op lists them) to take now. Counts
-        what fell out of the ring since the last call into ``missed``."""
+        what fell out of the ring since the last call into ``missed``, and what each restart
+        cost: a restarted worker keeps its ring, so one listing may hold the last frames of
+        one generation and the first of the next, and every change of generation between two
+        rows is a restart (not only one at the first row)."""
+        self._before = (self.last_id, self.last_t, self.generation, len(self.restarts), self.missed)
+        self._decimator_before = copy.copy(self.decimator)
         fresh = [
             r for r in rows if r[T_CAPTURE] >= self.t_start and (self.last_t is None or r[T_CAPTURE] > self.last_t)
         ]
         if not fresh:
             return []
-        first = fresh[0]
-        if first[GENERATION] != self.generation:
-            if self.generation is not None and self.last_id is not None and self.last_t is not None:
-                self.restarts.append(RestartGap.between(self.generation, self.last_id, self.last_t, first, period_ns))
-            self.last_id = None  # a restarted camera counts its ids afresh: its ids tell no gap
-        elif self.last_id is not None and rows[0][T_CAPTURE] > self.last_t:
+        same_generation = fresh[0][GENERATION] == self.generation
+        if (
+            same_generation
+            and self.last_id is not None
+            and self.last_t is not None
+            and rows[0][T_CAPTURE] > self.last_t
+        ):
             # the last frame taken has left the ring: everything up to the oldest held is lost
-            self.missed += max(0, first[ID] - self.last_id - 1)
-        chosen = [r for r in fresh if self.decimator.offer(r[T_CAPTURE], period_ns)]
-        last = fresh[-1]
-        self.last_id, self.last_t, self.generation = last[ID], last[T_CAPTURE], last[GENERATION]
-        return chosen
+            self.missed += max(0, fresh[0][ID] - self.last_id - 1)
+        for row in fresh:
+            if row[GENERATION] != self.generation and self.generation is not None:
+                # a restarted camera counts its ids afresh: across it, only the capture times tell the gap
+                assert self.last_id is not None and self.last_t is not None
+                self.restarts.append(RestartGap.between(self.generation, self.last_id, self.last_t, row, period_ns))
+            self.last_id, self.last_t, self.generation = row[ID], row[T_CAPTURE], row[GENERATION]
+        return [r for r in fresh if self.decimator.offer(r[T_CAPTURE], period_ns)]
+
+    def give_back(self) -> None:
+        """The frames the last ``new_frames`` chose could not be copied because the camera went
+        down meanwhile: they stay in its ring (its worker, restarted, keeps the ring), so the
+        next call offers them again, and a restart's gap is counted from the last frame taken,
+        the one the bag holds. Frames the ring no longer holds by then are counted as usual."""
+        self.last_id, self.last_t, self.generation, restarts, self.missed = self._before
+        del self.restarts[restarts:]
+        self.decimator = self._decimator_before
 
     @property
     def missing_at_restarts(self) -> int:

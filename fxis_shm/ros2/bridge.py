@@ -53,7 +53,7 @@ class Bridge:
         self.spec, self.stop = spec, stop
         keys = spec.client_keys()
         with Client(spec.endpoint, timeout=CLIENT_TIMEOUT_S, keys=keys) as probe:
-            clock = probe.status().get("clock") or "monotonic"
+            clock = timebase.of_status(probe.status())
         # Every client reads the service's own clock: on this host that is exact, no estimate.
         self.make_client: Callable[[], Client] = lambda: Client(
             spec.endpoint, timeout=CLIENT_TIMEOUT_S, keys=keys, clock=clock

@@ -339,11 +339,12 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
         config = replace(config, restart_window_s=_setting("restart_window_s", float, values["restart_window_s"]))
     config = _security(config, values)
     if "clock" in values:
-        from fxis_shm.core.timebase import CLOCK_IDS
+        from fxis_shm.core.timebase import CLOCK_IDS, short_name
 
-        if values["clock"] not in CLOCK_IDS:
+        clock = short_name(values["clock"])
+        if clock not in CLOCK_IDS:
             raise ConfigError(f"clock must be one of {', '.join(CLOCK_IDS)}, got {values['clock']!r}")
-        config = replace(config, clock=values["clock"])
+        config = replace(config, clock=clock)
     if "log_level" in values:
         level = str(values["log_level"]).upper()
         if level not in ("DEBUG", "INFO", "WARNING", "ERROR"):

@@ -181,12 +181,10 @@ class Coordinator:
             closing.append(links)
             self.streams = Streams(self.copyout, self._publish)
             poller = zmq.Poller()
-            for sock in (self.router, self.pub, self.events, watch.pull, *links.sockets.values()):
+            for sock in (self.router, self.pub, self.events, watch.pull, *links.sockets.values(), *links.monitors):
                 if sock is not None:
                     poller.register(sock, zmq.POLLIN)
-            for name in self.cameras:  # what reads and status answer with until a change is made
-                self.desk.ask(name)
-            on_ready()
+            on_ready()  # each camera's settings are asked when its link is up (desk.linked)
             log.info(
                 "serving %s on %s, publishing on %s, events on %s",
                 sorted(self.cameras),
@@ -206,6 +204,10 @@ class Coordinator:
                 for sock in links.sockets.values():
                     if sock in events:
                         links.drain(sock)
+                for monitor in links.monitors:
+                    if monitor in events:
+                        for camera in links.drain_monitor(monitor):
+                            self.desk.linked(camera)  # what reads and status answer with until a change
                 links.expire(self.clock.now_ns())
                 for line in self.tally.flush(self.clock.now_ns()):
                     log.info("%s", line)
@@ -377,7 +379,7 @@ class Coordinator:
             "now": now,
             "boot_id": self.boot_id,
             "time_namespace": self.time_namespace,
-            "clock": timebase.service_clock(),
+            "clock": timebase.wire_name(),  # the header's spelling (issue 43)
             "encoded": self.copyout.encoded.status(),
             "ring_ordering": ordering.MODE,
             "uptime_s": round((now - self.started_ns) / 1e9, 3),

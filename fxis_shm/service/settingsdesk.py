@@ -73,12 +73,21 @@ class SettingsDesk:
 
     def ask(self, camera: str) -> None:
         """Have the camera's worker report its settings (once: a report already asked for is
-        not asked again)."""
+        not asked again). With nobody waiting for the answer (the coordinator's own question:
+        at start, for status) and the worker's link not up yet, it is asked when the link comes
+        up (``linked``) rather than told now that it cannot be reached."""
         known = self._known[camera]
         if known.asking or self.links is None:
             return
+        if not known.readers and camera not in self.links.up:
+            return  # linked() asks
         known.asking = True
         self.links.send(camera, commands.SETTINGS, commands.SETTINGS_TIMEOUT_S, self._reported(camera))
+
+    def linked(self, camera: str) -> None:
+        """The camera's worker (re)linked: a worker that just started or restarted, whose
+        settings are asked now, so that reads and status have them from its first frames."""
+        self.ask(camera)
 
     def values(self, camera: str, generation: int | None) -> Message | None:
         """For status: the values the worker reported for this generation of its frames; for

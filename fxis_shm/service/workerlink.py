@@ -7,6 +7,11 @@ deadline and returns, ``drain`` hands each reply to its callback, and ``expire``
 commands whose deadline passed. The deadline travels with the command, so a worker that
 takes it late (it was restarting) drops it instead of applying a change its caller was told
 had failed. ZMQ_IMMEDIATE: a command to a worker that is not there fails at once.
+
+A link is up once ZeroMQ has connected it and completed its handshake, which happens in
+ZeroMQ's own thread some time after ``connect``: a monitor socket per link says when
+(``drain_monitor``), so that the coordinator's own questions (the settings at start, after a
+worker's restart) wait for it rather than fail and log that a running worker is not running.
 """
 
 from __future__ import annotations
@@ -17,6 +22,7 @@ from collections.abc import Callable
 from dataclasses import dataclass
 
 import zmq
+from zmq.utils.monitor import recv_monitor_message
 
 from fxis_shm.core import timebase
 from fxis_shm.errors import Code, ProtocolError
@@ -39,11 +45,16 @@ class _Pending:
 class WorkerLinks:
     def __init__(self, ctx: zmq.Context, service: str, cameras: list[str]):
         self.sockets: dict[str, zmq.Socket] = {}
+        self.monitors: dict[zmq.Socket, str] = {}  # a link's monitor -> its camera
+        self.up: set[str] = set()  # the cameras whose link is connected now
         for name in cameras:
             sock = ctx.socket(zmq.DEALER)
             sock.setsockopt(zmq.LINGER, 0)
             sock.setsockopt(zmq.IMMEDIATE, 1)  # no queueing for a worker that is not connected
             sock.setsockopt(zmq.RECONNECT_IVL, 100)
+            monitor = sock.get_monitor_socket(zmq.EVENT_HANDSHAKE_SUCCEEDED | zmq.EVENT_DISCONNECTED)
+            monitor.setsockopt(zmq.LINGER, 0)
+            self.monitors[monitor] = name
             sock.connect(naming.command_endpoint(service, name))
             self.sockets[name] = sock
         self._pending: dict[int, _Pending] = {}
@@ -58,9 +69,24 @@ class WorkerLinks:
         try:
             self.sockets[camera].send_multipart([b"", frame], zmq.NOBLOCK)
         except zmq.Again:
-            done(None, Code.CAMERA_DOWN, f"camera {camera!r} takes no commands now: its worker is not running")
+            why = "its link's queue is full" if camera in self.up else "its worker is not running"
+            done(None, Code.CAMERA_DOWN, f"camera {camera!r} takes no commands now: {why}")
             return
         self._pending[command_id] = _Pending(camera, deadline, done)
+
+    def drain_monitor(self, monitor: zmq.Socket) -> list[str]:
+        """Note what a link's monitor says; the cameras whose link came up (a worker started,
+        or restarted and linked again)."""
+        came = []
+        camera = self.monitors[monitor]
+        while monitor.poll(0):
+            event = recv_monitor_message(monitor)["event"]
+            if event == zmq.EVENT_HANDSHAKE_SUCCEEDED:
+                self.up.add(camera)
+                came.append(camera)
+            elif event == zmq.EVENT_DISCONNECTED:
+                self.up.discard(camera)
+        return came
 
     def drain(self, sock: zmq.Socket) -> None:
         while sock.poll(0):
@@ -91,4 +117,7 @@ class WorkerLinks:
 
     def close(self) -> None:
         for sock in self.sockets.values():
+            sock.disable_monitor()
             sock.close()
+        for monitor in self.monitors:
+            monitor.close()

@@ -212,7 +212,7 @@ def sync_status(ring: RingReader) -> dict:
         lockstep = {
             "hz": f["lockstep_mhz"] / 1000,
             "phase_ms": f["lockstep_phase_ns"] / 1e6,
-            "clock": GRID_CLOCKS[f["lockstep_clock"]],
+            "clock": timebase.WIRE_NAMES[GRID_CLOCKS[f["lockstep_clock"]]],
             "frames": f["frames_lockstep"],
             "residual_p50_ms": round(f["residual_p50_ns"] / 1e6, 4),
             "residual_p99_ms": round(f["residual_p99_ns"] / 1e6, 4),

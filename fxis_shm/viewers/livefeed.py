@@ -37,6 +37,7 @@ REQUEST_TIMEOUT_S = 1.5  # a service silent this long is shown as gone
 INTERVALS_SHOWN = 60  # frame intervals plotted per camera
 SYNC_WINDOW = 120  # the sampled tuples the live sync figures are of: a minute at two a second
 GRID_LAG_NS = 5_000_000  # a sampled tuple's t* is a period and this far back: its frames are stored
+SKEW_BOUND_MS = syncstats.DEFAULT_THRESHOLD_MS  # the skew plot's bound: a tuple within it counts as synced
 T = TypeVar("T")
 
 
@@ -221,7 +222,8 @@ class LiveFeed:
             "error": None,
             "status": status,
             "cameras": cameras,
-            "skew_ms": self._skews.points(),
+            "skew_ms": self._skews.points(time.monotonic() - self.started),
+            "skew_bound_ms": SKEW_BOUND_MS,
             "sync": self._sync_view(list(status["cameras"])),
             "sampled": time.time(),
         }

@@ -138,7 +138,8 @@ def frame_intervals_ms(rows: list[list[int]], columns: list[str], last: int) -> 
 
 
 class SkewHistory:
-    """The skew (ms) of the last synchronized tuples, with the time each was taken."""
+    """The skew (ms) of the last synchronized tuples, with the time each was taken (seconds of a
+    monotonic count the caller keeps)."""
 
     def __init__(self, length: int = 120):
         self._points: deque[tuple[float, float]] = deque(maxlen=length)
@@ -147,5 +148,7 @@ class SkewHistory:
         if math.isfinite(t_s):
             self._points.append((round(t_s, 3), round(skew_ns / 1e6, 3)))
 
-    def points(self) -> list[tuple[float, float]]:
-        return list(self._points)
+    def points(self, now_s: float) -> list[tuple[float, float]]:
+        """(seconds relative to ``now_s``, negative: ago; skew ms), oldest first: what the page
+        draws against "seconds ago", whenever it looks."""
+        return [(round(t - now_s, 3), skew) for t, skew in self._points]

@@ -16,7 +16,7 @@ import pytest
 from fxis_shm.cli import exitcodes
 from fxis_shm.service.launch import ServiceProcess
 
-from ..conftest import fxis
+from ..conftest import fxis, wait_until
 from .conftest import module_service
 
 pytestmark = pytest.mark.integration
@@ -36,6 +36,11 @@ def test_a_bag_names_the_endpoint_its_config_file_gave(service, tmp_path):
     assert result.returncode == 0, result.stderr
     metadata = (tmp_path / "bag" / "metadata.yaml").read_text()
     assert service.endpoint in metadata and "None" not in metadata.split("endpoint", 1)[1].splitlines()[0]
+    from mcap.reader import make_reader
+
+    with open(tmp_path / "bag" / "bag_0.mcap", "rb") as f:  # the bag's own ``fxis`` record says it too
+        records = {m.name: m.metadata for m in make_reader(f).iter_metadata()}
+    assert records["fxis"]["endpoint"] == records["fxis.begun"]["endpoint"] == service.endpoint
 
 
 @pytest.mark.parametrize("codec", ["h265", "av1"])
@@ -88,3 +93,16 @@ def test_grab_says_how_each_frame_was_captured(service, tmp_path):
     assert result.returncode == 0, result.stderr
     frame = json.loads((tmp_path / "g" / "tuple.json").read_text())["frames"]["left"]
     assert frame["capture"] == "free" and frame["t_target"] is None and frame["residual_ns"] is None
+
+
+def test_grab_of_a_lockstep_camera_gives_its_target_and_residual(start_service, tmp_path):
+    svc = start_service("--lockstep", "20", "--camera", f"trig=synthetic:trigger=software,{SIZE}")
+    with svc.client() as client:
+        wait_until(lambda: client.status()["cameras"]["trig"]["sync"]["lockstep"]["frames"] >= 3, what="grid frames")
+    result = fxis("grab", "--endpoint", svc.endpoint, "--out", str(tmp_path / "g"))
+    assert result.returncode == 0, result.stderr
+    frame = json.loads((tmp_path / "g" / "tuple.json").read_text())["frames"]["trig"]
+    assert frame["capture"] == "lockstep" and isinstance(
+        frame["t_target"], int
+    )  # the grid point, in the service's clock
+    assert frame["residual_ns"] == frame["t_capture"] - frame["t_target"]

@@ -17,7 +17,7 @@ import pytest
 from fxis_shm import read_stamp
 from fxis_shm.service.launch import free_tcp_port
 
-from ..conftest import fxis_run_alone, wait_until
+from ..conftest import fxis, fxis_run_alone, wait_until
 from .conftest import SMALL, client_keys, module_services
 
 pytestmark = pytest.mark.integration
@@ -85,6 +85,22 @@ def test_the_page_and_status_are_served(dashboard):
     reply = json.loads(body)
     assert status == 200 and reply["service"] == svc.name and set(reply["cameras"]) == {"a", "b"}
     assert reply["supervisor"]["processes"]["dashboard"]["state"] == "running"
+
+
+def test_the_clock_has_one_spelling_on_every_face(dashboard):
+    """Issue 43: /status.json said "monotonic", the settings reply "CLOCK_MONOTONIC". Every reply's
+    header, status, the dashboard's /status.json and the command line's JSON name it alike."""
+    svc, base = dashboard
+    with svc.client() as client:
+        said = {
+            "status": client.status()["clock"],
+            "settings": client.settings("a")["clock"],
+            "/status.json": json.loads(get(base + "/status.json")[2])["clock"],
+            "/dashboard.json": view(base)["status"]["clock"],
+        }
+    for argv in (["status", "--json"], ["get", "a", "--json"]):
+        said[" ".join(argv)] = json.loads(fxis(*argv, "--endpoint", svc.endpoint).stdout)["clock"]
+    assert set(said.values()) == {"CLOCK_MONOTONIC"}, said
 
 
 def test_the_sync_figures_are_shown_live(dashboard, wait):

@@ -13,7 +13,7 @@ import pytest
 
 from .browser import Browser, find_chromium
 from .conftest import child_pids
-from .test_dashboard import get, start_dashboard
+from .test_dashboard import get, start_dashboard, view
 
 pytestmark = pytest.mark.integration
 
@@ -115,3 +115,47 @@ def test_the_page_shows_every_camera_live_and_a_killed_one_down(browser, start_s
     failed = wait(lambda: (t := browser.evaluate(SYNC_JS)).startswith("sync FAIL") and t, timeout=30, interval=0.2,
                   what="the sync figures to fail")  # fmt: skip
     assert "dropped" in failed
+
+
+# the skew plot as the page draws it: its bound line, its axes' ticks (value, position), its points
+SKEW_PLOT_JS = """(() => {
+  const svg = document.getElementById('skew'), num = (e, a) => parseFloat(e.getAttribute(a));
+  if (!svg) return null;  // the page is not there yet
+  const bound = svg.querySelector('line.bound'), series = svg.querySelector('polyline.series');
+  return {
+    bound: bound && {value: num(bound, 'data-value'), y: num(bound, 'y1')},
+    yticks: Array.from(svg.querySelectorAll('text.ytick')).map(t => [num(t, 'data-value'), num(t, 'y') - 4]),
+    xticks: Array.from(svg.querySelectorAll('text.xtick')).map(t => [num(t, 'data-value'), num(t, 'x'), t.textContent]),
+    points: series ? series.getAttribute('points').trim().split(' ').map(p => p.split(',').map(Number)) : [],
+    right: svg.width.baseVal.value - 8,
+    box: (b => ({x: b.left + scrollX, y: b.top + scrollY, width: b.width, height: b.height}))(
+      svg.getBoundingClientRect()),
+  };
+})()"""
+
+
+def test_the_skew_plot_shows_its_bound_against_seconds_ago(browser, start_service, wait, tmp_path):
+    """Issue 43: the skew plot had no threshold line and an x axis in absolute seconds (since the
+    dashboard started). Now the sync figures' bound is a line at its height on the y axis, and
+    the x axis runs in round seconds ago to "now" at the right edge, every point left of it."""
+    svc, base = start_dashboard(start_service, wait)
+    assert view(base)["skew_bound_ms"] == 3.0  # the threshold the sync figures count "synced" by
+    browser.open(base + "/")
+    shown = wait(lambda: (p := browser.evaluate(SKEW_PLOT_JS)) and p["bound"] and len(p["points"]) >= 4 and p,
+                 timeout=30, interval=0.2, what="4 skews plotted")  # fmt: skip
+    browser.evaluate("document.getElementById('skew').scrollIntoView()")  # a screenshot sees the viewport
+    (tmp_path / "dashboard-skew.png").write_bytes(browser.screenshot(browser.evaluate(SKEW_PLOT_JS)["box"]))
+    # y: round, evenly spaced ticks from 0; the bound is drawn where 3 ms is on that scale
+    values, ys = zip(*shown["yticks"])
+    steps = {round(b - a, 9) for a, b in zip(values, values[1:])}
+    assert values[0] == 0 and len(steps) == 1 and values[-1] >= 3.0, values
+    px_per_ms = (ys[0] - ys[-1]) / values[-1]
+    assert shown["bound"]["value"] == 3.0
+    assert abs(shown["bound"]["y"] - (ys[0] - 3.0 * px_per_ms)) < 0.5, (shown["bound"], shown["yticks"])
+    # x: seconds ago, evenly spaced, "now" at the right edge; every point between the oldest tick and now
+    seconds, xs, labels = zip(*shown["xticks"])
+    assert labels[-1] == "now" and seconds[-1] == 0 and xs[-1] == shown["right"], shown["xticks"]
+    assert all(label == f"{-s:g} s ago" for s, label in zip(seconds[:-1], labels[:-1])), labels
+    assert len({round(b - a, 9) for a, b in zip(seconds, seconds[1:])}) == 1 and seconds[0] < 0
+    point_xs = [x for x, _ in shown["points"]]
+    assert point_xs == sorted(point_xs) and xs[0] <= point_xs[0] and point_xs[-1] <= xs[-1], (point_xs, xs)

@@ -42,11 +42,11 @@ def test_a_lockstep_camera_captures_on_the_grid_of_its_clock_and_says_so(start_s
         frames = [client.tuple(["trig"]).values() for _ in range(5)]  # no extra trigger: the grid's frames
         status = client.status()["cameras"]["trig"]
     shown = fxis("status", "--endpoint", svc.endpoint).stdout
-    assert "trig: trigger latency" in shown and f"lockstep 20 Hz + 5 ms of {clock}" in shown
+    assert "trig: trigger latency" in shown and f"lockstep 20 Hz + 5 ms of CLOCK_{clock.upper()}" in shown
     sync = status["sync"]
     assert status["trigger"] == "free"  # its frames come on their own: a request does not trigger it
     assert sync["lockstep"]["hz"] == HZ and sync["lockstep"]["phase_ms"] == 5.0
-    assert sync["lockstep"]["clock"] == clock
+    assert sync["lockstep"]["clock"] == f"CLOCK_{clock.upper()}"  # the one spelling of every reply
     assert sync["lockstep"]["frames"] >= 20
     assert (
         -LATENCY_NOISE_NS

@@ -155,3 +155,33 @@ def test_status_grab_and_record_take_keys_from_flags_the_environment_or_the_conf
     assert recorded.returncode == 0, recorded.stderr
     half = fxis("status", "--endpoint", svc.endpoint, "--server-key", server)
     assert half.returncode == 2 and "--client-key" in half.stderr
+
+
+def test_a_clean_start_and_a_restart_log_no_unreachable_worker(start_service, tmp_path):
+    """Issue 43: at every start the log said "camera X did not report its settings ... its
+    worker is not running" just after that worker said it streams: the coordinator asked the
+    moment it had called connect(), before ZeroMQ had linked it (ZMQ_IMMEDIATE fails such a
+    send). It now asks when the link is up, at start and after a worker's restart, so status
+    has every camera's settings without anyone asking, and the log says nothing of the kind."""
+    import signal
+
+    svc = start_service("--camera", f"a=synthetic:{SMALL}", "--camera", f"b=synthetic:fps=10,{SMALL}")
+    with svc.client() as client:
+        wait_until(
+            lambda: all(c.get("settings") for c in client.status()["cameras"].values()),
+            timeout=10,
+            what="every camera's settings in status (asked by the coordinator itself)",
+        )
+        generation = client.status()["cameras"]["a"]["generation"]
+        os.kill(svc.children()["camera:a"], signal.SIGKILL)
+        wait_until(
+            lambda: (
+                (a := client.status()["cameras"]["a"]).get("generation", generation) > generation and a.get("settings")
+            ),
+            timeout=20,
+            what="camera a's settings of its new generation, after its restart",
+        )
+    svc.stop()
+    log = (tmp_path / "service0.log").read_text()
+    assert log.count("streaming") >= 3, log  # a, b and a again: the workers did start
+    assert "did not report its settings" not in log and "not running" not in log, log

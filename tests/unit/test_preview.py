@@ -119,7 +119,7 @@ def test_the_skew_history_keeps_the_newest():
     history = SkewHistory(length=2)
     for t, skew in [(1.0, 1_000_000), (2.0, 2_000_000), (3.0, 500_000)]:
         history.add(t, skew)
-    assert history.points() == [(2.0, 2.0), (3.0, 0.5)]
+    assert history.points(3.5) == [(-1.5, 2.0), (-0.5, 0.5)]  # seconds before "now", as the page draws them
 
 
 # ---- the http setting ----

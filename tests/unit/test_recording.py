@@ -62,6 +62,39 @@ def test_what_a_restart_cost_is_counted_by_ids_and_capture_times():
     assert [g["missing"] for g in json.loads(gaps)["a"]] == [10, 17] and "b" not in json.loads(gaps)
 
 
+def test_a_restart_inside_one_listing_is_counted():
+    """A restarted worker keeps its ring: one listing can hold frames of the old generation the
+    recorder has not taken yet, then the first of the new one. The restart lies between two
+    rows, not at the first (issue 42 finding 7: the recording said "complete", exit 0)."""
+    f = Follower(t_start=0)
+    f.new_frames(rows(range(0, 5)), P)
+    listing = rows(range(0, 7)) + [[k, (20 + k) * P, 0, 0, 2] for k in range(0, 2)]
+    assert [(r[4], r[0]) for r in f.new_frames(listing, P)] == [(1, 5), (1, 6), (2, 0), (2, 1)]
+    assert f.restarts == [RestartGap((1, 2), (6, 6 * P), (0, 20 * P), 13)] and f.missed == 0
+
+
+def test_frames_not_copied_because_the_camera_went_down_are_offered_again():
+    """The camera went down between the listing and the copy: its frames are still in the ring,
+    so they are taken after the restart, and the restart's gap starts at the last of them (the
+    bag holds the frames either side of it)."""
+    f = Follower(t_start=0)
+    f.new_frames(rows(range(0, 5)), P)
+    assert [r[0] for r in f.new_frames(rows(range(0, 8)), P)] == [5, 6, 7]
+    f.give_back()  # the copy said CAMERA_DOWN
+    listing = rows(range(0, 8)) + [[k, (20 + k) * P, 0, 0, 2] for k in range(0, 2)]
+    assert [(r[4], r[0]) for r in f.new_frames(listing, P)] == [(1, 5), (1, 6), (1, 7), (2, 0), (2, 1)]
+    assert f.restarts == [RestartGap((1, 2), (7, 7 * P), (0, 20 * P), 12)] and f.missed == 0
+
+
+def test_a_frame_given_back_and_gone_from_the_ring_is_missed_once():
+    f = Follower(t_start=0)
+    f.new_frames(rows(range(0, 5)), P)
+    f.new_frames(rows(range(8, 10)), P)  # 5..7 left the ring: missed
+    f.give_back()
+    assert [r[0] for r in f.new_frames(rows(range(9, 12)), P)] == [9, 10, 11]
+    assert f.missed == 4  # 5..8, each once
+
+
 def test_a_camera_without_a_period_cannot_say_what_a_restart_cost():
     f = Follower(t_start=0)
     f.new_frames(rows(range(0, 3)), 0)
