@@ -26,7 +26,7 @@ from fxis_shm.wire import commands
 log = logging.getLogger("coordinator")
 
 # (result or None, error code or None, error message or None)
-Done = Callable[[dict | None, str | None, str | None], None]
+Done = Callable[[dict[str, object] | None, str | None, str | None], None]
 
 
 @dataclass
@@ -37,8 +37,8 @@ class _Pending:
 
 
 class WorkerLinks:
-    def __init__(self, ctx: zmq.Context, service: str, cameras: list[str]):
-        self.sockets: dict[str, zmq.Socket] = {}
+    def __init__(self, ctx: zmq.Context[zmq.Socket[bytes]], service: str, cameras: list[str]):
+        self.sockets: dict[str, zmq.Socket[bytes]] = {}
         for name in cameras:
             sock = ctx.socket(zmq.DEALER)
             sock.setsockopt(zmq.LINGER, 0)
@@ -49,7 +49,7 @@ class WorkerLinks:
         self._pending: dict[int, _Pending] = {}
         self._ids = itertools.count(1)
 
-    def send(self, camera: str, cmd: str, timeout_s: float, done: Done, **fields) -> None:
+    def send(self, camera: str, cmd: str, timeout_s: float, done: Done, **fields: object) -> None:
         """Send ``cmd`` to the camera's worker; ``done`` is called once, from ``drain`` or
         ``expire`` (or now, if the worker cannot be reached)."""
         command_id = next(self._ids)
@@ -62,7 +62,7 @@ class WorkerLinks:
             return
         self._pending[command_id] = _Pending(camera, deadline, done)
 
-    def drain(self, sock: zmq.Socket) -> None:
+    def drain(self, sock: zmq.Socket[bytes]) -> None:
         while sock.poll(0):
             frames = sock.recv_multipart()
             try:
