@@ -44,6 +44,7 @@ def split_envelope(frames: Sequence[Received]) -> tuple[list[Part], list[Receive
 
 
 def _bytes(part: Received | Part) -> bytes:
+    """The bytes of a part received (a zmq.Frame's, kept by the frame: no second copy)."""
     return part.bytes if isinstance(part, zmq.Frame) else bytes(part)
 
 
@@ -85,7 +86,7 @@ class RequestDispatch:
         envelope, body = split_envelope(frames)
         respond: Respond = lambda reply: self.outbox.send(envelope, reply)  # noqa: E731
         try:
-            request = protocol.decode_request(body)  # type: ignore[arg-type]
+            request = protocol.decode_request([_bytes(part) for part in body])
         except ProtocolError as exc:
             for line in self.tally.note("bad requests", f"bad request: {exc.message}", t_received):
                 log.info("%s", line)
@@ -100,7 +101,7 @@ class RequestDispatch:
     def on_event(self, frames: Sequence[Received], t_received: int) -> None:
         """A request event (its SUB frames): the reply is published on its ``reply_topic``."""
         try:
-            request = protocol.decode_event(frames)  # type: ignore[arg-type]
+            request = protocol.decode_event([_bytes(part) for part in frames])
         except ProtocolError as exc:
             topic = _readable_field(frames[-1], "reply_topic", (str,)) if frames else None
             if isinstance(topic, str) and topic and not topic.startswith(protocol.RESERVED_TOPICS):
