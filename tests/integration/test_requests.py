@@ -80,7 +80,7 @@ def test_the_status_reply_has_the_shape_its_typed_dict_names(two_cameras):
         header, _ = decode_reply(req.recv_multipart())
     finally:
         req.close()
-    assert set(header) - {"v", "id", "ok", "clock"} == set(StatusDocument.__annotations__)
+    assert set(header) - {"v", "id", "ok"} == set(StatusDocument.__annotations__)
     assert header["supervisor"] is not None and header["supervisor"]["processes"]
     for process in header["supervisor"]["processes"].values():
         assert set(process) == set(ProcessState.__required_keys__ | ProcessState.__optional_keys__)
