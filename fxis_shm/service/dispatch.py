@@ -139,7 +139,7 @@ class RequestDispatch:
             respond(protocol.encode_error(request["id"], Code.INTERNAL, repr(exc)))
 
     def _service_op(self, op: str, request: Request, t_received: int) -> Request:
-        """The body of a reply about the service (status, time, frames)."""
+        """The body of a reply about the service: status, time or (the codec admits no other op) frames."""
         if op == "status":
             return dict(self.reports.status(self.outbox.requests_served, self.events_dropped))
         if op == "time":
