@@ -4,7 +4,7 @@ and ``frame(timeout)`` pops what arrived. The action-command responder fires ``t
 
 from __future__ import annotations
 
-from fxis_shm.workers.backends.aravis import load_aravis
+from fxis_shm.workers.backends.aravis_library import load_aravis
 from fxis_shm.workers.backends.aravis_ptp import camera_ptp
 
 N_BUFFERS = 8

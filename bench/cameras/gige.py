@@ -106,7 +106,7 @@ def parser() -> argparse.ArgumentParser:
 def emulators(loss: int, log_dir: str):
     """Two emulators, serials GV01 and GV02; killed on exit."""
     from fxis_shm.service.tether import die_with_parent
-    from fxis_shm.workers.backends.aravis import load_aravis
+    from fxis_shm.workers.backends.aravis_library import load_aravis
 
     load_aravis()  # fails here, naming the extra, if PyGObject or Aravis is missing
     if shutil.which(EMULATOR) is None:

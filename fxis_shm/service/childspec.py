@@ -146,7 +146,7 @@ class ViewerSpec(ChildSpec):
 
     def client_keys(self) -> ClientKeys | None:
         """Under CurveZMQ the child connects with the service's own pair (the coordinator lets
-        it in, coordinator.AllowedKeys); None without CurveZMQ."""
+        it in, serversockets.AllowedKeys); None without CurveZMQ."""
         if not self.curve_secret:
             return None
         public, secret = load_pair(self.curve_secret)

@@ -128,7 +128,7 @@ def viewer_accesses(config: ServiceConfig) -> dict[str, ViewerAccess]:
     }
 
 
-def _camera(name: str, kind: str, raw: dict) -> CameraSpec:
+def _camera(name: str, kind: str, raw: dict[str, Any]) -> CameraSpec:
     try:
         check_name("camera", name)
     except ValueError as exc:
@@ -211,10 +211,11 @@ def _in_range(setting: str, value: Any, limits: ranges.Range, *, text: bool = Fa
         raise ConfigError(str(exc)) from None
 
 
-def load_toml(path: str) -> dict:
+def load_toml(path: str) -> dict[str, Any]:
     try:
         with open(path, "rb") as f:
-            return tomllib.load(f)
+            table: dict[str, Any] = tomllib.load(f)
+            return table
     except OSError as exc:
         raise ConfigError(f"--config {path}: {exc.strerror}") from None
     except tomllib.TOMLDecodeError as exc:
@@ -223,7 +224,7 @@ def load_toml(path: str) -> dict:
         raise ConfigError(f"--config {path}: not UTF-8 text (byte {exc.start}): a config file is TOML") from None
 
 
-def build_config(file_values: dict | None = None, flags: dict | None = None) -> ServiceConfig:
+def build_config(file_values: dict[str, Any] | None = None, flags: dict[str, Any] | None = None) -> ServiceConfig:
     """Defaults, overridden by the TOML file's values, overridden by flags.
 
     ``flags`` may hold name, endpoint, pub, slots (None = not given) and
@@ -336,7 +337,7 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
             config, restart_limit=_in_range("restart_limit", values["restart_limit"], ranges.RESTART_LIMIT)
         )
     if values.get("restart_window_s") is not None:
-        config = replace(config, restart_window_s=_setting("restart_window_s", float, values["restart_window_s"]))
+        config = replace(config, restart_window_s=_number("restart_window_s", float, values["restart_window_s"]))
     config = _security(config, values)
     if "clock" in values:
         from fxis_shm.core.timebase import CLOCK_IDS, short_name
@@ -353,15 +354,22 @@ def build_config(file_values: dict | None = None, flags: dict | None = None) -> 
     return config
 
 
-def _setting(key: str, kind: type, value: Any):
+def _setting(key: str, kind: type[int] | type[float], value: Any) -> str | float:
+    """A request default of the config file: a mode of its choices, or a number (``_number``)."""
     from fxis_shm.core.selection import SYNC_MODES
     from fxis_shm.core.waitpolicy import WAIT_MODES
 
     choices = {"sync": SYNC_MODES, "wait": WAIT_MODES}.get(key)
-    if choices is not None:
-        if value not in choices:
-            raise ConfigError(f"{key} must be one of {', '.join(choices)}, got {value!r}")
-        return value
+    if choices is None:
+        return _number(key, kind, value)
+    if value not in choices:
+        raise ConfigError(f"{key} must be one of {', '.join(choices)}, got {value!r}")
+    mode: str = value
+    return mode
+
+
+def _number(key: str, kind: type[int] | type[float], value: Any) -> float:
+    """A number of ``kind``, finite and above 0 (or 0 too, for the keys of ZERO_ALLOWED), else ConfigError."""
     try:
         number = kind(value)
     except (TypeError, ValueError, OverflowError):
@@ -375,14 +383,14 @@ def _setting(key: str, kind: type, value: Any):
     return number
 
 
-def _security(config: ServiceConfig, values: dict) -> ServiceConfig:
+def _security(config: ServiceConfig, values: dict[str, Any]) -> ServiceConfig:
     secret, clients = values.get("curve_secret"), values.get("curve_clients")
     if bool(secret) != bool(clients):
         raise ConfigError(
             "curve_secret and curve_clients go together: the service's secret key "
             "file and the folder of the client public keys it accepts"
         )
-    if secret:
+    if secret and clients:  # (both or neither, as just checked)
         from fxis_shm.wire.security import load_pair
 
         try:
@@ -415,7 +423,7 @@ def _security(config: ServiceConfig, values: dict) -> ServiceConfig:
     return config
 
 
-def _viewer_access(config: ServiceConfig, values: dict) -> ServiceConfig:
+def _viewer_access(config: ServiceConfig, values: dict[str, Any]) -> ServiceConfig:
     """The viewers' token file and TLS files, and the dashboard's operator token file (its own
     token, never the viewers'), checked now: a bad one stops the start here."""
     files = ("viewer_token_file", "viewer_tls_cert", "viewer_tls_key", "operator_token_file")
@@ -427,5 +435,10 @@ def _viewer_access(config: ServiceConfig, values: dict) -> ServiceConfig:
     operator = read_token_file(operator_file, files[3]) if operator_file else None
     if operator is not None and token_file and operator == read_token_file(token_file):
         raise ConfigError(f"{files[3]} {operator_file} holds the viewer token: give the operators a token of their own")
-    files_given = dict(zip(files, (token_file, cert, key, operator_file)))
-    return replace(config, **files_given)
+    return replace(
+        config,
+        viewer_token_file=token_file,
+        viewer_tls_cert=cert,
+        viewer_tls_key=key,
+        operator_token_file=operator_file,
+    )

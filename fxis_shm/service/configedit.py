@@ -15,11 +15,16 @@ from __future__ import annotations
 import json
 import os
 import re
+import sys
 from collections.abc import Mapping
 from typing import Any
 
 from fxis_shm.errors import ConfigError
-from fxis_shm.service.config import tomllib
+
+if sys.version_info >= (3, 11):
+    import tomllib
+else:  # pragma: no cover
+    import tomli as tomllib
 
 _TABLE = re.compile(r"^\s*\[")
 

@@ -12,15 +12,17 @@ waiting in it (in all, and per client) hold as they did.
 from __future__ import annotations
 
 from collections.abc import Callable
-from typing import Any
+
+import zmq
 
 from fxis_shm.core import timebase
 from fxis_shm.core.engine import RequestEngine
 from fxis_shm.core.snapshot import CAPTURES
+from fxis_shm.errors import Overwritten
+from fxis_shm.service.outbox import Part, Request
 from fxis_shm.shm import fastpick
 from fxis_shm.shm.cameras import CameraHandle
 from fxis_shm.shm.copyout import CopyOut, copied_by
-from fxis_shm.shm.ring import Overwritten
 from fxis_shm.wire import replytext
 from fxis_shm.wire.encoding import RAW
 
@@ -36,7 +38,7 @@ class FastAnswers:
         cameras: dict[str, CameraHandle],
         engine: RequestEngine,
         copyout: CopyOut,
-        message: Callable[[Any], Any],
+        message: Callable[[memoryview], zmq.Frame],
         message_max: int,
     ):
         self.cameras, self.engine, self.copyout = cameras, engine, copyout
@@ -44,7 +46,7 @@ class FastAnswers:
         self.picker: fastpick.Picker | None = None
         self.answered = 0  # requests answered here
 
-    def answer(self, request: dict, t_received: int, client: Any = None) -> list | None:
+    def answer(self, request: Request, t_received: int, client: object = None) -> list[Part] | None:
         """The reply (its header, written from templates, and its images), or None: the engine
         answers (or refuses: BUSY)."""
         op = _OPS.get(request["op"])
@@ -61,7 +63,9 @@ class FastAnswers:
         if got is None:
             return None
         _, t_decided, _, skew_ns, picked, indices, names = got
-        frames, images, waited = [], [], []
+        frames: list[str] = []
+        images: list[Part] = []
+        waited: list[tuple[str, int]] = []
         for k, name, picked_frame in zip(indices, names, picked):
             slot, seq, frame_id, t_capture, t_stored, t_available, generation, t_target, capture, ready_at, _ = (
                 picked_frame
@@ -100,8 +104,8 @@ class FastAnswers:
         """The C reader of the rings open now (made again once a ring was replaced)."""
         if self.picker is None or self.picker.retired:
             self.picker = None
-            readers = [handle.reader for handle in self.cameras.values()]
-            if any(r is None for r in readers):
+            readers = [handle.reader for handle in self.cameras.values() if handle.reader is not None]
+            if len(readers) < len(self.cameras):
                 return None
             self.picker = fastpick.Picker(
                 list(self.cameras), readers, self.engine.settings, timebase.service_clock(), 0

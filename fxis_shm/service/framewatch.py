@@ -14,7 +14,7 @@ NOTIFY_ENDPOINT = "inproc://fxis-new-frames"
 _WAIT_S = 0.2  # how often a watcher checks whether to stop, or re-opens a missing semaphore
 
 
-def _watch(ctx: zmq.Context, service: str, camera: str, stop: threading.Event) -> None:
+def _watch(ctx: zmq.Context[zmq.Socket[bytes]], service: str, camera: str, stop: threading.Event) -> None:
     push = ctx.socket(zmq.PUSH)
     push.setsockopt(zmq.LINGER, 0)
     push.setsockopt(zmq.SNDHWM, 16)
@@ -49,7 +49,7 @@ def _watch(ctx: zmq.Context, service: str, camera: str, stop: threading.Event) -
 class FrameWatch:
     """One watcher thread per camera; ``pull`` is the socket to poll."""
 
-    def __init__(self, ctx: zmq.Context, service: str, cameras: list[str]):
+    def __init__(self, ctx: zmq.Context[zmq.Socket[bytes]], service: str, cameras: list[str]):
         self.pull = ctx.socket(zmq.PULL)
         self.pull.setsockopt(zmq.LINGER, 0)
         self.pull.bind(NOTIFY_ENDPOINT)

@@ -16,11 +16,14 @@ import socket
 import subprocess
 import sys
 import time
+from collections.abc import Sequence
+from typing import IO
 
 from fxis_shm.client.client import Client
 from fxis_shm.errors import RequestTimeout, ServiceNotStarted
 from fxis_shm.service.tether import die_with_parent
 from fxis_shm.shm import naming, procstat
+from fxis_shm.wire.security import ClientKeys
 
 
 def free_tcp_ports(count: int) -> list[int]:
@@ -49,7 +52,8 @@ def free_tcp_port() -> int:
             return port
     with socket.socket() as s:  # that part of the range is taken: let the kernel choose
         s.bind(("127.0.0.1", 0))
-        return s.getsockname()[1]
+        chosen: int = s.getsockname()[1]
+        return chosen
 
 
 _SPAN = 12_000  # ports drawn from, just below the ephemeral range
@@ -67,17 +71,17 @@ def _ephemeral_start() -> int:
 class ServiceProcess:
     def __init__(
         self,
-        args: list[str] = (),
+        args: Sequence[str] = (),
         name: str | None = None,
         endpoint: str | None = None,
         pub: str | None = None,
         events: str | None = None,
         ready_timeout: float = 30.0,
-        stderr=None,
-        client_keys=None,
+        stderr: int | IO[str] | IO[bytes] | None = None,
+        client_keys: ClientKeys | None = None,
         python: str = sys.executable,
         env: dict[str, str] | None = None,
-        wrapper: list[str] = (),
+        wrapper: Sequence[str] = (),
         http: str = "off",
     ):
         """``http``: the dashboard's HOST:PORT, or "off" (the default: tests and scripts
@@ -108,7 +112,7 @@ class ServiceProcess:
         # a command that runs the service (e.g. in other namespaces: tests/hosts.py); it must
         # exec it, not fork, so that SIGTERM reaches the service
         self.wrapper = list(wrapper)
-        self.proc: subprocess.Popen | None = None
+        self.proc: subprocess.Popen[bytes] | None = None
 
     def start(self) -> ServiceProcess:
         self.proc = subprocess.Popen(
@@ -164,5 +168,5 @@ class ServiceProcess:
     def __enter__(self) -> ServiceProcess:
         return self.start()
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.stop()

@@ -18,6 +18,7 @@ from collections.abc import Callable
 
 from fxis_shm.formats.threadsched import tasks, threads_of
 from fxis_shm.service import rtpolicy
+from fxis_shm.wire.statusdoc import SupervisorState
 
 _MCL_CURRENT, _MCL_FUTURE = 1, 2
 _CAP_SYS_NICE, _CAP_IPC_LOCK = 23, 14
@@ -90,7 +91,7 @@ def raise_threads(role_of: Callable[[str | None, str], str], priority: int) -> l
     """Set every thread of this process to the priority its role gives (rtpolicy.priority_of);
     ``role_of(python_name or None, comm)``. Returns what failed, one line each."""
     # the main thread's tid is the pid: after a fork (service/forkstart.py) Python still gives it the parent's
-    names = {t.native_id: t.name for t in threading.enumerate()}
+    names = {t.native_id: t.name for t in threading.enumerate() if t.native_id is not None}
     names[os.getpid()] = threading.main_thread().name
     failed = []
     for tid in _settled_tasks(names):
@@ -121,10 +122,12 @@ def _settled_tasks(names: dict[int, str], wait_s: float = 1.0) -> list[int]:
         time.sleep(0.005)
 
 
-def with_scheduling(state: dict | None) -> dict | None:
+def with_scheduling(state: SupervisorState | None) -> SupervisorState | None:
     """A supervisor's state (its process table) with each running process's scheduling
     (``sched``: rtpolicy.summary of its threads, None once it is gone)."""
-    for process in (state or {}).get("processes", {}).values():
+    if state is None:
+        return None
+    for process in state.get("processes", {}).values():
         pid = process.get("pid")
         threads = threads_of(pid) if isinstance(pid, int) else {}
         process["sched"] = rtpolicy.summary(threads.values()) if threads else None

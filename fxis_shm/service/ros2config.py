@@ -43,7 +43,9 @@ class Ros2Settings:
     settings: str | None = None  # "allow", "read", None: read only under --curve-operators (service.changers)
 
 
-def ros2_settings(values: Mapping[str, Any], cameras: Iterable[str], environ=os.environ) -> Ros2Settings | None:
+def ros2_settings(
+    values: Mapping[str, Any], cameras: Iterable[str], environ: Mapping[str, str] = os.environ
+) -> Ros2Settings | None:
     """The bridge's settings from the file and flags (None: no bridge); ConfigError naming the setting."""
     enabled = values.get("ros2", False)
     if not isinstance(enabled, bool):

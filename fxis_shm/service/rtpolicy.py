@@ -15,6 +15,7 @@ from collections.abc import Iterable
 from dataclasses import dataclass
 
 from fxis_shm.errors import ConfigError
+from fxis_shm.wire.statusdoc import Scheduling
 
 DEFAULT_PRIORITY = 40
 KERNEL_PRIORITY = 50  # the kernel's threaded interrupt handlers (irq/N-...) and watchdogd
@@ -96,7 +97,7 @@ def memory_lock_allowed(memlock_limit: int, unlimited: int, can_lock: bool) -> b
     return can_lock or memlock_limit == unlimited
 
 
-def summary(threads: Iterable[tuple[int, int]]) -> dict:
+def summary(threads: Iterable[tuple[int, int]]) -> Scheduling:
     """A process's threads' (policy, rt_priority) summed up: the policy of its most urgent thread,
     the real-time priorities in use (highest first), how many threads run real-time, of how many."""
     threads = list(threads)
@@ -111,7 +112,7 @@ def summary(threads: Iterable[tuple[int, int]]) -> dict:
     }
 
 
-def sched_text(state: dict | None) -> str:
+def sched_text(state: Scheduling | None) -> str:
     """A summary as ``fifo 40/39 (5 of 7 threads)`` or ``other``; ``-`` when unknown."""
     if not state or not state.get("policy"):
         return "-"

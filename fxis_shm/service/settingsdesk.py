@@ -12,7 +12,7 @@ flooder its answers, not the camera its frames.
 from __future__ import annotations
 
 import logging
-from collections.abc import Callable
+from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 from typing import Any
 
@@ -20,6 +20,7 @@ from fxis_shm.core import timebase
 from fxis_shm.core.tuning import UNCHANGED
 from fxis_shm.errors import Code, ProtocolError
 from fxis_shm.service.logtally import LogTally
+from fxis_shm.service.outbox import Part, Respond
 from fxis_shm.service.workerlink import Done, WorkerLinks
 from fxis_shm.shm.cameras import CameraHandle
 from fxis_shm.wire import commands, protocol
@@ -31,7 +32,6 @@ READERS_LIMIT = 64  # reads waiting for a worker's first report of a new generat
 REPORTED = ("values", "limits", "generation", "ptp")  # what a read answers with
 
 Message = dict[str, Any]  # a request, a reply's body, a worker's report
-Respond = Callable[[list[Any]], None]
 # (respond, request, reply body): the coordinator's reply, counted and stamped
 Answer = Callable[[Respond, Message, Message], None]
 
@@ -49,7 +49,7 @@ class SettingsDesk:
         self,
         cameras: dict[str, CameraHandle],
         answer: Answer,
-        publish: Callable[[str, list[Any]], None],
+        publish: Callable[[str, Sequence[Part]], None],
         tally: LogTally,
         clock: timebase.Clock = timebase.REAL,
     ):

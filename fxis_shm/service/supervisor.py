@@ -17,6 +17,7 @@ import socket
 import subprocess
 import sys
 import time
+from typing import TextIO, TypedDict
 
 from fxis_shm.core import timebase
 from fxis_shm.core.restarts import gives_up, recent_crashes
@@ -31,13 +32,14 @@ from fxis_shm.service.childspec import (
     FoxgloveSpec,
     Ros2Spec,
 )
-from fxis_shm.service.config import ServiceConfig, http_address, viewer_accesses
+from fxis_shm.service.config import CameraSpec, ServiceConfig, http_address, viewer_accesses
 from fxis_shm.service.forkstart import ForkedProcess, fork_child, fork_wanted
 from fxis_shm.service.memory import ring_lines
 from fxis_shm.service.servicelock import ServiceLock
 from fxis_shm.service.stopsignals import StopSignals
 from fxis_shm.service.viewertokens import ViewerAccess
 from fxis_shm.shm import naming
+from fxis_shm.wire.statusdoc import SupervisorEvent, SupervisorState
 
 log = logging.getLogger("supervisor")
 
@@ -64,7 +66,7 @@ class Child:
         self.env = env  # added to the supervisor's environment (a viewer's token: never on argv, ps shows it)
         self.state = "starting"
         self.last_exit: int | None = None
-        self.proc: subprocess.Popen | ForkedProcess | None = None
+        self.proc: subprocess.Popen[bytes] | ForkedProcess | None = None
         self.restarts = 0
         self.crashes: list[float] = []  # when it exited, within the restart window (monotonic s)
         self.backoff = BACKOFF_FIRST_S
@@ -96,6 +98,8 @@ class Child:
         import select
 
         fd, self._ready_fd = self._ready_fd, None
+        if fd is None or self.proc is None:
+            raise StartError(f"{self.label} was not started")
         try:
             ready, _, _ = select.select([fd], [], [], timeout)
             line = os.read(fd, 4096).decode(errors="replace").strip() if ready else ""
@@ -121,18 +125,36 @@ class Child:
             self.proc.kill()
 
 
-def history_of(camera, config: ServiceConfig) -> float | None:
+class CommonFields(TypedDict):
+    """What every child's spec is told alike."""
+
+    service: str
+    log_level: str
+    clock: str
+
+
+class ViewerFields(CommonFields):
+    """What every viewer's spec (fxis_shm.service.childspec.ViewerSpec) is told alike."""
+
+    endpoint: str
+    curve_secret: str | None
+    cameras: dict[str, dict[str, object]]
+
+
+def history_of(camera: CameraSpec, config: ServiceConfig) -> float | None:
     """The seconds a camera's ring holds: its own history= key, else the service's."""
     return camera.options.get("history") or config.history
 
 
-def viewer_children(config: ServiceConfig, common: dict, access: dict[str, ViewerAccess]) -> list[Child]:
+def viewer_children(config: ServiceConfig, common: CommonFields, access: dict[str, ViewerAccess]) -> list[Child]:
     """The processes that show the cameras, clients of the service like any other: the live
     dashboard (fxis_shm.viewers.dashboard) and the Foxglove server (fxis_shm.viewers.foxglove_live), each
     when its address is not off and told its ``access`` (token, TLS), and the ROS 2 bridge
     (fxis_shm.ros2) when it is on."""
-    viewer = {
-        **common,
+    viewer: ViewerFields = {
+        "service": common["service"],
+        "log_level": common["log_level"],
+        "clock": common["clock"],
         "endpoint": config.endpoint,
         "curve_secret": config.curve_secret,
         "cameras": {c.name: {"kind": c.kind, "fps": c.options.get("fps")} for c in config.cameras},
@@ -165,9 +187,10 @@ def viewer_children(config: ServiceConfig, common: dict, access: dict[str, Viewe
             }
             for c in config.cameras
         }
-        ros2 = config.ros2
+        ros2, bridge = config.ros2, viewer.copy()
+        bridge["cameras"] = cameras
         spec = Ros2Spec(
-            **{**viewer, "cameras": cameras},
+            **bridge,
             domain=ros2.domain,
             namespace=ros2.namespace,
             tuples_hz=ros2.tuples_hz,
@@ -210,12 +233,12 @@ def link_host(address: str, setting: str) -> str:
 
 
 class Supervisor:
-    def __init__(self, config: ServiceConfig, out=sys.stdout):
+    def __init__(self, config: ServiceConfig, out: TextIO = sys.stdout):
         self.config = config
         self.out = out
         self.stop: StopSignals | None = None  # from run() on: SIGINT or SIGTERM received
         origin = timebase.reader(config.clock)()  # the synthetic cameras' shared time origin
-        common = {"service": config.name, "log_level": config.log_level, "clock": config.clock}
+        common: CommonFields = {"service": config.name, "log_level": config.log_level, "clock": config.clock}
         realtime = config.realtime.priority if config.realtime else None  # viewers never: they are clients
         self.cameras = [
             Child(
@@ -256,7 +279,7 @@ class Supervisor:
         )
         self.viewer_access = viewer_accesses(config)  # the token, made or read once: restarts keep it
         self.viewers = viewer_children(config, common, self.viewer_access)
-        self.events: list[dict] = []  # the latest exits and restarts, for status
+        self.events: list[SupervisorEvent] = []  # the latest exits and restarts, for status
 
     @property
     def children(self) -> list[Child]:
@@ -375,7 +398,7 @@ class Supervisor:
 
     def _write_state(self) -> None:
         """The process table, for the coordinator's status (written whole, then renamed)."""
-        state = {
+        state: SupervisorState = {
             "pid": os.getpid(),
             "processes": {
                 c.key: {

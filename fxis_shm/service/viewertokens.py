@@ -9,6 +9,7 @@ import os
 import re
 import secrets
 import ssl
+from collections.abc import Mapping
 from dataclasses import asdict, dataclass, field
 
 from fxis_shm.errors import ConfigError
@@ -36,7 +37,7 @@ class ViewerAccess:
         return {VIEWER_ACCESS_ENV: json.dumps(asdict(self))}
 
     @classmethod
-    def from_environment(cls, environ: dict | None = None) -> ViewerAccess:
+    def from_environment(cls, environ: Mapping[str, str] | None = None) -> ViewerAccess:
         """The access the supervisor gave; ConfigError if it gave none (another install's supervisor)."""
         text = (os.environ if environ is None else environ).get(VIEWER_ACCESS_ENV)
         try:
@@ -81,7 +82,7 @@ def check_viewer_files(token_file: str | None, cert: str | None, key: str | None
         read_token_file(token_file)
     if bool(cert) != bool(key):
         raise ConfigError("viewer_tls_cert and viewer_tls_key go together: the certificate (PEM) and its key")
-    if cert:
+    if cert and key:
         check_tls_files(cert, key)
 
 

@@ -32,7 +32,7 @@ from fxis_shm.wire import commands
 log = logging.getLogger("coordinator")
 
 # (result or None, error code or None, error message or None)
-Done = Callable[[dict | None, str | None, str | None], None]
+Done = Callable[[dict[str, object] | None, str | None, str | None], None]
 
 
 @dataclass
@@ -43,9 +43,9 @@ class _Pending:
 
 
 class WorkerLinks:
-    def __init__(self, ctx: zmq.Context, service: str, cameras: list[str]):
-        self.sockets: dict[str, zmq.Socket] = {}
-        self.monitors: dict[zmq.Socket, str] = {}  # a link's monitor -> its camera
+    def __init__(self, ctx: zmq.Context[zmq.Socket[bytes]], service: str, cameras: list[str]):
+        self.sockets: dict[str, zmq.Socket[bytes]] = {}
+        self.monitors: dict[zmq.Socket[bytes], str] = {}  # a link's monitor -> its camera
         self.up: set[str] = set()  # the cameras whose link is connected now
         for name in cameras:
             sock = ctx.socket(zmq.DEALER)
@@ -60,7 +60,7 @@ class WorkerLinks:
         self._pending: dict[int, _Pending] = {}
         self._ids = itertools.count(1)
 
-    def send(self, camera: str, cmd: str, timeout_s: float, done: Done, **fields) -> None:
+    def send(self, camera: str, cmd: str, timeout_s: float, done: Done, **fields: object) -> None:
         """Send ``cmd`` to the camera's worker; ``done`` is called once, from ``drain`` or
         ``expire`` (or now, if the worker cannot be reached)."""
         command_id = next(self._ids)
@@ -74,10 +74,10 @@ class WorkerLinks:
             return
         self._pending[command_id] = _Pending(camera, deadline, done)
 
-    def drain_monitor(self, monitor: zmq.Socket) -> list[str]:
+    def drain_monitor(self, monitor: zmq.Socket[bytes]) -> list[str]:
         """Note what a link's monitor says; the cameras whose link came up (a worker started,
         or restarted and linked again)."""
-        came = []
+        came: list[str] = []
         camera = self.monitors[monitor]
         while monitor.poll(0):
             event = recv_monitor_message(monitor)["event"]
@@ -88,7 +88,7 @@ class WorkerLinks:
                 self.up.discard(camera)
         return came
 
-    def drain(self, sock: zmq.Socket) -> None:
+    def drain(self, sock: zmq.Socket[bytes]) -> None:
         while sock.poll(0):
             frames = sock.recv_multipart()
             try:

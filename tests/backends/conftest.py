@@ -35,7 +35,7 @@ def aravis_missing() -> str | None:
     if shutil.which(EMULATOR) is None:
         return f"{EMULATOR} is not installed (Debian package aravis-tools)"
     try:
-        from fxis_shm.workers.backends.aravis import load_aravis
+        from fxis_shm.workers.backends.aravis_library import load_aravis
 
         load_aravis()
     except ImportError as exc:

@@ -19,7 +19,9 @@ import numpy as np
 import pytest
 
 from fxis_shm.errors import CameraDown, FrameTimeout, FxisError
-from fxis_shm.workers.backends.aravis import PIXEL_FORMATS, FrameCounter, load_aravis
+from fxis_shm.workers.backends.aravis_library import load_aravis
+from fxis_shm.workers.backends.aravis_settings import PIXEL_FORMATS
+from fxis_shm.workers.backends.blockids import FrameCounter
 
 from ..conftest import fxis_run_alone, wait_until
 from .conftest import fxis

@@ -16,7 +16,8 @@ except ImportError as exc:
     raise ImportError(f"the genicam tests need the genicam extra: pip install -e '.[genicam]' ({exc})") from exc
 
 from fxis_shm.service.camerakinds import GENTL_PATH_VAR, camera_options  # noqa: E402
-from fxis_shm.workers.backends.genicam import GenicamCamera, image_layout, producers_from_env, to_image  # noqa: E402
+from fxis_shm.workers.backends.genicam import GenicamCamera, producers_from_env  # noqa: E402
+from fxis_shm.workers.backends.pixelformats import image_layout, to_image  # noqa: E402
 
 from ..conftest import fxis_run_alone, wait_until  # noqa: E402
 from .conftest import fxis  # noqa: E402

@@ -18,8 +18,9 @@ from cyclonedds.idl import IdlStruct, types as t
 from cyclonedds.idl.annotations import appendable
 
 from fxis_shm.formats import cdr
+from fxis_shm.formats.rosnames import dds_type_name
 from fxis_shm.formats.stamp import read_stamp, write_stamp
-from fxis_shm.ros2 import dds
+from fxis_shm.ros2 import dds, idltypes
 
 from ..conftest import wait_until
 from ..dds_peer import DEADLINE, Peer, domain_id, loopback_config, stamp_rows
@@ -49,23 +50,23 @@ def step_of(array: np.ndarray) -> int:
 
 
 def test_the_idl_declarations_are_what_ros_matches():
-    for ros_type, idl in dds.IDL_TYPES.items():
-        dds._check_ros_compatible(idl, ros_type)
+    for ros_type, idl in idltypes.IDL_TYPES.items():
+        idltypes.check_ros_compatible(idl, ros_type)
         assert idl.__idl__.default_version == 1  # XCDR1
         # The TypeInformation Cyclone advertises: every struct final, none keyed, ROS's names.
         mapping = repr(idl.__idl__.get_type_mapping())
         assert "IS_FINAL=True" in mapping and "IS_APPENDABLE=True" not in mapping and "IS_MUTABLE=True" not in mapping
         assert "IS_KEY=True" not in mapping
-        assert f"type_name='{dds.dds_type_name(ros_type)}'" in mapping
+        assert f"type_name='{dds_type_name(ros_type)}'" in mapping
 
     @appendable
     class Image_(IdlStruct, typename="sensor_msgs::msg::dds_::Image_"):
         data: t.sequence[t.uint8]
 
     with pytest.raises(TypeError, match="final/XCDR1"):
-        dds._check_ros_compatible(Image_, IMAGE)
+        idltypes.check_ros_compatible(Image_, IMAGE)
     with pytest.raises(TypeError, match="named"):
-        dds._check_ros_compatible(dds.IDL_TYPES[IMAGE], COMPRESSED)
+        idltypes.check_ros_compatible(idltypes.IDL_TYPES[IMAGE], COMPRESSED)
 
 
 def test_the_loopback_config_selects_only_lo(domain, tmp_path):
@@ -128,7 +129,7 @@ def test_images_camera_info_and_compressed_images_reach_a_ros_like_peer_byte_for
         # What discovery told the peer of our writer: ROS's names, XCDR1, reliable, the typehash.
         [seen] = peer.of("matched", IMAGE_TOPIC, "default")[-1]["writers"]
         assert (seen["topic_name"], seen["type_name"]) == ("rt/cam0/image_raw", "sensor_msgs::msg::dds_::Image_")
-        assert seen["user_data"] == f"typehash={dds.TYPE_HASHES[IMAGE]};"
+        assert seen["user_data"] == f"typehash={idltypes.TYPE_HASHES[IMAGE]};"
         assert seen["xcdr1"] and not seen["xcdr2"] and seen["reliable"] and seen["has_type_id"]
 
         rng = np.random.default_rng(7)

@@ -71,7 +71,7 @@ def test_a_message_over_1_mib_drops_that_connection_and_the_service_goes_on(two_
     """The service takes messages (each frame of one) of up to 1 MiB (MAX_MESSAGE_BYTES); ZeroMQ
     drops the connection of a peer that sends a larger one, before the service reads it
     (docs/protocol.md, 1). Just under the limit a request is read, and refused with a reply."""
-    from fxis_shm.service.coordinator import MAX_MESSAGE_BYTES
+    from fxis_shm.service.serversockets import MAX_MESSAGE_BYTES
 
     assert MAX_MESSAGE_BYTES == 1 << 20
     sock = zmq.Context.instance().socket(zmq.DEALER)

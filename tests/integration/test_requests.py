@@ -9,6 +9,7 @@ import zmq
 
 from fxis_shm import Client, RequestTimeout, read_stamp
 from fxis_shm.wire.protocol import decode_reply, encode_request
+from fxis_shm.wire.statusdoc import ProcessState, StatusDocument
 
 from ..conftest import run_in_threads
 from .conftest import child_pids
@@ -64,6 +65,25 @@ def test_status_and_time(two_cameras):
         assert info["shape"] == [48, 64] and info["ring_slots"] == 20 and info["generation"] == 1
         assert info["frames_stored"] > 0 and info["frames_dropped"] >= 0
         assert info["fps"] == pytest.approx(50, rel=0.05)
+
+
+def test_the_status_reply_has_the_shape_its_typed_dict_names(two_cameras):
+    """wire/statusdoc.py is what the type checker holds the coordinator's status to: the reply
+    carries every field StatusDocument names and no other (besides the reply header's), and the
+    supervisor's process entries the fields of ProcessState."""
+    req = zmq.Context.instance().socket(zmq.REQ)
+    req.setsockopt(zmq.LINGER, 0)
+    req.setsockopt(zmq.RCVTIMEO, 5000)
+    req.connect(two_cameras.endpoint)
+    try:
+        req.send_multipart(encode_request("status", id=7))
+        header, _ = decode_reply(req.recv_multipart())
+    finally:
+        req.close()
+    assert set(header) - {"v", "id", "ok"} == set(StatusDocument.__annotations__)
+    assert header["supervisor"] is not None and header["supervisor"]["processes"]
+    for process in header["supervisor"]["processes"].values():
+        assert set(process) == set(ProcessState.__required_keys__ | ProcessState.__optional_keys__)
 
 
 def test_many_clients_at_once(two_cameras):

@@ -372,7 +372,7 @@ def test_participant_entities_info(participant, nodes):
 @pytest.mark.parametrize("store", [Stores.ROS2_JAZZY, Stores.ROS2_KILTED], ids=["jazzy", "kilted"])
 def test_the_type_hashes_are_those_ros_computes(store):
     """RIHS01 (REP-2011), which rosbags implements; the String one is also what ROS shows."""
-    from fxis_shm.ros2.dds import TYPE_HASHES
+    from fxis_shm.ros2.idltypes import TYPE_HASHES
 
     types = get_typestore(store)
     assert {ros_type: types.hash_rihs01(ros_type) for ros_type in TYPE_HASHES} == TYPE_HASHES

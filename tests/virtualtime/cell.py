@@ -146,7 +146,7 @@ class Cell:
         return answer
 
     def _carry_out(self, actions: list) -> None:
-        """As the coordinator's _carry_out, with the answers kept."""
+        """As the coordinator's RequestDispatch.carry_out, with the answers kept."""
         for action in actions:
             if isinstance(action, Trigger):
                 for name in action.cameras:

@@ -14,7 +14,7 @@ copies the image out (Bayer demosaiced to BGR, RGB8 reordered to BGR, unless
 (missing packets, timeout) is counted in ``frames_dropped`` and never returned,
 as are frames whose block ids never arrived (a gap in the ids). GigE Vision
 block ids are 16-bit (1..65535, 0 is reserved): they are unwrapped into a 64-bit
-counter, so frame ids keep increasing.
+counter (blockids.py), so frame ids keep increasing.
 
 Time (docs/cameras.md): ``timestamp=host`` (default) is the moment Aravis saw
 the frame arrive, a wall-clock time mapped onto CLOCK_MONOTONIC with both
@@ -54,69 +54,21 @@ from fxis_shm.service.camerakinds import DRIVER_BUFFERS
 from fxis_shm.shm.ring import FrameLayout
 
 from . import aravis_tuning
+from .aravis_library import devices, load_aravis
 from .aravis_ptp import camera_ptp
 from .aravis_settings import PIXEL_FORMATS, apply_options
 from .base import Camera, CameraLost, Capture
+from .blockids import FrameCounter
 from .genicam_timing import SilenceWatch, device_clock, period_ns
 from .pixelformats import image_layout
 
 log = logging.getLogger("camera")
-
-EXTRA_HINT = (
-    "the aravis backend needs PyGObject and Aravis' introspection data: "
-    "pip install 'fxis-shm[aravis]' and, on Debian/Ubuntu, apt-get install gir1.2-aravis-0.8 "
-    "(scripts/install-system-packages.sh)"
-)
-
-
-def load_aravis():
-    """(Aravis, GLib) from PyGObject; ImportError naming the ``aravis`` extra if missing."""
-    try:
-        import gi
-
-        gi.require_version("Aravis", "0.8")
-        from gi.repository import Aravis, GLib
-    except (ImportError, ValueError) as exc:  # ValueError: gi is there, Aravis' typelib is not
-        raise ImportError(f"{EXTRA_HINT} ({type(exc).__name__}: {exc})") from exc
-    return Aravis, GLib
-
 
 N_BUFFERS = DRIVER_BUFFERS  # frames Aravis can hold for us; ~0.6 s at 20 fps if the worker stalls
 MIN_SOCKET_BUFFER = 1 << 20  # bytes; the kernel caps it at net.core.rmem_max
 GV_CCP_REGISTER = 0x0A00  # GigE Vision bootstrap: control channel privilege
 GV_CCP_CONTROL_BITS = 0x3  # exclusive | control
 PROBE_IDLE_S = 0.5  # probe the camera after this long without a frame (at least 4 periods)
-MAX_ID_GAP = 10_000  # a larger jump of the frame ids is a restarted count, not lost frames
-
-
-class FrameCounter:
-    """64-bit frame ids from a camera's block ids, and the frames missing before each.
-
-    GigE Vision 1.x block ids are 16-bit and run 1..65535 (0 is reserved), so
-    after 65535 comes 1. Ids that go back without wrapping, or jump by more than
-    MAX_ID_GAP, restart the count: the ids keep increasing by one and nothing is
-    counted as missing. Pure: no camera, no clock.
-    """
-
-    def __init__(self, wrap: int | None = 0xFFFF):
-        self.wrap = wrap
-        self._last_raw: int | None = None
-        self.value = 0
-
-    def next(self, raw: int) -> tuple[int, int]:
-        """(64-bit id of the frame with block id ``raw``, frames missing just before it)."""
-        last, self._last_raw = self._last_raw, raw
-        if last is None:
-            self.value = raw
-            return raw, 0
-        step = raw - last
-        if self.wrap and step < -(self.wrap // 2) and raw <= self.wrap and last <= self.wrap:
-            step += self.wrap  # 65535 -> 1 is one step
-        if step <= 0 or step > MAX_ID_GAP:
-            log.warning("frame ids jumped from %d to %d: the camera restarted its count", last, raw)
-            step = 1
-        self.value += step
-        return self.value, step - 1
 
 
 class AravisCamera(Camera):
@@ -467,28 +419,4 @@ class AravisCamera(Camera):
 
     @classmethod
     def discover(cls) -> list[dict]:
-        Aravis, GLib = load_aravis()
-        Aravis.update_device_list()
-        found = []
-        for i in range(Aravis.get_n_devices()):
-            device_id = Aravis.get_device_id(i)
-            entry = {
-                "id": device_id,
-                "model": Aravis.get_device_model(i),
-                "vendor": Aravis.get_device_vendor(i),
-                "serial": Aravis.get_device_serial_nbr(i),
-                "protocol": Aravis.get_device_protocol(i),
-                "address": Aravis.get_device_address(i),
-            }
-            try:
-                cam = Aravis.Camera.new(device_id)
-                _, _, w, h = cam.get_region()
-                fmt = f"{w}x{h} {cam.get_pixel_format_as_string()}"
-                if cam.is_frame_rate_available():
-                    fmt += f" {cam.get_frame_rate():g} fps"
-                del cam
-            except GLib.Error as exc:
-                fmt = f"? (cannot open it: {exc.message})"
-            entry["format"] = fmt
-            found.append(entry)
-        return found
+        return devices()

@@ -40,7 +40,7 @@ from . import genicam_tuning
 from .base import Camera, CameraLost, Capture
 from .genicam_features import DeviceFeatures, refusal, short_error
 from .genicam_timing import SilenceWatch, device_clock
-from .pixelformats import image_layout, to_image  # noqa: F401 (image_layout: tests import it from here)
+from .pixelformats import to_image
 
 log = logging.getLogger("camera")
 
