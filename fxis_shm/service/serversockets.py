@@ -102,7 +102,14 @@ class ServerSockets:
 
     def polled(self) -> list[zmq.Socket[bytes]]:
         """Every socket the loop waits on."""
-        inputs = [self.router, self.pub, self.events, self.watch.pull, *self.links.sockets.values(), *self.links.monitors]
+        inputs = [
+            self.router,
+            self.pub,
+            self.events,
+            self.watch.pull,
+            *self.links.sockets.values(),
+            *self.links.monitors,
+        ]
         return [sock for sock in inputs if sock is not None]
 
     def _bind(self, kind: int, endpoint: str, what: str, queue: int) -> zmq.Socket[bytes]:
