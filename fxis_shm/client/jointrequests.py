@@ -23,7 +23,7 @@ from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.core.engine import Reply, RequestEngine, Trigger
 from fxis_shm.core.remotecamera import RemoteCamera
 from fxis_shm.errors import Code, FxisError, Overwritten, RequestTimeout, ServiceError
-from fxis_shm.wire import protocol
+from fxis_shm.wire import framemeta, protocol
 
 LOOK_AGAIN_NS = 1_000_000  # after a frame was due, look for it this often
 SILENT_FOR_S = 1.0  # a service that did not answer is probed this often until it answers again
@@ -268,7 +268,7 @@ def _joined(header: dict, chosen: list[Frame]) -> tuple[dict, list, Callable | N
     caller's clock, the service's own times kept), the images, and a validity check for views."""
     frames = []
     for k, frame in enumerate(chosen):
-        meta = protocol.frame_meta(
+        meta = framemeta.frame_meta(
             frame.camera,
             frame.frame_id,
             frame.t_capture,

@@ -12,7 +12,7 @@ from fxis_shm.core import timebase
 from fxis_shm.core.decisions import Reject, check_not_empty
 from fxis_shm.core.engine import Reply
 from fxis_shm.core.selection import Selection, radius_for, select, tolerance_for
-from fxis_shm.core.snapshot import CAPTURES, Snapshot
+from fxis_shm.core.snapshot import Snapshot
 from fxis_shm.core.timesearch import Timeline
 from fxis_shm.errors import Code
 from fxis_shm.shm import ordering
@@ -149,7 +149,7 @@ class CopyOut:
 
         data = self.encoded.get((cam, meta.generation, meta.frame_id), pixels, encoding, quality)
         images.append(data)
-        return encoded_meta(self._meta(cam, snap, i, buffer=buffer), encoding, len(data))
+        return encoded_meta(self.header(cam).recorded(meta, buffer=buffer), encoding, len(data))
 
     def _copied(self, cam: str, snap: Snapshot, i: int, buffer: int, images: list, how: str) -> dict:
         handle = self.cameras[cam]
@@ -166,13 +166,7 @@ class CopyOut:
             handle.torn_reads += 1
             raise
         images.append(image)
-        return self._meta(cam, snap, i, buffer=buffer)
-
-    def _meta(self, cam: str, snap: Snapshot, i: int, **more) -> dict:
-        m = snap.frame_meta(i)
-        return self.header(cam).frame(
-            m.frame_id, m.t_capture, m.t_stored, m.generation, m.t_available, m.t_target, CAPTURES[m.capture], **more
-        )
+        return self.header(cam).recorded(snap.frame_meta(i), buffer=buffer)
 
     def encode(self, meta: dict, image, encoding: str, quality: int | None) -> tuple[dict, bytes]:
         """A copied frame (checked whole) in ``encoding``, encoded once for every reply and stream."""
@@ -185,4 +179,4 @@ class CopyOut:
         reader = self.cameras[cam].reader
         slot, seq = snap.slot(i), snap.seq(i)
         reader.check_slot(slot, seq, "before")  # already gone: choose again rather than send it
-        return self._meta(cam, snap, i, **ring_place(reader.name, reader.instance, slot, seq))
+        return self.header(cam).recorded(snap.frame_meta(i), place=ring_place(reader.name, reader.instance, slot, seq))
