@@ -16,7 +16,8 @@ from fxis_shm.core import timebase
 from fxis_shm.service import realtime, rtpolicy
 from fxis_shm.service.childspec import CameraWorkerSpec
 from fxis_shm.shm import history, naming
-from fxis_shm.shm.ring import FLAG_TRIGGERED, FrameLayout, RingWriter, segment_size
+from fxis_shm.shm.ring import FrameLayout, RingWriter, segment_size
+from fxis_shm.shm.ringheader import FLAG_TRIGGERED
 from fxis_shm.wire import commands
 
 from . import processing, tuning

@@ -10,9 +10,12 @@ from __future__ import annotations
 import math
 from collections.abc import Callable, Mapping, Sequence
 from dataclasses import dataclass
-from typing import Any, TypeAlias, cast
+from typing import TYPE_CHECKING, Any, TypeAlias, cast
 
 import numpy as np
+
+if TYPE_CHECKING:
+    import zmq
 
 from fxis_shm.core import timebase
 from fxis_shm.core.selection import SYNC_MODES
@@ -32,7 +35,7 @@ _DTYPE_OF = {name: np.dtype(name) for name in DTYPES}  # (np.dtype(name) parses 
 # engine (fxis_shm.core.engine) takes it; its values are what the schema's checks returned.
 Request: TypeAlias = dict[str, Any]
 # A frame of a message: what pyzmq sends without a copy and what a received zmq.Frame's buffer is.
-Buffer: TypeAlias = bytes | memoryview | np.ndarray
+Buffer: TypeAlias = "bytes | memoryview | np.ndarray | zmq.Frame"
 Received: TypeAlias = bytes | memoryview  # a received frame (a zmq.Frame's buffer, or its bytes)
 LOCAL = "local"  # the delivery of a reply whose frames the client copies from the rings itself
 
