@@ -7,7 +7,7 @@ one kind of client is there for the other; each kind fills in how a request is a
 
 from __future__ import annotations
 
-from abc import ABC, abstractmethod
+from abc import abstractmethod
 from collections.abc import Callable
 from typing import Any, Literal, overload
 
@@ -15,7 +15,7 @@ from fxis_shm.client import arguments, snapshot as snapshots
 from fxis_shm.client.fastreads import FastReads
 from fxis_shm.client.frames import Frame, FrameTuple, FrameView, frames_of, sequence_of, tuple_of
 from fxis_shm.client.requestoptions import RequestOptions
-from fxis_shm.core.clockmap import ClockEstimate
+from fxis_shm.client.serviceapi import ServiceApi
 from fxis_shm.formats.videochoice import split_encoding
 from fxis_shm.formats.videotracks import VideoSettings
 from fxis_shm.wire import encoding as image_encoding
@@ -24,7 +24,7 @@ from fxis_shm.wire import encoding as image_encoding
 SHARED_OPERATIONS = ("image", "tuple", "latest", "sequence", "snapshot", "subscribe", "frame_times")
 
 
-class ClientApi(ABC):
+class ClientApi(ServiceApi):
     """The methods every client has; every time given or returned is in the caller's clock."""
 
     clock: Callable[[], int]
@@ -375,58 +375,55 @@ class ClientApi(ABC):
 
     def subscribe(self, timeout: float = 2.0, queue: int = 16) -> Any:
         """A subscriber of the streams (``frames(camera)``, and joint ``tuples(rate_hz)``), every
-        time in this client's clock; a context manager like the client."""
+        time in this client's clock; a context manager like the client.
+
+        Parameters
+        ----------
+        timeout
+            Seconds its ``receive()`` waits for a message before RequestTimeout.
+        queue
+            Messages kept per stream for a reader that falls behind (older ones are dropped).
+
+        Returns
+        -------
+        Subscriber
+            Not subscribed to anything yet (``frames``, ``tuples``, ``topic``).
+
+        Raises
+        ------
+        InvalidArgument
+            A ``timeout`` or ``queue`` out of its range.
+        """
         arguments.check_numbers(timeout)
         return self._subscriber(timeout, arguments.check_queue(queue))
 
     def frame_times(self, cameras: list[str] | None = None) -> dict:
         """Each camera's frames without pixels (the ``frames`` op): liveness, period and a row
         per valid frame with the fields named in ``columns``, times in the clock of the camera's
-        service."""
+        service.
+
+        Parameters
+        ----------
+        cameras
+            The cameras' names; default: every camera.
+
+        Returns
+        -------
+        dict
+            ``now``, ``columns`` and per camera ``alive``, ``reason``, ``frames`` (the rows,
+            oldest first) and, if its ring exists, ``period_ns``, ``delay_ns``, ``slots`` and
+            ``triggered`` (docs/protocol.md 7.5a).
+
+        Raises
+        ------
+        InvalidArgument
+            ``cameras`` not a list of names.
+        RequestTimeout, UnknownCamera, ServiceError
+            As for ``image``.
+        """
         cameras = arguments.camera_names(cameras)
         arguments.check_request("frames", cameras=cameras)
         return self._frame_times(cameras)
-
-    @abstractmethod
-    def events(self) -> Any:
-        """An event publisher whose ``at``, ``start`` and ``end`` are in this client's clock, t*
-        the moment of the call without ``at``. Answers arrive on ``subscribe()``'s subscriber,
-        ``topic(reply_topic)``."""
-
-    # ---- the services ----
-
-    @abstractmethod
-    def status(self) -> dict:
-        """The service's status: its cameras, endpoints and clock."""
-
-    @abstractmethod
-    def time(self) -> Any:
-        """The service's clock now (int ns of the clock its status names; CLOCK_MONOTONIC by default)."""
-
-    @property
-    @abstractmethod
-    def clocks(self) -> dict[str, ClockEstimate]:
-        """Each service's clock against the caller's, by endpoint: offset (service minus caller),
-        drift, uncertainty and how it is known ("same clock", "shared", "estimated")."""
-
-    @abstractmethod
-    def clock_estimate(self) -> ClockEstimate:
-        """The current mapping of the caller's clock onto the service's (see ``clocks``)."""
-
-    @property
-    @abstractmethod
-    def local_unavailable(self) -> str | None:
-        """Why the last request could not use the local path (None: it could, or was not asked to)."""
-
-    @abstractmethod
-    def close(self) -> None:
-        """Closes the client's sockets and stops its threads."""
-
-    def __enter__(self) -> Any:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
 
     # ---- what each kind of client fills in ----
 
