@@ -12,6 +12,7 @@ from fxis_shm.errors import InvalidArgument, ProtocolError, SettingRejected
 from fxis_shm.formats import videochoice
 from fxis_shm.formats.videotracks import VideoSettings
 from fxis_shm.wire import protocol, ranges
+from fxis_shm.wire.fieldchecks import MAX_SETTINGS
 
 TIMES = ("at", "start", "end")  # ns of the caller's clock
 
@@ -68,8 +69,8 @@ def setting_values(values: dict[str, Any]) -> dict[str, Any]:
             raise SettingRejected(
                 "SETTING_REFUSED", f"{key}={value!r}: a setting takes a finite number, a string or true/false"
             )
-    if len(values) > protocol.MAX_SETTINGS:
-        raise InvalidArgument(f"configure takes at most {protocol.MAX_SETTINGS} settings at once, got {len(values)}")
+    if len(values) > MAX_SETTINGS:
+        raise InvalidArgument(f"configure takes at most {MAX_SETTINGS} settings at once, got {len(values)}")
     return values
 
 

@@ -17,7 +17,6 @@ Check = Callable[[str, object], object]
 INT64_MAX = 2**63 - 1
 MAX_TIMEOUT_MS = 3_600_000.0  # one hour: longer waits are surely a mistake
 MAX_SETTINGS = 64  # keys in one settings request
-RESERVED_TOPICS = ("frames/", "tuples", "settings/", "fxis.")  # stream topics the service publishes itself
 
 
 def fail(field: str, what: str) -> NoReturn:
@@ -68,12 +67,17 @@ def nonzero(field: str, v: object) -> float:
     return n
 
 
-def topic(field: str, v: object) -> str:
-    if not isinstance(v, str) or not v or len(v) > 256:
-        fail(field, "must be a non-empty string of at most 256 characters")
-    if v.startswith(RESERVED_TOPICS):
-        fail(field, f"must not start with a reserved prefix {RESERVED_TOPICS}")
-    return v
+def topic(reserved: tuple[str, ...]) -> Check:
+    """The check of a topic a client names: not one that starts as the ``reserved`` ones do."""
+
+    def check(field: str, v: object) -> str:
+        if not isinstance(v, str) or not v or len(v) > 256:
+            fail(field, "must be a non-empty string of at most 256 characters")
+        if v.startswith(reserved):
+            fail(field, f"must not start with a reserved prefix {reserved}")
+        return v
+
+    return check
 
 
 def name(field: str, v: object) -> str:

@@ -29,6 +29,7 @@ from fxis_shm.wire.headers import FrameMeta, ReplyHeader, RequestId
 VERSION = 1
 CLOCK = "CLOCK_MONOTONIC"
 MAX_HEADER_BYTES = 64 * 1024
+RESERVED_TOPICS = ("frames/", "tuples", "settings/", "fxis.")  # stream topics the service publishes itself
 DTYPES = ("uint8", "uint16", "float32")
 _DTYPE_OF = {name: np.dtype(name) for name in DTYPES}  # (np.dtype(name) parses the name on every call)
 # A validated request: every field of its op (wire.headers.RequestHeader names them), as the
@@ -127,7 +128,10 @@ _REQUESTS = _with_common(OPS)
 # Event answers go to many subscribers, so they always carry the pixels: no "local".
 _EVENTS = _with_common(
     {
-        op: {**{k: v for k, v in OPS[op].items() if k not in _LOCAL}, "reply_topic": (checks.topic, ...)}
+        op: {
+            **{k: v for k, v in OPS[op].items() if k not in _LOCAL},
+            "reply_topic": (checks.topic(RESERVED_TOPICS), ...),
+        }
         for op in EVENT_OPS
     }
 )
