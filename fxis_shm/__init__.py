@@ -26,11 +26,12 @@ from fxis_shm.errors import (
 
 if typing.TYPE_CHECKING:
     from fxis_shm.client.client import Client
-    from fxis_shm.client.frames import Frame, FrameTuple
+    from fxis_shm.client.frames import Frame, FrameTuple, FrameView
     from fxis_shm.client.multiclient import MultiClient
     from fxis_shm.client.pubsub import EventPublisher, Message, Subscriber, handshake
     from fxis_shm.core.clockmap import ClockEstimate
     from fxis_shm.formats.stamp import read_stamp
+    from fxis_shm.formats.videotracks import VideoSettings
     from fxis_shm.wire.security import ClientKeys
 
 # Imported on first use (PEP 562), not with the package: every process of a service (the
@@ -41,6 +42,8 @@ _LAZY = {
     "Client": "fxis_shm.client.client",
     "Frame": "fxis_shm.client.frames",
     "FrameTuple": "fxis_shm.client.frames",
+    "FrameView": "fxis_shm.client.frames",
+    "VideoSettings": "fxis_shm.formats.videotracks",
     "MultiClient": "fxis_shm.client.multiclient",
     "EventPublisher": "fxis_shm.client.pubsub",
     "Message": "fxis_shm.client.pubsub",
@@ -56,7 +59,9 @@ __all__ = [
     "MultiClient",
     "ClientKeys",
     "Frame",
+    "FrameView",
     "FrameTuple",
+    "VideoSettings",
     "ClockEstimate",
     "Subscriber",
     "EventPublisher",

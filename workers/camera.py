@@ -13,16 +13,18 @@ import time
 import posix_ipc
 
 from fxis_shm.core import timebase
+from fxis_shm.errors import RingError
 from fxis_shm.service import realtime, rtpolicy
 from fxis_shm.service.childspec import CameraWorkerSpec
 from fxis_shm.shm import history, naming
-from fxis_shm.shm.ring import FLAG_TRIGGERED, FrameLayout, RingWriter, segment_size
+from fxis_shm.shm.ring import FrameLayout, RingWriter, segment_size
+from fxis_shm.shm.ringheader import FLAG_TRIGGERED
 from fxis_shm.wire import commands
 
 from . import processing, tuning
 from ._child import Ready, child_main
 from .backends import backend_class
-from .backends.base import CameraLost
+from .backends.base import Camera, CameraLost
 from .commands import CommandServer, serve_pending
 from .triggers import TriggerLog, TriggerTimer
 
@@ -45,7 +47,7 @@ class Stream:
         self.process = processing.pipeline(self.camera.options)
         self.ring: RingWriter | None = None
         self.commands: CommandServer | None = None
-        self.first = None  # the first frame to store, if finding the layout took one
+        self.first: processing.Processed | None = None  # the first frame to store, if finding the layout took one
         # triggers for a moment (capture at T, lockstep), fired by a timer thread of their own
         self.triggers = TriggerLog(_tolerance_ns(self.camera))
         self.timer: TriggerTimer | None = None
@@ -92,6 +94,13 @@ class Stream:
         self.ring.count("hook_errors", hook_errors)
         self.timed()
 
+    @property
+    def writer(self) -> RingWriter:
+        """The ring ``start`` made (RingError before it has)."""
+        if self.ring is None:
+            raise RingError(f"camera {self.spec.camera}: the stream has no ring before it starts")
+        return self.ring
+
     def _ring(self, layout: FrameLayout) -> RingWriter:
         spec, period = self.spec, self.camera.nominal_period_ns
         slots = history.slots_for(spec.history_s, period, spec.slots)
@@ -108,7 +117,7 @@ class Stream:
         )
         return ring
 
-    def restart(self, options: dict) -> None:
+    def restart(self, options: dict[str, object]) -> None:
         """The stream again with ``options``: a new camera object, a new ring if the layout or
         the slots differ (readers re-open it by name), the generation + 1 either way. If the
         new camera fails, the old one is opened again as it was and the failure raised."""
@@ -135,12 +144,12 @@ class Stream:
             ring.new_generation()
             ring.set_period(camera.nominal_period_ns)
         else:  # the new writer retires the old segment; the old writer's mapping is then closed
-            self.ring = self._ring(layout)
+            new = self.ring = self._ring(layout)
             for counter in ("frames_captured", "frames_dropped", "hook_errors"):
-                self.ring.count(counter, ring.field(counter) - self.ring.field(counter))
+                new.count(counter, ring.field(counter) - new.field(counter))
             ring.close()
         self.timed()  # read by the next request
-        log.info("camera %s restarted its stream (generation %d)", self.spec.camera, self.ring.generation)
+        log.info("camera %s restarted its stream (generation %d)", self.spec.camera, self.writer.generation)
 
     def timed(self) -> None:
         """Tell readers how the camera's frames come: on triggers of the requests (FLAG_TRIGGERED),
@@ -164,9 +173,10 @@ class Stream:
         self.camera.close()
 
 
-def _tolerance_ns(camera) -> int:
+def _tolerance_ns(camera: Camera) -> int:
     """How far from T a frame captured for T may land before it is marked late."""
-    return round(camera.options["capture_tolerance_ms"] * 1e6)
+    tolerance_ms: float = camera.options["capture_tolerance_ms"]
+    return round(tolerance_ms * 1e6)
 
 
 def run(spec: CameraWorkerSpec, ready: Ready, stop: threading.Event) -> None:
@@ -189,7 +199,9 @@ def run(spec: CameraWorkerSpec, ready: Ready, stop: threading.Event) -> None:
         stream.close()
 
 
-def _layout(camera, process, stop) -> tuple:
+def _layout(
+    camera: Camera, process: processing.Direct | processing.Pool, stop: threading.Event
+) -> tuple[processing.Processed | None, FrameLayout, int]:
     """The ring's layout: the camera's, or that of the first frame its hook returns
     (frames the hook fails on are counted and skipped, as later ones are).
     Returns (the first frame to store or None, the layout, hook errors so far)."""
@@ -219,8 +231,9 @@ def _layout(camera, process, stop) -> tuple:
 def _stream(stream: Stream) -> None:
     stop, generation = stream.stop, -1
     while not stop.is_set():
-        if stream.ring.generation != generation:  # started, or restarted by a command
-            camera, process, ring, generation = stream.camera, stream.process, stream.ring, stream.ring.generation
+        if stream.writer.generation != generation:  # started, or restarted by a command
+            camera, process, ring = stream.camera, stream.process, stream.writer
+            generation = ring.generation
             dropped, note = camera.frames_dropped, ""
             _realtime(stream)  # the new camera's own threads too
             if stream.first is not None:
@@ -266,7 +279,7 @@ def _realtime(stream: Stream) -> None:
         log.warning("camera %s: --realtime: %s", stream.spec.camera, line)
 
 
-def _reconnect(camera, ring: RingWriter, stop: threading.Event, reason: str) -> None:
+def _reconnect(camera: Camera, ring: RingWriter, stop: threading.Event, reason: str) -> None:
     """Reopen a lost camera with backoff, heartbeating meanwhile so the service
     knows the worker lives; the frames after the outage get a new generation."""
     backoff = _RECONNECT_FIRST_S
@@ -298,7 +311,7 @@ def _sleep_heartbeating(ring: RingWriter, stop: threading.Event, seconds: float)
 
 
 def _store(stream: Stream, item: processing.Processed) -> None:
-    ring = stream.ring
+    ring = stream.writer
     if item.error is None and item.image is not None and FrameLayout.of(item.image) != ring.layout:
         item.error = f"returned {FrameLayout.of(item.image)}, but the ring holds {ring.layout}"
     if item.error is not None:

@@ -16,7 +16,7 @@ import logging
 import os
 import queue
 import threading
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 
 import zmq
 
@@ -62,7 +62,7 @@ class CommandServer:
         service: str,
         camera: str,
         stop: threading.Event,
-        direct: dict[str, Callable[[dict], dict]] | None = None,
+        direct: Mapping[str, Callable[[dict], dict]] | None = None,
     ):
         self._direct = direct or {}
         self.endpoint = naming.command_endpoint(service, camera)

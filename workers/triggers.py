@@ -84,7 +84,7 @@ class TriggerLog:
             self.missed += points
 
     def figures(self) -> dict[str, int]:
-        """What the ring's header shows of it (fxis_shm.shm.ring.SYNC_FIELDS)."""
+        """What the ring's header shows of it (fxis_shm.shm.ringheader.SYNC_FIELDS)."""
         with self._lock:
             residuals, lateness = list(self.residuals), list(self.lateness)
         hz, phase = self.grid or (0.0, 0)

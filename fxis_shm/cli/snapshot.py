@@ -11,6 +11,7 @@ from fxis_shm.cli.stopsignals import as_interrupts, interrupted
 from fxis_shm.cli.videoflags import add_encoding_option, add_video_options, video_settings
 from fxis_shm.errors import ConfigError, FxisError, InvalidArgument
 from fxis_shm.formats.outfolder import check_out_folder
+from fxis_shm.wire import encoding as image_encoding
 
 
 def snapshot_command(args) -> int:
@@ -23,21 +24,8 @@ def snapshot_command(args) -> int:
     try:
         video = video_settings(args)
         with as_interrupts(), client_for(args) as client:
-            if video is None:
-                result = client.snapshot(args.at, args.before, args.after, args.out, cameras, args.encoding)
-            else:
-                result = client.snapshot(
-                    args.at,
-                    args.before,
-                    args.after,
-                    args.out,
-                    cameras,
-                    codec=video.codec,
-                    encoder=video.encoder,
-                    crf=video.crf,
-                    preset=video.preset,
-                    gop_s=video.gop_s,
-                )
+            encoding = args.encoding if video is None else image_encoding.RAW
+            result = client.snapshot(args.at, args.before, args.after, args.out, cameras, encoding, video=video)
     except (InvalidArgument, ConfigError) as exc:
         exitcodes.say("snapshot", exitcodes.message(exc))
         return exitcodes.USAGE

@@ -7,14 +7,15 @@ one kind of client is there for the other; each kind fills in how a request is a
 
 from __future__ import annotations
 
-from abc import ABC, abstractmethod
+from abc import abstractmethod
 from collections.abc import Callable
-from typing import Any
+from typing import Any, Literal, overload
 
 from fxis_shm.client import arguments, snapshot as snapshots
 from fxis_shm.client.fastreads import FastReads
-from fxis_shm.client.frames import Frame, FrameTuple, frames_of, sequence_of, tuple_of
-from fxis_shm.core.clockmap import ClockEstimate
+from fxis_shm.client.frames import Frame, FrameTuple, FrameView, frames_of, sequence_of, tuple_of
+from fxis_shm.client.requestoptions import RequestOptions
+from fxis_shm.client.serviceapi import ServiceApi
 from fxis_shm.formats.videochoice import split_encoding
 from fxis_shm.formats.videotracks import VideoSettings
 from fxis_shm.wire import encoding as image_encoding
@@ -23,7 +24,7 @@ from fxis_shm.wire import encoding as image_encoding
 SHARED_OPERATIONS = ("image", "tuple", "latest", "sequence", "snapshot", "subscribe", "frame_times")
 
 
-class ClientApi(ABC):
+class ClientApi(ServiceApi):
     """The methods every client has; every time given or returned is in the caller's clock."""
 
     clock: Callable[[], int]
@@ -40,6 +41,37 @@ class ClientApi(ABC):
             raise TypeError(f"{cls.__name__} redefines {redefined}: they are ClientApi's, the same for every client")
 
     # ---- operations ----
+
+    # ``copy=False`` answers a FrameView (its image a view of the ring slot: check still_valid())
+    @overload
+    def image(
+        self,
+        camera: str,
+        *,
+        at: int | None = None,
+        wait: str | None = None,
+        timeout: float | None = None,
+        copy: Literal[True] = True,
+        encoding: str | None = None,
+        quality: int | None = None,
+        timeout_ms: float | None = None,
+        capture: bool = False,
+    ) -> Frame: ...
+
+    @overload
+    def image(
+        self,
+        camera: str,
+        *,
+        at: int | None = None,
+        wait: str | None = None,
+        timeout: float | None = None,
+        copy: Literal[False],
+        encoding: str | None = None,
+        quality: int | None = None,
+        timeout_ms: float | None = None,
+        capture: bool = False,
+    ) -> FrameView: ...
 
     def image(
         self,
@@ -68,8 +100,8 @@ class ClientApi(ABC):
         timeout
             Seconds the service may wait for frames (default: its setting).
         copy
-            False (local path only): the image is a read-only view of the ring slot, with no
-            copy at all; check ``frame.still_valid()`` after using it.
+            False: a FrameView, whose image (local path) is a read-only view of the ring slot,
+            with no copy at all; check ``frame.still_valid()`` after using it.
         encoding, quality
             ``"raw"``, ``"jpeg"`` or ``"png"`` and the JPEG quality, for this request only.
         timeout_ms
@@ -82,7 +114,8 @@ class ClientApi(ABC):
         Returns
         -------
         Frame
-            The image as a NumPy array with its metadata, times in the caller's clock.
+            The image as a NumPy array with its metadata, times in the caller's clock (a
+            FrameView with ``copy=False``).
 
         Raises
         ------
@@ -102,16 +135,17 @@ class ClientApi(ABC):
         Overrun
             The ring came round during every copy: ask for newer frames or keep more history.
         """
+        options = RequestOptions.given(timeout, copy, encoding, quality, timeout_ms)
         camera = arguments.camera_name(camera)
         if at is not None or timeout is not None:
             arguments.check_numbers(timeout, at=at)
-        if self._fast is not None and not capture and encoding is quality is timeout is timeout_ms is None:
+        if self._fast is not None and not capture and options.plain:
             frame = self._compiled(self._fast.image(camera, at, wait, copy))
             if frame is not None:
                 return frame
         fields = {"camera": camera, "at": at, "wait": wait, "capture": capture or None}
         arguments.check_request("image", **fields)
-        return frames_of(*self._answer("image", timeout, timeout_ms, copy, encoding, quality, **fields))[0]
+        return frames_of(*self._answer("image", options, **fields), view=not copy)[0]
 
     def tuple(
         self,
@@ -168,18 +202,18 @@ class ClientApi(ABC):
         SkewExceeded
             With ``max_skew_ms``: no tuple near t* was that well synchronized.
         """
+        options = RequestOptions.given(timeout, copy, encoding, quality, timeout_ms)
         cameras = arguments.camera_names(cameras)
         if at is not None or timeout is not None or max_skew_ms is not None:
             arguments.check_numbers(timeout, at=at, max_skew_ms=max_skew_ms)
-        fast = not capture and encoding is quality is timeout is timeout_ms is max_skew_ms is None
-        if self._fast is not None and fast:
+        if self._fast is not None and not capture and options.plain and max_skew_ms is None:
             tuple_ = self._compiled(self._fast.tuple(cameras, at, sync, wait, copy))
             if tuple_ is not None:
                 return tuple_
         fields = dict(cameras=cameras, at=at, sync=sync, wait=wait, max_skew_ms=max_skew_ms)
         fields.update(partial=partial or None, capture=capture or None)
         arguments.check_request("tuple", **fields)
-        return tuple_of(*self._answer("tuple", timeout, timeout_ms, copy, encoding, quality, **fields))
+        return tuple_of(*self._answer("tuple", options, **fields), view=not copy)
 
     def latest(
         self,
@@ -208,13 +242,14 @@ class ClientApi(ABC):
         RequestTimeout, UnknownCamera, CameraDown, ServiceError
             As for ``image``; ``NO_FRAMES`` (a ServiceError) while a camera has stored none.
         """
+        options = RequestOptions(None, copy, encoding, quality)
         cameras = arguments.camera_names(cameras)
-        if self._fast is not None and encoding is quality is None:
+        if self._fast is not None and options.plain:
             tuple_ = self._compiled(self._fast.latest(cameras, copy))
             if tuple_ is not None:
                 return tuple_
         arguments.check_request("latest", cameras=cameras)
-        return tuple_of(*self._answer("latest", None, None, copy, encoding, quality, cameras=cameras))
+        return tuple_of(*self._answer("latest", options, cameras=cameras), view=not copy)
 
     def sequence(
         self,
@@ -266,21 +301,14 @@ class ClientApi(ABC):
         InvalidArgument, RequestTimeout, UnknownCamera, CameraDown, FrameTimeout, ServiceError, Overrun
             As for ``image``.
         """
+        options = RequestOptions.given(timeout, copy, encoding, quality, timeout_ms)
         cameras = arguments.camera_names(cameras)
         arguments.check_numbers(timeout, at=at, start=start, end=end, count=count, interval_ms=interval_ms)
         fields = dict(camera=camera, cameras=cameras, kind=kind, count=count, direction=direction)
         fields.update(interval_ms=interval_ms, start=start, end=end, at=at, sync=sync)
         arguments.check_request("sequence", **fields)
-        header, images, check = self._answer(
-            "sequence",
-            timeout,
-            timeout_ms,
-            copy,
-            encoding,
-            quality,
-            **fields,
-        )
-        return sequence_of(header, images, check, single=camera is not None)
+        header, images, check = self._answer("sequence", options, **fields)
+        return sequence_of(header, images, check, single=camera is not None, view=not copy)
 
     def snapshot(
         self,
@@ -291,8 +319,10 @@ class ClientApi(ABC):
         cameras: list[str] | None = None,
         encoding: str = image_encoding.RAW,
         quality: int | None = None,
+        *,
+        video: VideoSettings | None = None,
         codec: str | None = None,
-        encoder: str = "auto",
+        encoder: str | None = None,
         crf: int | None = None,
         preset: str | None = None,
         gop_s: float | None = None,
@@ -314,10 +344,14 @@ class ClientApi(ABC):
         cameras
             The cameras' names; default: all.
         encoding, quality
-            ``"raw"``, ``"jpeg"`` (with its quality), or a video codec (the same as ``codec``).
+            ``"raw"``, ``"jpeg"`` (with its quality), or a video codec (``encoding="h264"`` is
+            ``video=VideoSettings("h264")``).
+        video
+            Each camera as video: ``VideoSettings(codec, encoder, crf, preset, gop_s)``
+            (fxis_shm.formats.videotracks; codec ``"h264"``, ``"h265"`` or ``"av1"``), the
+            window's first frame a keyframe, with the encoder options ``fxis record --codec`` takes.
         codec, encoder, crf, preset, gop_s
-            Each camera as video (``"h264"``, ``"h265"``, ``"av1"``), the window's first frame a
-            keyframe, with the encoder options ``fxis record --codec`` takes.
+            Deprecated (DeprecationWarning): the fields of ``video`` given apart.
 
         Returns
         -------
@@ -328,83 +362,73 @@ class ClientApi(ABC):
         Raises
         ------
         InvalidArgument
-            A bad window, folder or video setting.
+            A bad window, folder or video setting, or ``video`` given with the deprecated keywords.
         RequestTimeout, UnknownCamera, CameraDown, ServiceError
             As for ``image`` (``OUT_OF_RANGE`` when the rings no longer hold the window's start).
         """
-        encoding, codec = split_encoding(encoding, codec)
+        video = arguments.video_of(video, codec=codec, encoder=encoder, crf=crf, preset=preset, gop_s=gop_s)
+        encoding, codec = split_encoding(encoding, video.codec if video is not None else None)
+        if video is None and codec is not None:  # encoding="h264"
+            video = VideoSettings(codec)
         owners = self._owners(arguments.camera_names(cameras))
-        settings = VideoSettings(codec, encoder, crf, preset, gop_s) if codec is not None else None
-        return snapshots.take(owners, self.clock, out, at, before, after, encoding, quality, self._clock_name, settings)
+        return snapshots.take(owners, self.clock, out, at, before, after, encoding, quality, self._clock_name, video)
 
     def subscribe(self, timeout: float = 2.0, queue: int = 16) -> Any:
         """A subscriber of the streams (``frames(camera)``, and joint ``tuples(rate_hz)``), every
-        time in this client's clock; a context manager like the client."""
+        time in this client's clock; a context manager like the client.
+
+        Parameters
+        ----------
+        timeout
+            Seconds its ``receive()`` waits for a message before RequestTimeout.
+        queue
+            Messages kept per stream for a reader that falls behind (older ones are dropped).
+
+        Returns
+        -------
+        Subscriber
+            Not subscribed to anything yet (``frames``, ``tuples``, ``topic``).
+
+        Raises
+        ------
+        InvalidArgument
+            A ``timeout`` or ``queue`` out of its range.
+        """
         arguments.check_numbers(timeout)
         return self._subscriber(timeout, arguments.check_queue(queue))
 
     def frame_times(self, cameras: list[str] | None = None) -> dict:
         """Each camera's frames without pixels (the ``frames`` op): liveness, period and a row
         per valid frame with the fields named in ``columns``, times in the clock of the camera's
-        service."""
+        service.
+
+        Parameters
+        ----------
+        cameras
+            The cameras' names; default: every camera.
+
+        Returns
+        -------
+        dict
+            ``now``, ``columns`` and per camera ``alive``, ``reason``, ``frames`` (the rows,
+            oldest first) and, if its ring exists, ``period_ns``, ``delay_ns``, ``slots`` and
+            ``triggered`` (docs/protocol.md 7.5a).
+
+        Raises
+        ------
+        InvalidArgument
+            ``cameras`` not a list of names.
+        RequestTimeout, UnknownCamera, ServiceError
+            As for ``image``.
+        """
         cameras = arguments.camera_names(cameras)
         arguments.check_request("frames", cameras=cameras)
         return self._frame_times(cameras)
 
-    @abstractmethod
-    def events(self) -> Any:
-        """An event publisher whose ``at``, ``start`` and ``end`` are in this client's clock, t*
-        the moment of the call without ``at``. Answers arrive on ``subscribe()``'s subscriber,
-        ``topic(reply_topic)``."""
-
-    # ---- the services ----
-
-    @abstractmethod
-    def status(self) -> dict:
-        """The service's status: its cameras, endpoints and clock."""
-
-    @abstractmethod
-    def time(self) -> Any:
-        """The service's clock now (int ns of the clock its status names; CLOCK_MONOTONIC by default)."""
-
-    @property
-    @abstractmethod
-    def clocks(self) -> dict[str, ClockEstimate]:
-        """Each service's clock against the caller's, by endpoint: offset (service minus caller),
-        drift, uncertainty and how it is known ("same clock", "shared", "estimated")."""
-
-    @abstractmethod
-    def clock_estimate(self) -> ClockEstimate:
-        """The current mapping of the caller's clock onto the service's (see ``clocks``)."""
-
-    @property
-    @abstractmethod
-    def local_unavailable(self) -> str | None:
-        """Why the last request could not use the local path (None: it could, or was not asked to)."""
-
-    @abstractmethod
-    def close(self) -> None:
-        """Closes the client's sockets and stops its threads."""
-
-    def __enter__(self) -> Any:
-        return self
-
-    def __exit__(self, *exc: object) -> None:
-        self.close()
-
     # ---- what each kind of client fills in ----
 
     @abstractmethod
-    def _answer(
-        self,
-        op: str,
-        timeout: float | None,
-        timeout_ms: float | None,
-        copy: bool,
-        encoding: str | None,
-        quality: int | None,
-        **fields: Any,
-    ) -> tuple[dict, list, Callable | None]:
+    def _answer(self, op: str, options: RequestOptions, **fields: Any) -> tuple[dict, list, Callable | None]:
         """A frame request's reply header (times in the caller's clock), images and validity check."""
 
     @abstractmethod

@@ -5,10 +5,14 @@ deep inside, an OverflowError or a ProtocolError of the wire's own check."""
 from __future__ import annotations
 
 import math
+import warnings
 from typing import Any
 
 from fxis_shm.errors import InvalidArgument, ProtocolError, SettingRejected
+from fxis_shm.formats import videochoice
+from fxis_shm.formats.videotracks import VideoSettings
 from fxis_shm.wire import protocol, ranges
+from fxis_shm.wire.fieldchecks import MAX_SETTINGS
 
 TIMES = ("at", "start", "end")  # ns of the caller's clock
 
@@ -65,8 +69,8 @@ def setting_values(values: dict[str, Any]) -> dict[str, Any]:
             raise SettingRejected(
                 "SETTING_REFUSED", f"{key}={value!r}: a setting takes a finite number, a string or true/false"
             )
-    if len(values) > protocol.MAX_SETTINGS:
-        raise InvalidArgument(f"configure takes at most {protocol.MAX_SETTINGS} settings at once, got {len(values)}")
+    if len(values) > MAX_SETTINGS:
+        raise InvalidArgument(f"configure takes at most {MAX_SETTINGS} settings at once, got {len(values)}")
     return values
 
 
@@ -74,3 +78,29 @@ def check_queue(queue: Any) -> int:
     if isinstance(queue, bool) or not isinstance(queue, int) or not 1 <= queue <= 1_000_000:
         raise InvalidArgument(f"queue must be a whole number of messages from 1 to 1000000, got {queue!r}")
     return queue
+
+
+def video_of(
+    video: VideoSettings | None,
+    *,
+    codec: str | None,
+    encoder: str | None,
+    crf: int | None,
+    preset: str | None,
+    gop_s: float | None,
+) -> VideoSettings | None:
+    """A snapshot's video settings: ``video``, or the deprecated keywords that give its fields
+    apart (a DeprecationWarning pointing at the caller of ``snapshot``; without ``codec`` they
+    ask for no video, as they did)."""
+    apart = {"codec": codec, "encoder": encoder, "crf": crf, "preset": preset, "gop_s": gop_s}
+    given = [f"{name}=" for name, value in apart.items() if value is not None]
+    if not given:
+        return video
+    warnings.warn(
+        f"snapshot({', '.join(given)}) is deprecated: give video=VideoSettings(...)", DeprecationWarning, stacklevel=3
+    )
+    if video is not None:
+        raise InvalidArgument(f"give video= or {', '.join(given)}, not both")
+    if codec is None:
+        return None
+    return VideoSettings(codec, encoder or videochoice.AUTO, crf, preset, gop_s)

@@ -18,7 +18,7 @@ from collections.abc import Sequence
 from functools import partial
 from typing import Any
 
-from fxis_shm.client.frames import LOCAL, Frame, FrameTuple
+from fxis_shm.client.frames import LOCAL, Frame, FrameTuple, FrameView
 from fxis_shm.core.snapshot import CAPTURES
 from fxis_shm.shm import fastpick
 from fxis_shm.shm.ring import RingReader
@@ -81,7 +81,7 @@ class FastReads:
             if not copy:
                 image = self.views[k][slot].view()
                 still_valid = partial(self.picker.readers[k].slot_holds, slot, seq)
-            frames[name] = Frame(
+            frames[name] = (Frame if copy else FrameView)(
                 image,
                 name,
                 frame_id,

@@ -102,6 +102,14 @@ class Frame:
         self.release()
 
 
+@dataclass(slots=True)
+class FrameView(Frame):
+    """A Frame asked for with ``copy=False``: on the local path its ``image`` is a read-only
+    view of the ring slot, no copy at all, valid only while ``still_valid()`` is true; check it
+    after using the pixels, and discard what you computed if it is false. (Over the network the
+    pixels are the reply's and stay valid.)"""
+
+
 class ReleasedImage:
     """What ``Frame.image`` is after ``release()``: any use says so."""
 
@@ -207,14 +215,18 @@ class FrameTuple(Mapping):
 # ---- decoding replies and stream messages into Frames ----
 
 
-def frames_of(header: dict, images: list[np.ndarray], still_valid: Callable | None = None) -> list[Frame]:
+def frames_of(
+    header: dict, images: list[np.ndarray], still_valid: Callable | None = None, view: bool = False
+) -> list[Frame]:
+    """The frames of a reply: FrameViews if asked for with ``copy=False`` (``view``)."""
     timing, path = header.get("timing") or {}, header.get("path", NETWORK)
+    make = FrameView if view else Frame
     frames = []
     try:  # (a loop, not a comprehension: cold, each comprehension is a function call more)
         for meta, image in zip(header["frames"], images):
             t_capture, t_stored, t_available = meta["t_capture"], meta["t_stored"], meta.get("t_available")
             frames.append(
-                Frame(
+                make(
                     image,
                     meta["camera"],
                     meta["frame_id"],
@@ -265,9 +277,11 @@ def _points_to_caller(points: dict[str, int], clock: ClockEstimate) -> dict[str,
     return {c: clock.to_caller(t) for c, t in points.items()}
 
 
-def tuple_of(header: dict, images: list[np.ndarray], still_valid: Callable | None = None) -> FrameTuple:
+def tuple_of(
+    header: dict, images: list[np.ndarray], still_valid: Callable | None = None, view: bool = False
+) -> FrameTuple:
     by_camera = {}
-    for frame in frames_of(header, images, still_valid):
+    for frame in frames_of(header, images, still_valid, view):
         by_camera[frame.camera] = frame
     return FrameTuple(
         by_camera,
@@ -280,9 +294,13 @@ def tuple_of(header: dict, images: list[np.ndarray], still_valid: Callable | Non
 
 
 def sequence_of(
-    header: dict, images: list[np.ndarray], still_valid: Callable | None = None, single: bool = False
+    header: dict,
+    images: list[np.ndarray],
+    still_valid: Callable | None = None,
+    single: bool = False,
+    view: bool = False,
 ) -> list:
-    frames = frames_of(header, images, still_valid)
+    frames = frames_of(header, images, still_valid, view)
     groups = header.get("groups", [])
     timing = header.get("timing", {})
     if single:

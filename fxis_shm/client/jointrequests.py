@@ -15,15 +15,17 @@ from __future__ import annotations
 import time
 from collections.abc import Callable
 from concurrent.futures import Future, ThreadPoolExecutor
+from typing import Any
 
 from fxis_shm.client.frames import LOCAL, NETWORK, Frame
 from fxis_shm.client.localreads import settled
+from fxis_shm.client.requestoptions import RequestOptions
 from fxis_shm.client.single import SingleClient
 from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.core.engine import Reply, RequestEngine, Trigger
 from fxis_shm.core.remotecamera import RemoteCamera
 from fxis_shm.errors import Code, FxisError, Overwritten, RequestTimeout, ServiceError
-from fxis_shm.wire import protocol
+from fxis_shm.wire import framemeta, protocol
 
 LOOK_AGAIN_NS = 1_000_000  # after a frame was due, look for it this often
 SILENT_FOR_S = 1.0  # a service that did not answer is probed this often until it answers again
@@ -51,13 +53,11 @@ class JointRequests:
         for twin in self._twins.values():
             twin.close()
 
-    def answer(
-        self, op: str, copy: bool, encoding: str | None, quality: int | None, **fields
-    ) -> tuple[dict, list, Callable | None]:
+    def answer(self, op: str, options: RequestOptions, **fields: Any) -> tuple[dict, list, Callable | None]:
         """The reply header (times in the caller's clock), images and validity check of one request."""
-        request = protocol.request_of(op, id=None, **fields)
+        request = protocol.request_of(op, id=None, timeout_ms=options.timeout_ms, **fields)
         if request.get("capture"):
-            return self._captured(request, copy, encoding, quality)
+            return self._captured(request, options)
         asked = self.clock()  # "now" is when the caller asked, not when the services answered
         names = self._names(request)
         self._describe(names)  # bounded by each client's timeout; a silent service is down
@@ -66,7 +66,7 @@ class JointRequests:
         if request.get("at") is not None:
             wait_s += max(0, request["at"] - now) / 1e9
         deadline = now + int(wait_s * 1e9)
-        fetch = _Fetch(copy, encoding, quality)
+        fetch = _Fetch(options)
         actions = self.engine.submit(request, asked, ticket=op)
         while True:
             self._fire([a for a in actions if isinstance(a, Trigger)], fetch)
@@ -182,9 +182,7 @@ class JointRequests:
             header["groups"] = [[position[pick] for pick in group] for group in reply.plan.groups]
         return _joined(header, chosen)
 
-    def _captured(
-        self, request: dict, copy: bool, encoding: str | None, quality: int | None
-    ) -> tuple[dict, list, Callable | None]:
+    def _captured(self, request: dict, options: RequestOptions) -> tuple[dict, list, Callable | None]:
         """A capture at T (``request["at"]``, the caller's clock) on several services: each service
         triggers its cameras that can be triggered for T, in its own clock, and answers for the
         others with their frames nearest T; the services are asked at once."""
@@ -193,10 +191,12 @@ class JointRequests:
         by_client: dict[SingleClient, list[str]] = {}
         for name in names:
             by_client.setdefault(self.owner[name], []).append(name)
-        options = {"copy": copy, "encoding": encoding, "quality": quality, "timeout_ms": request.get("timeout_ms")}
+        given = {"copy": options.copy, "encoding": options.encoding, "quality": options.quality}
         tuples = list(
             self._pool.map(
-                lambda client, cams: client.tuple(cams, at=request["at"], capture=True, **options),
+                lambda client, cams: client.tuple(
+                    cams, at=request["at"], capture=True, timeout=options.timeout, **given
+                ),
                 by_client,
                 by_client.values(),
             )
@@ -213,8 +213,8 @@ class JointRequests:
 class _Fetch:
     """How one request's frames are fetched (copied or viewed, encoded), and those fetched so far."""
 
-    def __init__(self, copy: bool, encoding: str | None, quality: int | None):
-        self.options = {"copy": copy, "encoding": encoding, "quality": quality}
+    def __init__(self, options: RequestOptions):
+        self.options = {"copy": options.copy, "encoding": options.encoding, "quality": options.quality}
         self.kept: Fetched = {}
 
     def chosen(self, client: SingleClient, wanted: list[tuple[str, dict]]) -> Fetched:
@@ -268,7 +268,7 @@ def _joined(header: dict, chosen: list[Frame]) -> tuple[dict, list, Callable | N
     caller's clock, the service's own times kept), the images, and a validity check for views."""
     frames = []
     for k, frame in enumerate(chosen):
-        meta = protocol.frame_meta(
+        meta = framemeta.frame_meta(
             frame.camera,
             frame.frame_id,
             frame.t_capture,

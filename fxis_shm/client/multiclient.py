@@ -15,8 +15,8 @@ from typing import Any
 from fxis_shm.client.api import ClientApi
 from fxis_shm.client.jointrequests import JointRequests
 from fxis_shm.client.multistreams import MultiEventPublisher, MultiSubscriber
+from fxis_shm.client.requestoptions import RequestOptions
 from fxis_shm.client.single import SingleClient
-from fxis_shm.client.sockets import wire_timeout_ms
 from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.errors import ConfigError, FxisError, InvalidArgument, RequestTimeout
 from fxis_shm.wire import ranges
@@ -138,21 +138,10 @@ class MultiClient(ClientApi):
 
     # ---- what ClientApi's operations ask of several services ----
 
-    def _answer(
-        self,
-        op: str,
-        timeout: float | None,
-        timeout_ms: float | None,
-        copy: bool,
-        encoding: str | None,
-        quality: int | None,
-        **fields,
-    ) -> tuple[dict, list, Callable | None]:
+    def _answer(self, op: str, options: RequestOptions, **fields: Any) -> tuple[dict, list, Callable | None]:
         """Answered by one engine over every service's frame times (fxis_shm.client.jointrequests)."""
         assert self._requests is not None
-        return self._requests.answer(
-            op, copy, encoding, quality, **fields, timeout_ms=wire_timeout_ms(timeout, timeout_ms)
-        )
+        return self._requests.answer(op, options, **fields)
 
     def _owners(self, cameras: list[str] | None) -> dict[str, SingleClient]:
         return {name: self.owner[name] for name in self._known(cameras or list(self.owner))}

@@ -19,8 +19,10 @@ reads the same clock.
 from __future__ import annotations
 
 import itertools
+import math
 import time
 from collections.abc import Callable
+from typing import Any
 
 import numpy as np
 import zmq
@@ -33,9 +35,10 @@ from fxis_shm.client.frames import LOCAL, NETWORK, in_caller_clock
 from fxis_shm.client.handshake import HandshakeWatch
 from fxis_shm.client.localreads import LocalReads
 from fxis_shm.client.pubsub import EventPublisher, Subscriber
+from fxis_shm.client.requestoptions import RequestOptions
 from fxis_shm.client.requestpaths import RequestPaths
 from fxis_shm.client.requesttimes import fixed_mapping, last_needed
-from fxis_shm.client.sockets import SocketOwner, checked_encoding, connected_socket, reachable, wire_timeout_ms
+from fxis_shm.client.sockets import SocketOwner, checked_encoding, connected_socket, reachable
 from fxis_shm.core import timebase
 from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.errors import InvalidArgument, RequestTimeout, service_error
@@ -251,21 +254,13 @@ class SingleClient(RequestPaths, SocketOwner, ClientApi):
         assert self._identity is not None
         return self._identity
 
-    def _answer(
-        self,
-        op: str,
-        timeout: float | None,
-        timeout_ms: float | None,
-        copy: bool,
-        encoding: str | None,
-        quality: int | None,
-        **fields,
-    ) -> tuple[dict, list, Callable | None]:
+    def _answer(self, op: str, options: RequestOptions, **fields: Any) -> tuple[dict, list, Callable | None]:
         """A frame request with the caller's times moved into the service's clock, and the
         reply's moved back. Without ``at``, t* is the moment of the call (the request's
         travel time does not count)."""
         called = self.clock()
-        waits_ms = wire_timeout_ms(timeout, timeout_ms)
+        waits_ms = options.timeout_ms
+        encoding, quality = options.encoding, options.quality
         mapping = self.clock_estimate()
         last = last_needed(op, fields)  # in the caller's clock
         extra = max(0.0, (waits_ms or 0) / 1000 - self.timeout / 2)
@@ -284,7 +279,7 @@ class SingleClient(RequestPaths, SocketOwner, ClientApi):
             encoding, quality = self.encoding, self.quality
         if encoding != codec.RAW:
             fields.update(encoding=encoding, quality=quality)
-        header, images, check = self._fetch(op, extra, copy, timeout_ms=waits_ms, **fields)
+        header, images, check = self._fetch(op, extra, options.copy, timeout_ms=waits_ms, **fields)
         return in_caller_clock(header, mapping), images, check
 
     def _frame_times(self, cameras: list[str] | None) -> dict:
@@ -298,7 +293,7 @@ class SingleClient(RequestPaths, SocketOwner, ClientApi):
         sock = self._sock
         # A DEALER with no connected peer (service down, or our keys refused) would
         # block in send: wait for it to become writable within our own deadline.
-        if not sock.getsockopt(_EVENTS) & _POLLOUT and not sock.poll(self.timeout * 1000, zmq.POLLOUT):
+        if not sock.getsockopt(_EVENTS) & _POLLOUT and not sock.poll(math.ceil(self.timeout * 1000), zmq.POLLOUT):
             raise RequestTimeout(self._handshake.problem(self.endpoint, self._keys is not None) or self._unsendable(op))
         try:
             send_parts(sock, [b"", *protocol.encode_request(op, id=request_id, **fields)])

@@ -5,7 +5,6 @@ fxis_shm.wire.multipart, as the service sends them)."""
 
 from __future__ import annotations
 
-import warnings
 from collections.abc import Callable
 
 import zmq
@@ -58,16 +57,6 @@ class SocketOwner:
 
     def __exit__(self, *exc) -> None:
         self.close()
-
-
-def wire_timeout_ms(timeout: float | None, timeout_ms: float | None) -> float | None:
-    """A request's own timeout for the wire (ms), from ``timeout`` in seconds as everywhere in
-    this API; ``timeout_ms``, the old name, still works but warns."""
-    if timeout_ms is not None:
-        warnings.warn("timeout_ms= is deprecated: give timeout= in seconds", DeprecationWarning, stacklevel=3)
-        if timeout is None:
-            return timeout_ms
-    return None if timeout is None else timeout * 1000
 
 
 def reachable(endpoint: str, via: str) -> str:

@@ -23,6 +23,7 @@ import zmq
 
 from fxis_shm.client.jointrequests import JointRequests
 from fxis_shm.client.pubsub import Message
+from fxis_shm.client.requestoptions import RequestOptions
 from fxis_shm.client.single import SingleClient
 from fxis_shm.core.decimation import every_frame
 from fxis_shm.errors import Code, FxisError, RequestTimeout
@@ -122,9 +123,8 @@ class TupleStream:
         if self.seq == 1 and self.stream.rate_hz:
             body["rate"] = {"asked_hz": self.stream.rate_hz}
         try:
-            header, images, _ = self._requests.answer(
-                "tuple", True, self.stream.encoding, self.stream.quality, at=t_star, partial=self.partial or None
-            )
+            options = RequestOptions(encoding=self.stream.encoding, quality=self.stream.quality)
+            header, images, _ = self._requests.answer("tuple", options, at=t_star, partial=self.partial or None)
         except FxisError as exc:
             code = Code.TIMEOUT if isinstance(exc, RequestTimeout) else getattr(exc, "code", Code.INTERNAL)
             message = str(exc).removeprefix(f"{code}: ")

@@ -28,7 +28,7 @@ import numpy as np
 class _Buffer:
     memory: np.ndarray  # the pooled bytes
     address: int  # of its first byte
-    lease: weakref.ref | None = field(default=None)  # to the lease of the array handed out last
+    lease: weakref.ref[_Lease] | None = field(default=None)  # to the lease of the array handed out last
 
     @property
     def free(self) -> bool:
@@ -43,7 +43,7 @@ class _Lease:
 
     __slots__ = ("__weakref__", "__array_interface__", "ended", "memory")
 
-    def __init__(self, memory: np.ndarray, interface: dict):
+    def __init__(self, memory: np.ndarray, interface: dict[str, object]):
         self.memory = memory  # the pool's bytes live as long as the array, even if the pool does not
         self.__array_interface__ = interface
         self.ended = False  # set by release(): the holder gave the buffer back early
@@ -55,7 +55,9 @@ class BufferPool:
     def __init__(self, max_bytes: int = 256 << 20):
         self.max_bytes = max_bytes
         self._buffers: dict[int, list[_Buffer]] = {}
-        self._sizes: dict[tuple, tuple[int, str]] = {}  # (shape, dtype) -> (bytes, NumPy's typestr)
+        self._sizes: dict[
+            tuple[tuple[int, ...], str], tuple[int, str]
+        ] = {}  # (shape, dtype) -> (bytes, NumPy's typestr)
         self.kept_bytes = 0
 
     def take(self, shape: tuple[int, ...], dtype: str) -> np.ndarray:

@@ -12,7 +12,8 @@ from fxis_shm.core.waitpolicy import CameraState
 from fxis_shm.errors import RingError
 from fxis_shm.shm import naming, procstat
 from fxis_shm.shm.history import held_seconds
-from fxis_shm.shm.ring import FLAG_TRIGGERED, STATE_RETIRED, SYNC_FIELDS, RingReader
+from fxis_shm.shm.ring import RingReader
+from fxis_shm.shm.ringheader import FLAG_TRIGGERED, STATE_RETIRED, SYNC_FIELDS
 
 # The columns of the ``frames`` op's rows, one row per frame.
 FRAME_FIELDS = ("frame_id", "t_capture", "t_stored", "t_available", "generation")
@@ -32,7 +33,7 @@ def process_alive(pid: int) -> bool:
 RATE_WINDOW_NS = 5_000_000_000  # the measured rate: frames stored over the last 5 s
 
 
-def measured_rate(snap: Snapshot, now: int) -> dict:
+def measured_rate(snap: Snapshot, now: int) -> dict[str, float | None]:
     """``measured_fps``: the frames the ring holds that were captured in the last
     ``measured_over_s`` seconds, per second; 5 s, or as far back as the ring reaches. A
     camera that drops frames or stalls shows it here, whatever its set rate."""
@@ -105,7 +106,13 @@ class CameraHandle:
 
     def snapshot(self) -> Snapshot:
         """The ring's frames now (call after ``down_reason`` found the ring there)."""
-        return self.reader.snapshot()
+        return self.ring_open().snapshot()
+
+    def ring_open(self) -> RingReader:
+        """The ring ``down_reason`` or ``ring`` opened (RingError if none was)."""
+        if self.reader is None:
+            raise RingError(f"camera {self.name!r} has no ring open: ask down_reason first")
+        return self.reader
 
     @property
     def period_ns(self) -> int:
@@ -123,7 +130,7 @@ class CameraHandle:
         self._trigger.release()
 
     def state(self, snapshot: Snapshot) -> CameraState:
-        period_ns, delay_ns = self.reader.timing()
+        period_ns, delay_ns = self.ring_open().timing()
         return CameraState(
             newest=snapshot.newest,
             period_ns=period_ns,
@@ -132,10 +139,10 @@ class CameraHandle:
             triggered=self.triggered,
         )
 
-    def status(self, now: int) -> dict:
+    def status(self, now: int) -> dict[str, object]:
         ring = self.ring()
         down = self.down_reason(now)
-        info = {"kind": self.kind, "alive": down is None, "torn_reads": self.torn_reads}
+        info: dict[str, object] = {"kind": self.kind, "alive": down is None, "torn_reads": self.torn_reads}
         if down:
             info["reason"] = down
         if ring is None:
@@ -147,6 +154,12 @@ class CameraHandle:
         # rate is the nominal one, if any (the coordinator adds the configured one)
         set_period = ring.field("nominal_period_ns") if triggered else period
         newest_stored = snap.newest_stored
+        held = held_seconds(ring.slots, period)
+        note = ring.header["status_text"].item().decode(errors="replace")
+        if self.history_s and held is not None and held < self.history_s * 0.98:
+            # the ring was sized at the camera's nominal rate; it runs faster now
+            short = f"holds {held:.2f} s of the {self.history_s:g} s asked: the camera runs faster than its ring's size"
+            note = f"{note}; {short}" if note else short
         info.update(
             shape=list(ring.layout.shape),
             dtype=ring.layout.dtype,
@@ -157,7 +170,7 @@ class CameraHandle:
             # a frame stored after ``now`` was read (between it and the snapshot) is 0 ms old, not negative
             last_frame_age_ms=round(max(0, now - newest_stored) / 1e6, 3) if newest_stored else None,
             ring_slots=ring.slots,
-            history_s=held_seconds(ring.slots, period),
+            history_s=held,
             ring=ring.name,
             instance=str(ring.instance),  # uint64: a decimal string on the wire (docs/protocol.md)
             generation=ring.field("generation"),
@@ -165,21 +178,16 @@ class CameraHandle:
             delay_ms=round(ring.field("delay_ns") / 1e6, 3),
             trigger="software" if triggered else "free",
             hook_errors=ring.field("hook_errors"),
-            note=ring.header["status_text"].item().decode(errors="replace"),
+            note=note,
             sync=sync_status(ring),
         )
-        held = info["history_s"]
-        if self.history_s and held is not None and held < self.history_s * 0.98:
-            # the ring was sized at the camera's nominal rate; it runs faster now
-            short = f"holds {held:.2f} s of the {self.history_s:g} s asked: the camera runs faster than its ring's size"
-            info["note"] = f"{info['note']}; {short}" if info["note"] else short
         return info
 
-    def timeline(self, now: int) -> dict:
+    def timeline(self, now: int) -> dict[str, object]:
         """What a caller elsewhere needs to choose frames itself (the ``frames`` op): the
         camera's liveness, timing and every valid frame's identity and times, oldest first."""
         down = self.down_reason(now)
-        info: dict = {"alive": down is None, "reason": down, "frames": []}
+        info: dict[str, object] = {"alive": down is None, "reason": down, "frames": []}
         if self.reader is None:
             return info
         snap = self.reader.snapshot()
@@ -202,12 +210,12 @@ class CameraHandle:
             self.reader = None
 
 
-def sync_status(ring: RingReader) -> dict:
+def sync_status(ring: RingReader) -> dict[str, object]:
     """How the camera was triggered for moments (docs/sync.md): its learned trigger latency, the
     frames captured for a trigger_at and on the lockstep grid, the triggers that got no frame, and
     the grid with the residuals t_capture - grid point (None while there is no grid)."""
     f = {name: ring.field(name) for name in SYNC_FIELDS}
-    lockstep = None
+    lockstep: dict[str, object] | None = None
     if f["lockstep_mhz"]:
         lockstep = {
             "hz": f["lockstep_mhz"] / 1000,

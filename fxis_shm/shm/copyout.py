@@ -5,29 +5,33 @@ so that it copies the frame itself (REFS)."""
 
 from __future__ import annotations
 
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import Any
+
+import numpy as np
 
 from fxis_shm.core import timebase
 from fxis_shm.core.decisions import Reject, check_not_empty
 from fxis_shm.core.engine import Reply
 from fxis_shm.core.selection import Selection, radius_for, select, tolerance_for
-from fxis_shm.core.snapshot import CAPTURES, Snapshot
+from fxis_shm.core.snapshot import Snapshot
 from fxis_shm.core.timesearch import Timeline
-from fxis_shm.errors import Code
+from fxis_shm.errors import Code, Overwritten
 from fxis_shm.shm import ordering
 from fxis_shm.shm.bufferpool import BufferPool
 from fxis_shm.shm.cameras import CameraHandle
-from fxis_shm.shm.ring import Overwritten, RingReader
+from fxis_shm.shm.ring import RingReader
 from fxis_shm.wire import protocol
 from fxis_shm.wire.encodecache import EncodeCache
 from fxis_shm.wire.encoding import RAW
 from fxis_shm.wire.framemeta import CameraFrames, encoded_meta, ring_place
+from fxis_shm.wire.headers import FrameMeta
+from fxis_shm.wire.protocol import Buffer
 
 COPY, REFS, VIEWS, MESSAGES = "copy", "refs", "views", "messages"  # how a reply carries its frames
 
 
-def copied_by(reader: RingReader, slot: int, seq: int, make: Callable[[Any], Any]) -> Any:
+def copied_by(reader: RingReader, slot: int, seq: int, make: Callable[[np.ndarray], Buffer]) -> Buffer:
     """``make(the slot's bytes)``: whatever copy of them it makes (a ZeroMQ message, say), kept
     only if the slot held the frame of ``seq`` from before the copy to after it (the seqlock
     check of ``RingReader.copy_slot``, with the copy made by ``make``); else Overwritten."""
@@ -42,9 +46,9 @@ class CopyOut:
     def __init__(
         self,
         cameras: dict[str, CameraHandle],
-        settings: dict,
+        settings: Mapping[str, Any],
         buffers: BufferPool | None = None,
-        message: Callable[[Any], Any] | None = None,
+        message: Callable[[np.ndarray], Buffer] | None = None,
     ):
         """``message(bytes)``: a copy of the bytes into a message of the transport (for
         MESSAGES: the coordinator's zmq.Frame, copied once out of the ring, sent as it is), for
@@ -59,7 +63,7 @@ class CopyOut:
 
     def header(self, cam: str) -> CameraFrames:
         """What every frame of ``cam`` says alike in a reply, made again only when its ring is."""
-        reader = self.cameras[cam].reader
+        reader = self.cameras[cam].ring_open()
         known = self._headers.get(cam)
         if known is None or known[0] is not reader:
             known = (reader, CameraFrames(cam, reader.layout.shape, reader.layout.dtype))
@@ -86,7 +90,7 @@ class CopyOut:
             mode, timelines, t, radius_for(periods), tolerance_for(periods, self.settings["sync_tolerance_ms"])
         )
 
-    def reply(self, reply: Reply, how: str | None = None) -> tuple[dict, list]:
+    def reply(self, reply: Reply, how: str | None = None) -> tuple[dict[str, object], list[Buffer]]:
         """The body and images of the reply ``reply`` plans; raises Overwritten if a chosen
         slot was overwritten before its copy was complete. ``how``: COPY (pooled buffers),
         MESSAGES (the transport's messages, see ``message``), REFS (where each frame is, for
@@ -98,7 +102,7 @@ class CopyOut:
         frames, images, position = self.copy(
             reply.snapshots, plan.picks, how, p.request.get("encoding") or RAW, p.request.get("quality")
         )
-        body = {**plan.body, "frames": frames}
+        body: dict[str, object] = {**plan.body, "frames": frames}
         if plan.groups is not None:
             body["groups"] = [[position[pick] for pick in group] for group in plan.groups]
         body["timing"] = {
@@ -114,15 +118,17 @@ class CopyOut:
 
     def copy(
         self,
-        snaps: dict,
+        snaps: Mapping[str, Snapshot],
         picks: list[tuple[str, int]],
         how: str = COPY,
         encoding: str = RAW,
         quality: int | None = None,
-    ) -> tuple[list, list, dict]:
+    ) -> tuple[list[FrameMeta], list[Buffer], dict[tuple[str, int], int]]:
         """Copy each distinct (camera, snapshot index) once: metadata, images (in ``encoding``),
         and each pick's position. With REFS nothing is copied: the metadata says where each frame is."""
-        frames, images, position = [], [], {}
+        frames: list[FrameMeta] = []
+        images: list[Buffer] = []
+        position: dict[tuple[str, int], int] = {}
         for cam, i in picks:
             if (cam, i) in position:
                 continue
@@ -136,28 +142,30 @@ class CopyOut:
         return frames, images, position
 
     def _encoded(
-        self, cam: str, snap: Snapshot, i: int, buffer: int, images: list, encoding: str, quality: int | None
-    ) -> dict:
+        self, cam: str, snap: Snapshot, i: int, buffer: int, images: list[Buffer], encoding: str, quality: int | None
+    ) -> FrameMeta:
         """A frame in ``encoding``: copied out of the ring (and checked whole) only if no reply or
         stream has encoded it so yet."""
         meta = snap.frame_meta(i)
 
-        def pixels():
-            copied: list = []
+        def pixels() -> np.ndarray:
+            copied: list[Buffer] = []
             self._copied(cam, snap, i, buffer, copied, COPY)
-            return copied[0]
+            image = copied[0]
+            assert isinstance(image, np.ndarray)  # (COPY copies into a pooled array)
+            return image
 
         data = self.encoded.get((cam, meta.generation, meta.frame_id), pixels, encoding, quality)
         images.append(data)
-        return encoded_meta(self._meta(cam, snap, i, buffer=buffer), encoding, len(data))
+        return encoded_meta(self.header(cam).recorded(meta, buffer=buffer), encoding, len(data))
 
-    def _copied(self, cam: str, snap: Snapshot, i: int, buffer: int, images: list, how: str) -> dict:
+    def _copied(self, cam: str, snap: Snapshot, i: int, buffer: int, images: list[Buffer], how: str) -> FrameMeta:
         handle = self.cameras[cam]
-        reader = handle.reader
+        reader = handle.ring_open()
         slot, seq = snap.slot(i), snap.seq(i)
         try:
             if how == VIEWS:
-                image = reader.view_slot(slot, seq)
+                image: Buffer = reader.view_slot(slot, seq)
             elif how == MESSAGES and self.message is not None and reader.layout.nbytes <= self.message_max:
                 image = copied_by(reader, slot, seq, self.message)
             else:
@@ -166,23 +174,17 @@ class CopyOut:
             handle.torn_reads += 1
             raise
         images.append(image)
-        return self._meta(cam, snap, i, buffer=buffer)
+        return self.header(cam).recorded(snap.frame_meta(i), buffer=buffer)
 
-    def _meta(self, cam: str, snap: Snapshot, i: int, **more) -> dict:
-        m = snap.frame_meta(i)
-        return self.header(cam).frame(
-            m.frame_id, m.t_capture, m.t_stored, m.generation, m.t_available, m.t_target, CAPTURES[m.capture], **more
-        )
-
-    def encode(self, meta: dict, image, encoding: str, quality: int | None) -> tuple[dict, bytes]:
+    def encode(self, meta: FrameMeta, image: np.ndarray, encoding: str, quality: int | None) -> tuple[FrameMeta, bytes]:
         """A copied frame (checked whole) in ``encoding``, encoded once for every reply and stream."""
         data = self.encoded.get(
             (meta["camera"], meta["generation"], meta["frame_id"]), lambda: image, encoding, quality
         )
         return encoded_meta(meta, encoding, len(data)), data
 
-    def _reference(self, cam: str, snap: Snapshot, i: int) -> dict:
-        reader = self.cameras[cam].reader
+    def _reference(self, cam: str, snap: Snapshot, i: int) -> FrameMeta:
+        reader = self.cameras[cam].ring_open()
         slot, seq = snap.slot(i), snap.seq(i)
         reader.check_slot(slot, seq, "before")  # already gone: choose again rather than send it
-        return self._meta(cam, snap, i, **ring_place(reader.name, reader.instance, slot, seq))
+        return self.header(cam).recorded(snap.frame_meta(i), place=ring_place(reader.name, reader.instance, slot, seq))

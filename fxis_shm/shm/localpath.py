@@ -17,6 +17,7 @@ caller checks after using the pixels (the same seqlock, one step later).
 from __future__ import annotations
 
 import os
+from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
@@ -24,6 +25,7 @@ import numpy as np
 from fxis_shm.errors import RingError
 from fxis_shm.shm.bufferpool import BufferPool
 from fxis_shm.shm.ring import RingReader
+from fxis_shm.wire.headers import FrameMeta
 
 _BOOT_ID_PATH = "/proc/sys/kernel/random/boot_id"
 
@@ -62,7 +64,7 @@ class SlotRef:
     seq: int
 
     @classmethod
-    def of(cls, meta: dict) -> SlotRef:
+    def of(cls, meta: FrameMeta) -> SlotRef:
         try:
             return cls(str(meta["ring"]), int(meta["instance"]), int(meta["slot"]), int(meta["seq"]))
         except (KeyError, TypeError, ValueError) as exc:
@@ -96,10 +98,10 @@ class LocalRings:
             self._readers[ref.ring] = reader
         return reader
 
-    def images(self, metas: list[dict], copy: bool = True) -> list[np.ndarray]:
+    def images(self, metas: Sequence[FrameMeta], copy: bool = True) -> list[np.ndarray]:
         """The pixels of every frame of a local reply, in order: copies checked whole,
         or (``copy=False``) read-only views of the slots. Raises Overwritten or LocalUnavailable."""
-        images = []
+        images: list[np.ndarray] = []
         for meta in metas:
             ref = SlotRef.of(meta)
             reader = self.reader(ref)
@@ -114,7 +116,7 @@ class LocalRings:
                 images.append(reader.view_slot(ref.slot, ref.seq))
         return images
 
-    def still_valid(self, meta: dict) -> bool:
+    def still_valid(self, meta: FrameMeta) -> bool:
         """True while the slot still holds the frame ``meta`` names (for zero-copy views)."""
         ref = SlotRef.of(meta)
         reader = self._readers.get(ref.ring)

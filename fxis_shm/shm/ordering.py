@@ -14,15 +14,21 @@ correct on x86-64) or None (unsupported: the helper is missing on a weak CPU).
 
 from __future__ import annotations
 
+import mmap
 import os
 import platform
+from collections.abc import Callable
+from typing import TypeAlias
 
 from fxis_shm.errors import RingError
 
 try:
     from fxis_shm.shm import _ordered
 except ImportError:  # not built (a source checkout, or no C compiler at install time)
-    _ordered = None
+    _ordered = None  # type: ignore[assignment]  # (the stub types the built helper; it may be missing)
+
+# The memory of a ring's segment: its mapping, or a view of it (the tests' bytearrays too).
+Memory: TypeAlias = mmap.mmap | memoryview | bytearray
 
 _TSO_MACHINES = ("x86_64", "amd64", "i386", "i686")
 
@@ -50,21 +56,26 @@ def require_supported() -> None:
         )
 
 
-if MODE == "fenced":
-    load_acquire = _ordered.load_acquire
-    store_release = _ordered.store_release
-    fence_acquire = _ordered.fence_acquire
-    fence_release = _ordered.fence_release
-else:
+def _plain_load(buffer: Memory, offset: int) -> int:
+    return int.from_bytes(buffer[offset : offset + 8], "little")
 
-    def load_acquire(buffer, offset: int) -> int:
-        return int.from_bytes(buffer[offset : offset + 8], "little")
 
-    def store_release(buffer, offset: int, value: int) -> None:
-        buffer[offset : offset + 8] = value.to_bytes(8, "little")
+def _plain_store(buffer: Memory, offset: int, value: int) -> None:
+    buffer[offset : offset + 8] = value.to_bytes(8, "little")
 
-    def fence_acquire() -> None:
-        """Nothing to do on x86-64: loads are not reordered with other loads."""
 
-    def fence_release() -> None:
-        """Nothing to do on x86-64: stores are not reordered with other stores."""
+def _no_acquire_fence() -> None:
+    """Nothing to do on x86-64: loads are not reordered with other loads."""
+
+
+def _no_release_fence() -> None:
+    """Nothing to do on x86-64: stores are not reordered with other stores."""
+
+
+load_acquire: Callable[[Memory, int], int] = _plain_load
+store_release: Callable[[Memory, int, int], None] = _plain_store
+fence_acquire: Callable[[], None] = _no_acquire_fence
+fence_release: Callable[[], None] = _no_release_fence
+if MODE == "fenced" and _ordered is not None:
+    load_acquire, store_release = _ordered.load_acquire, _ordered.store_release
+    fence_acquire, fence_release = _ordered.fence_acquire, _ordered.fence_release

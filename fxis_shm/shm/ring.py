@@ -36,8 +36,7 @@ from fxis_shm.core.snapshot import CAPTURE_FREE, SLOT, SlotMeta, Snapshot
 from fxis_shm.core.timesearch import Timeline
 from fxis_shm.errors import Overwritten, RingError
 from fxis_shm.shm import history, naming, ordering, slotio
-from fxis_shm.shm.ringheader import (  # noqa: F401 (readers import the header's names from here)
-    FLAG_TRIGGERED,
+from fxis_shm.shm.ringheader import (
     HEADER,
     HEADER_BYTES,
     LAYOUT_VERSION,
@@ -47,7 +46,6 @@ from fxis_shm.shm.ringheader import (  # noqa: F401 (readers import the header's
     STATE_INIT,
     STATE_LIVE,
     STATE_RETIRED,
-    SYNC_FIELDS,
     TIMING,
     WRITE_COUNT_AT,
     align_to_page,
@@ -116,32 +114,36 @@ class _Mapping:
         )
 
     def slot_image(self, slot: int) -> np.ndarray:
-        return self.data[slot].view(self.layout.dtype).reshape(self.layout.shape)
+        image: np.ndarray = self.data[slot].view(self.layout.dtype).reshape(self.layout.shape)
+        return image
 
     def field(self, name: str) -> int:
         if name == "write_count":  # the word that publishes frames: read it ordered
             return ordering.load_acquire(self._mm, WRITE_COUNT_AT)
         unpack, offset = NUMBERS[name]
-        return unpack(self._mm, offset)[0]
+        value: int = unpack(self._mm, offset)[0]
+        return value
 
     def liveness(self) -> tuple[int, int, int, int]:
         """(state, writer_pid, write_count, heartbeat_ns) in one read: the signs of life (the
         write count read plainly, as a sign of life, not to read the frames it publishes)."""
-        return LIVENESS(self._mm)
+        state, writer_pid, write_count, heartbeat_ns = LIVENESS(self._mm)
+        return state, writer_pid, write_count, heartbeat_ns
 
     def timing(self) -> tuple[int, int]:
         """(period_ns, delay_ns) in one read."""
-        return TIMING(self._mm)
+        period_ns, delay_ns = TIMING(self._mm)
+        return period_ns, delay_ns
 
     def _unmap(self) -> None:
         for attr in ("header", "table", "seq", "data", "_views_ro"):
             self.__dict__.pop(attr, None)
-        if getattr(self, "_mm", None) is not None:
+        mapping = self.__dict__.pop("_mm", None)
+        if mapping is not None:
             try:
-                self._mm.close()
+                mapping.close()
             except BufferError:  # a zero-copy view handed out still maps it; unmapped when it goes
                 pass
-            self._mm = None
 
 
 def segment_size(layout: FrameLayout, slots: int) -> tuple[int, int, int]:
@@ -179,7 +181,9 @@ class RingWriter(_Mapping):
             h["period_ns"] = nominal_period_ns
         self.generation = int(h["generation"])
         self._count = int(h["write_count"])
-        self._last, self._samples = None, 0  # (frame_id, t_capture) of the previous stored frame; their count
+        # (frame_id, t_capture) of the previous stored frame; their count
+        self._last: tuple[int, int] | None = None
+        self._samples = 0
         self.semaphore = posix_ipc.Semaphore(
             naming.semaphore_name(service, camera), posix_ipc.O_CREAT, mode=0o600, initial_value=0
         )
@@ -415,7 +419,7 @@ class RingReader(_Mapping):
             raise self.overwritten(slot, torn)
         return out
 
-    def copy_job(self, slot: int, expected_seq: int, out) -> tuple:
+    def copy_job(self, slot: int, expected_seq: int, out: np.ndarray) -> slotio.CopyJob:
         """What ``slotio.copy`` and ``slotio.copies`` take to copy the frame in ``slot`` (the one
         ``expected_seq`` names) into ``out``."""
         if not 0 <= slot < self.slots:
@@ -435,7 +439,8 @@ class RingReader(_Mapping):
         """A read-only view of the frame in ``slot`` (no copy): valid only while
         ``slot_holds(slot, expected_seq)`` stays true; the writer may overwrite it any time."""
         self.check_slot(slot, expected_seq, "before")
-        return self.slot_views()[slot].view()
+        view: np.ndarray = self.slot_views()[slot].view()
+        return view
 
     def slot_views(self) -> list[np.ndarray]:
         """A read-only array over each slot's frame, made once: a view of one of them is cheaper
@@ -446,7 +451,7 @@ class RingReader(_Mapping):
                 view.flags.writeable = False
         return self._views_ro
 
-    def geometry(self) -> tuple:
+    def geometry(self) -> tuple[mmap.mmap, int, int, int, int, int]:
         """(mapping, slots, slot table offset, data offset, slot stride, frame bytes): where a C
         reader finds the slots (fxis_shm.shm._fastpick.Rings)."""
         return self._mm, self.slots, HEADER_BYTES, self._data_at, self._stride, self.layout.nbytes
@@ -463,6 +468,8 @@ class RingReader(_Mapping):
 
     def wait_for_frame(self, timeout: float) -> bool:
         """Block until the writer posts a new frame or ``timeout`` seconds pass."""
+        if self.semaphore is None:
+            raise RingError(f"ring {self.name} was opened without its semaphore: nothing to wait on")
         try:
             self.semaphore.acquire(timeout)
         except posix_ipc.BusyError:

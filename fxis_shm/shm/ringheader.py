@@ -6,10 +6,15 @@ fxis_shm/shm/seqlock.h, know the slot record's layout)."""
 from __future__ import annotations
 
 import struct
+from collections.abc import Callable
+from typing import TYPE_CHECKING
 
 import numpy as np
 
 from fxis_shm.core.snapshot import SLOT
+
+if TYPE_CHECKING:
+    from typing_extensions import Buffer
 
 MAGIC = b"FXISRNG1"
 LAYOUT_VERSION = 3  # 3: the slot record holds t_target and capture (64 bytes)
@@ -62,24 +67,27 @@ HEADER = np.dtype(
         ("lockstep_clock", "<u8"),  # the grid's clock: an index of fxis_shm.core.schedule.GRID_CLOCKS
     ]
 )
+assert HEADER.names is not None and HEADER.fields is not None  # (a structured dtype has both)
+# each field's (dtype, byte offset), as numpy's fields give them
+FIELDS: dict[str, tuple[np.dtype[np.generic], int]] = {name: (f[0], f[1]) for name, f in HEADER.fields.items()}
 SYNC_FIELDS = HEADER.names[HEADER.names.index("trigger_latency_ns") :]
 assert HEADER.itemsize <= HEADER_BYTES and SLOT.itemsize == 64
-WRITE_COUNT_AT = HEADER.fields["write_count"][1]  # byte offsets of the ordered words
+WRITE_COUNT_AT = FIELDS["write_count"][1]  # byte offsets of the ordered words
 # the header's numbers, read in place (a numpy field read costs ten times as much)
 _STRUCTS = {"<u4": "<I", "<u8": "<Q", "<i8": "<q"}
 NUMBERS = {
     name: (struct.Struct(_STRUCTS[dtype.str]).unpack_from, offset)
-    for name, (dtype, offset) in HEADER.fields.items()
+    for name, (dtype, offset) in FIELDS.items()
     if dtype.str in _STRUCTS
 }
 
 
-def _gather(fields: list[str]):
+def _gather(fields: list[str]) -> Callable[[Buffer], tuple[int, ...]]:
     """One unpack of header ``fields`` (in order of offset), in place, skipping the bytes between."""
-    start = at = HEADER.fields[fields[0]][1]
+    start = at = FIELDS[fields[0]][1]
     fmt = "<"
     for name in fields:
-        dtype, offset = HEADER.fields[name]
+        dtype, offset = FIELDS[name]
         fmt += f"{offset - at}x{_STRUCTS[dtype.str][1:]}"
         at = offset + dtype.itemsize
     unpack = struct.Struct(fmt).unpack_from

@@ -18,16 +18,22 @@ from __future__ import annotations
 
 import os
 import struct
+from collections.abc import Callable
+from typing import TypeAlias
 
 import numpy as np
 
 from fxis_shm.shm import ordering
+from fxis_shm.shm.ordering import Memory
 
+# One copy: (segment, seq_at, seq, src, nbytes, out), as ``copy`` takes it.
+CopyJob: TypeAlias = tuple[Memory, int, int, int, int, np.ndarray]
+Copies: TypeAlias = Callable[[list[CopyJob]], "tuple[int, int] | None"]
 _RECORD = struct.Struct("<QQqqqQqQ")  # the ring's slot record (fxis_shm.core.snapshot.SLOT)
 
 
-def py_records(buffer, table: int, slots: int, lo: int, hi: int) -> list[tuple[int, ...]]:
-    out = []
+def py_records(buffer: Memory, table: int, slots: int, lo: int, hi: int) -> list[tuple[int, ...]]:
+    out: list[tuple[int, ...]] = []
     for w in range(lo, hi):
         at = table + (w % slots) * _RECORD.size
         expected = 2 * w + 2
@@ -40,7 +46,7 @@ def py_records(buffer, table: int, slots: int, lo: int, hi: int) -> list[tuple[i
     return out
 
 
-def py_copy(buffer, seq_at: int, seq: int, src: int, nbytes: int, out) -> int:
+def py_copy(buffer: Memory, seq_at: int, seq: int, src: int, nbytes: int, out: np.ndarray | Memory) -> int:
     if ordering.load_acquire(buffer, seq_at) != seq:
         return 1
     target = np.frombuffer(out, dtype=np.uint8) if not isinstance(out, np.ndarray) else out.reshape(-1).view(np.uint8)
@@ -51,7 +57,7 @@ def py_copy(buffer, seq_at: int, seq: int, src: int, nbytes: int, out) -> int:
     return 0 if ordering.load_acquire(buffer, seq_at) == seq else 2
 
 
-def py_copies(items: list[tuple]) -> tuple[int, int] | None:
+def py_copies(items: list[CopyJob]) -> tuple[int, int] | None:
     for k, item in enumerate(items):
         torn = py_copy(*item)
         if torn:
@@ -59,7 +65,7 @@ def py_copies(items: list[tuple]) -> tuple[int, int] | None:
     return None
 
 
-def py_holds(buffer, seq_at: int, seq: int) -> bool:
+def py_holds(buffer: Memory, seq_at: int, seq: int) -> bool:
     ordering.fence_acquire()
     return ordering.load_acquire(buffer, seq_at) == seq
 
@@ -69,16 +75,16 @@ try:
         raise ImportError("FXIS_PURE_PYTHON=1")
     from fxis_shm.shm import _slotio
 except ImportError:
-    _slotio = None
+    _slotio = None  # type: ignore[assignment]  # (the stub types the built helper; it may be missing)
 
 COPIES_AT_ONCE = 64  # what one call of the C ``copies`` takes (MAX_JOBS in _slotio.c)
 
 
-def in_batches(copies_at_once):
+def in_batches(copies_at_once: Copies) -> Copies:
     """``copies`` over any number of items, in calls of at most COPIES_AT_ONCE (a sequence
     request can copy hundreds of frames)."""
 
-    def copies(items: list[tuple]) -> tuple[int, int] | None:
+    def copies(items: list[CopyJob]) -> tuple[int, int] | None:
         for start in range(0, len(items), COPIES_AT_ONCE):
             torn = copies_at_once(items[start : start + COPIES_AT_ONCE])
             if torn is not None:
@@ -88,10 +94,12 @@ def in_batches(copies_at_once):
     return copies
 
 
+records: Callable[[Memory, int, int, int, int], list[tuple[int, ...]]] = py_records
+copy: Callable[[Memory, int, int, int, int, np.ndarray], int] = py_copy
+copies: Copies = py_copies
+holds: Callable[[Memory, int, int], bool] = py_holds
+IMPL = "python"  # not built (no C compiler at install time), or FXIS_PURE_PYTHON=1
 if _slotio is not None:
     IMPL = "c"
     records, copy, holds = _slotio.records, _slotio.copy, _slotio.holds
     copies = in_batches(_slotio.copies)
-else:  # not built (no C compiler at install time), or FXIS_PURE_PYTHON=1
-    IMPL = "python"
-    records, copy, copies, holds = py_records, py_copy, py_copies, py_holds

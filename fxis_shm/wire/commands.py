@@ -11,6 +11,7 @@ install answers a command it does not know with an error, never by silence.
 from __future__ import annotations
 
 import json
+from collections.abc import Mapping
 from typing import Any
 
 from fxis_shm.errors import Code, ProtocolError
@@ -28,7 +29,7 @@ def encode_command(command_id: int, cmd: str, **fields: Any) -> bytes:
     return json.dumps({"id": command_id, "cmd": cmd, **fields}).encode()
 
 
-def decode_command(frame: bytes) -> dict:
+def decode_command(frame: bytes) -> dict[str, object]:
     """A command, or ProtocolError saying why it is none (its id kept when readable)."""
     try:
         command = json.loads(bytes(frame))
@@ -41,7 +42,7 @@ def decode_command(frame: bytes) -> dict:
     return command
 
 
-def encode_result(command_id: int | None, result: dict) -> bytes:
+def encode_result(command_id: int | None, result: Mapping[str, object]) -> bytes:
     return json.dumps({"id": command_id, "ok": True, "result": result}).encode()
 
 
@@ -49,7 +50,7 @@ def encode_failure(command_id: int | None, code: str, message: str) -> bytes:
     return json.dumps({"id": command_id, "ok": False, "code": code, "error": message}).encode()
 
 
-def decode_reply(frame: bytes) -> dict:
+def decode_reply(frame: bytes) -> dict[str, object]:
     """A worker's reply: its id, ok, and result or code and error."""
     try:
         reply = json.loads(bytes(frame))

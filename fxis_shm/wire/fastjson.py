@@ -16,12 +16,17 @@ around the value, bytes that are not UTF-8, or a document that does not parse.
 from __future__ import annotations
 
 import json
+from collections.abc import Callable, Iterable
 from json import decoder as _decoder, encoder as _encoder
 from typing import Any
 
-_make_encoder = _encoder.c_make_encoder  # None without the C accelerator
+# The standard library's C parts, which typeshed does not declare (they are private): each
+# named with the signature json's own modules call it with.
+_Encoder = Callable[[object, int], Iterable[str]]
+_make_encoder: Callable[..., _Encoder] | None = getattr(_encoder, "c_make_encoder", None)  # None: no C accelerator
 _default = json.JSONEncoder().default  # the TypeError json.dumps raises for what JSON cannot hold
-_scan = _decoder.JSONDecoder().scan_once  # with json.loads's defaults; the C scanner if built
+# with json.loads's defaults; the C scanner if built (an attribute __init__ sets, undeclared in typeshed)
+_scan: Callable[[str, int], tuple[Any, int]] = _decoder.JSONDecoder().scan_once  # type: ignore[attr-defined]
 
 
 def dumps(obj: Any) -> bytes:

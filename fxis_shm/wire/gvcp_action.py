@@ -128,7 +128,15 @@ class ActionCommand:
         time = _TIME.unpack_from(packet, _HEADER.size + _KEYS.size)[0] if scheduled else None
         if req_id == 0:
             raise GvcpFormatError("req_id 0 is reserved")
-        return cls(*keys, req_id=req_id, action_time=time, ack_required=bool(flags & FLAG_ACK_REQUIRED))
+        device_key, group_key, group_mask = keys
+        return cls(
+            device_key,
+            group_key,
+            group_mask,
+            req_id=req_id,
+            action_time=time,
+            ack_required=bool(flags & FLAG_ACK_REQUIRED),
+        )
 
 
 @dataclass(frozen=True)

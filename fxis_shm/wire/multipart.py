@@ -5,14 +5,18 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
+from typing import TYPE_CHECKING
 
 import zmq
+
+if TYPE_CHECKING:
+    from typing_extensions import Buffer
 
 # plain ints: their arithmetic is far cheaper than that of pyzmq's enums
 _MORE, _LAST, _RCVTIMEO = int(zmq.NOBLOCK | zmq.SNDMORE), int(zmq.NOBLOCK), int(zmq.RCVTIMEO)
 
 
-def send_parts(sock: zmq.Socket, parts: Sequence) -> None:
+def send_parts(sock: zmq.Socket[bytes], parts: Sequence[Buffer]) -> None:
     """``parts`` as one message, without blocking (zmq.Again if it cannot go now): messages
     (zmq.Frame) and image buffers handed to ZeroMQ without a copy, small byte strings copied
     (cheaper than tracking them). (pyzmq's send_multipart checks each part's type in Python
@@ -23,7 +27,7 @@ def send_parts(sock: zmq.Socket, parts: Sequence) -> None:
         sock.send(part, _MORE if i < last else _LAST, copy=isinstance(part, (bytes, zmq.Frame)))
 
 
-def recv_parts(sock: zmq.Socket, timeout_s: float) -> list[zmq.Frame] | None:
+def recv_parts(sock: zmq.Socket[bytes], timeout_s: float) -> list[zmq.Frame] | None:
     """The next message's parts (uncopied), waiting at most ``timeout_s``; None if none came.
     (A receive with a timeout of its own: pyzmq's poll makes a Poller in Python every call,
     a quarter of the cold cost of a small round trip's client side.)"""

@@ -80,13 +80,13 @@ class ClientKeys:
     def from_files(cls, server_key: str, client_secret: str) -> ClientKeys:
         return cls(load_public(server_key), *load_pair(client_secret))
 
-    def apply(self, sock: zmq.Socket) -> None:
+    def apply(self, sock: zmq.Socket[bytes]) -> None:
         sock.curve_serverkey = self.server_public
         sock.curve_publickey = self.public
         sock.curve_secretkey = self.secret
 
 
-def make_server(sock: zmq.Socket, public: bytes, secret: bytes) -> None:
+def make_server(sock: zmq.Socket[bytes], public: bytes, secret: bytes) -> None:
     sock.curve_server = True
     sock.curve_publickey = public
     sock.curve_secretkey = secret

@@ -11,6 +11,7 @@ from fxis_shm.formats.stamp import write_stamp
 from fxis_shm.formats.videochoice import DEFAULT_CRF, Choice
 from fxis_shm.formats.videodecoder import COLOUR, MONO, TrackDecoder, pixels_of
 from fxis_shm.formats.videoencoder import StreamEncoder
+from fxis_shm.formats.videotracks import VideoSettings
 from fxis_shm.workers.backends.bag import LEAD_NS, BagCamera
 
 from ..conftest import fxis, fxis_run_alone, wait_until
@@ -183,7 +184,7 @@ def video_bags(tmp_path_factory):
     try:
         record(svc, tmp / "rec", "--frames", "20", "--codec", "h264", "--gop", "0.3")
         with Client(svc.endpoint) as client:
-            client.snapshot(before=0.8, after=0.0, out=str(tmp / "snap"), codec="h264", cameras=["left"])
+            client.snapshot(before=0.8, after=0.0, out=str(tmp / "snap"), video=VideoSettings("h264"), cameras=["left"])
     finally:
         stop(svc)
     return {name: (str(tmp / name), read_bag(tmp / name)) for name in ("rec", "snap")}

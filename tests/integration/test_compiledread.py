@@ -17,7 +17,8 @@ from fxis_shm import Client, read_stamp
 from fxis_shm.core.snapshot import SLOT
 from fxis_shm.errors import CameraDown, ServiceError, UnknownCamera
 from fxis_shm.shm import fastpick, naming
-from fxis_shm.shm.ring import HEADER_BYTES, FrameLayout, RingReader, RingWriter
+from fxis_shm.shm.ring import FrameLayout, RingReader, RingWriter
+from fxis_shm.shm.ringheader import HEADER_BYTES
 from fxis_shm.wire.protocol import encode_request
 
 from ..conftest import wait_until

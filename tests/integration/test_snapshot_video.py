@@ -1,4 +1,4 @@
-"""Snapshots as video (``client.snapshot(codec=...)``, ``fxis snapshot --codec``): the window's
+"""Snapshots as video (``client.snapshot(video=VideoSettings(...))``, ``fxis snapshot --codec``): the window's
 frames from the rings' history encoded with its first frame as a keyframe, read back with
 rosbags and decoded with PyAV, every frame's id and capture time checked against the rings."""
 
@@ -13,6 +13,7 @@ import pytest
 from fxis_shm import Client, InvalidArgument, read_stamp
 from fxis_shm.errors import ConfigError
 from fxis_shm.formats import rosmsgs
+from fxis_shm.formats.videotracks import VideoSettings
 
 from ..conftest import fxis, wait_until
 from .bags import read_bag
@@ -46,7 +47,7 @@ def check_video(bag, cameras=PIXELS) -> None:
 def test_a_window_from_history_is_video_that_starts_with_a_keyframe_at_its_first_frame(history3, tmp_path):
     with Client(history3.endpoint) as client:
         t = client.clock() - 1_000_000_000  # an event a second ago: its past is in the rings
-        result = client.snapshot(at=t, before=1.0, after=0.5, out=str(tmp_path / "v"), codec="h264")
+        result = client.snapshot(at=t, before=1.0, after=0.5, out=str(tmp_path / "v"), video=VideoSettings("h264"))
         rings = client.frame_times(list(PIXELS))
         to_caller = client.clock_estimate().to_caller
     bag = read_bag(tmp_path / "v")
@@ -102,7 +103,7 @@ def test_ctrl_c_during_a_video_snapshot_keeps_a_valid_bag_that_decodes(history3,
 
 def test_encoding_h264_is_video_as_codec_h264(history3, tmp_path):
     """``encoding="h264"`` (the issue's spelling) and ``fxis snapshot --encoding h264`` are
-    ``codec="h264"``; both given, they must agree."""
+    ``video=VideoSettings("h264")``; both given, they must agree."""
     with Client(history3.endpoint) as client:
         client.snapshot(before=0.3, after=0.0, out=str(tmp_path / "api"), cameras=["a"], encoding="h264")
     command = ("snapshot", "--endpoint", history3.endpoint, "--before", "0.3", "--after", "0", "--cameras", "b")
@@ -122,13 +123,13 @@ def test_encoding_h264_is_video_as_codec_h264(history3, tmp_path):
 @pytest.mark.parametrize(
     "kwargs, error",
     [
-        ({"codec": "vp8"}, (ConfigError, "--codec vp8: unknown")),
+        ({"video": VideoSettings("vp8")}, (ConfigError, "--codec vp8: unknown")),
         (
-            {"codec": "h264", "encoding": "jpeg"},
+            {"video": VideoSettings("h264"), "encoding": "jpeg"},
             (InvalidArgument, "codec h264 writes video: it takes no encoding"),
         ),
-        ({"codec": "h264", "crf": 60}, (ConfigError, "--crf 60: out of range")),
-        ({"encoding": "h264", "codec": "av1"}, (ConfigError, "encoding h264 and codec av1 disagree")),
+        ({"video": VideoSettings("h264", crf=60)}, (ConfigError, "--crf 60: out of range")),
+        ({"encoding": "h264", "video": VideoSettings("av1")}, (ConfigError, "encoding h264 and codec av1 disagree")),
     ],
 )
 def test_bad_video_settings_are_refused_before_anything_is_made(history3, tmp_path, kwargs, error):

@@ -41,6 +41,17 @@ def test_the_requests_say_what_they_take_return_and_raise():
         assert parameters - named == set(), f"ClientApi.{name} does not document {parameters - named}"
 
 
+def test_the_calls_about_the_services_say_what_they_return_and_raise():
+    for name in ("subscribe", "frame_times", "events", "status", "time", "clock_estimate"):
+        doc = inspect.getdoc(getattr(ClientApi, name)) or ""
+        for section in ("Returns\n-------", "Raises\n------"):
+            assert section in doc, f"ClientApi.{name} lacks {section.splitlines()[0]}"
+    for name in ("subscribe", "frame_times"):  # the ones that take parameters name each
+        doc = inspect.getdoc(getattr(ClientApi, name)) or ""
+        parameters = set(inspect.signature(getattr(ClientApi, name)).parameters) - {"self"}
+        assert all(f"\n{p}\n" in doc.split("Returns")[0] for p in parameters), name
+
+
 def test_the_settings_calls_and_the_frames_say_what_they_are():
     from fxis_shm.client.frames import Frame, FrameTuple
     from fxis_shm.client.single import SingleClient

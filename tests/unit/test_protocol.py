@@ -7,7 +7,9 @@ import json
 import numpy as np
 import pytest
 
+from fxis_shm.core.snapshot import SlotMeta
 from fxis_shm.errors import Code, ProtocolError
+from fxis_shm.wire.framemeta import frame_meta, frame_ref, ring_place
 from fxis_shm.wire.protocol import (
     CLOCK,
     MAX_HEADER_BYTES,
@@ -19,8 +21,6 @@ from fxis_shm.wire.protocol import (
     encode_event,
     encode_reply,
     encode_request,
-    frame_meta,
-    frame_ref,
 )
 
 
@@ -455,20 +455,9 @@ def test_request_events_cannot_ask_for_ring_references():
 
 
 def test_a_local_reply_names_where_each_frame_is_and_carries_no_buffers():
-    ref = frame_ref(
-        "cam0",
-        np.int64(7),
-        10**12,
-        10**12 + 5,
-        1,
-        (1024, 1360),
-        "uint8",
-        None,
-        ring="/fxis.svc.cam0.ring",
-        instance=np.uint64(2**63 + 1),
-        slot=3,
-        seq=np.uint64(88),
-    )
+    record = SlotMeta(frame_id=7, t_capture=10**12, t_stored=10**12 + 5, t_available=10**12, generation=1)
+    place = ring_place("/fxis.svc.cam0.ring", instance=np.uint64(2**63 + 1), slot=3, seq=np.uint64(88))
+    ref = frame_ref("cam0", record, (1024, 1360), "uint8", place)
     header, images = decode_reply(over_the_wire(encode_reply(4, {"frames": [ref], "delivery": "local"})))
     assert images == []
     assert header["frames"][0] == {

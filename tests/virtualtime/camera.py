@@ -13,7 +13,8 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from fxis_shm.service.camerakinds import camera_options
-from fxis_shm.shm.ring import FLAG_TRIGGERED, RingWriter
+from fxis_shm.shm.ring import RingWriter
+from fxis_shm.shm.ringheader import FLAG_TRIGGERED
 from fxis_shm.workers.backends.synthetic import SyntheticCamera
 from fxis_shm.workers.triggers import TriggerLog, TriggerTimer
 
