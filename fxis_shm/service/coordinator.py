@@ -16,6 +16,7 @@ import logging
 import threading
 from collections.abc import Callable, Sequence
 
+import numpy as np
 import zmq
 
 from fxis_shm.core import timebase
@@ -59,7 +60,7 @@ def keep_message_memory() -> bool:
     return bool(mallopt(_M_MMAP_THRESHOLD, _MMAP_THRESHOLD)) and bool(mallopt(_M_TRIM_THRESHOLD, _TRIM_THRESHOLD))
 
 
-def as_message(data: memoryview) -> zmq.Frame:
+def as_message(data: np.ndarray) -> zmq.Frame:
     """A ZeroMQ message holding a copy of ``data`` (the copy out of a ring, made once)."""
     return zmq.Frame(data, copy=True)
 

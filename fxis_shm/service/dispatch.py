@@ -48,6 +48,12 @@ def _bytes(part: Received | Part) -> bytes:
     return part.bytes if isinstance(part, zmq.Frame) else bytes(part)
 
 
+def _readable_id(frame: Received) -> int | str | None:
+    """The id of a request we could not decode, if it is there and readable."""
+    value = _readable_field(frame, "id", (int, str))
+    return value if isinstance(value, (int, str)) else None
+
+
 def _readable_field(frame: Received, name: str, kinds: tuple[type, ...]) -> object:
     """A field of a header we could not decode, if it is there and readable."""
     try:
@@ -90,7 +96,7 @@ class RequestDispatch:
         except ProtocolError as exc:
             for line in self.tally.note("bad requests", f"bad request: {exc.message}", t_received):
                 log.info("%s", line)
-            rid = _readable_field(body[0], "id", (int, str)) if body else None
+            rid = _readable_id(body[0]) if body else None
             respond(protocol.encode_error(rid, exc.code, exc.message))
             return
         if request["op"] == "settings" and request["set"] and not self.access.may_change(body[0]):
@@ -105,7 +111,7 @@ class RequestDispatch:
         except ProtocolError as exc:
             topic = _readable_field(frames[-1], "reply_topic", (str,)) if frames else None
             if isinstance(topic, str) and topic and not topic.startswith(protocol.RESERVED_TOPICS):
-                rid = _readable_field(frames[-1], "id", (int, str))
+                rid = _readable_id(frames[-1])
                 self.outbox.publish(topic, protocol.encode_error(rid, exc.code, exc.message))
             else:
                 self.events_dropped += 1

@@ -13,6 +13,7 @@ from __future__ import annotations
 
 from collections.abc import Callable
 
+import numpy as np
 import zmq
 
 from fxis_shm.core import timebase
@@ -38,7 +39,7 @@ class FastAnswers:
         cameras: dict[str, CameraHandle],
         engine: RequestEngine,
         copyout: CopyOut,
-        message: Callable[[memoryview], zmq.Frame],
+        message: Callable[[np.ndarray], zmq.Frame],
         message_max: int,
     ):
         self.cameras, self.engine, self.copyout = cameras, engine, copyout

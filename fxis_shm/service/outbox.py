@@ -7,9 +7,8 @@ from __future__ import annotations
 
 import logging
 from collections.abc import Callable, Sequence
-from typing import Any, TypeAlias
+from typing import TypeAlias
 
-import numpy as np
 import zmq
 
 from fxis_shm.core import timebase
@@ -19,8 +18,8 @@ from fxis_shm.wire.multipart import send_parts
 
 log = logging.getLogger("coordinator")
 
-Request: TypeAlias = dict[str, Any]  # a request as the codec decodes it and the engine takes it
-Part: TypeAlias = bytes | memoryview | zmq.Frame | np.ndarray  # a part of a message sent
+Request: TypeAlias = protocol.Request  # a request as the codec decodes it and the engine takes it
+Part: TypeAlias = protocol.Buffer  # a part of a message sent
 Respond: TypeAlias = Callable[[Sequence[Part]], None]  # sends a reply's parts where its request came from
 
 

@@ -13,6 +13,8 @@ import logging
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
+import numpy as np
+
 from fxis_shm.core.decimation import Decimator, every_frame
 from fxis_shm.core.decisions import Reject
 from fxis_shm.core.selection import JOINT
@@ -22,13 +24,14 @@ from fxis_shm.service.outbox import Part
 from fxis_shm.shm.copyout import CopyOut
 from fxis_shm.wire import protocol
 from fxis_shm.wire.encoding import RAW
+from fxis_shm.wire.headers import FrameMeta
 from fxis_shm.wire.protocol import StreamTopic, parse_stream_topic
 from fxis_shm.wire.statusdoc import StreamCount
 
 log = logging.getLogger("streams")
 
 _Meta = dict[str, object]  # a frame's metadata, a message's body
-_Copied = tuple[_Meta, Part]  # a frame copied (or encoded): its metadata and its image
+_Copied = tuple[FrameMeta, Part]  # a frame copied (or encoded): its metadata and its image
 _Copies = dict[tuple[str, int], _Copied]  # (camera, write index) -> the frame copied
 
 
@@ -86,6 +89,7 @@ class Streams:
             copies[key] = (frames[0], images[0])
         if topic.encoding != RAW:
             meta, image = copies[key]
+            assert isinstance(image, np.ndarray)  # (copy() copies into a pooled array)
             return self.copyout.encode(meta, image, topic.encoding, topic.quality)
         return copies[key]
 
@@ -93,7 +97,7 @@ class Streams:
         self,
         topic: str,
         state: _StreamState,
-        metas: list[_Meta],
+        metas: Sequence[FrameMeta],
         images: list[Part],
         extra: _Meta,
         period_ns: int,

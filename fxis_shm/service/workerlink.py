@@ -96,13 +96,15 @@ class WorkerLinks:
             except ProtocolError as exc:
                 log.warning("a camera worker sent an unreadable reply: %s", exc.message)
                 continue
-            pending = self._pending.pop(reply.get("id"), None)  # type: ignore[arg-type]
+            command_id = reply.get("id")
+            pending = self._pending.pop(command_id, None) if isinstance(command_id, int) else None
             if pending is None:
                 continue  # expired already: its caller was answered
+            result, code, error = reply.get("result"), reply.get("code"), reply.get("error")
             if reply["ok"]:
-                pending.done(reply.get("result") or {}, None, None)
+                pending.done(result if isinstance(result, dict) else {}, None, None)
             else:
-                pending.done(None, reply.get("code") or Code.INTERNAL, reply.get("error") or "")
+                pending.done(None, code if isinstance(code, str) and code else Code.INTERNAL, str(error or ""))
 
     def expire(self, now: int) -> None:
         for command_id, pending in list(self._pending.items()):

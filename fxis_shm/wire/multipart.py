@@ -5,18 +5,20 @@ from __future__ import annotations
 
 import math
 from collections.abc import Sequence
-from typing import TYPE_CHECKING
+from typing import TYPE_CHECKING, cast
 
 import zmq
 
 if TYPE_CHECKING:
     from typing_extensions import Buffer
 
+    from fxis_shm.wire.protocol import Buffer as Part  # what a message's parts may be
+
 # plain ints: their arithmetic is far cheaper than that of pyzmq's enums
 _MORE, _LAST, _RCVTIMEO = int(zmq.NOBLOCK | zmq.SNDMORE), int(zmq.NOBLOCK), int(zmq.RCVTIMEO)
 
 
-def send_parts(sock: zmq.Socket[bytes], parts: Sequence[Buffer]) -> None:
+def send_parts(sock: zmq.Socket[bytes], parts: Sequence[Part]) -> None:
     """``parts`` as one message, without blocking (zmq.Again if it cannot go now): messages
     (zmq.Frame) and image buffers handed to ZeroMQ without a copy, small byte strings copied
     (cheaper than tracking them). (pyzmq's send_multipart checks each part's type in Python
@@ -24,7 +26,12 @@ def send_parts(sock: zmq.Socket[bytes], parts: Sequence[Buffer]) -> None:
     sends themselves.)"""
     last = len(parts) - 1
     for i, part in enumerate(parts):
-        sock.send(part, _MORE if i < last else _LAST, copy=isinstance(part, (bytes, zmq.Frame)))
+        flags = _MORE if i < last else _LAST
+        if isinstance(part, zmq.Frame):  # (a message is sent as it is; pyzmq's stubs type it apart from buffers)
+            sock.send(part, flags)
+        else:
+            # (numpy's stubs give an array the buffer protocol only from Python 3.12 on)
+            sock.send(cast("Buffer", part), flags, copy=isinstance(part, bytes))
 
 
 def recv_parts(sock: zmq.Socket[bytes], timeout_s: float) -> list[zmq.Frame] | None:
