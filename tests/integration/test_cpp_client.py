@@ -139,7 +139,7 @@ def test_tuples_at_times_of_the_clients_own_clock(client_binary, cameras):
     lines = parse(result.stdout)
 
     kind, clock = lines[0]
-    assert kind == "clock" and clock["ours"] == "CLOCK_REALTIME" and clock["service"] == "monotonic", lines[0]
+    assert kind == "clock" and clock["ours"] == "CLOCK_REALTIME" and clock["service"] == "CLOCK_MONOTONIC", lines[0]
     assert int(clock["exchanges"]) == 8
     # an NTP estimate is off by at most half its round trip; 2 ms more for the host clocks slewing meanwhile
     bound = int(clock["round_trip_ns"]) // 2 + 2_000_000

@@ -240,3 +240,90 @@ def test_a_free_camera_beside_a_point_gets_its_frame_by_the_requests_t_star_and_
     assert plan.picks == [("left", 1), ("right", 0), ("free", 1)] and plan.body["skew_ns"] == 47 * MS
     strict = tuple_reply(snaps, G + 40 * MS, tolerance_ms=1.0)  # 2 ms more skew is too much
     assert strict.picks == [("left", 1), ("right", 0), ("free", 0)] and strict.body["skew_ns"] == 45 * MS
+
+
+# ---- a sequence of tuples: each held to one grid point, or flagged at its place (decisions._sequence) ----
+
+# b captures on the grid; a captures 35 ms late and lost point G + 2P: by time alone, each of b's
+# frames is nearest a's frame of the point before (15 ms), its own point's frame is 35 ms away.
+B_ON_TIME = lockstep([(G + k * P, G + k * P) for k in range(5)])
+A_LATE = lockstep([(G + k * P + 35 * MS, G + k * P) for k in (0, 1, 3, 4)])
+
+
+def sequence_reply(snaps, t_star, sync=JOINT, **fields) -> Plan:
+    names = list(snaps)
+    request = request_of("sequence", id=None, cameras=names, at=t_star, **fields)
+    p = Pending(None, request, names, t_star + 500 * MS, t_star)
+    states = {c: CameraState(s.newest, P, 2 * MS, s.newest_stored) for c, s in snaps.items()}
+    decision = decide(p, t_star + 900 * MS, snaps, states, Context({c: P for c in names}, NONE, sync, 1.0, None, 500))
+    assert isinstance(decision, Plan)
+    return decision
+
+
+def tuples_picked(plan: Plan, snaps) -> list[dict[str, int]]:
+    """Each tuple's frames, by capture time."""
+    assert plan.groups is not None
+    return [{c: snaps[c].timeline.at(i) for c, i in group} for group in plan.groups]
+
+
+def ms_after_g(tuples) -> list[dict[str, int]]:
+    return [{c: (t - G) // MS for c, t in frames.items()} for frames in tuples]
+
+
+SNAPS = {"b": B_ON_TIME, "a": A_LATE}  # b first: b's frames are the reference times
+LOST = {"b": G + 2 * P, "a": G + P}  # b's frame of the point a lost, beside a's nearest, of the point before
+
+
+@pytest.mark.parametrize(
+    "t_star,fields",
+    [
+        (G, {"kind": "range", "start": G + P, "end": G + 4 * P}),
+        (G + 4 * P, {"kind": "consecutive", "count": 4, "direction": "before"}),
+    ],
+)
+def test_each_tuple_of_a_sequence_pairs_a_reference_frame_with_the_frames_of_its_grid_point(t_star, fields):
+    plan = sequence_reply(SNAPS, t_star, **fields)
+    assert ms_after_g(tuples_picked(plan, SNAPS)) == [
+        {"b": 50, "a": 85},
+        {"b": 100, "a": 85},
+        {"b": 150, "a": 185},
+        {"b": 200, "a": 235},
+    ]
+    assert plan.body["grid_mismatch"] == [None, LOST, None, None]  # one entry per tuple, at its place
+
+
+def test_a_tuple_of_an_interval_sequence_is_the_tuple_of_one_grid_point_nearest_its_target():
+    """Target G + 2P (100 ms): b's frame of it has no partner of its point, so the tuple is G + P's."""
+    plan = sequence_reply(SNAPS, G + P, kind="interval", count=4, interval_ms=50)
+    assert ms_after_g(tuples_picked(plan, SNAPS)) == [
+        {"b": 50, "a": 85},
+        {"b": 50, "a": 85},
+        {"b": 150, "a": 185},
+        {"b": 200, "a": 235},
+    ]
+    assert plan.body["targets"] == [G + k * P for k in range(1, 5)] and "grid_mismatch" not in plan.body
+
+
+@pytest.mark.parametrize(
+    "t_star,fields",
+    [
+        (G, {"kind": "range", "start": G + P, "end": G + 4 * P}),
+        (G + P, {"kind": "interval", "count": 4, "interval_ms": 50}),
+    ],
+)
+def test_independent_tuples_of_a_sequence_are_each_flagged_not_changed(t_star, fields):
+    plan = sequence_reply(SNAPS, t_star, INDEPENDENT, **fields)
+    assert ms_after_g(tuples_picked(plan, SNAPS)) == [
+        {"b": 50, "a": 35},
+        {"b": 100, "a": 85},
+        {"b": 150, "a": 185},
+        {"b": 200, "a": 185},
+    ]
+    before = [{"b": G + k * P, "a": G + (k - 1) * P} for k in range(1, 5)]
+    assert plan.body["grid_mismatch"] == [before[0], before[1], None, before[3]]
+
+
+def test_a_sequence_of_one_camera_is_never_flagged():
+    plan = sequence_reply({"a": A_LATE}, G + P, kind="interval", count=3, interval_ms=50)
+    assert ms_after_g(tuples_picked(plan, {"a": A_LATE})) == [{"a": 35}, {"a": 85}, {"a": 185}]
+    assert "grid_mismatch" not in plan.body
