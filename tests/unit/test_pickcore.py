@@ -296,7 +296,7 @@ def outcome(decision: tuple) -> str:
     return {PLAN: "plan", WAIT: "wait"}.get(decision[0]) or f"reject {decision[1]}"
 
 
-@settings(max_examples=800, deadline=None)
+@settings(max_examples=400, deadline=None)
 @given(cases())
 def test_c_and_python_decide_alike(case):
     event(outcome(decided_alike(case)))
