@@ -22,8 +22,9 @@ from __future__ import annotations
 import sys
 from collections.abc import Sequence
 from dataclasses import dataclass, field
+from typing import Any
 
-import numpy as np
+from numpy.typing import NDArray
 
 from fxis_shm.formats.cdrstream import (
     CDR_LE_HEADER as CDR_LE_HEADER,
@@ -178,7 +179,7 @@ def encode_image(
     return writer.finish(pixels, pad=pad)
 
 
-def encode_image_array(header: Header, array: np.ndarray, encoding: str, *, pad: bool = False) -> bytes:
+def encode_image_array(header: Header, array: NDArray[Any], encoding: str, *, pad: bool = False) -> bytes:
     """A ``(H, W)`` or ``(H, W, C)`` array as ``sensor_msgs/msg/Image`` in ROS ``encoding``.
 
     ``step`` is ``W * C * itemsize`` (a strided array is made contiguous first) and

@@ -21,6 +21,7 @@ from collections.abc import Sequence
 from typing import Any, TypeAlias
 
 import numpy as np
+from numpy.typing import NDArray
 
 from fxis_shm.errors import InvalidArgument
 
@@ -28,7 +29,7 @@ CDR_LE_HEADER = b"\x00\x01\x00\x00"  # classic CDR, little endian, options 0
 _BYTE_ORDERS = {b"\x00\x01": "<", b"\x00\x00": ">"}
 _PAD = (b"", b"\x00", b"\x00\x00", b"\x00\x00\x00")
 
-Buffer: TypeAlias = bytes | bytearray | memoryview | np.ndarray  # anything with a byte buffer
+Buffer: TypeAlias = bytes | bytearray | memoryview | NDArray[Any]  # anything with a byte buffer
 
 
 class CdrError(InvalidArgument):

@@ -25,23 +25,25 @@ two copies, complements and a check, is what a lossy video codec will need too).
 from __future__ import annotations
 
 import zlib
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from fxis_shm.errors import InvalidArgument
 
 STAMP_BYTES = 16
 
 
-def _row_bytes(image: np.ndarray, row: int) -> np.ndarray:
-    row_bytes: np.ndarray = image[row].reshape(-1).view(np.uint8)
+def _row_bytes(image: NDArray[Any], row: int) -> NDArray[Any]:
+    row_bytes: NDArray[Any] = image[row].reshape(-1).view(np.uint8)
     return row_bytes
 
 
 CHECKED_BYTES = 24  # a row this long also holds the check
 
 
-def _encode(frame_id: int, row_bytes: int) -> np.ndarray:
+def _encode(frame_id: int, row_bytes: int) -> NDArray[Any]:
     """The stamp for a row of ``row_bytes``: the id and its complement, then the check if it fits."""
     ident = (frame_id & 0xFFFFFFFFFFFFFFFF).to_bytes(8, "little")
     code = ident + bytes(b ^ 0xFF for b in ident)
@@ -73,14 +75,14 @@ def _check(ident: int) -> int:
     return zlib.crc32(ident.to_bytes(4, "little")) & 0xFFFF
 
 
-def _block_bits(frame_id: int) -> np.ndarray:
+def _block_bits(frame_id: int) -> NDArray[Any]:
     ident = frame_id & 0xFFFFFFFF
     word = ident | _check(ident) << ID_BITS
     bits = [(word >> i) & 1 for i in range(ID_BITS + CHECK_BITS)]
     return np.array(bits + [1 - b for b in bits], dtype=np.uint8)
 
 
-def _write_blocks(image: np.ndarray, frame_id: int) -> None:
+def _write_blocks(image: NDArray[Any], frame_id: int) -> None:
     bands = _bands(image.shape)
     if bands is None or image.dtype != np.uint8:
         return
@@ -94,7 +96,7 @@ def _write_blocks(image: np.ndarray, frame_id: int) -> None:
         image[top : top + height, : per_row * BLOCK] = band
 
 
-def _read_blocks(image: np.ndarray) -> int | None:
+def _read_blocks(image: NDArray[Any]) -> int | None:
     bands = _bands(image.shape)
     if bands is None or image.dtype != np.uint8:
         return None
@@ -117,7 +119,7 @@ def _read_blocks(image: np.ndarray) -> int | None:
     return ident if word >> ID_BITS == _check(ident) else None
 
 
-def write_stamp(image: np.ndarray, frame_id: int) -> None:
+def write_stamp(image: NDArray[Any], frame_id: int) -> None:
     """Stamp ``frame_id`` into the first and the last row of ``image`` (in place), and, for an
     8-bit image large enough, as blocks that survive JPEG."""
     if image.ndim < 1 or image.shape[0] < 1:
@@ -131,7 +133,7 @@ def write_stamp(image: np.ndarray, frame_id: int) -> None:
         _write_blocks(image, frame_id)
 
 
-def read_stamp(image: np.ndarray) -> int | None:
+def read_stamp(image: NDArray[Any]) -> int | None:
     """The frame id stamped into ``image``, or None if there is no consistent stamp. After
     lossy compression only the blocks read: then the id's low 32 bits."""
     if image.ndim < 2 or image[0].nbytes < STAMP_BYTES or not image[0].flags.c_contiguous:

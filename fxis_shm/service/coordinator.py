@@ -15,9 +15,10 @@ import ctypes
 import logging
 import threading
 from collections.abc import Callable, Sequence
+from typing import Any
 
-import numpy as np
 import zmq
+from numpy.typing import NDArray
 
 from fxis_shm.core import timebase
 from fxis_shm.core.engine import RequestEngine
@@ -60,7 +61,7 @@ def keep_message_memory() -> bool:
     return bool(mallopt(_M_MMAP_THRESHOLD, _MMAP_THRESHOLD)) and bool(mallopt(_M_TRIM_THRESHOLD, _TRIM_THRESHOLD))
 
 
-def as_message(data: np.ndarray) -> zmq.Frame:
+def as_message(data: NDArray[Any]) -> zmq.Frame:
     """A ZeroMQ message holding a copy of ``data`` (the copy out of a ring, made once)."""
     return zmq.Frame(data, copy=True)
 

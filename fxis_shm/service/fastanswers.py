@@ -12,9 +12,10 @@ waiting in it (in all, and per client) hold as they did.
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import Any
 
-import numpy as np
 import zmq
+from numpy.typing import NDArray
 
 from fxis_shm.core import timebase
 from fxis_shm.core.engine import RequestEngine
@@ -39,7 +40,7 @@ class FastAnswers:
         cameras: dict[str, CameraHandle],
         engine: RequestEngine,
         copyout: CopyOut,
-        message: Callable[[np.ndarray], zmq.Frame],
+        message: Callable[[NDArray[Any]], zmq.Frame],
         message_max: int,
     ):
         self.cameras, self.engine, self.copyout = cameras, engine, copyout

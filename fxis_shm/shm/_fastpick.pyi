@@ -1,7 +1,8 @@
 # The compiled read of one service's rings (_fastpick.c); fastpick.py says what it answers.
 from collections.abc import Callable, Sequence
+from typing import Any
 
-import numpy as np
+from numpy.typing import NDArray
 
 PLAN: int
 WAIT: int
@@ -14,7 +15,7 @@ TORN: int
 
 class Rings:
     def __init__(
-        self, rings: Sequence[tuple[object, ...]], layout: tuple[int, ...], fresh: Callable[[int], np.ndarray], /
+        self, rings: Sequence[tuple[object, ...]], layout: tuple[int, ...], fresh: Callable[[int], NDArray[Any]], /
     ) -> None: ...
     def pick(
         self,

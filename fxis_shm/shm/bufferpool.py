@@ -20,13 +20,15 @@ from __future__ import annotations
 import math
 import weakref
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 
 @dataclass(eq=False)
 class _Buffer:
-    memory: np.ndarray  # the pooled bytes
+    memory: NDArray[Any]  # the pooled bytes
     address: int  # of its first byte
     lease: weakref.ref[_Lease] | None = field(default=None)  # to the lease of the array handed out last
 
@@ -43,7 +45,7 @@ class _Lease:
 
     __slots__ = ("__weakref__", "__array_interface__", "ended", "memory")
 
-    def __init__(self, memory: np.ndarray, interface: dict[str, object]):
+    def __init__(self, memory: NDArray[Any], interface: dict[str, object]):
         self.memory = memory  # the pool's bytes live as long as the array, even if the pool does not
         self.__array_interface__ = interface
         self.ended = False  # set by release(): the holder gave the buffer back early
@@ -60,7 +62,7 @@ class BufferPool:
         ] = {}  # (shape, dtype) -> (bytes, NumPy's typestr)
         self.kept_bytes = 0
 
-    def take(self, shape: tuple[int, ...], dtype: str) -> np.ndarray:
+    def take(self, shape: tuple[int, ...], dtype: str) -> NDArray[Any]:
         """An array of ``shape`` and ``dtype`` whose contents are undefined, leased to the caller."""
         size = self._sizes.get((shape, dtype))
         if size is None:
@@ -93,7 +95,7 @@ class BufferPool:
         return sum(not b.free for same in self._buffers.values() for b in same)
 
 
-def release(array: np.ndarray) -> bool:
+def release(array: NDArray[Any]) -> bool:
     """Give the buffer under ``array`` back to its pool now, whatever still refers to it
     (True); False if ``array`` is not a leased pool buffer (nothing to give back)."""
     lease = getattr(array, "base", None)

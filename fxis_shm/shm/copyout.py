@@ -9,6 +9,7 @@ from collections.abc import Callable, Mapping
 from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from fxis_shm.core import timebase
 from fxis_shm.core.decisions import Reject, check_not_empty
@@ -31,7 +32,7 @@ from fxis_shm.wire.protocol import Buffer
 COPY, REFS, VIEWS, MESSAGES = "copy", "refs", "views", "messages"  # how a reply carries its frames
 
 
-def copied_by(reader: RingReader, slot: int, seq: int, make: Callable[[np.ndarray], Buffer]) -> Buffer:
+def copied_by(reader: RingReader, slot: int, seq: int, make: Callable[[NDArray[Any]], Buffer]) -> Buffer:
     """``make(the slot's bytes)``: whatever copy of them it makes (a ZeroMQ message, say), kept
     only if the slot held the frame of ``seq`` from before the copy to after it (the seqlock
     check of ``RingReader.copy_slot``, with the copy made by ``make``); else Overwritten."""
@@ -48,7 +49,7 @@ class CopyOut:
         cameras: dict[str, CameraHandle],
         settings: Mapping[str, Any],
         buffers: BufferPool | None = None,
-        message: Callable[[np.ndarray], Buffer] | None = None,
+        message: Callable[[NDArray[Any]], Buffer] | None = None,
     ):
         """``message(bytes)``: a copy of the bytes into a message of the transport (for
         MESSAGES: the coordinator's zmq.Frame, copied once out of the ring, sent as it is), for
@@ -148,7 +149,7 @@ class CopyOut:
         stream has encoded it so yet."""
         meta = snap.frame_meta(i)
 
-        def pixels() -> np.ndarray:
+        def pixels() -> NDArray[Any]:
             copied: list[Buffer] = []
             self._copied(cam, snap, i, buffer, copied, COPY)
             image = copied[0]
@@ -176,7 +177,9 @@ class CopyOut:
         images.append(image)
         return self.header(cam).recorded(snap.frame_meta(i), buffer=buffer)
 
-    def encode(self, meta: FrameMeta, image: np.ndarray, encoding: str, quality: int | None) -> tuple[FrameMeta, bytes]:
+    def encode(
+        self, meta: FrameMeta, image: NDArray[Any], encoding: str, quality: int | None
+    ) -> tuple[FrameMeta, bytes]:
         """A copied frame (checked whole) in ``encoding``, encoded once for every reply and stream."""
         data = self.encoded.get(
             (meta["camera"], meta["generation"], meta["frame_id"]), lambda: image, encoding, quality

@@ -17,6 +17,7 @@ from functools import partial
 from typing import Any, TypeAlias
 
 import numpy as np
+from numpy.typing import NDArray
 
 from fxis_shm.core import timebase
 from fxis_shm.shm.cameras import ALIVE_CHECK_NS, STALE_HEARTBEAT_NS
@@ -43,7 +44,7 @@ _Form: TypeAlias = tuple[tuple[int, ...], tuple[int, ...], list[str]]
 _INT64_MIN, _INT64_MAX = -(1 << 63), (1 << 63) - 1  # the times the C reader takes
 
 
-def fresh_array(layouts: Sequence[tuple[tuple[int, ...], str]], k: int) -> np.ndarray:
+def fresh_array(layouts: Sequence[tuple[tuple[int, ...], str]], k: int) -> NDArray[Any]:
     """An array for a frame of ring ``k``, its pages mapped in now (not during a copy someone waits for)."""
     array = np.empty(*layouts[k])
     array.fill(0)

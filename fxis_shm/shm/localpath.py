@@ -19,8 +19,9 @@ from __future__ import annotations
 import os
 from collections.abc import Sequence
 from dataclasses import dataclass
+from typing import Any
 
-import numpy as np
+from numpy.typing import NDArray
 
 from fxis_shm.errors import RingError
 from fxis_shm.shm.bufferpool import BufferPool
@@ -98,10 +99,10 @@ class LocalRings:
             self._readers[ref.ring] = reader
         return reader
 
-    def images(self, metas: Sequence[FrameMeta], copy: bool = True) -> list[np.ndarray]:
+    def images(self, metas: Sequence[FrameMeta], copy: bool = True) -> list[NDArray[Any]]:
         """The pixels of every frame of a local reply, in order: copies checked whole,
         or (``copy=False``) read-only views of the slots. Raises Overwritten or LocalUnavailable."""
-        images: list[np.ndarray] = []
+        images: list[NDArray[Any]] = []
         for meta in metas:
             ref = SlotRef.of(meta)
             reader = self.reader(ref)

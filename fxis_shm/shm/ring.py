@@ -27,9 +27,11 @@ from __future__ import annotations
 import mmap
 import os
 from dataclasses import dataclass
+from typing import Any
 
 import numpy as np
 import posix_ipc
+from numpy.typing import NDArray
 
 from fxis_shm.core import timebase
 from fxis_shm.core.snapshot import CAPTURE_FREE, SLOT, SlotMeta, Snapshot
@@ -65,7 +67,7 @@ class FrameLayout:
     dtype: str = "uint8"
 
     @classmethod
-    def of(cls, image: np.ndarray) -> FrameLayout:
+    def of(cls, image: NDArray[Any]) -> FrameLayout:
         if image.ndim not in (2, 3) or (image.ndim == 3 and image.shape[2] not in (1, 3, 4)):
             raise ValueError(f"an image must be (h, w) or (h, w, 1|3|4), got {image.shape}")
         channels = 1 if image.ndim == 2 else image.shape[2]
@@ -89,7 +91,7 @@ class _Mapping:
         ordering.require_supported()
         prot = mmap.PROT_READ | (mmap.PROT_WRITE if writable else 0)
         self._mm = mmap.mmap(fd, size, flags=mmap.MAP_SHARED | mmap.MAP_POPULATE, prot=prot)
-        self.header = np.ndarray((), dtype=HEADER, buffer=self._mm)
+        self.header: NDArray[Any] = np.ndarray((), dtype=HEADER, buffer=self._mm)
         if self.header["magic"] != MAGIC or self.header["version"] != LAYOUT_VERSION:
             if writable and self.header["magic"] == b"":
                 return  # being created
@@ -100,12 +102,12 @@ class _Mapping:
         h = self.header
         self.layout = FrameLayout(int(h["height"]), int(h["width"]), int(h["channels"]), h["dtype"].item().decode())
         self.slots = int(h["slots"])
-        self.table = np.ndarray((self.slots,), dtype=SLOT, buffer=self._mm, offset=HEADER_BYTES)
-        self.seq = np.ndarray(
+        self.table: NDArray[Any] = np.ndarray((self.slots,), dtype=SLOT, buffer=self._mm, offset=HEADER_BYTES)
+        self.seq: NDArray[Any] = np.ndarray(
             (self.slots,), dtype="<u8", buffer=self._mm, offset=HEADER_BYTES, strides=(SLOT.itemsize,)
         )
         stride = int(h["slot_stride"])
-        self.data = np.ndarray(
+        self.data: NDArray[Any] = np.ndarray(
             (self.slots, self.layout.nbytes),
             dtype=np.uint8,
             buffer=self._mm,
@@ -113,8 +115,8 @@ class _Mapping:
             strides=(stride, 1),
         )
 
-    def slot_image(self, slot: int) -> np.ndarray:
-        image: np.ndarray = self.data[slot].view(self.layout.dtype).reshape(self.layout.shape)
+    def slot_image(self, slot: int) -> NDArray[Any]:
+        image: NDArray[Any] = self.data[slot].view(self.layout.dtype).reshape(self.layout.shape)
         return image
 
     def field(self, name: str) -> int:
@@ -232,7 +234,7 @@ class RingWriter(_Mapping):
 
     def write(
         self,
-        image: np.ndarray,
+        image: NDArray[Any],
         frame_id: int,
         t_capture: int,
         t_available: int | None = None,
@@ -344,7 +346,7 @@ class RingReader(_Mapping):
         self._rows: list[SlotMeta | None] = []
         self._times: list[int] = []
         self._last: Snapshot | None = None
-        self._views_ro: list[np.ndarray] | None = None
+        self._views_ro: list[NDArray[Any]] | None = None
         try:
             shm = posix_ipc.SharedMemory(self.name, read_only=True)
         except posix_ipc.ExistentialError:
@@ -405,11 +407,11 @@ class RingReader(_Mapping):
     def instance(self) -> int:
         return self.field("instance")
 
-    def copy(self, snapshot: Snapshot, i: int, out: np.ndarray | None = None) -> np.ndarray:
+    def copy(self, snapshot: Snapshot, i: int, out: NDArray[Any] | None = None) -> NDArray[Any]:
         """Copy the frame of logical index ``i``; raises Overwritten if the slot changed."""
         return self.copy_slot(snapshot.slot(i), snapshot.seq(i), out)
 
-    def copy_slot(self, slot: int, expected_seq: int, out: np.ndarray | None = None) -> np.ndarray:
+    def copy_slot(self, slot: int, expected_seq: int, out: NDArray[Any] | None = None) -> NDArray[Any]:
         """Copy the frame in ``slot`` if it is the one ``expected_seq`` names and stays
         so to the end of the copy; raises Overwritten otherwise."""
         if out is None:
@@ -419,7 +421,7 @@ class RingReader(_Mapping):
             raise self.overwritten(slot, torn)
         return out
 
-    def copy_job(self, slot: int, expected_seq: int, out: np.ndarray) -> slotio.CopyJob:
+    def copy_job(self, slot: int, expected_seq: int, out: NDArray[Any]) -> slotio.CopyJob:
         """What ``slotio.copy`` and ``slotio.copies`` take to copy the frame in ``slot`` (the one
         ``expected_seq`` names) into ``out``."""
         if not 0 <= slot < self.slots:
@@ -435,14 +437,14 @@ class RingReader(_Mapping):
         """The write count the last snapshot read (before reading the records it shows)."""
         return self._seen
 
-    def view_slot(self, slot: int, expected_seq: int) -> np.ndarray:
+    def view_slot(self, slot: int, expected_seq: int) -> NDArray[Any]:
         """A read-only view of the frame in ``slot`` (no copy): valid only while
         ``slot_holds(slot, expected_seq)`` stays true; the writer may overwrite it any time."""
         self.check_slot(slot, expected_seq, "before")
-        view: np.ndarray = self.slot_views()[slot].view()
+        view: NDArray[Any] = self.slot_views()[slot].view()
         return view
 
-    def slot_views(self) -> list[np.ndarray]:
+    def slot_views(self) -> list[NDArray[Any]]:
         """A read-only array over each slot's frame, made once: a view of one of them is cheaper
         than a new one (hand out views, never these)."""
         if self._views_ro is None:

@@ -19,15 +19,16 @@ from __future__ import annotations
 import os
 import struct
 from collections.abc import Callable
-from typing import TypeAlias
+from typing import Any, TypeAlias
 
 import numpy as np
+from numpy.typing import NDArray
 
 from fxis_shm.shm import ordering
 from fxis_shm.shm.ordering import Memory
 
 # One copy: (segment, seq_at, seq, src, nbytes, out), as ``copy`` takes it.
-CopyJob: TypeAlias = tuple[Memory, int, int, int, int, np.ndarray]
+CopyJob: TypeAlias = tuple[Memory, int, int, int, int, NDArray[Any]]
 Copies: TypeAlias = Callable[[list[CopyJob]], "tuple[int, int] | None"]
 _RECORD = struct.Struct("<QQqqqQqQ")  # the ring's slot record (fxis_shm.core.snapshot.SLOT)
 
@@ -46,7 +47,7 @@ def py_records(buffer: Memory, table: int, slots: int, lo: int, hi: int) -> list
     return out
 
 
-def py_copy(buffer: Memory, seq_at: int, seq: int, src: int, nbytes: int, out: np.ndarray | Memory) -> int:
+def py_copy(buffer: Memory, seq_at: int, seq: int, src: int, nbytes: int, out: NDArray[Any] | Memory) -> int:
     if ordering.load_acquire(buffer, seq_at) != seq:
         return 1
     target = np.frombuffer(out, dtype=np.uint8) if not isinstance(out, np.ndarray) else out.reshape(-1).view(np.uint8)
@@ -95,7 +96,7 @@ def in_batches(copies_at_once: Copies) -> Copies:
 
 
 records: Callable[[Memory, int, int, int, int], list[tuple[int, ...]]] = py_records
-copy: Callable[[Memory, int, int, int, int, np.ndarray], int] = py_copy
+copy: Callable[[Memory, int, int, int, int, NDArray[Any]], int] = py_copy
 copies: Copies = py_copies
 holds: Callable[[Memory, int, int], bool] = py_holds
 IMPL = "python"  # not built (no C compiler at install time), or FXIS_PURE_PYTHON=1

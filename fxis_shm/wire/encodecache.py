@@ -8,8 +8,9 @@ from __future__ import annotations
 
 from collections import OrderedDict
 from collections.abc import Callable
+from typing import Any
 
-import numpy as np
+from numpy.typing import NDArray
 
 from fxis_shm.wire import encoding as codec
 
@@ -21,7 +22,7 @@ class EncodeCache:
         self.encoded = self.reused = 0
 
     def get(
-        self, frame: tuple[str, int, int], pixels: Callable[[], np.ndarray], encoding: str, quality: int | None
+        self, frame: tuple[str, int, int], pixels: Callable[[], NDArray[Any]], encoding: str, quality: int | None
     ) -> bytes:
         """The frame ``frame`` = (camera, generation, frame_id) in ``encoding``; ``pixels()`` gives
         its image (checked whole), and is called only when the frame is not encoded yet."""

@@ -8,7 +8,10 @@ mono8 and bgr8 frames; ``png`` is lossless and also takes 16-bit mono.
 
 from __future__ import annotations
 
+from typing import Any
+
 import numpy as np
+from numpy.typing import NDArray
 
 from fxis_shm.errors import ProtocolError
 
@@ -27,7 +30,7 @@ def check(encoding: str, quality: int = DEFAULT_JPEG_QUALITY) -> tuple[str, int]
     return encoding, quality
 
 
-def _check_encodable(image: np.ndarray, encoding: str) -> None:
+def _check_encodable(image: NDArray[Any], encoding: str) -> None:
     channels = 1 if image.ndim == 2 else image.shape[2]
     if channels not in (1, 3):
         raise ProtocolError(f"{encoding} takes mono or 3-channel frames, not {channels} channels")
@@ -36,7 +39,7 @@ def _check_encodable(image: np.ndarray, encoding: str) -> None:
         raise ProtocolError(f"{encoding} takes {' or '.join(allowed)} frames, not {image.dtype.name}")
 
 
-def encode(image: np.ndarray, encoding: str, quality: int = DEFAULT_JPEG_QUALITY) -> bytes:
+def encode(image: NDArray[Any], encoding: str, quality: int = DEFAULT_JPEG_QUALITY) -> bytes:
     """The frame's bytes in ``encoding`` (3-channel frames are taken as BGR)."""
     check(encoding, quality)
     if encoding == RAW:
@@ -51,7 +54,7 @@ def encode(image: np.ndarray, encoding: str, quality: int = DEFAULT_JPEG_QUALITY
     return data.tobytes()
 
 
-def decode(data: bytes | memoryview, encoding: str, shape: tuple[int, ...] | None, dtype: str | None) -> np.ndarray:
+def decode(data: bytes | memoryview, encoding: str, shape: tuple[int, ...] | None, dtype: str | None) -> NDArray[Any]:
     """The frame back from its bytes, with the ``shape`` and ``dtype`` it was sent with
     (None for both: as the JPEG or PNG data says, for a file whose frames come unannounced)."""
     if encoding == RAW:

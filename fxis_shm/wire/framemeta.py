@@ -6,8 +6,9 @@ from __future__ import annotations
 
 import json
 from collections.abc import Sequence
+from typing import Any
 
-import numpy as np
+from numpy.typing import NDArray
 
 from fxis_shm.core.snapshot import CAPTURES, SlotMeta
 from fxis_shm.wire import encoding as codec
@@ -128,7 +129,7 @@ def frame_meta(
     t_capture: int,
     t_stored: int,
     generation: int,
-    image: np.ndarray,
+    image: NDArray[Any],
     buffer: int,
     t_available: int | None = None,
     t_target: int | None = None,

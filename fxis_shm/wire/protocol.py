@@ -13,6 +13,7 @@ from dataclasses import dataclass
 from typing import TYPE_CHECKING, Any, TypeAlias, cast
 
 import numpy as np
+from numpy.typing import NDArray
 
 if TYPE_CHECKING:
     import zmq
@@ -36,7 +37,7 @@ _DTYPE_OF = {name: np.dtype(name) for name in DTYPES}  # (np.dtype(name) parses 
 # engine (fxis_shm.core.engine) takes it; its values are what the schema's checks returned.
 Request: TypeAlias = dict[str, Any]
 # A frame of a message: what pyzmq sends without a copy and what a received zmq.Frame's buffer is.
-Buffer: TypeAlias = "bytes | memoryview | np.ndarray | zmq.Frame"
+Buffer: TypeAlias = "bytes | memoryview | NDArray[Any] | zmq.Frame"
 Received: TypeAlias = bytes | memoryview  # a received frame (a zmq.Frame's buffer, or its bytes)
 LOCAL = "local"  # the delivery of a reply whose frames the client copies from the rings itself
 
@@ -317,7 +318,7 @@ def encode_error(request_id: RequestId, code: str, message: str) -> list[bytes]:
     return [fastjson.dumps(header)]
 
 
-def decode_reply(frames: Sequence[Received]) -> tuple[ReplyHeader, list[np.ndarray]]:
+def decode_reply(frames: Sequence[Received]) -> tuple[ReplyHeader, list[NDArray[Any]]]:
     """Header and images of a reply; images are built on the received buffers without copying."""
     if not frames:
         raise ProtocolError("empty reply")
@@ -328,7 +329,7 @@ def decode_reply(frames: Sequence[Received]) -> tuple[ReplyHeader, list[np.ndarr
     if not isinstance(header, dict) or header.get("v") != VERSION or "ok" not in header:
         raise ProtocolError("reply header is not a version-1 reply")
     buffers = frames[1:]
-    images: list[np.ndarray] = []
+    images: list[NDArray[Any]] = []
     if not isinstance(header.get("frames", []), list):
         raise ProtocolError("reply field 'frames' must be a list")
     # A reply of version 1 from here on; each frame's fields are checked where _image reads them.
@@ -340,7 +341,7 @@ def decode_reply(frames: Sequence[Received]) -> tuple[ReplyHeader, list[np.ndarr
     return reply, images
 
 
-def _image(meta: FrameMeta, buffers: Sequence[Received]) -> np.ndarray:
+def _image(meta: FrameMeta, buffers: Sequence[Received]) -> NDArray[Any]:
     """A frame's image: on its buffer without a copy (raw), or decoded. A well-formed raw frame
     takes the short way (its checks cost half a cold reply's decoding); anything else, the
     field-by-field checks, which say what is wrong."""
@@ -355,7 +356,7 @@ def _image(meta: FrameMeta, buffers: Sequence[Received]) -> np.ndarray:
                 buf = buffers[index]
                 nbytes = buf.nbytes if type(buf) is memoryview else len(buf) if type(buf) is bytes else -1
                 try:
-                    image: np.ndarray = np.ndarray(shape, dtype, buf)
+                    image: NDArray[Any] = np.ndarray(shape, dtype, buf)
                 except (TypeError, ValueError):  # too big, or the buffer too short: worded below
                     pass
                 else:
@@ -364,7 +365,7 @@ def _image(meta: FrameMeta, buffers: Sequence[Received]) -> np.ndarray:
     return _checked_image(meta, buffers)
 
 
-def _checked_image(meta: FrameMeta, buffers: Sequence[Received]) -> np.ndarray:
+def _checked_image(meta: FrameMeta, buffers: Sequence[Received]) -> NDArray[Any]:
     try:
         index, listed = meta["buffer"], meta["shape"]
         if type(index) is not int or index < 0:
