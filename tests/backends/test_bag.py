@@ -5,7 +5,6 @@ import numpy as np
 import pytest
 
 from fxis_shm import Client, read_stamp
-from fxis_shm.core import timebase
 from fxis_shm.formats import rosmsgs
 from fxis_shm.formats.stamp import write_stamp
 from fxis_shm.formats.videochoice import DEFAULT_CRF, Choice
@@ -16,6 +15,7 @@ from fxis_shm.workers.backends.bag import LEAD_NS, BagCamera
 
 from ..conftest import fxis, fxis_run_alone, wait_until
 from ..integration.bags import read_bag, record, start_cameras, stop
+from ..virtualtime.clock import VirtualClock
 
 pytestmark = pytest.mark.integration
 
@@ -244,9 +244,12 @@ def test_a_video_camera_joining_part_way_decodes_from_the_keyframe_before(video_
     k = next(i for i, (_, f) in enumerate(frames) if f.keyframe and i > 0)  # the second keyframe
     join_log, join = frames[k + 1]  # the frame after it: decodes only from that keyframe
     assert not join.keyframe
-    camera = BagCamera("v", {"path": path, "topic": "/left/video", "loop": False, "stamps": "recorded"}, 0)
+    # in virtual time: how long opening and decoding take on a loaded machine moves nothing
+    clock = VirtualClock()
     # the playback's origin put so that the camera joins 25 ms (half a frame) before that frame is due
-    camera.time_origin_ns = timebase.now() - LEAD_NS - (join_log - frames[0][0]) + 25_000_000
+    origin = clock.now_ns() - LEAD_NS - (join_log - frames[0][0]) + 25_000_000
+    options = {"path": path, "topic": "/left/video", "loop": False, "stamps": "recorded"}
+    camera = BagCamera("v", options, origin, clock=clock)
     camera.open()
     try:
         played = []

@@ -34,7 +34,6 @@ matches frames with other recorded data: it must then ask for frames by those ti
 from __future__ import annotations
 
 import logging
-import time
 from contextlib import closing
 
 import numpy as np
@@ -61,8 +60,9 @@ LEAD_NS = 2_000_000_000
 class BagCamera(Camera):
     kind = "bag"
 
-    def __init__(self, name, options, time_origin_ns):
+    def __init__(self, name, options, time_origin_ns, clock: timebase.Clock = timebase.REAL):
         super().__init__(name, options, time_origin_ns)
+        self.clock = clock  # the playback's clock and waits: a virtual one in tests
         path = self.options["path"]
         if path is None or not str(path).strip():
             raise ValueError(
@@ -155,7 +155,7 @@ class BagCamera(Camera):
         else:
             image = self._image(first)
         self._layout = FrameLayout.of(image)
-        self._frames = self._play_from(timebase.now())
+        self._frames = self._play_from(self.clock.now_ns())
         self._next = None
 
     def close(self) -> None:
@@ -221,24 +221,23 @@ class BagCamera(Camera):
             return due, t_capture, image
 
     def grab(self, timeout: float) -> Capture | None:
-        give_up = timebase.now() + int(timeout * 1e9)
+        give_up = self.clock.now_ns() + int(timeout * 1e9)
         while True:
             if self._next is None:
                 self._next = self._pull()
             if self._next is None:  # the end of a bag played once
-                time.sleep(max(0, give_up - timebase.now()) / 1e9)
+                self.clock.sleep_until(give_up)
                 return None
             due, t_capture, image = self._next
-            now = timebase.now()
+            now = self.clock.now_ns()
             if due < now - self._period_ns:  # more than a frame late: lost, as on a camera
                 self.frames_dropped += 1
                 self._next = None
                 continue
             if due > give_up:
-                time.sleep(max(0, give_up - now) / 1e9)
+                self.clock.sleep_until(give_up)
                 return None
-            if due > now:
-                time.sleep((due - now) / 1e9)
+            self.clock.sleep_until(due)
             self._next = None
             self._k += 1
             return Capture(image, self._k - 1, t_capture)
