@@ -57,6 +57,18 @@ def free_tcp_port() -> int:
 
 
 _SPAN = 12_000  # ports drawn from, just below the ephemeral range
+_PORT_DRAWS = 3  # starts of a service whose drawn port another process took first
+
+
+def _bindable(port: int) -> bool:
+    with socket.socket() as s:
+        try:
+            s.bind(("", port))
+        except OSError:
+            return False
+        return True
+
+
 _DRAW = random.Random()  # its own: a test that seeds the module's generator must not make ports repeat
 
 
@@ -87,23 +99,14 @@ class ServiceProcess:
         """``http``: the dashboard's HOST:PORT, or "off" (the default: tests and scripts
         running at once must not all claim the same fixed port)."""
         self.name = name or f"t{os.getpid()}x{time.monotonic_ns() % 10**6}"
+        # the endpoints not given are drawn here: free now, but another process may bind one of
+        # them before the service does (start draws them again then)
+        self._drawn = [key for key, given in (("endpoint", endpoint), ("pub", pub), ("events", events)) if not given]
         ports = free_tcp_ports(3)  # three distinct: two random draws can be the same port
         self.endpoint = endpoint or f"tcp://127.0.0.1:{ports[0]}"
         self.pub = pub or f"tcp://127.0.0.1:{ports[1]}"
         self.events = events or f"tcp://127.0.0.1:{ports[2]}"
-        self.args = [
-            "--name",
-            self.name,
-            "--endpoint",
-            self.endpoint,
-            "--pub",
-            self.pub,
-            "--events",
-            self.events,
-            "--http",
-            http,
-            *args,
-        ]
+        self.extra_args = list(args)
         self.http = http
         self.ready_timeout = ready_timeout
         self.stderr = stderr
@@ -114,7 +117,32 @@ class ServiceProcess:
         self.wrapper = list(wrapper)
         self.proc: subprocess.Popen[bytes] | None = None
 
+    @property
+    def args(self) -> list[str]:
+        """``fxis run``'s arguments."""
+        names = ["--name", self.name, "--endpoint", self.endpoint, "--pub", self.pub, "--events", self.events]
+        return [*names, "--http", self.http, *self.extra_args]
+
     def start(self) -> ServiceProcess:
+        for _ in range(_PORT_DRAWS - 1):
+            try:
+                return self._start_once()
+            except ServiceNotStarted:
+                if not self._drew_a_taken_port():
+                    raise
+        return self._start_once()
+
+    def _drew_a_taken_port(self) -> bool:
+        """Whether a port this launcher drew is taken now (another process bound it first: the
+        service stopped on it); if so, those drawn are drawn again."""
+        drawn = {key: int(getattr(self, key).rsplit(":", 1)[1]) for key in self._drawn}
+        if all(_bindable(port) for port in drawn.values()):
+            return False
+        for key, port in zip(drawn, free_tcp_ports(len(drawn))):
+            setattr(self, key, f"tcp://127.0.0.1:{port}")
+        return True
+
+    def _start_once(self) -> ServiceProcess:
         self.proc = subprocess.Popen(
             [*self.wrapper, self.python, "-m", "fxis_shm.cli", "run", *self.args],
             env=self.env,

@@ -2,12 +2,14 @@
 
 import os
 import signal
+import socket
 import subprocess
 
 import posix_ipc
 import pytest
 
 from fxis_shm import CameraDown
+from fxis_shm.errors import ServiceNotStarted
 from fxis_shm.service.launch import ServiceProcess
 from fxis_shm.shm import naming
 
@@ -145,3 +147,28 @@ def test_config_file_is_used(start_service, tmp_path):
         frames = client.tuple()
     assert set(status) == {"left", "right"} and status["left"]["ring_slots"] == 5
     assert frames["right"].image.shape == (48, 64, 3)
+
+
+def _taken(endpoint: str) -> socket.socket:
+    """The endpoint's port bound by another (this test's) process, as a parallel test might."""
+    holder = socket.socket()
+    holder.bind(("127.0.0.1", int(endpoint.rsplit(":", 1)[1])))
+    holder.listen()
+    return holder
+
+
+def test_a_launcher_whose_drawn_port_was_taken_first_draws_again():
+    svc = ServiceProcess(["--camera", f"a=synthetic:{SMALL}"])
+    taken = svc.endpoint
+    with _taken(taken), svc:
+        assert svc.endpoint != taken
+        with svc.client() as client:
+            assert set(client.status()["cameras"]) == {"a"}
+
+
+def test_a_launcher_given_a_port_in_use_stops_at_once():
+    svc = ServiceProcess(["--camera", f"a=synthetic:{SMALL}"])
+    given = ServiceProcess([], endpoint=svc.endpoint, name=svc.name + "g")
+    with _taken(svc.endpoint), pytest.raises(ServiceNotStarted, match="exited with code 2"):
+        given.start()
+    assert given.endpoint == svc.endpoint
