@@ -298,6 +298,10 @@ def test_ctrl_c_or_sigterm_is_code_130_with_one_line(sig):
             ],
             stderr=subprocess.PIPE,
             text=True,
+            # Ctrl-C as a terminal delivers it: a suite started in the background (`make test &`)
+            # has SIGINT ignored, and a command started so keeps ignoring it (as Python and
+            # POSIX shells do, on purpose), which is not what this asks
+            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL),
         )
         try:
             listener.settimeout(30)
