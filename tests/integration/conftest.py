@@ -1,9 +1,11 @@
 import contextlib
 import subprocess
+import time
 
 import pytest
 
 from fxis_shm import Client
+from fxis_shm.errors import OutOfRange
 from fxis_shm.service.launch import ServiceProcess
 
 from ..conftest import assert_nothing_left, start_service, wait_until  # noqa: F401  (shared fixtures)
@@ -130,3 +132,18 @@ def curve_service(start_service, keys):  # noqa: F811  (the fixture, by name)
         client_keys=client_keys(folder, "alice"),
     )
     return svc, folder
+
+
+def streamed_and_asked(client, sub, camera: str, timeout: float = 10.0):
+    """A frame of ``camera`` from the subscription ``sub``, and the frame ``client`` gets asking
+    for its capture time. A frame streamed later than its ring still holds it (a loaded machine,
+    a small test ring: OUT_OF_RANGE) gives way to the next one, until ``timeout``."""
+    deadline = time.monotonic() + timeout
+    while time.monotonic() < deadline:
+        frame = sub.receive().frames[0]
+        if frame.camera == camera:
+            try:
+                return frame, client.image(camera, at=frame.t_capture, wait="none")
+            except OutOfRange:
+                pass
+    raise AssertionError(f"no frame of {camera} streamed within {timeout} s was still held when asked for")

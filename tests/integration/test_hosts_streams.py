@@ -9,7 +9,7 @@ import pytest
 from fxis_shm import Client, read_stamp
 
 from ..conftest import wait_until
-from .conftest import SMALL
+from .conftest import SMALL, streamed_and_asked
 
 pytestmark = pytest.mark.integration
 
@@ -135,10 +135,9 @@ def test_a_frame_stream_from_another_host_is_in_the_callers_clock(two_hosts):
     client, (a, sa), (b, sb) = two_hosts
     with client.subscribe(timeout=TIMEOUT_S) as sub:
         sub.frames("right")
-        frame = sub.receive().frames[0]
+        frame, asked = streamed_and_asked(client, sub, "right", TIMEOUT_S)
         estimate = client.clocks[sb.endpoint]
         assert abs(frame.t_capture - (frame.service_t_capture - b.clock_offset_ns)) <= estimate.uncertainty_ns + 500_000
-        asked = client.image("right", at=frame.t_capture, wait="none")
         assert asked.frame_id == frame.frame_id
         assert abs(asked.t_capture - frame.t_capture) <= estimate.uncertainty_ns + 500_000
 
