@@ -308,9 +308,11 @@ class Supervisor:
     def _start_all(self) -> None:
         for child in self.cameras:
             child.start()
+        self._write_state()  # on record before any of them is ready: see _restart
         for child in self.cameras:
             child.wait_ready()
         self.coordinator.start()
+        self._write_state()
         self.coordinator.wait_ready()
         for viewer in self.viewers:  # a reader like any client: after the service it reads
             viewer.start()
@@ -382,6 +384,9 @@ class Supervisor:
     def _restart(self, child: Child) -> None:
         child.restarts += 1
         child.start()
+        # The table names the new pid and count before the child is ready: a coordinator answers
+        # status as soon as it is, and must not serve the table of its predecessor.
+        self._write_state()
         try:
             child.wait_ready()
             log.info("%s restarted (restart %d)", child.label, child.restarts)
