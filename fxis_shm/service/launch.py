@@ -167,10 +167,11 @@ class ServiceProcess:
     def client(self, timeout: float = 2.0) -> Client:
         return Client(self.endpoint, timeout=timeout, keys=self.client_keys)
 
-    def children(self) -> dict[str, int]:
+    def children(self, state: str | None = None) -> dict[str, int]:
         """The service's running child processes by the supervisor's name for them (``camera:NAME``,
         ``coordinator``, ``dashboard``, ...) -> pid, from its process table: a forked worker's
-        command line is the supervisor's, so ``ps`` cannot tell them apart by it."""
+        command line is the supervisor's, so ``ps`` cannot tell them apart by it. ``state``: only
+        those the table says are in it (``"running"``: ready; a child is listed from its start on)."""
         try:
             with open(naming.supervisor_state_path(self.name)) as f:
                 processes = json.load(f)["processes"]
@@ -178,7 +179,9 @@ class ServiceProcess:
             return {}
         children = procstat.children(self.proc.pid) if self.proc else []
         running = {child.pid for child in children if child.running}  # not a killed one not yet reaped
-        return {key: p["pid"] for key, p in processes.items() if p.get("pid") in running}
+        return {
+            key: p["pid"] for key, p in processes.items() if p.get("pid") in running and state in (None, p.get("state"))
+        }
 
     def stop(self, timeout: float = 10.0) -> int:
         """SIGTERM, wait, then kill; returns the exit code."""

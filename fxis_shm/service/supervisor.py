@@ -294,9 +294,6 @@ class Supervisor:
             if removed:
                 log.warning("removed %d leftovers of an earlier run: %s", len(removed), " ".join(removed))
             self._start_all()  # a StartError: the command says it, once all is stopped and removed
-            for child in self.children:
-                child.state = "running"
-            self._write_state()
             self._announce()
             return self._watch()
         finally:
@@ -306,17 +303,21 @@ class Supervisor:
             lock.release()
 
     def _start_all(self) -> None:
-        for child in self.cameras:
-            child.start()
-        self._write_state()  # on record before any of them is ready: see _restart
-        for child in self.cameras:
-            child.wait_ready()
-        self.coordinator.start()
-        self._write_state()
-        self.coordinator.wait_ready()
+        self._start(self.cameras)
+        self._start([self.coordinator])  # reads the cameras' rings
         for viewer in self.viewers:  # a reader like any client: after the service it reads
-            viewer.start()
-            viewer.wait_ready()
+            self._start([viewer])
+
+    def _start(self, children: list[Child]) -> None:
+        """Start ``children`` together; each is in the table from its start on (see _restart) and
+        "running" from its handshake on."""
+        for child in children:
+            child.start()
+        self._write_state()
+        for child in children:
+            child.wait_ready()
+            child.state = "running"
+        self._write_state()
 
     def _announce(self) -> None:
         c = self.config

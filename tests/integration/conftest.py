@@ -73,9 +73,10 @@ def two_cameras():
     )
 
 
-def child_pids(svc, role: str) -> list[int]:
-    """Pids of the service's running children of one role ("camera" or "coordinator")."""
-    return [pid for key, pid in svc.children().items() if key.split(":")[0] == role]
+def child_pids(svc, role: str, state: str | None = None) -> list[int]:
+    """Pids of the service's running children of one role ("camera" or "coordinator"); ``state``:
+    only those the supervisor's table says are in it ("running": ready, not just started)."""
+    return [pid for key, pid in svc.children(state).items() if key.split(":")[0] == role]
 
 
 @pytest.fixture

@@ -57,5 +57,5 @@ def test_the_hook_pool_ends_with_the_worker(start_service, spawn, ending):
         what=f"the pool to end: {[line for pid, line in pool.items() if alive(pid)]}",
     )
     if ending == "kill -9 of the worker":  # the supervisor's restart starts a pool of its own
-        wait_until(lambda: child_pids(svc, "camera"), timeout=20, what="camera a restarted")
+        wait_until(lambda: child_pids(svc, "camera", "running"), timeout=20, what="camera a restarted and ready")
         assert not set(pool_of(svc)) & set(pool)
