@@ -63,7 +63,7 @@ def test_the_supervisor_forks_with_no_thread_but_its_main_one(start_service, wai
     assert len(threads_of(svc.proc.pid)) == 1, threads_of(svc.proc.pid)
     old = svc.children()["camera:a"]
     os.kill(old, signal.SIGKILL)
-    wait(lambda: svc.children().get("camera:a") not in (None, old), timeout=20, what="camera a forked again")
+    wait(lambda: svc.children("running").get("camera:a") not in (None, old), timeout=20, what="camera a forked again")
     assert len(threads_of(svc.proc.pid)) == 1, threads_of(svc.proc.pid)
     assert svc.stop() == 0  # and SIGTERM still stops it, through the wakeup pipe
 
@@ -72,7 +72,7 @@ def test_a_killed_forked_worker_is_forked_again(start_service, wait):
     svc = start_service(*CAMERAS)
     old = svc.children()["camera:a"]
     os.kill(old, signal.SIGKILL)
-    wait(lambda: svc.children().get("camera:a") not in (None, old), timeout=20, what="camera a restarted")
+    wait(lambda: svc.children("running").get("camera:a") not in (None, old), timeout=20, what="camera a restarted")
     new = procstat.read(svc.children()["camera:a"])
     assert (new.name, new.ppid) == ("fxis camera", svc.proc.pid)
     with svc.client() as client:
