@@ -118,7 +118,7 @@ PURE_UNIT_TIMEOUT := 900
 test: setup lint docs mutation-changed $(ROS_VENVS) .venv-lerobot/.installed
 	$(BIN)/python -c "import fxis_shm, os, sys; sys.exit(not (fxis_shm.compiled or os.environ.get('FXIS_PURE_PYTHON') == '1'))"
 	$(BIN)/python -m compileall -q fxis_shm workers tests bench examples > /dev/null
-	@mkdir -p .pytest_cache && rm -f $(RERUN_LOG)
+	@mkdir -p .pytest_cache && rm -f $(RERUN_LOG) $(RERUN_LOG).details
 	( export FXIS_PURE_PYTHON=1; PURE="$(BIN)/python -m pytest -q -p no:xdist -o cache_dir=.pytest_cache/pure"; \
 	  $$PURE $(PURE_INTEGRATION); services=$$?; nice -n 19 $$PURE --timeout $(PURE_UNIT_TIMEOUT) tests/unit; exit $$((services || $$?)) \
 	) > $(PURE_LOG) 2>&1 & pure=$$!; trap 'kill $$pure 2>/dev/null' INT TERM; \
@@ -126,7 +126,7 @@ test: setup lint docs mutation-changed $(ROS_VENVS) .venv-lerobot/.installed
 	wait $$pure; pure_code=$$?; \
 	echo "== the pure-Python pass, beside the main one (FXIS_PURE_PYTHON=1; exit code $$pure_code):"; cat $(PURE_LOG); \
 	echo "== the real-time tier, alone:"; $(BIN)/python -m pytest $(REALTIME); realtime=$$?; \
-	echo "== reruns ($(RERUN_LOG)): $$(cat $(RERUN_LOG) 2>/dev/null | wc -l)"; cat $(RERUN_LOG) 2>/dev/null; \
+	echo "== reruns ($(RERUN_LOG), whole reports in $(RERUN_LOG).details): $$(cat $(RERUN_LOG) 2>/dev/null | wc -l)"; cat $(RERUN_LOG) 2>/dev/null; \
 	test $$main -eq 0 -a $$pure_code -eq 0 -a $$realtime -eq 0
 	scripts/test-aarch64.sh --quick -q tests/unit/test_ordering.py
 	scripts/build-wheels.sh .pytest_cache/wheels
