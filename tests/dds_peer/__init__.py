@@ -194,6 +194,20 @@ class Peer:
         self.wait_for(lambda _: len(self.samples(topic, profile)) >= count, timeout, f"{count} samples of {topic}")
         return self.samples(topic, profile)
 
+    def first_sample_of_resent(
+        self, topic: str, write: Callable[[], object], *, timeout: float = DEADLINE, every: float = 0.2
+    ) -> Event:
+        """The first sample of ``topic``, calling ``write()`` again every ``every`` s until one came:
+        a best-effort reader gets nothing resent, and on a loaded machine one write can be lost."""
+        deadline = time.monotonic() + timeout
+        while True:
+            write()
+            try:
+                return self.wait_for_samples(topic, timeout=min(every, deadline - time.monotonic()))[0]
+            except AssertionError:
+                if time.monotonic() >= deadline:
+                    raise
+
     def wait_matched(
         self, topic: str, count: int = 1, *, profile: str | None = None, timeout: float = DEADLINE
     ) -> Event:
