@@ -155,14 +155,27 @@ class ServiceProcess:
         with self.client(timeout=0.5) as client:
             while True:
                 if self.proc.poll() is not None:
-                    raise ServiceNotStarted(f"fxis run exited with code {self.proc.returncode} during start-up")
+                    code = self.proc.returncode
+                    raise ServiceNotStarted(f"fxis run exited with code {code} during start-up{self._said()}")
                 try:
                     client.status()
                     return self
                 except RequestTimeout:
                     if time.monotonic() > deadline:
                         self.stop()
-                        raise ServiceNotStarted(f"service did not answer within {self.ready_timeout} s") from None
+                        said = self._said()
+                        raise ServiceNotStarted(f"service did not answer within {self.ready_timeout} s{said}") from None
+
+    def _said(self) -> str:
+        """The end of what the service wrote to ``stderr``, when that is a file: the why of a failed start."""
+        log = self.stderr
+        name = getattr(log, "name", None)
+        if log is None or isinstance(log, int) or not isinstance(name, str) or not os.path.isfile(name):
+            return ""
+        log.flush()
+        with open(name, errors="replace") as f:
+            said = f.read()[-3000:].strip()
+        return f"; it said:\n{said}" if said else ""
 
     def client(self, timeout: float = 2.0) -> Client:
         return Client(self.endpoint, timeout=timeout, keys=self.client_keys)

@@ -1,5 +1,6 @@
 import contextlib
 import subprocess
+import tempfile
 import time
 
 import pytest
@@ -21,14 +22,18 @@ def module_services(*arg_lists: list[str], **options):
     fixture): started once rather than once a test, each with ``options`` (ServiceProcess's).
     Each is stopped and checked for leftovers afterwards, also when a later one failed to start."""
     started: list[ServiceProcess] = []
+    logs = []  # what each said: a failed start quotes it
     try:
         for args in arg_lists:
-            started.append(ServiceProcess(args, stderr=subprocess.DEVNULL, **options))
+            logs.append(tempfile.NamedTemporaryFile("w", prefix="fxis-service-", suffix=".log"))
+            started.append(ServiceProcess(args, stderr=logs[-1], **options))
             started[-1].start()
         yield started
     finally:
         for svc in started:
             svc.stop()
+        for log in logs:
+            log.close()
     for svc in started:
         assert_nothing_left(svc.name)
 
