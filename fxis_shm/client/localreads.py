@@ -84,7 +84,8 @@ class LocalReads:
         self.wire_clock = timebase.WIRE_NAMES[self.clock]
         self.engine = RequestEngine(self.cameras, status.get("settings"))
         self.buffers = BufferPool(max_pooled_bytes)
-        self._requests: dict[tuple[object, ...], protocol.Request] = {}  # validated requests by form (protocol.request_of)
+        # validated requests by form (protocol.request_of)
+        self._requests: dict[tuple[object, ...], protocol.Request] = {}
         self.torn = 0  # copies found torn (and made again)
 
     def fast_reads(self) -> FastReads | None:
