@@ -86,7 +86,7 @@ class FrameMeta(_FrameMetaBase, total=False):
     seq: int
     # the client's own additions when it moves the times into the caller's clock
     service_t_capture: int
-    service_t_available: int
+    service_t_available: int | None  # None: a frame without t_available (Frame.t_available)
     service_t_stored: int
     service_t_target: int
 
