@@ -10,15 +10,19 @@ from __future__ import annotations
 
 from abc import abstractmethod
 from collections.abc import Callable
-from typing import Any, Literal, overload
+from typing import TYPE_CHECKING, Any, Literal, overload
 
 from fxis_shm.client import arguments, snapshot as snapshots
 from fxis_shm.client.framerequests import FrameRequests
 from fxis_shm.client.frames import Frame, FrameTuple, FrameView, sequence_of
+from fxis_shm.client.requestkeywords import SequenceKeywords
 from fxis_shm.client.requestoptions import RequestOptions
 from fxis_shm.formats.videochoice import split_encoding
 from fxis_shm.formats.videotracks import VideoSettings
 from fxis_shm.wire import encoding as image_encoding
+
+if TYPE_CHECKING:  # (typing's own from Python 3.11)
+    from typing_extensions import Unpack
 
 # The operations written once, here: ClientApi refuses a subclass that redefines one.
 SHARED_OPERATIONS = ("image", "tuple", "latest", "sequence", "snapshot", "subscribe", "frame_times")
@@ -41,107 +45,27 @@ class ClientApi(FrameRequests):
 
     @overload
     def sequence(
-        self,
-        kind: str,
-        *,
-        camera: str,
-        cameras: list[str] | None = None,
-        count: int | None = None,
-        direction: str = "before",
-        interval_ms: float | None = None,
-        start: int | None = None,
-        end: int | None = None,
-        at: int | None = None,
-        sync: str | None = None,
-        timeout: float | None = None,
-        copy: Literal[True] = True,
-        encoding: str | None = None,
-        quality: int | None = None,
-        timeout_ms: float | None = None,
+        self, kind: str, *, camera: str, copy: Literal[True] = True, **keywords: Unpack[SequenceKeywords]
     ) -> list[Frame]: ...
 
     @overload
     def sequence(
-        self,
-        kind: str,
-        *,
-        camera: str,
-        cameras: list[str] | None = None,
-        count: int | None = None,
-        direction: str = "before",
-        interval_ms: float | None = None,
-        start: int | None = None,
-        end: int | None = None,
-        at: int | None = None,
-        sync: str | None = None,
-        timeout: float | None = None,
-        copy: Literal[False],
-        encoding: str | None = None,
-        quality: int | None = None,
-        timeout_ms: float | None = None,
+        self, kind: str, *, camera: str, copy: Literal[False], **keywords: Unpack[SequenceKeywords]
     ) -> list[FrameView]: ...
 
     @overload
     def sequence(
-        self,
-        kind: str,
-        *,
-        camera: None = None,
-        cameras: list[str] | None = None,
-        count: int | None = None,
-        direction: str = "before",
-        interval_ms: float | None = None,
-        start: int | None = None,
-        end: int | None = None,
-        at: int | None = None,
-        sync: str | None = None,
-        timeout: float | None = None,
-        copy: Literal[True] = True,
-        encoding: str | None = None,
-        quality: int | None = None,
-        timeout_ms: float | None = None,
+        self, kind: str, *, camera: None = None, copy: Literal[True] = True, **keywords: Unpack[SequenceKeywords]
     ) -> list[FrameTuple[Frame]]: ...
 
     @overload
     def sequence(
-        self,
-        kind: str,
-        *,
-        camera: None = None,
-        cameras: list[str] | None = None,
-        count: int | None = None,
-        direction: str = "before",
-        interval_ms: float | None = None,
-        start: int | None = None,
-        end: int | None = None,
-        at: int | None = None,
-        sync: str | None = None,
-        timeout: float | None = None,
-        copy: Literal[False],
-        encoding: str | None = None,
-        quality: int | None = None,
-        timeout_ms: float | None = None,
+        self, kind: str, *, camera: None = None, copy: Literal[False], **keywords: Unpack[SequenceKeywords]
     ) -> list[FrameTuple[FrameView]]: ...
 
     @overload
     def sequence(
-        self,
-        kind: str,
-        *,
-        camera: str | None = None,
-        cameras: list[str] | None = None,
-        count: int | None = None,
-        direction: str = "before",
-        interval_ms: float | None = None,
-        start: int | None = None,
-        end: int | None = None,
-        at: int | None = None,
-        sync: str | None = None,
-        timeout: float | None = None,
-        copy: bool = True,
-        encoding: str | None = None,
-        quality: int | None = None,
-        timeout_ms: float | None = None,
+        self, kind: str, *, camera: str | None = None, copy: bool = True, **keywords: Unpack[SequenceKeywords]
     ) -> list[Frame] | list[FrameTuple[Frame]]: ...
 
     def sequence(

@@ -13,8 +13,12 @@ from typing import TYPE_CHECKING, Any, Literal, TypeVar, overload
 from fxis_shm.client import arguments
 from fxis_shm.client.fastreads import FastReads
 from fxis_shm.client.frames import Answer, Frame, FrameTuple, FrameView, frames_of, tuple_of
+from fxis_shm.client.requestkeywords import ImageKeywords, LatestKeywords, TupleKeywords
 from fxis_shm.client.requestoptions import RequestOptions
 from fxis_shm.client.serviceapi import ServiceApi
+
+if TYPE_CHECKING:  # (typing's own from Python 3.11)
+    from typing_extensions import Unpack
 
 _Answered = TypeVar("_Answered")  # what the compiled read answered (a Frame or a FrameTuple)
 
@@ -33,49 +37,13 @@ class FrameRequests(ServiceApi):
 
     # ``copy=False`` answers a FrameView (its image a view of the ring slot: check still_valid())
     @overload
-    def image(
-        self,
-        camera: str,
-        *,
-        at: int | None = None,
-        wait: str | None = None,
-        timeout: float | None = None,
-        copy: Literal[True] = True,
-        encoding: str | None = None,
-        quality: int | None = None,
-        timeout_ms: float | None = None,
-        capture: bool = False,
-    ) -> Frame: ...
+    def image(self, camera: str, *, copy: Literal[True] = True, **keywords: Unpack[ImageKeywords]) -> Frame: ...
 
     @overload
-    def image(
-        self,
-        camera: str,
-        *,
-        at: int | None = None,
-        wait: str | None = None,
-        timeout: float | None = None,
-        copy: Literal[False],
-        encoding: str | None = None,
-        quality: int | None = None,
-        timeout_ms: float | None = None,
-        capture: bool = False,
-    ) -> FrameView: ...
+    def image(self, camera: str, *, copy: Literal[False], **keywords: Unpack[ImageKeywords]) -> FrameView: ...
 
     @overload
-    def image(
-        self,
-        camera: str,
-        *,
-        at: int | None = None,
-        wait: str | None = None,
-        timeout: float | None = None,
-        copy: bool = True,
-        encoding: str | None = None,
-        quality: int | None = None,
-        timeout_ms: float | None = None,
-        capture: bool = False,
-    ) -> Frame: ...
+    def image(self, camera: str, *, copy: bool = True, **keywords: Unpack[ImageKeywords]) -> Frame: ...
 
     def image(
         self,
@@ -153,56 +121,17 @@ class FrameRequests(ServiceApi):
 
     @overload
     def tuple(
-        self,
-        cameras: list[str] | None = None,
-        *,
-        at: int | None = None,
-        sync: str | None = None,
-        wait: str | None = None,
-        max_skew_ms: float | None = None,
-        timeout: float | None = None,
-        partial: bool = False,
-        copy: Literal[True] = True,
-        encoding: str | None = None,
-        quality: int | None = None,
-        timeout_ms: float | None = None,
-        capture: bool = False,
+        self, cameras: list[str] | None = None, *, copy: Literal[True] = True, **keywords: Unpack[TupleKeywords]
     ) -> FrameTuple[Frame]: ...
 
     @overload
     def tuple(
-        self,
-        cameras: list[str] | None = None,
-        *,
-        at: int | None = None,
-        sync: str | None = None,
-        wait: str | None = None,
-        max_skew_ms: float | None = None,
-        timeout: float | None = None,
-        partial: bool = False,
-        copy: Literal[False],
-        encoding: str | None = None,
-        quality: int | None = None,
-        timeout_ms: float | None = None,
-        capture: bool = False,
+        self, cameras: list[str] | None = None, *, copy: Literal[False], **keywords: Unpack[TupleKeywords]
     ) -> FrameTuple[FrameView]: ...
 
     @overload
     def tuple(
-        self,
-        cameras: list[str] | None = None,
-        *,
-        at: int | None = None,
-        sync: str | None = None,
-        wait: str | None = None,
-        max_skew_ms: float | None = None,
-        timeout: float | None = None,
-        partial: bool = False,
-        copy: bool = True,
-        encoding: str | None = None,
-        quality: int | None = None,
-        timeout_ms: float | None = None,
-        capture: bool = False,
+        self, cameras: list[str] | None = None, *, copy: bool = True, **keywords: Unpack[TupleKeywords]
     ) -> FrameTuple[Frame]: ...
 
     def tuple(
@@ -275,32 +204,17 @@ class FrameRequests(ServiceApi):
 
     @overload
     def latest(
-        self,
-        cameras: list[str] | None = None,
-        *,
-        copy: Literal[True] = True,
-        encoding: str | None = None,
-        quality: int | None = None,
+        self, cameras: list[str] | None = None, *, copy: Literal[True] = True, **keywords: Unpack[LatestKeywords]
     ) -> FrameTuple[Frame]: ...
 
     @overload
     def latest(
-        self,
-        cameras: list[str] | None = None,
-        *,
-        copy: Literal[False],
-        encoding: str | None = None,
-        quality: int | None = None,
+        self, cameras: list[str] | None = None, *, copy: Literal[False], **keywords: Unpack[LatestKeywords]
     ) -> FrameTuple[FrameView]: ...
 
     @overload
     def latest(
-        self,
-        cameras: list[str] | None = None,
-        *,
-        copy: bool = True,
-        encoding: str | None = None,
-        quality: int | None = None,
+        self, cameras: list[str] | None = None, *, copy: bool = True, **keywords: Unpack[LatestKeywords]
     ) -> FrameTuple[Frame]: ...
 
     def latest(

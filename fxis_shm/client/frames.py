@@ -10,7 +10,7 @@ from __future__ import annotations
 
 from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any, Generic, Literal, NoReturn, cast, overload
+from typing import TYPE_CHECKING, Any, Generic, Literal, NoReturn, cast
 
 from numpy.typing import NDArray
 
@@ -246,28 +246,11 @@ class FrameTuple(Mapping[str, AnyFrame], Generic[AnyFrame]):
 Images = list[NDArray[Any]]
 
 
-@overload
-def frames_of(
-    header: ReplyHeader, images: Images, still_valid: Validity | None = None, view: Literal[False] = False
-) -> list[Frame]: ...
-@overload
-def frames_of(
-    header: ReplyHeader, images: Images, still_valid: Validity | None, view: Literal[True]
-) -> list[FrameView]: ...
-@overload
-def frames_of(
-    header: ReplyHeader, images: Images, still_valid: Validity | None = None, *, view: Literal[True]
-) -> list[FrameView]: ...
-@overload
 def frames_of(
     header: ReplyHeader, images: Images, still_valid: Validity | None = None, view: bool = False
-) -> list[Frame]: ...
-
-
-def frames_of(
-    header: ReplyHeader, images: Images, still_valid: Validity | None = None, view: bool = False
-) -> list[Frame] | list[FrameView]:
-    """The frames of a reply: FrameViews if asked for with ``copy=False`` (``view``)."""
+) -> list[Frame]:
+    """The frames of a reply: FrameViews if asked for with ``copy=False`` (``view``; the client's
+    operations type them apart, fxis_shm.client.framerequests)."""
     timing: TimingRecord = header.get("timing") or {}
     path = header.get("path", NETWORK)
     make = FrameView if view else Frame
@@ -329,20 +312,6 @@ def _points_to_caller(points: dict[str, int], clock: ClockEstimate) -> dict[str,
     return {c: clock.to_caller(t) for c, t in points.items()}
 
 
-@overload
-def tuple_of(
-    header: ReplyHeader, images: Images, still_valid: Validity | None = None, view: Literal[False] = False
-) -> FrameTuple[Frame]: ...
-@overload
-def tuple_of(
-    header: ReplyHeader, images: Images, still_valid: Validity | None = None, *, view: Literal[True]
-) -> FrameTuple[FrameView]: ...
-@overload
-def tuple_of(
-    header: ReplyHeader, images: Images, still_valid: Validity | None = None, view: bool = False
-) -> FrameTuple[Frame]: ...
-
-
 def tuple_of(
     header: ReplyHeader, images: Images, still_valid: Validity | None = None, view: bool = False
 ) -> FrameTuple[Frame]:
@@ -360,50 +329,9 @@ def tuple_of(
     )
 
 
-@overload
-def sequence_of(
-    header: ReplyHeader,
-    images: Images,
-    still_valid: Validity | None = None,
-    *,
-    single: Literal[True],
-    view: Literal[False] = False,
-) -> list[Frame]: ...
-@overload
-def sequence_of(
-    header: ReplyHeader,
-    images: Images,
-    still_valid: Validity | None = None,
-    *,
-    single: Literal[True],
-    view: Literal[True],
-) -> list[FrameView]: ...
-@overload
-def sequence_of(
-    header: ReplyHeader,
-    images: Images,
-    still_valid: Validity | None = None,
-    single: Literal[False] = False,
-    view: Literal[False] = False,
-) -> list[FrameTuple[Frame]]: ...
-@overload
-def sequence_of(
-    header: ReplyHeader,
-    images: Images,
-    still_valid: Validity | None = None,
-    single: Literal[False] = False,
-    *,
-    view: Literal[True],
-) -> list[FrameTuple[FrameView]]: ...
-@overload
 def sequence_of(
     header: ReplyHeader, images: Images, still_valid: Validity | None = None, single: bool = False, view: bool = False
-) -> list[Frame] | list[FrameTuple[Frame]]: ...
-
-
-def sequence_of(
-    header: ReplyHeader, images: Images, still_valid: Validity | None = None, single: bool = False, view: bool = False
-) -> Sequence[Frame] | Sequence[FrameTuple[Frame]]:
+) -> list[Frame] | list[FrameTuple[Frame]]:
     frames = frames_of(header, images, still_valid, view)
     groups = header.get("groups", [])
     timing: TimingRecord = header.get("timing", {})
