@@ -1,6 +1,7 @@
 """What every client answers, declared once: ``Client(endpoint)`` (fxis_shm.client.single) and
 ``Client([a, b])`` (fxis_shm.client.multiclient) take their public surface from ``ClientApi``,
-signatures and docs alike. The operations that take parameters are written here and may not be
+signatures and docs alike. The operations that take parameters are written here (those for the
+frames of one moment in its base, fxis_shm.client.framerequests) and may not be
 redefined (a subclass that tries is refused when its class is made), so a parameter added for
 one kind of client is there for the other; each kind fills in how a request is answered
 (``_answer``) and what it has of its own (status, clocks, streams)."""
@@ -9,30 +10,30 @@ from __future__ import annotations
 
 from abc import abstractmethod
 from collections.abc import Callable
-from typing import Any, Literal, overload
+from typing import TYPE_CHECKING, Any, Literal, overload
 
 from fxis_shm.client import arguments, snapshot as snapshots
-from fxis_shm.client.fastreads import FastReads
-from fxis_shm.client.frames import Frame, FrameTuple, FrameView, frames_of, sequence_of, tuple_of
+from fxis_shm.client.framerequests import FrameRequests
+from fxis_shm.client.frames import Frame, FrameTuple, FrameView, sequence_of
+from fxis_shm.client.requestkeywords import SequenceKeywords
 from fxis_shm.client.requestoptions import RequestOptions
-from fxis_shm.client.serviceapi import ServiceApi
 from fxis_shm.formats.videochoice import split_encoding
 from fxis_shm.formats.videotracks import VideoSettings
 from fxis_shm.wire import encoding as image_encoding
+
+if TYPE_CHECKING:  # (typing's own from Python 3.11)
+    from typing_extensions import Unpack
 
 # The operations written once, here: ClientApi refuses a subclass that redefines one.
 SHARED_OPERATIONS = ("image", "tuple", "latest", "sequence", "snapshot", "subscribe", "frame_times")
 
 
-class ClientApi(ServiceApi):
-    """The methods every client has; every time given or returned is in the caller's clock."""
+class ClientApi(FrameRequests):
+    """The methods every client has (the frame requests are FrameRequests'); every time given or
+    returned is in the caller's clock."""
 
     clock: Callable[[], int]
     _clock_name: str | None  # the caller's clock by name (a snapshot's metadata says it), None: a callable
-    # A compiled read of the common requests, where a client has one (a single service's rings
-    # read here, fxis_shm.client.fastreads): tried first, ``_compiled`` gives its answer or None.
-    _fast: FastReads | None = None
-    _compiled: Callable[[Any], Any]
 
     def __init_subclass__(cls, **kwargs: Any) -> None:
         super().__init_subclass__(**kwargs)
@@ -40,216 +41,32 @@ class ClientApi(ServiceApi):
         if redefined:
             raise TypeError(f"{cls.__name__} redefines {redefined}: they are ClientApi's, the same for every client")
 
-    # ---- operations ----
-
-    # ``copy=False`` answers a FrameView (its image a view of the ring slot: check still_valid())
-    @overload
-    def image(
-        self,
-        camera: str,
-        *,
-        at: int | None = None,
-        wait: str | None = None,
-        timeout: float | None = None,
-        copy: Literal[True] = True,
-        encoding: str | None = None,
-        quality: int | None = None,
-        timeout_ms: float | None = None,
-        capture: bool = False,
-    ) -> Frame: ...
+    # ---- operations over a span of time (those of one moment are FrameRequests') ----
 
     @overload
-    def image(
-        self,
-        camera: str,
-        *,
-        at: int | None = None,
-        wait: str | None = None,
-        timeout: float | None = None,
-        copy: Literal[False],
-        encoding: str | None = None,
-        quality: int | None = None,
-        timeout_ms: float | None = None,
-        capture: bool = False,
-    ) -> FrameView: ...
+    def sequence(
+        self, kind: str, *, camera: str, copy: Literal[True] = True, **keywords: Unpack[SequenceKeywords]
+    ) -> list[Frame]: ...
 
-    def image(
-        self,
-        camera: str,
-        *,
-        at: int | None = None,
-        wait: str | None = None,
-        timeout: float | None = None,
-        copy: bool = True,
-        encoding: str | None = None,
-        quality: int | None = None,
-        timeout_ms: float | None = None,
-        capture: bool = False,
-    ) -> Frame:
-        """The frame of ``camera`` nearest to ``at``.
+    @overload
+    def sequence(
+        self, kind: str, *, camera: str, copy: Literal[False], **keywords: Unpack[SequenceKeywords]
+    ) -> list[FrameView]: ...
 
-        Parameters
-        ----------
-        camera
-            The camera's name.
-        at
-            t*, int ns of the caller's clock; default: the moment of this call.
-        wait
-            ``"auto"`` (wait only when a closer frame is about to arrive), ``"next"`` (always a
-            new frame) or ``"none"``; default: the service's setting.
-        timeout
-            Seconds the service may wait for frames (default: its setting).
-        copy
-            False: a FrameView, whose image (local path) is a read-only view of the ring slot,
-            with no copy at all; check ``frame.still_valid()`` after using it.
-        encoding, quality
-            ``"raw"``, ``"jpeg"`` or ``"png"`` and the JPEG quality, for this request only.
-        timeout_ms
-            The same as ``timeout``, in ms (deprecated: give ``timeout``).
-        capture
-            True with ``at`` in the future: a camera that can be triggered captures at ``at``
-            (its frame says ``capture == "scheduled"``, ``t_target`` and ``residual_ns``); one
-            that cannot answers with its frame nearest ``at`` (``"free"``).
+    @overload
+    def sequence(
+        self, kind: str, *, camera: None = None, copy: Literal[True] = True, **keywords: Unpack[SequenceKeywords]
+    ) -> list[FrameTuple[Frame]]: ...
 
-        Returns
-        -------
-        Frame
-            The image as a NumPy array with its metadata, times in the caller's clock (a
-            FrameView with ``copy=False``).
+    @overload
+    def sequence(
+        self, kind: str, *, camera: None = None, copy: Literal[False], **keywords: Unpack[SequenceKeywords]
+    ) -> list[FrameTuple[FrameView]]: ...
 
-        Raises
-        ------
-        InvalidArgument
-            An argument out of its range or of the wrong type.
-        RequestTimeout
-            No reply within the client's ``timeout`` (the client stays usable).
-        UnknownCamera
-            A camera the service does not have.
-        CameraDown
-            A camera whose worker is down (see ``partial`` where offered).
-        FrameTimeout
-            The frames waited for did not arrive within ``timeout``.
-        ServiceError
-            Any other refusal, with its ``code`` (``OUT_OF_RANGE``: history the rings no longer
-            hold, or a t* too far ahead; ``BUSY``: too many waiting requests).
-        Overrun
-            The ring came round during every copy: ask for newer frames or keep more history.
-        """
-        options = RequestOptions.given(timeout, copy, encoding, quality, timeout_ms)
-        camera = arguments.camera_name(camera)
-        if at is not None or timeout is not None:
-            arguments.check_numbers(timeout, at=at)
-        if self._fast is not None and not capture and options.plain:
-            frame = self._compiled(self._fast.image(camera, at, wait, copy))
-            if frame is not None:
-                return frame
-        fields = {"camera": camera, "at": at, "wait": wait, "capture": capture or None}
-        arguments.check_request("image", **fields)
-        return frames_of(*self._answer("image", options, **fields), view=not copy)[0]
-
-    def tuple(
-        self,
-        cameras: list[str] | None = None,
-        *,
-        at: int | None = None,
-        sync: str | None = None,
-        wait: str | None = None,
-        max_skew_ms: float | None = None,
-        timeout: float | None = None,
-        partial: bool = False,
-        copy: bool = True,
-        encoding: str | None = None,
-        quality: int | None = None,
-        timeout_ms: float | None = None,
-        capture: bool = False,
-    ) -> FrameTuple:
-        """One frame per camera, nearest to ``at`` and to each other.
-
-        Parameters
-        ----------
-        cameras
-            The cameras' names; default: every camera of the service (or services).
-        at
-            t*, int ns of the caller's clock; default: the moment of this call.
-        sync
-            ``"joint"`` (the frames chosen together for the least skew) or ``"independent"``
-            (each camera's nearest frame, the paper's search); default: the service's setting.
-        wait
-            As for ``image``.
-        max_skew_ms
-            Refuse a tuple whose skew (max minus min capture time) is larger (SkewExceeded,
-            naming the best skew there was).
-        timeout
-            Seconds the service may wait for frames (default: its setting).
-        partial
-            True: cameras that are down are left out (``.missing`` names them) instead of
-            failing the request with CameraDown.
-        copy, encoding, quality, timeout_ms
-            As for ``image``.
-        capture
-            True with ``at`` in the future: every camera that can be triggered captures at
-            ``at`` (as for ``image``), on every service of the client.
-
-        Returns
-        -------
-        FrameTuple
-            Camera name to Frame, with ``skew_ns``, ``t_request`` and ``timing``.
-
-        Raises
-        ------
-        InvalidArgument, RequestTimeout, UnknownCamera, CameraDown, FrameTimeout, ServiceError, Overrun
-            As for ``image``.
-        SkewExceeded
-            With ``max_skew_ms``: no tuple near t* was that well synchronized.
-        """
-        options = RequestOptions.given(timeout, copy, encoding, quality, timeout_ms)
-        cameras = arguments.camera_names(cameras)
-        if at is not None or timeout is not None or max_skew_ms is not None:
-            arguments.check_numbers(timeout, at=at, max_skew_ms=max_skew_ms)
-        if self._fast is not None and not capture and options.plain and max_skew_ms is None:
-            tuple_ = self._compiled(self._fast.tuple(cameras, at, sync, wait, copy))
-            if tuple_ is not None:
-                return tuple_
-        fields = dict(cameras=cameras, at=at, sync=sync, wait=wait, max_skew_ms=max_skew_ms)
-        fields.update(partial=partial or None, capture=capture or None)
-        arguments.check_request("tuple", **fields)
-        return tuple_of(*self._answer("tuple", options, **fields), view=not copy)
-
-    def latest(
-        self,
-        cameras: list[str] | None = None,
-        *,
-        copy: bool = True,
-        encoding: str | None = None,
-        quality: int | None = None,
-    ) -> FrameTuple:
-        """The newest stored frame of each camera, without waiting.
-
-        Parameters
-        ----------
-        cameras
-            The cameras' names; default: every camera.
-        copy, encoding, quality
-            As for ``image``.
-
-        Returns
-        -------
-        FrameTuple
-            Camera name to its newest Frame (not chosen together: the skew is whatever it is).
-
-        Raises
-        ------
-        RequestTimeout, UnknownCamera, CameraDown, ServiceError
-            As for ``image``; ``NO_FRAMES`` (a ServiceError) while a camera has stored none.
-        """
-        options = RequestOptions(None, copy, encoding, quality)
-        cameras = arguments.camera_names(cameras)
-        if self._fast is not None and options.plain:
-            tuple_ = self._compiled(self._fast.latest(cameras, copy))
-            if tuple_ is not None:
-                return tuple_
-        arguments.check_request("latest", cameras=cameras)
-        return tuple_of(*self._answer("latest", options, cameras=cameras), view=not copy)
+    @overload
+    def sequence(
+        self, kind: str, *, camera: str | None = None, copy: bool = True, **keywords: Unpack[SequenceKeywords]
+    ) -> list[Frame] | list[FrameTuple[Frame]]: ...
 
     def sequence(
         self,
@@ -269,7 +86,7 @@ class ClientApi(ServiceApi):
         encoding: str | None = None,
         quality: int | None = None,
         timeout_ms: float | None = None,
-    ) -> list:
+    ) -> list[Frame] | list[FrameView] | list[FrameTuple[Frame]] | list[FrameTuple[FrameView]]:
         """Several frames of one camera, or several tuples.
 
         Parameters
@@ -304,7 +121,7 @@ class ClientApi(ServiceApi):
         options = RequestOptions.given(timeout, copy, encoding, quality, timeout_ms)
         cameras = arguments.camera_names(cameras)
         arguments.check_numbers(timeout, at=at, start=start, end=end, count=count, interval_ms=interval_ms)
-        fields = dict(camera=camera, cameras=cameras, kind=kind, count=count, direction=direction)
+        fields: dict[str, object] = dict(camera=camera, cameras=cameras, kind=kind, count=count, direction=direction)
         fields.update(interval_ms=interval_ms, start=start, end=end, at=at, sync=sync)
         arguments.check_request("sequence", **fields)
         header, images, check = self._answer("sequence", options, **fields)
@@ -326,7 +143,7 @@ class ClientApi(ServiceApi):
         crf: int | None = None,
         preset: str | None = None,
         gop_s: float | None = None,
-    ) -> dict:
+    ) -> dict[str, Any]:
         """Every frame captured in [at - before, at + after] into a rosbag2/MCAP bag.
 
         Blocks until ``at + after`` has passed: the window's past comes from the rings at once,
@@ -397,7 +214,7 @@ class ClientApi(ServiceApi):
         arguments.check_numbers(timeout)
         return self._subscriber(timeout, arguments.check_queue(queue))
 
-    def frame_times(self, cameras: list[str] | None = None) -> dict:
+    def frame_times(self, cameras: list[str] | None = None) -> dict[str, Any]:
         """Each camera's frames without pixels (the ``frames`` op): liveness, period and a row
         per valid frame with the fields named in ``columns``, times in the clock of the camera's
         service.
@@ -428,10 +245,6 @@ class ClientApi(ServiceApi):
     # ---- what each kind of client fills in ----
 
     @abstractmethod
-    def _answer(self, op: str, options: RequestOptions, **fields: Any) -> tuple[dict, list, Callable | None]:
-        """A frame request's reply header (times in the caller's clock), images and validity check."""
-
-    @abstractmethod
     def _owners(self, cameras: list[str] | None) -> dict[str, Any]:
         """The single-service client that serves each of ``cameras`` (default: all)."""
 
@@ -439,4 +252,4 @@ class ClientApi(ServiceApi):
     def _subscriber(self, timeout: float, queue: int) -> Any: ...
 
     @abstractmethod
-    def _frame_times(self, cameras: list[str] | None) -> dict: ...
+    def _frame_times(self, cameras: list[str] | None) -> dict[str, Any]: ...

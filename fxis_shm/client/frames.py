@@ -8,21 +8,41 @@ there and keeps the service's own as ``service_t_*``.
 
 from __future__ import annotations
 
-from collections.abc import Callable, Iterator, Mapping
+from collections.abc import Callable, Iterable, Iterator, Mapping, Sequence
 from dataclasses import dataclass, field
+from typing import TYPE_CHECKING, Any, Generic, Literal, NoReturn, cast
 
-import numpy as np
+from numpy.typing import NDArray
 
 from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.errors import FxisError, ProtocolError
 from fxis_shm.shm.bufferpool import release as release_buffer
+from fxis_shm.wire.headers import ReplyHeader, TimingRecord
+
+if TYPE_CHECKING:  # a TypeVar's default (PEP 696) is typing_extensions' before Python 3.13
+    from typing_extensions import TypeVar
+else:
+    from typing import TypeVar
 
 LOCAL, NETWORK = "local", "network"
-_TIMES = ("t_capture", "t_stored", "t_available", "t_target")
+_Time = Literal["t_capture", "t_stored", "t_available", "t_target"]
+_ServiceTime = Literal["service_t_capture", "service_t_stored", "service_t_available", "service_t_target"]
+# a frame's times, each with where the service's own value is kept once moved to the caller's clock
+_TIMES: tuple[tuple[_Time, _ServiceTime], ...] = (
+    ("t_capture", "service_t_capture"),
+    ("t_stored", "service_t_stored"),
+    ("t_available", "service_t_available"),
+    ("t_target", "service_t_target"),
+)
 # how a frame came to be captured (Frame.capture): on its own (free-running, or triggered by a
 # request for "now"), triggered for a moment a caller named, on the service's lockstep grid, or
 # for a named moment and captured further from it than the camera's capture_tolerance_ms
 FREE, SCHEDULED, LOCKSTEP, LATE = "free", "scheduled", "lockstep", "late"
+
+Validity = Callable[[], bool]  # a zero-copy view's check: False once its slot was overwritten
+# A frame request's reply as a path of the client answers it: the header (times in the caller's
+# clock, its ``path`` set), the images, and the validity check of views (None: copies)
+Answer = tuple[ReplyHeader, list[NDArray[Any]], Validity | None]
 
 
 @dataclass(slots=True)
@@ -60,13 +80,13 @@ class Frame:
         Where the request's time went (docs/protocol.md, the timing record).
     """
 
-    image: np.ndarray
+    image: NDArray[Any]
     camera: str
     frame_id: int
     t_capture: int
     t_stored: int
     generation: int
-    timing: dict = field(default_factory=dict, repr=False)
+    timing: TimingRecord = field(default_factory=TimingRecord, repr=False)
     t_available: int | None = None  # when the worker had the whole frame (before any processing hook)
     path: str = NETWORK  # how the pixels came: "local" (copied from the ring here) or "network"
     _still_valid: Callable[[], bool] | None = field(default=None, repr=False)
@@ -93,12 +113,14 @@ class Frame:
         FxisError. ``with frame:`` releases on leaving the block."""
         if not isinstance(self.image, ReleasedImage):
             release_buffer(self.image)
-            self.image = ReleasedImage(f"the image of frame {self.frame_id} of {self.camera!r}")
+            # it stands in for the array (every use of it raises), so the field keeps the array's type
+            released = ReleasedImage(f"the image of frame {self.frame_id} of {self.camera!r}")
+            self.image = cast("NDArray[Any]", released)
 
     def __enter__(self) -> Frame:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.release()
 
 
@@ -118,7 +140,7 @@ class ReleasedImage:
     def __init__(self, what: str):
         self.what = what
 
-    def _fail(self, *args, **kwargs):
+    def _fail(self, *args: object, **kwargs: object) -> NoReturn:
         raise FxisError(f"{self.what} was released: its buffer may hold another frame now")
 
     __getattr__ = __array__ = __getitem__ = __len__ = __iter__ = _fail
@@ -127,10 +149,17 @@ class ReleasedImage:
         return f"<{self.what}, released>"
 
 
-class FrameTuple(Mapping):
+if TYPE_CHECKING:
+    AnyFrame = TypeVar("AnyFrame", bound=Frame, covariant=True, default=Frame)
+else:
+    AnyFrame = TypeVar("AnyFrame", bound=Frame, covariant=True)  # (the default is the checker's only)
+
+
+class FrameTuple(Mapping[str, AnyFrame], Generic[AnyFrame]):
     """One frame per camera, chosen together for the request time ``t_request``.
 
-    A mapping of camera name to ``Frame`` (``tuple_["left"]``, ``for name in tuple_``).
+    A mapping of camera name to ``Frame`` (``tuple_["left"]``, ``for name in tuple_``); a
+    ``FrameTuple[FrameView]`` (asked for with ``copy=False``) maps to FrameViews.
 
     Attributes
     ----------
@@ -150,10 +179,10 @@ class FrameTuple(Mapping):
 
     def __init__(
         self,
-        frames: dict[str, Frame],
+        frames: dict[str, AnyFrame],
         t_request: int | None,
-        timing: dict,
-        missing: list[str] = (),
+        timing: TimingRecord,
+        missing: Iterable[str] = (),
         service_t_request: int | None = None,
         grid_mismatch: dict[str, int] | None = None,
     ):
@@ -185,13 +214,13 @@ class FrameTuple(Mapping):
         for frame in self._frames.values():
             frame.release()
 
-    def __enter__(self) -> FrameTuple:
+    def __enter__(self) -> FrameTuple[AnyFrame]:
         return self
 
-    def __exit__(self, *exc) -> None:
+    def __exit__(self, *exc: object) -> None:
         self.release()
 
-    def __getitem__(self, camera: str) -> Frame:
+    def __getitem__(self, camera: str) -> AnyFrame:
         return self._frames[camera]
 
     def __iter__(self) -> Iterator[str]:
@@ -214,14 +243,18 @@ class FrameTuple(Mapping):
 
 # ---- decoding replies and stream messages into Frames ----
 
+Images = list[NDArray[Any]]
+
 
 def frames_of(
-    header: dict, images: list[np.ndarray], still_valid: Callable | None = None, view: bool = False
+    header: ReplyHeader, images: Images, still_valid: Validity | None = None, view: bool = False
 ) -> list[Frame]:
-    """The frames of a reply: FrameViews if asked for with ``copy=False`` (``view``)."""
-    timing, path = header.get("timing") or {}, header.get("path", NETWORK)
+    """The frames of a reply: FrameViews if asked for with ``copy=False`` (``view``; the client's
+    operations type them apart, fxis_shm.client.framerequests)."""
+    timing: TimingRecord = header.get("timing") or {}
+    path = header.get("path", NETWORK)
     make = FrameView if view else Frame
-    frames = []
+    frames: list[Frame] = []
     try:  # (a loop, not a comprehension: cold, each comprehension is a function call more)
         for meta, image in zip(header["frames"], images):
             t_capture, t_stored, t_available = meta["t_capture"], meta["t_stored"], meta.get("t_available")
@@ -250,19 +283,21 @@ def frames_of(
     return frames
 
 
-def in_caller_clock(header: dict, clock: ClockEstimate) -> dict:
+def in_caller_clock(header: ReplyHeader, clock: ClockEstimate) -> ReplyHeader:
     """The reply ``header`` with its frames' times, t* and sequence targets in the caller's
     clock; the service's own values kept as ``service_*``. (``timing`` stays the service's.)"""
     if clock.offset_ns == 0 and clock.drift_ppm == 0:
         return header
     for meta in header.get("frames", ()):
-        for key in _TIMES:
-            if meta.get(key) is not None:
-                meta["service_" + key] = meta[key]
-                meta[key] = clock.to_caller(meta[key])
-    if header.get("t_request") is not None:
-        header["service_t_request"] = header["t_request"]
-        header["t_request"] = clock.to_caller(header["t_request"])
+        for key, service_key in _TIMES:
+            value = meta.get(key)
+            if value is not None:
+                meta[service_key] = value
+                meta[key] = clock.to_caller(value)
+    t_request = header.get("t_request")
+    if t_request is not None:
+        header["service_t_request"] = t_request
+        header["t_request"] = clock.to_caller(t_request)
     if header.get("targets"):
         header["targets"] = [clock.to_caller(t) for t in header["targets"]]
     mismatch = header.get("grid_mismatch")
@@ -278,35 +313,33 @@ def _points_to_caller(points: dict[str, int], clock: ClockEstimate) -> dict[str,
 
 
 def tuple_of(
-    header: dict, images: list[np.ndarray], still_valid: Callable | None = None, view: bool = False
-) -> FrameTuple:
-    by_camera = {}
+    header: ReplyHeader, images: Images, still_valid: Validity | None = None, view: bool = False
+) -> FrameTuple[Frame]:
+    by_camera: dict[str, Frame] = {}
     for frame in frames_of(header, images, still_valid, view):
         by_camera[frame.camera] = frame
+    mismatch = header.get("grid_mismatch")  # a tuple's: camera -> grid point
     return FrameTuple(
         by_camera,
         header.get("t_request"),
         header.get("timing", {}),
         header.get("missing", ()),
         header.get("service_t_request"),
-        header.get("grid_mismatch"),
+        mismatch if isinstance(mismatch, dict) else None,
     )
 
 
 def sequence_of(
-    header: dict,
-    images: list[np.ndarray],
-    still_valid: Callable | None = None,
-    single: bool = False,
-    view: bool = False,
-) -> list:
+    header: ReplyHeader, images: Images, still_valid: Validity | None = None, single: bool = False, view: bool = False
+) -> list[Frame] | list[FrameTuple[Frame]]:
     frames = frames_of(header, images, still_valid, view)
     groups = header.get("groups", [])
-    timing = header.get("timing", {})
+    timing: TimingRecord = header.get("timing", {})
     if single:
         return [frames[g[0]] for g in groups]
-    targets = header.get("targets", [None] * len(groups))
-    mismatches = header.get("grid_mismatch") or [None] * len(groups)
+    targets: Sequence[int | None] = header.get("targets", [None] * len(groups))
+    mismatch = header.get("grid_mismatch")  # a sequence's: one per tuple
+    mismatches = (mismatch if isinstance(mismatch, list) else None) or [None] * len(groups)
     return [
         FrameTuple({frames[i].camera: frames[i] for i in g}, t, timing, grid_mismatch=m)
         for g, t, m in zip(groups, targets, mismatches)

@@ -13,11 +13,11 @@ brings are kept for the fetch.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterable
 from concurrent.futures import Future, ThreadPoolExecutor
-from typing import Any
+from typing import Any, cast
 
-from fxis_shm.client.frames import LOCAL, NETWORK, Frame
+from fxis_shm.client.frames import LOCAL, NETWORK, Answer, Frame, Validity
 from fxis_shm.client.localreads import settled
 from fxis_shm.client.requestoptions import RequestOptions
 from fxis_shm.client.single import SingleClient
@@ -26,6 +26,7 @@ from fxis_shm.core.engine import Reply, RequestEngine, Trigger
 from fxis_shm.core.remotecamera import RemoteCamera
 from fxis_shm.errors import Code, FxisError, Overwritten, RequestTimeout, ServiceError
 from fxis_shm.wire import framemeta, protocol
+from fxis_shm.wire.headers import FrameMeta, ReplyHeader
 
 LOOK_AGAIN_NS = 1_000_000  # after a frame was due, look for it this often
 SILENT_FOR_S = 1.0  # a service that did not answer is probed this often until it answers again
@@ -43,7 +44,7 @@ class JointRequests:
         self.cameras = {name: RemoteCamera(name, c.endpoint) for name, c in owner.items()}
         self.engine = RequestEngine(self.cameras)
         self._pool = ThreadPoolExecutor(max_workers=max(1, len(self.clients)), thread_name_prefix="fxis-multi")
-        self._silent: dict[SingleClient, Future] = {}  # services that did not answer: the probe asking again
+        self._silent: dict[SingleClient, Future[bool]] = {}  # services that did not answer: the probe asking again
         self._probes = ThreadPoolExecutor(max_workers=max(1, len(self.clients)), thread_name_prefix="fxis-probe")
         self._twins: dict[SingleClient, SingleClient] = {}
 
@@ -53,7 +54,7 @@ class JointRequests:
         for twin in self._twins.values():
             twin.close()
 
-    def answer(self, op: str, options: RequestOptions, **fields: Any) -> tuple[dict, list, Callable | None]:
+    def answer(self, op: str, options: RequestOptions, **fields: Any) -> Answer:
         """The reply header (times in the caller's clock), images and validity check of one request."""
         request = protocol.request_of(op, id=None, timeout_ms=options.timeout_ms, **fields)
         if request.get("capture"):
@@ -91,12 +92,12 @@ class JointRequests:
             self._describe(waiting)
             actions = self.engine.on_frames(waiting, self.clock())
 
-    def _names(self, request: dict) -> list[str]:
+    def _names(self, request: protocol.Request) -> list[str]:
         """The cameras the request reads (those unknown are the engine's to refuse)."""
         names = request.get("cameras") or ([request["camera"]] if request.get("camera") else list(self.cameras))
         return [n for n in names if n in self.cameras]
 
-    def _describe(self, names) -> None:
+    def _describe(self, names: Iterable[str]) -> None:
         """Ask every service concerned, at once, for its cameras' frame times. A service that
         did not answer is left out (its cameras down) until a probe of its own finds it back:
         waiting for it in every request would let the other services' frames leave their
@@ -161,11 +162,11 @@ class JointRequests:
         if by_client:
             self._describe([c for cams in by_client.values() for c in cams])
 
-    def _fetch(self, reply: Reply, fetch: _Fetch) -> tuple[dict, list, Callable | None]:
+    def _fetch(self, reply: Reply, fetch: _Fetch) -> Answer:
         """The reply header, images and validity check of a plan: each chosen frame fetched
         from its service, the services at once (each client by one thread: a socket is not shared)."""
         picks = list(dict.fromkeys(reply.plan.picks))  # each distinct frame once
-        by_client: dict[SingleClient, list[tuple[str, dict]]] = {}
+        by_client: dict[SingleClient, list[tuple[str, dict[str, int]]]] = {}
         for cam, i in picks:
             row = self.cameras[cam].service_row(i)
             if (cam, row["frame_id"]) not in fetch.kept:
@@ -174,15 +175,16 @@ class JointRequests:
             fetch.kept.update(group)
         chosen = [fetch.kept[cam, self.cameras[cam].service_row(i)["frame_id"]] for cam, i in picks]
         position = {pick: k for k, pick in enumerate(picks)}
-        header = {
-            **reply.plan.body,
-            "timing": {"received": reply.pending.t_received, "waited": reply.t_decided},
-        }
+        # the plan's body is the engine's JSON-bound dict: the fields of a reply (docs/protocol.md 7)
+        header = cast(
+            ReplyHeader,
+            {**reply.plan.body, "timing": {"received": reply.pending.t_received, "waited": reply.t_decided}},
+        )
         if reply.plan.groups is not None:
             header["groups"] = [[position[pick] for pick in group] for group in reply.plan.groups]
         return _joined(header, chosen)
 
-    def _captured(self, request: dict, options: RequestOptions) -> tuple[dict, list, Callable | None]:
+    def _captured(self, request: protocol.Request, options: RequestOptions) -> Answer:
         """A capture at T (``request["at"]``, the caller's clock) on several services: each service
         triggers its cameras that can be triggered for T, in its own clock, and answers for the
         others with their frames nearest T; the services are asked at once."""
@@ -191,21 +193,28 @@ class JointRequests:
         by_client: dict[SingleClient, list[str]] = {}
         for name in names:
             by_client.setdefault(self.owner[name], []).append(name)
-        given = {"copy": options.copy, "encoding": options.encoding, "quality": options.quality}
         tuples = list(
             self._pool.map(
                 lambda client, cams: client.tuple(
-                    cams, at=request["at"], capture=True, timeout=options.timeout, **given
+                    cams,
+                    at=request["at"],
+                    capture=True,
+                    timeout=options.timeout,
+                    copy=options.copy,
+                    encoding=options.encoding,
+                    quality=options.quality,
                 ),
                 by_client,
                 by_client.values(),
             )
         )
         frames = [t[name] for t, cams in zip(tuples, by_client.values()) for name in cams]
-        header: dict = {"op": request["op"], "t_request": request["at"]}
+        # a reply the client makes itself: no envelope (v, id, ok), only what frames_of reads
+        header = cast(ReplyHeader, {"op": request["op"], "t_request": request["at"]})
         if request["op"] == "tuple":
             times = [f.t_capture for f in frames]
-            header.update(skew_ns=max(times) - min(times), sync=request.get("sync") or "joint")
+            header["skew_ns"] = max(times) - min(times)
+            header["sync"] = request.get("sync") or "joint"
         header["timing"] = {"received": asked, "waited": self.clock()}
         return _joined(header, frames)
 
@@ -214,15 +223,18 @@ class _Fetch:
     """How one request's frames are fetched (copied or viewed, encoded), and those fetched so far."""
 
     def __init__(self, options: RequestOptions):
-        self.options = {"copy": options.copy, "encoding": options.encoding, "quality": options.quality}
+        self.options = options
         self.kept: Fetched = {}
 
-    def chosen(self, client: SingleClient, wanted: list[tuple[str, dict]]) -> Fetched:
+    def chosen(self, client: SingleClient, wanted: list[tuple[str, dict[str, int]]]) -> Fetched:
         """The frames ``wanted`` of one service, by (camera, frame id); Overwritten if one is gone."""
-        fetched = {}
+        fetched: Fetched = {}
+        o = self.options
         for cam, row in wanted:
             try:
-                frame = client.image(cam, at=row["t_capture"], wait="none", **self.options)
+                frame = client.image(
+                    cam, at=row["t_capture"], wait="none", copy=o.copy, encoding=o.encoding, quality=o.quality
+                )
             except ServiceError as exc:
                 if exc.code != Code.OUT_OF_RANGE:
                     raise
@@ -238,13 +250,14 @@ class _Fetch:
         """Fire the triggers of ``cameras`` of one service (a tuple request without ``at``
         there) and keep the frames it answers."""
         try:
-            frames = client.tuple(cameras, **self.options)
+            o = self.options
+            frames = client.tuple(cameras, copy=o.copy, encoding=o.encoding, quality=o.quality)
         except FxisError as exc:
             return exc
         return {(cam, f.frame_id): f for cam, f in frames.items()}
 
 
-def _frame_times(client: SingleClient, names: list[str]) -> tuple[dict, ClockEstimate] | Exception:
+def _frame_times(client: SingleClient, names: list[str]) -> tuple[dict[str, Any], ClockEstimate] | Exception:
     """The service's frame times of ``names`` and its clock estimate (the first one asks the
     service too), or why it did not answer."""
     try:
@@ -263,10 +276,10 @@ def _probe(twin: SingleClient) -> bool:
     return True
 
 
-def _joined(header: dict, chosen: list[Frame]) -> tuple[dict, list, Callable | None]:
+def _joined(header: ReplyHeader, chosen: list[Frame]) -> Answer:
     """The reply of frames fetched from their services: ``header`` with each frame's metadata (the
     caller's clock, the service's own times kept), the images, and a validity check for views."""
-    frames = []
+    frames: list[FrameMeta] = []
     for k, frame in enumerate(chosen):
         meta = framemeta.frame_meta(
             frame.camera,
@@ -295,4 +308,5 @@ def _joined(header: dict, chosen: list[Frame]) -> tuple[dict, list, Callable | N
         "path": LOCAL if chosen and all(f.path == LOCAL for f in chosen) else NETWORK,
     }
     views = [f for f in chosen if f._still_valid is not None]
-    return header, [f.image for f in chosen], (lambda: all(f.still_valid() for f in views)) if views else None
+    check: Validity | None = (lambda: all(f.still_valid() for f in views)) if views else None
+    return header, [f.image for f in chosen], check

@@ -19,19 +19,23 @@ What only the coordinator can do (software triggers) still goes to it.
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
+from collections.abc import Mapping
+from typing import Any, cast
 
 from fxis_shm.client.fastreads import FastReads
+from fxis_shm.client.frames import Answer, Images
 from fxis_shm.core import timebase
-from fxis_shm.core.engine import Failure, Reply, RequestEngine
+from fxis_shm.core.engine import Action, Failure, Reply, RequestEngine
 from fxis_shm.core.snapshot import CAPTURES
-from fxis_shm.errors import RequestTimeout, service_error
+from fxis_shm.errors import Overwritten, RequestTimeout, service_error
 from fxis_shm.shm import fastpick, slotio
 from fxis_shm.shm.bufferpool import BufferPool
 from fxis_shm.shm.cameras import CameraHandle
 from fxis_shm.shm.localpath import LocalUnavailable, boot_id, time_namespace
-from fxis_shm.shm.ring import Overwritten
+from fxis_shm.shm.ring import RingReader
+from fxis_shm.shm.slotio import CopyJob
 from fxis_shm.wire import protocol
+from fxis_shm.wire.headers import FrameMeta, ReplyHeader
 
 WAKE_MARGIN_NS = 1_500_000  # stop sleeping this long before a frame is due
 POLL_S = 0.0001  # then look at the write counters this often
@@ -41,7 +45,7 @@ _UNCHECKED = (*_TIMES, "encoding", "quality")  # encoding, quality: the frames s
 _REQUEST_FORMS = 256  # validated forms kept
 
 
-def same_clock(status: dict, our_boot_id: str | None = None) -> str | None:
+def same_clock(status: dict[str, Any], our_boot_id: str | None = None) -> str | None:
     """Why this process cannot read the service's clock as its own (None: it can)."""
     ours = boot_id() if our_boot_id is None else our_boot_id
     if status.get("boot_id") is None or status.get("boot_id") != ours:
@@ -57,7 +61,7 @@ def same_clock(status: dict, our_boot_id: str | None = None) -> str | None:
 class LocalReads:
     """The service's rings as this client maps them, and the engine that answers from them."""
 
-    def __init__(self, status: dict, our_boot_id: str | None = None, max_pooled_bytes: int = 128 << 20):
+    def __init__(self, status: dict[str, Any], our_boot_id: str | None = None, max_pooled_bytes: int = 128 << 20):
         reason = same_clock(status, our_boot_id)
         if reason:
             raise LocalUnavailable(reason)
@@ -80,17 +84,18 @@ class LocalReads:
         self.wire_clock = timebase.WIRE_NAMES[self.clock]
         self.engine = RequestEngine(self.cameras, status.get("settings"))
         self.buffers = BufferPool(max_pooled_bytes)
-        self._requests: dict[tuple, dict] = {}  # validated requests by form (protocol.request_of)
+        # validated requests by form (protocol.request_of)
+        self._requests: dict[tuple[object, ...], protocol.Request] = {}
         self.torn = 0  # copies found torn (and made again)
 
     def fast_reads(self) -> FastReads | None:
         """The compiled read of these rings (None: not built, or a ring is not open now)."""
-        readers = [handle.reader for handle in self.cameras.values()]
-        if not fastpick.AVAILABLE or any(r is None for r in readers):
+        readers = [handle.reader for handle in self.cameras.values() if handle.reader is not None]
+        if not fastpick.AVAILABLE or len(readers) < len(self.cameras):
             return None
         return FastReads(list(self.cameras), readers, self.engine.settings, self.clock)
 
-    def serves(self, op: str, fields: dict) -> bool:
+    def serves(self, op: str, fields: Mapping[str, Any]) -> bool:
         """False for requests only the coordinator can answer: those that fire software triggers,
         now or for a capture at T."""
         if fields.get("capture"):
@@ -100,9 +105,7 @@ class LocalReads:
         names = [fields["camera"]] if fields.get("camera") else fields.get("cameras") or list(self.cameras)
         return not any(c in self.cameras and self.cameras[c].slots and self.cameras[c].triggered for c in names)
 
-    def answer(
-        self, op: str, fields: dict, deadline_ns: int, copy: bool = True
-    ) -> tuple[dict, list, Callable[[], bool] | None]:
+    def answer(self, op: str, fields: Mapping[str, Any], deadline_ns: int, copy: bool = True) -> Answer:
         """The reply header, images and (for views) a validity check, as the coordinator would
         send them. Raises the service's errors, or RequestTimeout at ``deadline_ns``."""
         actions = self.engine.submit(self._request(op, fields), self.now(), ticket=op)
@@ -127,7 +130,7 @@ class LocalReads:
             updated = self._wait_for_frames(waiting, min(deadline_ns, self.engine.next_wake() or now), seen)
             actions = self.engine.on_frames(updated, self.now())
 
-    def _request(self, op: str, fields: dict) -> dict:
+    def _request(self, op: str, fields: Mapping[str, Any]) -> protocol.Request:
         """The request as the service would validate it (protocol.request_of), without its
         encoding (nothing travels, so the frames stay raw). Validated once per form: only the
         times, which change with every call, are checked each time."""
@@ -150,17 +153,21 @@ class LocalReads:
                 request[name] = schema[name][0](name, value)
         return request
 
-    def _reply(self, reply: Reply, copy: bool) -> tuple[dict, list, Callable[[], bool] | None]:
+    def _reply(self, reply: Reply, copy: bool) -> Answer:
         """The plan's frames: their metadata, then their pixels (copies, checked whole in one
         call, or views), then the header. Raises Overwritten (counted as a torn read)."""
         searched = self.now()
-        frames, images, jobs, held, position = [], [], [], [], {}
+        frames: list[FrameMeta] = []
+        images: Images = []
+        jobs: list[CopyJob] = []
+        held: list[tuple[str, RingReader, int, int]] = []
+        position: dict[tuple[str, int], int] = {}
         for pick in reply.plan.picks:
             if pick in position:
                 continue
             position[pick] = len(frames)
             cam, i = pick
-            snap, reader = reply.snapshots[cam], self.cameras[cam].reader
+            snap, reader = reply.snapshots[cam], self._reader(cam)
             slot, seq, meta = snap.slot(i), snap.seq(i), snap.frame_meta(i)
             frames.append(
                 {
@@ -194,7 +201,8 @@ class LocalReads:
             raise reader.overwritten(slot, torn[1])
         copied = self.now()
         p = reply.pending
-        header = {"ok": True, "clock": self.wire_clock, **reply.plan.body, "frames": frames}
+        # the plan's body is the engine's JSON-bound dict: the fields of a reply (docs/protocol.md 7)
+        header = cast(ReplyHeader, {"ok": True, "clock": self.wire_clock, **reply.plan.body, "frames": frames})
         if reply.plan.groups is not None:
             header["groups"] = [[position[pick] for pick in group] for group in reply.plan.groups]
         header["timing"] = {
@@ -210,10 +218,16 @@ class LocalReads:
         views = [(reader, slot, seq) for _, reader, slot, seq in held]
         return header, images, lambda: all(reader.slot_holds(slot, seq) for reader, slot, seq in views)
 
+    def _reader(self, camera: str) -> RingReader:
+        """The ring of a camera the engine chose frames of (so open: the engine saw them)."""
+        reader = self.cameras[camera].reader
+        assert reader is not None
+        return reader
+
     def _wait_for_frames(self, cameras: set[str], until_ns: int, seen: dict[str, int]) -> set[str]:
         """The cameras whose write count moved on from ``seen`` before ``until_ns`` (empty: none
         did); ``seen`` is updated to the counts found."""
-        readers = {c: self.cameras[c].reader for c in cameras if self.cameras[c].reader is not None}
+        readers = {c: r for c in cameras if (r := self.cameras[c].reader) is not None}
         counts = {c: seen.get(c, -1) for c in readers}
         due = min((_next_due(r) for r in readers.values()), default=until_ns)  # before the look below
         if all(r.field("write_count") == counts[c] for c, r in readers.items()):  # else: no nap
@@ -233,7 +247,7 @@ class LocalReads:
             handle.close()
 
 
-def settled(actions: list) -> Reply | None:
+def settled(actions: list[Action]) -> Reply | None:
     """The reply the engine's actions settle on, None if they are waits; raises a failure."""
     for action in actions:
         if isinstance(action, Failure):
@@ -243,7 +257,7 @@ def settled(actions: list) -> Reply | None:
     return None
 
 
-def _next_due(reader) -> int:
+def _next_due(reader: RingReader) -> int:
     """When the ring's next frame should be stored: its newest frame's capture time plus a
     period, plus the shortest capture-to-storage delay of the last few frames. Not the newest
     frame's storage time plus a period: a frame its worker stored late (held up by the

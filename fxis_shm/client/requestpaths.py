@@ -8,25 +8,53 @@ from __future__ import annotations
 
 import time
 from collections.abc import Callable
+from typing import TYPE_CHECKING, Any, TypeVar, cast
 
 from fxis_shm import _compiled
+from fxis_shm.client.clocktracker import ClockTracker
 from fxis_shm.client.fastreads import FastReads
-from fxis_shm.client.frames import LOCAL, NETWORK
+from fxis_shm.client.frames import LOCAL, NETWORK, Answer, Images, Validity
 from fxis_shm.client.localreads import LocalReads
 from fxis_shm.client.requesttimes import same_moment
+from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.errors import CameraDown, LocalPathUnavailable, Overwritten, UnknownCamera
 from fxis_shm.shm import fastpick
-from fxis_shm.shm.localpath import LocalUnavailable
+from fxis_shm.shm.localpath import LocalRings, LocalUnavailable
 from fxis_shm.wire import protocol
+from fxis_shm.wire.headers import ReplyHeader
 
 _LOCAL_ATTEMPTS = 3  # requests re-asked after a torn local copy before giving up
 _LOCAL_RETRY_S = 10.0  # after the rings could not be opened, the network path this long
+# requesttimes.same_moment reads the first reply's header (typed there as a plain dict, for now)
+_same_moment = cast("Callable[[str, dict[str, object], ReplyHeader], dict[str, object]]", same_moment)
+_Answered = TypeVar("_Answered")  # what the compiled read answered (a Frame or a FrameTuple)
 
 
 class RequestPaths:
     """The paths of a frame request, for a client of one service (its state is the client's)."""
 
-    def _fetch(self, op: str, extra_wait: float, copy: bool, **fields) -> tuple[dict, list, Callable | None]:
+    # the client's state these paths read and keep (SingleClient makes it)
+    local: str  # "auto", "off" or "require"
+    timeout: float
+    paths: dict[str, int]  # replies by path, local copies found torn, compiled replies
+    _boot_id: str | None
+    _rings: LocalRings
+    _reads: LocalReads | None
+    _fast: FastReads | None
+    _reads_off: tuple[str, float] | None
+    _local_off: tuple[str, float] | None
+    _tracker: ClockTracker | None
+    _mapping: ClockEstimate | None
+
+    if TYPE_CHECKING:  # the client's own (SingleClient's), used here
+
+        def _call(self, op: str, extra_wait: float, **fields: object) -> tuple[ReplyHeader, Images]: ...
+        def status(self) -> dict[str, Any]: ...
+        def clock_estimate(self) -> ClockEstimate: ...
+        @property
+        def local_unavailable(self) -> str | None: ...
+
+    def _fetch(self, op: str, extra_wait: float, copy: bool, **fields: object) -> Answer:
         """A request for frames, over the local path if it can be used: the reply header,
         the images (the header's ``path`` set) and a validity check for zero-copy views.
         Where the rings can be read with the service's own clock, the client answers
@@ -48,12 +76,14 @@ class RequestPaths:
                     continue
                 except LocalUnavailable as exc:  # the frames are there, just not here: same t*
                     self._give_up_local(str(exc))
-                    fields = same_moment(op, fields, header)
+                    fields = _same_moment(op, fields, header)
                     break
                 self.paths[LOCAL] += 1
                 self._local_off = None  # (again) usable
                 header["path"] = LOCAL
-                check = None if copy else (lambda metas=header["frames"]: all(map(self._rings.still_valid, metas)))
+                check: Validity | None = (
+                    None if copy else (lambda metas=header["frames"]: all(map(self._rings.still_valid, metas)))
+                )
                 return header, images, check
             else:
                 raise Overwritten(
@@ -65,8 +95,10 @@ class RequestPaths:
             raise LocalPathUnavailable(f"the local fast path cannot be used: {self.local_unavailable}")
         return self._network_reply(*self._call(op, extra_wait, **fields))
 
-    def _read_locally(self, op: str, extra_wait: float, copy: bool, fields: dict) -> tuple[dict, list, Callable | None]:
-        deadline = self._reads.now() + int((self.timeout + extra_wait) * 1e9)
+    def _read_locally(self, op: str, extra_wait: float, copy: bool, fields: dict[str, object]) -> Answer:
+        reads = self._reads
+        assert reads is not None  # (the caller found it so)
+        deadline = reads.now() + int((self.timeout + extra_wait) * 1e9)
         try:
             header, images, check = self._answer_locally(op, fields, deadline, copy)
         except (CameraDown, UnknownCamera):
@@ -81,8 +113,9 @@ class RequestPaths:
             self._fast = self._fast_reads()
         return header, images, check
 
-    def _answer_locally(self, op: str, fields: dict, deadline: int, copy: bool) -> tuple[dict, list, Callable | None]:
+    def _answer_locally(self, op: str, fields: dict[str, object], deadline: int, copy: bool) -> Answer:
         reads = self._reads
+        assert reads is not None  # (asked again only once found again)
         torn = reads.torn
         try:
             return reads.answer(op, fields, deadline, copy)
@@ -117,12 +150,14 @@ class RequestPaths:
             return None
         return self._reads.fast_reads()
 
-    def _compiled(self, answer):
+    def _compiled(self, answer: _Answered | None) -> _Answered | None:
         """``answer`` of the compiled read, counted; None (it left the request to the engine) as it
         is, dropping the read once a ring was replaced (made again when the engine reopened it)."""
         if answer is None:
-            self.paths["torn"] += self._fast.torn_since()
-            if self._fast.retired:
+            fast = self._fast
+            assert fast is not None  # (it gave the answer)
+            self.paths["torn"] += fast.torn_since()
+            if fast.retired:
                 self._fast = None
         else:
             self.paths[LOCAL] += 1
@@ -135,7 +170,7 @@ class RequestPaths:
             self._reads.close()
             self._reads = None
 
-    def _network_reply(self, header: dict, images: list) -> tuple[dict, list, None]:
+    def _network_reply(self, header: ReplyHeader, images: Images) -> Answer:
         self.paths[NETWORK] += 1
         header["path"] = NETWORK
         return header, images, None

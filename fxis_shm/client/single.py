@@ -22,16 +22,15 @@ import itertools
 import math
 import time
 from collections.abc import Callable
-from typing import Any
+from typing import Any, cast
 
-import numpy as np
 import zmq
 
 from fxis_shm.client import arguments
 from fxis_shm.client.api import ClientApi
 from fxis_shm.client.clocktracker import ClockTracker
 from fxis_shm.client.fastreads import FastReads
-from fxis_shm.client.frames import LOCAL, NETWORK, in_caller_clock
+from fxis_shm.client.frames import LOCAL, NETWORK, Answer, Images, in_caller_clock
 from fxis_shm.client.handshake import HandshakeWatch
 from fxis_shm.client.localreads import LocalReads
 from fxis_shm.client.pubsub import EventPublisher, Subscriber
@@ -45,6 +44,7 @@ from fxis_shm.errors import InvalidArgument, RequestTimeout, service_error
 from fxis_shm.shm.localpath import LocalRings, boot_id
 from fxis_shm.wire import commands, defaults, encoding as codec, protocol, ranges
 from fxis_shm.wire.endpoints import check_endpoint, unknown_host
+from fxis_shm.wire.headers import ReplyHeader
 from fxis_shm.wire.multipart import recv_parts, send_parts
 from fxis_shm.wire.security import ClientKeys
 
@@ -63,7 +63,7 @@ class SingleClient(RequestPaths, SocketOwner, ClientApi):
         self,
         endpoint: str = DEFAULT_ENDPOINT,
         timeout: float = 2.0,
-        context: zmq.Context | None = None,
+        context: zmq.Context[Any] | None = None,  # any context: the sockets are made by connected_socket
         keys: ClientKeys | None = None,
         local: str = "auto",
         *,
@@ -102,7 +102,7 @@ class SingleClient(RequestPaths, SocketOwner, ClientApi):
         self._sock = connected_socket(context, zmq.DEALER, endpoint, keys, lambda s: watches.append(HandshakeWatch(s)))
         self._handshake = watches[0]
         self._heard = False  # the service has answered a request of this client
-        self._identity: dict | None = None  # the service's kernel, time namespace and clock, from its status
+        self._identity: dict[str, Any] | None = None  # the service's kernel, time namespace and clock, from its status
         self._mapping: ClockEstimate | None = None  # fixed: the service reads our clock (or one shared)
         self._tracker: ClockTracker | None = None  # else: estimated
         self._periods: tuple[float, float] | None = None  # (longest frame period, when learnt)
@@ -162,7 +162,10 @@ class SingleClient(RequestPaths, SocketOwner, ClientApi):
                     self.endpoint,
                     self.timeout,
                 )
-        return self._mapping or self._tracker.estimate()  # type: ignore[union-attr]
+        if self._mapping is not None:
+            return self._mapping
+        assert self._tracker is not None  # (made just above when there is no mapping)
+        return self._tracker.estimate()
 
     def _longest_period_s(self) -> float:
         """The slowest camera's frame period: from the rings when they are read here (no
@@ -176,8 +179,8 @@ class SingleClient(RequestPaths, SocketOwner, ClientApi):
             self._periods = (max((1 / c["fps"] for c in cams if c.get("fps")), default=1.0), time.monotonic())
         return self._periods[0]
 
-    def status(self) -> dict:
-        status = self._call("status", 0.0)[0]
+    def status(self) -> dict[str, Any]:
+        status = self._document("status", 0.0)
         self._identity = {k: status.get(k) for k in ("boot_id", "time_namespace", "clock")}
         return status
 
@@ -185,7 +188,7 @@ class SingleClient(RequestPaths, SocketOwner, ClientApi):
         """The service's clock now (int ns of the clock its status names; CLOCK_MONOTONIC by default)."""
         return self._call("time", 0.0)[0]["now"]
 
-    def settings(self, camera: str, *, features: bool = False) -> dict:
+    def settings(self, camera: str, *, features: bool = False) -> dict[str, Any]:
         """The camera's settings, as its worker last reported them.
 
         Parameters
@@ -209,7 +212,7 @@ class SingleClient(RequestPaths, SocketOwner, ClientApi):
         """
         return self._settings(camera=arguments.camera_name(camera), features=features or None)
 
-    def configure(self, camera: str, **values) -> dict:
+    def configure(self, camera: str, **values: object) -> dict[str, Any]:
         """Change settings of ``camera``, all or none: ``client.configure("left", exposure_us=2000, gain=6)``.
 
         Parameters
@@ -240,21 +243,21 @@ class SingleClient(RequestPaths, SocketOwner, ClientApi):
         """
         return self._settings(camera=arguments.camera_name(camera), set=arguments.setting_values(values))
 
-    def _settings(self, **fields) -> dict:
+    def _settings(self, **fields: object) -> dict[str, Any]:
         """A settings request: the camera may take SETTINGS_TIMEOUT_S more than the client's
         timeout to answer (a stream restarting), once the service has answered at all: a
         service that does not answer is said within the timeout, as for every other request."""
         if not self._heard:
             self._call("time", 0.0)
-        return self._call("settings", commands.SETTINGS_TIMEOUT_S, **fields)[0]
+        return self._document("settings", commands.SETTINGS_TIMEOUT_S, **fields)
 
-    def _service_identity(self) -> dict:
+    def _service_identity(self) -> dict[str, Any]:
         if self._identity is None:
             self.status()
         assert self._identity is not None
         return self._identity
 
-    def _answer(self, op: str, options: RequestOptions, **fields: Any) -> tuple[dict, list, Callable | None]:
+    def _answer(self, op: str, options: RequestOptions, **fields: Any) -> Answer:
         """A frame request with the caller's times moved into the service's clock, and the
         reply's moved back. Without ``at``, t* is the moment of the call (the request's
         travel time does not count)."""
@@ -282,18 +285,26 @@ class SingleClient(RequestPaths, SocketOwner, ClientApi):
         header, images, check = self._fetch(op, extra, options.copy, timeout_ms=waits_ms, **fields)
         return in_caller_clock(header, mapping), images, check
 
-    def _frame_times(self, cameras: list[str] | None) -> dict:
-        return self._call("frames", 0.0, cameras=cameras)[0]
+    def _frame_times(self, cameras: list[str] | None) -> dict[str, Any]:
+        return self._document("frames", 0.0, cameras=cameras)
 
     # ---- plumbing ----
 
-    def _call(self, op: str, extra_wait: float, **fields) -> tuple[dict, list[np.ndarray]]:
+    def _document(self, op: str, extra_wait: float, **fields: object) -> dict[str, Any]:
+        """The reply of an op whose body is a document of its own (status, settings, frames: the
+        JSON object docs/protocol.md 7 shows, beyond ReplyHeader's fields)."""
+        return cast("dict[str, Any]", self._call(op, extra_wait, **fields)[0])
+
+    def _call(self, op: str, extra_wait: float, **fields: object) -> tuple[ReplyHeader, Images]:
         request_id = next(self._ids)
         deadline = time.monotonic() + self.timeout + extra_wait
         sock = self._sock
         # A DEALER with no connected peer (service down, or our keys refused) would
         # block in send: wait for it to become writable within our own deadline.
-        if not sock.getsockopt(_EVENTS) & _POLLOUT and not sock.poll(math.ceil(self.timeout * 1000), zmq.POLLOUT):
+        # (EVENTS is an int option: pyzmq types every option's value as int | bytes)
+        if not cast(int, sock.getsockopt(_EVENTS)) & _POLLOUT and not sock.poll(
+            math.ceil(self.timeout * 1000), zmq.POLLOUT
+        ):
             raise RequestTimeout(self._handshake.problem(self.endpoint, self._keys is not None) or self._unsendable(op))
         try:
             send_parts(sock, [b"", *protocol.encode_request(op, id=request_id, **fields)])
@@ -315,8 +326,9 @@ class SingleClient(RequestPaths, SocketOwner, ClientApi):
             if header.get("id") != request_id:
                 continue  # the late reply to an earlier request that timed out
             if not header["ok"]:
-                err = header.get("error") or {}
-                raise service_error(err.get("code", "UNKNOWN"), err.get("message", ""))
+                error = header.get("error")
+                code, message = (error.get("code", "UNKNOWN"), error.get("message", "")) if error else ("UNKNOWN", "")
+                raise service_error(code, message)
             self._heard = True
             return header, images
 

@@ -67,14 +67,16 @@ class _FrameMetaBase(TypedDict):
     generation: int
     capture: str  # "free", "scheduled", "late" or "lockstep"
     t_target: int | None
-    shape: list[int]
-    dtype: str
 
 
 class FrameMeta(_FrameMetaBase, total=False):
     """One entry of a reply's ``frames`` (section 7.6): what the frame is, when it was captured
-    and stored, and where its pixels are (a ``buffer`` of the reply, or a ring place)."""
+    and stored, and where its pixels are (a ``buffer`` of the reply, or a ring place). A reply
+    of the service always has ``shape`` and ``dtype``; one the client answers itself from the
+    rings (fxis_shm.client.localreads) has its images as arrays already, and not them."""
 
+    shape: list[int]
+    dtype: str
     buffer: int
     encoding: str  # only when the buffer is compressed
     bytes: int  # with ``encoding``: the buffer's length
@@ -84,25 +86,25 @@ class FrameMeta(_FrameMetaBase, total=False):
     seq: int
     # the client's own additions when it moves the times into the caller's clock
     service_t_capture: int
-    service_t_available: int
+    service_t_available: int | None  # None: a frame without t_available (Frame.t_available)
     service_t_stored: int
+    service_t_target: int
 
 
 class CameraTiming(TypedDict):
     waited: int
 
 
-class _TimingBase(TypedDict):
+class TimingRecord(TypedDict, total=False):
+    """A reply's ``timing`` (section 9): service-clock moments of answering it. A service's reply
+    has every field; what a client makes of its own has fewer (a stream message's frames none,
+    the multi-service client's reply ``received`` and ``waited``: fxis_shm.client.jointrequests)."""
+
     received: int
     waited: int
     searched: int
     copied: int
     sent: int
-
-
-class TimingRecord(_TimingBase, total=False):
-    """A reply's ``timing`` (section 9): service-clock moments of answering it."""
-
     cameras: dict[str, CameraTiming]
 
 
@@ -134,12 +136,14 @@ class ReplyHeader(_ReplyBase, total=False):
     skew_ns: int
     sync: str
     missing: list[str]
-    grid_mismatch: dict[str, int]
+    grid_mismatch: dict[str, int] | list[dict[str, int] | None]  # a tuple's; a sequence's: one per tuple
     delivery: Delivery
     targets: list[int]  # sequence: the moments its groups are for
     groups: list[list[int]]  # sequence: each group's indices into ``frames``
     received: int  # time
     now: int  # time, status, frames
     boot_id: str | None
-    # the client's own additions when it moves the times into the caller's clock
+    # the client's own additions: t* in the service's clock when it moves the times into the
+    # caller's, and the path the frames took ("local" or "network", fxis_shm.client.requestpaths)
     service_t_request: int
+    path: str
