@@ -15,6 +15,7 @@ import time
 from collections.abc import Iterable, Mapping
 from dataclasses import dataclass
 
+from fxis_shm.client.sockets import Closable
 from fxis_shm.core.ptp import PtpState, require_locked
 from fxis_shm.wire.gvcp_action import GVCP_PORT, STATUS_SUCCESS, ActionAck, ActionCommand, GvcpFormatError, status_text
 
@@ -57,7 +58,7 @@ def check(outcomes: dict[str, ActionOutcome]) -> dict[str, ActionOutcome]:
     return outcomes
 
 
-class ActionSender:
+class ActionSender(Closable):
     """Action commands of one (device_key, group_key, group_mask), from one UDP socket."""
 
     def __init__(
@@ -80,12 +81,6 @@ class ActionSender:
 
     def close(self) -> None:
         self._sock.close()
-
-    def __enter__(self) -> ActionSender:
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
 
     def _next_req_id(self) -> int:
         return next(self._req_ids) % 0xFFFF + 1  # 1..65535: 0 is reserved

@@ -21,8 +21,10 @@ from fxis_shm.formats.videochoice import split_encoding
 from fxis_shm.formats.videotracks import VideoSettings
 from fxis_shm.wire import encoding as image_encoding
 
-if TYPE_CHECKING:  # (typing's own from Python 3.11)
-    from typing_extensions import Unpack
+if TYPE_CHECKING:
+    from typing_extensions import Unpack  # (typing's own from Python 3.11)
+
+    from fxis_shm.client.single import SingleClient  # (it imports this module)
 
 # The operations written once, here: ClientApi refuses a subclass that redefines one.
 SHARED_OPERATIONS = ("image", "tuple", "latest", "sequence", "snapshot", "subscribe", "frame_times")
@@ -245,7 +247,7 @@ class ClientApi(FrameRequests):
     # ---- what each kind of client fills in ----
 
     @abstractmethod
-    def _owners(self, cameras: list[str] | None) -> dict[str, Any]:
+    def _owners(self, cameras: list[str] | None) -> dict[str, SingleClient]:
         """The single-service client that serves each of ``cameras`` (default: all)."""
 
     @abstractmethod

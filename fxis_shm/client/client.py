@@ -5,6 +5,8 @@ here, above both, so that neither imports the other's module back."""
 
 from __future__ import annotations
 
+from typing import Any, overload
+
 from fxis_shm.client.multiclient import MultiClient
 from fxis_shm.client.single import DEFAULT_ENDPOINT, SingleClient
 from fxis_shm.errors import InvalidArgument
@@ -16,7 +18,15 @@ class Client(SingleClient):
     ``Client([endpoint_a, endpoint_b], timeout=...)``: one client over several services (a
     MultiClient), its options given by keyword."""
 
-    def __new__(cls, endpoint: str | list[str] = DEFAULT_ENDPOINT, *args, **kwargs):
+    # The checker is told what a call makes: a Client, or for a list of endpoints a MultiClient.
+    # Python lets __new__ return another class's instance; mypy's check of __new__ does not (misc).
+    # The options are SingleClient's or MultiClient's keywords, passed on as they are.
+    @overload
+    def __new__(cls, endpoint: str = DEFAULT_ENDPOINT, *args: Any, **kwargs: Any) -> Client: ...
+    @overload
+    def __new__(cls, endpoint: list[str], *args: Any, **kwargs: Any) -> MultiClient: ...  # type: ignore[misc]
+
+    def __new__(cls, endpoint: str | list[str] = DEFAULT_ENDPOINT, *args: Any, **kwargs: Any) -> Any:
         if cls is Client and isinstance(endpoint, (list, tuple)):
             if args:  # they would be dropped silently: timeout, keys, ... are keywords there
                 raise InvalidArgument("Client([endpoint, ...]) takes its options by keyword (timeout=..., keys=...)")

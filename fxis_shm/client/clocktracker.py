@@ -8,6 +8,7 @@ is current. A service that stops answering leaves the last estimate in place.
 
 from __future__ import annotations
 
+import math
 import threading
 import time
 from collections.abc import Callable
@@ -26,7 +27,7 @@ STOP_CHECK_S = 0.1  # while waiting for a silent service, look this often whethe
 class ClockTracker:
     def __init__(
         self,
-        connect: Callable[[], zmq.Socket],
+        connect: Callable[[], zmq.Socket[bytes]],
         clock: Callable[[], int],
         endpoint: str,
         timeout: float = 2.0,
@@ -37,7 +38,7 @@ class ClockTracker:
         self._estimator = ClockEstimator()
         self._estimate: ClockEstimate | None = None
         self._lock = threading.Lock()  # one burst at a time on the one socket
-        self._sock: zmq.Socket | None = None
+        self._sock: zmq.Socket[bytes] | None = None
         self._stop = threading.Event()
         self._thread: threading.Thread | None = None
         self._ids = 0
@@ -111,7 +112,7 @@ class ClockTracker:
         deadline = time.monotonic() + self.timeout
         while True:
             left = deadline - time.monotonic()
-            if self._sock.poll(max(0.0, min(left, STOP_CHECK_S)) * 1000, event):
+            if self._sock.poll(math.ceil(max(0.0, min(left, STOP_CHECK_S)) * 1000), event):  # ms, whole
                 return True
             if left <= 0 or self._stop.is_set():
                 return False

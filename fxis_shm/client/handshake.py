@@ -17,7 +17,7 @@ KEY_OPTIONS = "ClientKeys in Python, --server-key and --client-key on the comman
 
 
 class HandshakeWatch:
-    def __init__(self, sock: zmq.Socket):
+    def __init__(self, sock: zmq.Socket[bytes]):
         self._sock = sock
         self._monitor = sock.get_monitor_socket(_FAILED | zmq.EVENT_HANDSHAKE_SUCCEEDED)
         self._last: int | None = None  # the last handshake event seen

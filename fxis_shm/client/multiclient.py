@@ -13,6 +13,7 @@ from concurrent.futures import ThreadPoolExecutor
 from typing import Any
 
 from fxis_shm.client.api import ClientApi
+from fxis_shm.client.frames import Answer
 from fxis_shm.client.jointrequests import JointRequests
 from fxis_shm.client.multistreams import MultiEventPublisher, MultiSubscriber
 from fxis_shm.client.requestoptions import RequestOptions
@@ -35,7 +36,7 @@ class MultiClient(ClientApi):
         *,
         timeout: float = 2.0,
         clock: Callable[[], int] | str | None = None,
-        **client_options,
+        **client_options: Any,  # SingleClient's keywords, the same for every service
     ):
         ranges.TIMEOUT_S.check(timeout, "timeout")
         if not endpoints:
@@ -81,7 +82,7 @@ class MultiClient(ClientApi):
 
     # ---- the services ----
 
-    def status(self) -> dict:
+    def status(self) -> dict[str, Any]:
         """Every service's status and the cameras of all as one set: ``services`` maps each
         endpoint to its status (or ``{"ok": False, "error": ...}`` for one that does not
         answer; it is left out of the rest), ``cameras`` each camera's status with its
@@ -108,18 +109,18 @@ class MultiClient(ClientApi):
                 return client.clock_estimate()
         raise InvalidArgument(f"clock_estimate(service) needs one of {self.endpoints}, got {service!r}; or see clocks")
 
-    def settings(self, camera: str, *, features: bool = False) -> dict:
+    def settings(self, camera: str, *, features: bool = False) -> dict[str, Any]:
         """As ``Client.settings``, asked of the service that has ``camera``."""
         return self.owner[self._known([camera])[0]].settings(camera, features=features)
 
-    def configure(self, camera: str, **values) -> dict:
+    def configure(self, camera: str, **values: object) -> dict[str, Any]:
         """As ``Client.configure``, on the service that has ``camera``."""
         return self.owner[self._known([camera])[0]].configure(camera, **values)
 
-    def _frame_times(self, cameras: list[str] | None) -> dict:
+    def _frame_times(self, cameras: list[str] | None) -> dict[str, Any]:
         """Every service's answer together, each camera named with its ``service``."""
         names = self._known(cameras or list(self.owner))
-        merged: dict = {"cameras": {}, "columns": None}
+        merged: dict[str, Any] = {"cameras": {}, "columns": None}
         for client in self.clients:
             mine = [n for n in names if self.owner[n] is client]
             if mine:
@@ -138,7 +139,7 @@ class MultiClient(ClientApi):
 
     # ---- what ClientApi's operations ask of several services ----
 
-    def _answer(self, op: str, options: RequestOptions, **fields: Any) -> tuple[dict, list, Callable | None]:
+    def _answer(self, op: str, options: RequestOptions, **fields: Any) -> Answer:
         """Answered by one engine over every service's frame times (fxis_shm.client.jointrequests)."""
         assert self._requests is not None
         return self._requests.answer(op, options, **fields)
@@ -165,12 +166,12 @@ class MultiClient(ClientApi):
         return names
 
 
-def joint_status(clients: list[SingleClient], pool: ThreadPoolExecutor, clock: Callable[[], int]) -> dict:
+def joint_status(clients: list[SingleClient], pool: ThreadPoolExecutor, clock: Callable[[], int]) -> dict[str, Any]:
     """The status of several services asked at once, as ``MultiClient.status`` returns it."""
     answers = {c.endpoint: a for c, a in zip(clients, pool.map(_or_error, [c.status for c in clients]))}
     if all(isinstance(a, FxisError) for a in answers.values()):
         raise RequestTimeout(f"none of the services answers: {_errors(answers)}")
-    cameras = {}
+    cameras: dict[str, Any] = {}
     for endpoint, answer in answers.items():
         if not isinstance(answer, FxisError):
             cameras.update({name: {**cam, "service": endpoint} for name, cam in answer["cameras"].items()})
@@ -191,11 +192,11 @@ def _or_error(call: Callable[[], Any]) -> Any:
         return exc
 
 
-def _errors(answers: dict) -> str:
+def _errors(answers: dict[str, Any]) -> str:
     return "; ".join(f"{e}: {a}" for e, a in answers.items() if isinstance(a, FxisError))
 
 
-def _each(answers: dict) -> dict:
+def _each(answers: dict[str, Any]) -> dict[str, Any]:
     """The answers by endpoint, or RequestTimeout naming the first service that did not answer."""
     for endpoint, answer in answers.items():
         if isinstance(answer, FxisError):

@@ -11,23 +11,31 @@ sends each event request to the service of the cameras it names.
 from __future__ import annotations
 
 import collections
+import math
 import threading
 import time
+from typing import Any
 
 import zmq
 
 from fxis_shm.client.pubsub import EventPublisher, Message, Receiver, Subscriber, stream_topic
 from fxis_shm.client.single import SingleClient
+from fxis_shm.client.sockets import Closable
 from fxis_shm.client.tuplestream import TupleStream
 from fxis_shm.errors import InvalidArgument, RequestTimeout
 from fxis_shm.wire.encoding import RAW
 
 
-class MultiSubscriber(Receiver):
+class MultiSubscriber(Receiver, Closable):
     """A subscriber of several services' streams; iterate it or call ``receive``, as a Subscriber."""
 
     def __init__(
-        self, clients: list[SingleClient], owner: dict[str, SingleClient], options: dict, timeout: float, queue: int
+        self,
+        clients: list[SingleClient],
+        owner: dict[str, SingleClient],
+        options: dict[str, Any],
+        timeout: float,
+        queue: int,
     ):
         self.timeout, self._queue = timeout, queue
         self._owner = {name: client.endpoint for name, client in owner.items()}
@@ -37,7 +45,7 @@ class MultiSubscriber(Receiver):
         self._made: collections.deque[Message] = collections.deque(maxlen=queue)  # from the tuple streams
         self._made_lock = threading.Lock()
         self._held: collections.deque[Message] = collections.deque()
-        self._bell = zmq.Context.instance().socket(zmq.PULL)  # rung when a tuple stream made a message
+        self._bell: zmq.Socket[bytes] = zmq.Context.instance().socket(zmq.PULL)  # rung by a tuple stream
         self._bell.setsockopt(zmq.LINGER, 0)
         self._bell_address = f"inproc://fxis-tuples-{id(self)}"
         self._bell.bind(self._bell_address)
@@ -105,7 +113,7 @@ class MultiSubscriber(Receiver):
             poller.register(subscriber.socket, zmq.POLLIN)
         found: Message | None = None
         while True:
-            wait_ms = 0 if found is not None else max(0.0, deadline - time.monotonic()) * 1000
+            wait_ms = 0 if found is not None else math.ceil(max(0.0, deadline - time.monotonic()) * 1000)
             ready = dict(poller.poll(wait_ms))
             newest = self._take(ready, latest)
             if newest is not None:
@@ -117,7 +125,7 @@ class MultiSubscriber(Receiver):
             elif time.monotonic() >= deadline:
                 raise RequestTimeout(f"no message from {sorted(self.subscribers)} within {timeout:.3g} s")
 
-    def _take(self, ready: dict, latest: bool) -> Message | None:
+    def _take(self, ready: dict[Any, int], latest: bool) -> Message | None:
         """The first message of those ready (with ``latest``, the last); the others are held."""
         if self._bell in ready:
             while self._bell.poll(0):
@@ -146,14 +154,8 @@ class MultiSubscriber(Receiver):
             subscriber.close()
         self._bell.close()
 
-    def __enter__(self):
-        return self
 
-    def __exit__(self, *exc):
-        self.close()
-
-
-class MultiEventPublisher:
+class MultiEventPublisher(Closable):
     """Event requests to several services, each to the service of the cameras it names (an
     event is answered by one service: for a tuple across services, ask ``Client([...]).tuple``
     or subscribe to ``tuples``). ``at``, ``start`` and ``end`` are in the caller's clock."""
@@ -168,12 +170,12 @@ class MultiEventPublisher:
             self.close()
             raise
 
-    def request(self, op: str, reply_topic: str, *, service: str | None = None, **fields) -> str:
+    def request(self, op: str, reply_topic: str, *, service: str | None = None, **fields: Any) -> str:
         """Publish one request event to the service of its cameras (or to ``service``, an
         endpoint); returns its id, which the answer's ``header["id"]`` repeats."""
         return self.publishers[self._service_of(op, service, fields)].request(op, reply_topic, **fields)
 
-    def _service_of(self, op: str, service: str | None, fields: dict) -> str:
+    def _service_of(self, op: str, service: str | None, fields: dict[str, Any]) -> str:
         if service is not None:
             if service not in self.publishers:
                 raise InvalidArgument(f"unknown service {service!r}; the services are {sorted(self.publishers)}")
@@ -194,9 +196,3 @@ class MultiEventPublisher:
     def close(self) -> None:
         for publisher in self.publishers.values():
             publisher.close()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc):
-        self.close()

@@ -16,16 +16,18 @@ from __future__ import annotations
 
 import collections
 import itertools
+import math
 import secrets
 import time
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
+from typing import Any
 
-import numpy as np
 import zmq
+from numpy.typing import NDArray
 
 from fxis_shm.client.clocktracker import ClockTracker
-from fxis_shm.client.frames import FrameTuple, frames_of, in_caller_clock, sequence_of, tuple_of
+from fxis_shm.client.frames import Frame, FrameTuple, frames_of, in_caller_clock, sequence_of, tuple_of
 from fxis_shm.client.sockets import SocketOwner, checked_encoding, connected_socket
 from fxis_shm.core import timebase
 from fxis_shm.core.clockmap import ClockEstimate
@@ -33,6 +35,7 @@ from fxis_shm.errors import InvalidArgument, ProtocolError, RequestTimeout, serv
 from fxis_shm.wire import defaults, protocol
 from fxis_shm.wire.encoding import JPEG, RAW
 from fxis_shm.wire.endpoints import check_endpoint
+from fxis_shm.wire.headers import ReplyHeader
 from fxis_shm.wire.protocol import StreamTopic
 from fxis_shm.wire.security import ClientKeys
 
@@ -50,15 +53,16 @@ class Message:
     ``Subscriber(clock=...)``), the service's own kept as ``service_t_*``."""
 
     topic: str
-    header: dict
-    images: list[np.ndarray]
+    header: ReplyHeader
+    images: list[NDArray[Any]]
     estimate: Estimate | None = field(default=None, repr=False)
+    _moved: bool = field(default=False, repr=False, compare=False)  # its times are the caller's
 
-    def _in_caller_clock(self) -> dict:
-        if self.estimate is None or self.header.get("_caller_clock"):
+    def _in_caller_clock(self) -> ReplyHeader:
+        if self.estimate is None or self._moved:
             return self.header
         self.header = in_caller_clock(self.header, self.estimate())
-        self.header["_caller_clock"] = True  # moved once, however often it is read
+        self._moved = True  # moved once, however often it is read
         return self.header
 
     @property
@@ -67,7 +71,7 @@ class Message:
         return self.header.get("seq")
 
     @property
-    def rate(self) -> dict | None:
+    def rate(self) -> dict[str, object] | None:
         """In a decimated stream's first message: the rate asked, the camera's, and whether
         every frame is sent (the camera is no faster than the rate asked)."""
         return self.header.get("rate")
@@ -78,11 +82,11 @@ class Message:
 
     def raise_for_error(self) -> None:
         if not self.ok:
-            err = self.header.get("error") or {}
-            raise service_error(err.get("code", "UNKNOWN"), err.get("message", ""))
+            err = self.header.get("error")  # a published header is not checked field by field
+            raise service_error(*((err.get("code", "UNKNOWN"), err.get("message", "")) if err else ("UNKNOWN", "")))
 
     @property
-    def frames(self):
+    def frames(self) -> list[Frame]:
         self.raise_for_error()
         return frames_of(self._in_caller_clock(), self.images)
 
@@ -91,7 +95,7 @@ class Message:
         self.raise_for_error()
         return tuple_of(self._in_caller_clock(), self.images)
 
-    def sequence(self, single: bool = False) -> list:
+    def sequence(self, single: bool = False) -> list[Frame] | list[FrameTuple[Frame]]:
         self.raise_for_error()
         return sequence_of(self._in_caller_clock(), self.images, single=single)
 
@@ -108,7 +112,13 @@ class CallerClock:
     the estimate of a client of that service (``Client.subscribe()``, ``Client.events()``),
     or one kept here from exchanges with the service's request ``service`` endpoint."""
 
-    def __init__(self, clock, service: str | None, keys: ClientKeys | None, estimate: Estimate | None):
+    def __init__(
+        self,
+        clock: Callable[[], int] | str | None,
+        service: str | None,
+        keys: ClientKeys | None,
+        estimate: Estimate | None,
+    ):
         self._tracker: ClockTracker | None = None
         self.now: Callable[[], int] | None = None
         if estimate is None and clock is not None:
@@ -140,7 +150,7 @@ class Receiver:
         """Put back a message read too early: the next ``receive`` returns it first."""
         self._held.append(message)
 
-    def __iter__(self):
+    def __iter__(self) -> Iterator[Message]:
         while True:
             yield self.receive()
 
@@ -157,7 +167,7 @@ class Subscriber(Receiver, SocketOwner):
         endpoint: str = DEFAULT_PUB,
         timeout: float = 2.0,
         queue: int = 16,
-        context: zmq.Context | None = None,
+        context: zmq.Context[Any] | None = None,
         keys: ClientKeys | None = None,
         *,
         clock: Callable[[], int] | str | None = None,
@@ -167,7 +177,7 @@ class Subscriber(Receiver, SocketOwner):
         self.endpoint = check_endpoint(endpoint)
         self.timeout = timeout
         self._clock = CallerClock(clock, service, keys, estimate)
-        self._sock = (context or zmq.Context.instance()).socket(zmq.SUB)
+        self._sock: zmq.Socket[bytes] = (context or zmq.Context.instance()).socket(zmq.SUB)
         self._sock.setsockopt(zmq.LINGER, 0)
         self._sock.setsockopt(zmq.RCVHWM, queue)  # set before connecting, so it applies
         if keys is not None:
@@ -177,7 +187,7 @@ class Subscriber(Receiver, SocketOwner):
         self._held: collections.deque[Message] = collections.deque()
 
     @property
-    def socket(self) -> zmq.Socket:
+    def socket(self) -> zmq.Socket[bytes]:
         """The SUB socket, to poll it together with others (fxis_shm.client.multistreams)."""
         return self._sock
 
@@ -214,9 +224,9 @@ class Subscriber(Receiver, SocketOwner):
             return self._held.popleft()
         timeout = self.timeout if timeout is None else timeout
         deadline = time.monotonic() + timeout
-        found = None
+        found: list[zmq.Frame] | None = None
         while found is None or (latest and self._sock.poll(0, zmq.POLLIN)):
-            wait_ms = 0 if found is not None else max(0.0, deadline - time.monotonic()) * 1000
+            wait_ms = 0 if found is not None else math.ceil(max(0.0, deadline - time.monotonic()) * 1000)
             if not self._sock.poll(wait_ms, zmq.POLLIN):
                 if found is not None:
                     break
@@ -244,7 +254,7 @@ class EventPublisher(SocketOwner):
     def __init__(
         self,
         endpoint: str = DEFAULT_EVENTS,
-        context: zmq.Context | None = None,
+        context: zmq.Context[Any] | None = None,
         keys: ClientKeys | None = None,
         *,
         clock: Callable[[], int] | str | None = None,
@@ -259,7 +269,7 @@ class EventPublisher(SocketOwner):
         self._clock = CallerClock(clock, service, keys, estimate)
         self._now = now or self._clock.now
 
-    def request(self, op: str, reply_topic: str, **fields) -> str:
+    def request(self, op: str, reply_topic: str, **fields: Any) -> str:
         """Publish one request event (op image, tuple, latest, sequence or time); returns its
         id ("<publisher>-<n>"), which the answer's ``header["id"]`` repeats."""
         request_id = next(self._ids)
@@ -288,7 +298,7 @@ def handshake(events: EventPublisher, answers: Subscriber, reply_topic: str, tim
             handshake(publisher, answers, reply_topic, timeout)
         return
     deadline = time.monotonic() + timeout
-    probes = set()
+    probes: set[str] = set()
     while time.monotonic() < deadline:
         probes.add(events.request("time", reply_topic))
         try:
@@ -305,7 +315,7 @@ def handshake(events: EventPublisher, answers: Subscriber, reply_topic: str, tim
     )
 
 
-def _drain_probe_answers(answers: Subscriber, probes: set, settle_s: float = 0.05) -> None:
+def _drain_probe_answers(answers: Subscriber, probes: set[str], settle_s: float = 0.05) -> None:
     """Consume answers to earlier probes that are already on their way; anything
     else seen meanwhile is kept for the subscriber's next ``receive``."""
     while True:

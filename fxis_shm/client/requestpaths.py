@@ -7,8 +7,7 @@ The path a reply took is counted in ``paths`` and named by ``Frame.path``."""
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
-from typing import TYPE_CHECKING, Any, TypeVar, cast
+from typing import TYPE_CHECKING, Any, TypeVar
 
 from fxis_shm import _compiled
 from fxis_shm.client.clocktracker import ClockTracker
@@ -25,8 +24,6 @@ from fxis_shm.wire.headers import ReplyHeader
 
 _LOCAL_ATTEMPTS = 3  # requests re-asked after a torn local copy before giving up
 _LOCAL_RETRY_S = 10.0  # after the rings could not be opened, the network path this long
-# requesttimes.same_moment reads the first reply's header (typed there as a plain dict, for now)
-_same_moment = cast("Callable[[str, dict[str, object], ReplyHeader], dict[str, object]]", same_moment)
 _Answered = TypeVar("_Answered")  # what the compiled read answered (a Frame or a FrameTuple)
 
 
@@ -76,7 +73,7 @@ class RequestPaths:
                     continue
                 except LocalUnavailable as exc:  # the frames are there, just not here: same t*
                     self._give_up_local(str(exc))
-                    fields = _same_moment(op, fields, header)
+                    fields = same_moment(op, fields, header)
                     break
                 self.paths[LOCAL] += 1
                 self._local_off = None  # (again) usable

@@ -3,16 +3,21 @@ service's clock needs estimating at all, and the same t* asked again of another 
 
 from __future__ import annotations
 
+from collections.abc import Mapping
+from typing import Any
+
 from fxis_shm.core import timebase
 from fxis_shm.core.clockmap import IDENTITY, SAME_CLOCK, SHARED, ClockEstimate
 from fxis_shm.shm.localpath import boot_id, time_namespace
+from fxis_shm.wire.headers import ReplyHeader
 
 
-def last_needed(op: str, fields: dict) -> int | None:
+def last_needed(op: str, fields: Mapping[str, Any]) -> int | None:
     """The latest moment (caller's clock) whose frames a request asks for, if it names one."""
     if op == "sequence" and fields["kind"] == "range":
-        return fields["end"]
-    at = fields.get("at")
+        end: int = fields["end"]
+        return end
+    at: int | None = fields.get("at")
     if (
         op == "sequence"
         and fields["kind"] == "interval"
@@ -25,7 +30,7 @@ def last_needed(op: str, fields: dict) -> int | None:
     return at
 
 
-def fixed_mapping(caller_clock: str | None, service: dict) -> ClockEstimate | None:
+def fixed_mapping(caller_clock: str | None, service: dict[str, Any]) -> ClockEstimate | None:
     """The mapping when no estimate is needed: the service reads the very clock the caller
     does (same kernel, and for CLOCK_MONOTONIC the same time namespace), or both read a
     clock kept in step across hosts (realtime, tai). None: it must be estimated."""
@@ -41,7 +46,7 @@ def fixed_mapping(caller_clock: str | None, service: dict) -> ClockEstimate | No
     return ClockEstimate(0, method=SAME_CLOCK if same_kernel else SHARED)
 
 
-def same_moment(op: str, fields: dict, header: dict) -> dict:
+def same_moment(op: str, fields: dict[str, object], header: ReplyHeader) -> dict[str, object]:
     """The fields of a request asked again: for the t* the service chose the first time."""
     if op == "latest" or fields.get("at") is not None or header.get("t_request") is None:
         return fields

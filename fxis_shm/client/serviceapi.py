@@ -33,7 +33,7 @@ class ServiceApi(ABC):
         """
 
     @abstractmethod
-    def status(self) -> dict:
+    def status(self) -> dict[str, Any]:
         """The service's status: its cameras, endpoints and clock.
 
         Returns

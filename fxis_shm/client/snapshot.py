@@ -32,12 +32,13 @@ import fcntl
 import json
 import os
 import queue
+import sys
 import threading
 import time
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
-from typing import Any
+from typing import TYPE_CHECKING, Any
 
 from fxis_shm.core import timebase
 from fxis_shm.errors import (
@@ -57,6 +58,10 @@ from fxis_shm.formats.videoencoder import StreamEncoder
 from fxis_shm.formats.videotracks import VideoPlan, VideoSettings, write_packets
 from fxis_shm.wire import encoding as codec, ranges
 
+if TYPE_CHECKING:  # the clients import this module
+    from fxis_shm.client.frames import Frame
+    from fxis_shm.client.single import SingleClient
+
 ID, T_CAPTURE, GENERATION = 0, 1, 4  # columns of a ``frames`` row
 CHUNK = 16  # frames copied per request: bounds the memory a long window takes at once
 GRACE_S = 2.0  # after t + after, how long a camera may take to show a frame past the window
@@ -67,7 +72,7 @@ class _Camera:
     """One camera's part of a snapshot, in its service's clock."""
 
     name: str
-    client: Any  # a single-service client (its frame_times, sequence, clock_estimate)
+    client: SingleClient  # of the camera's service
     start: int
     end: int
     last_t: int | None = None  # the newest capture time looked at
@@ -77,7 +82,7 @@ class _Camera:
     period_ns: int = 0
     past_end: bool = False  # a frame after the window was seen: nothing more to come
 
-    def new_rows(self, info: dict) -> list[list[int]]:
+    def new_rows(self, info: dict[str, Any]) -> list[list[int]]:  # the camera's frame_times entry
         self.period_ns = info.get("period_ns") or self.period_ns
         rows = info.get("frames") or []
         if self.last_t is None and rows and rows[0][T_CAPTURE] > self.start:  # the first look
@@ -107,7 +112,7 @@ def lost_to_ring(oldest: list[int], start: int, end: int, period_ns: int) -> lis
 
 
 def take(
-    owners: dict[str, Any],
+    owners: dict[str, SingleClient],
     clock: Callable[[], int],
     out: str,
     at: int | None = None,
@@ -117,7 +122,7 @@ def take(
     quality: int | None = None,
     clock_name: str | None = None,
     video: VideoSettings | None = None,
-) -> dict:
+) -> dict[str, Any]:
     """The snapshot of the cameras ``owners`` names (camera -> the client of its service)
     around ``at`` (ns of ``clock``, whose name ``clock_name`` is; default now) into the bag
     ``out``; what it holds. ``out`` is None if the rings held no frame of the window (no
@@ -138,8 +143,9 @@ def take(
     lock = _claim(partial, out)
     window = (t - round(before * 1e9), t + round(after * 1e9))
     try:
-        cameras = {name: _Camera(name, c, *map(c.clock_estimate().to_service, window)) for name, c in owners.items()}
-        custom = {"clock": _clock_words(clock_name), "stamps": "header.stamp: capture time in that clock"}
+        cameras = {name: _Camera(name, c, *_in_service_clock(c, window)) for name, c in owners.items()}
+        stamps = "header.stamp: capture time in that clock"
+        custom: dict[str, object] = {"clock": _clock_words(clock_name), "stamps": stamps}
         custom.update(event_ns=t, before_s=before, after_s=after, window_ns=f"{window[0]} {window[1]}")
         custom.update(cameras=",".join(cameras), encoding=video.codec if video else encoding)
         custom.update(missing="", gone_before_ms="", ended="")
@@ -184,7 +190,8 @@ def take(
     said = f"the snapshot kept {_kept_words(summary)} in {out}, a valid bag" if kept else "no frame was kept"
     if isinstance(stopped, KeyboardInterrupt):
         raise Interrupted(f"{_ended(stopped)}: {said}", result) from None
-    stopped.add_note(said)
+    if sys.version_info >= (3, 11):  # before, an exception has no notes
+        stopped.add_note(said)
     raise stopped
 
 
@@ -196,7 +203,7 @@ class Interrupted(KeyboardInterrupt):
     too): ``result`` is what ``take`` returns, its ``out`` a valid bag of every frame copied
     until then (its metadata's ``ended`` says it was interrupted), or None if none was."""
 
-    def __init__(self, message: str, result: dict):
+    def __init__(self, message: str, result: dict[str, Any]):
         super().__init__(message)
         self.result = result
 
@@ -226,7 +233,7 @@ def _follow(cameras: dict[str, _Camera], writer: _Writer, clock: Callable[[], in
         time.sleep(max(0.0, _poll_s(cameras) - (time.monotonic() - began)))
 
 
-def _summary(cameras: dict[str, _Camera], written: Counter) -> dict:
+def _summary(cameras: dict[str, _Camera], written: Counter[str]) -> dict[str, dict[str, Any]]:
     return {
         name: {
             "frames": written[name],
@@ -238,7 +245,12 @@ def _summary(cameras: dict[str, _Camera], written: Counter) -> dict:
     }
 
 
-def _kept_words(summary: dict) -> str:
+def _in_service_clock(client: SingleClient, window: tuple[int, int]) -> tuple[int, int]:
+    to_service = client.clock_estimate().to_service
+    return to_service(window[0]), to_service(window[1])
+
+
+def _kept_words(summary: dict[str, dict[str, Any]]) -> str:
     return ", ".join(f"{name} {kept['frames']} frames" for name, kept in summary.items())
 
 
@@ -248,7 +260,7 @@ def _clock_words(name: str | None) -> str:
     return timebase.WIRE_NAMES[name]
 
 
-def _claim(partial: str, out: str):
+def _claim(partial: str, out: str) -> int:
     """The snapshot's own ``partial`` folder, made here (never one found: it may hold an
     earlier snapshot's frames, or another's being written) and locked while it is written."""
     try:
@@ -296,7 +308,7 @@ def _move(partial: str, out: str) -> None:
         raise FxisError(f"{out}: {exc.strerror}: the snapshot is kept, whole, in {partial}") from None
 
 
-def _disk_full(exc: DiskFull, lock, partial: str, out: str) -> DiskFull:
+def _disk_full(exc: DiskFull, lock: int, partial: str, out: str) -> DiskFull:
     _release(lock, partial, remove=False)
     if not exc.valid:  # the bag could not be closed: it stays unfinished, for --recover
         return DiskFull(f"{exc} (the snapshot's bag: {partial})", **{k: getattr(exc, k) for k in DISK_FULL_FIELDS})
@@ -311,13 +323,21 @@ def _disk_full(exc: DiskFull, lock, partial: str, out: str) -> DiskFull:
 DISK_FULL_FIELDS = ("folder", "reason", "kept", "seconds", "file_bytes", "valid")
 
 
-def _video_plan(owners: dict[str, Any], video: VideoSettings | None) -> VideoPlan | None:
+def _video_plan(owners: dict[str, SingleClient], video: VideoSettings | None) -> VideoPlan | None:
     if video is None:
         return None
     return VideoPlan.make(video, {name: c.status()["cameras"][name] for name, c in owners.items()})
 
 
-def _check(at, before, after, out, encoding, quality, video) -> None:
+def _check(
+    at: int | None,
+    before: float,
+    after: float,
+    out: str,
+    encoding: str,
+    quality: int | None,
+    video: VideoSettings | None,
+) -> None:
     for name, value in (("before", before), ("after", after)):
         ranges.WINDOW_S.check(value, name)
     if before + after <= 0:
@@ -367,14 +387,14 @@ class _Writer:
         self.bag, self.to_realtime, self.encoding, self.quality = bag, to_realtime, encoding, quality
         self.plan = plan
         self._encoders: dict[str, StreamEncoder] = {}
-        self._frames: queue.Queue = queue.Queue()
+        self._frames: queue.Queue[Frame | None] = queue.Queue()
         self._error: BaseException | None = None
         # counted here, once in the bag: a frame put just before Ctrl-C is still written, and counted
-        self.written: Counter = Counter()
+        self.written: Counter[str] = Counter()
         self._thread = threading.Thread(target=self._run, name="snapshot-writer", daemon=True)
         self._thread.start()
 
-    def put(self, frame) -> None:
+    def put(self, frame: Frame) -> None:
         if self._error is not None:
             raise self._error
         self._frames.put(frame)
@@ -403,7 +423,7 @@ class _Writer:
             except BaseException as exc:
                 self._error = exc
 
-    def _write(self, frame) -> None:
+    def _write(self, frame: Frame) -> None:
         if self.plan is None:
             topic, msgtype, message, size = rosmsgs.frame_message(frame, frame.t_capture, self.encoding, self.quality)
             self.bag.write(topic, msgtype, message, frame.t_capture + self.to_realtime, size)

@@ -6,6 +6,7 @@ fxis_shm.wire.multipart, as the service sends them)."""
 from __future__ import annotations
 
 from collections.abc import Callable
+from typing import TYPE_CHECKING, Any
 
 import zmq
 
@@ -13,6 +14,9 @@ from fxis_shm.errors import InvalidArgument, ProtocolError
 from fxis_shm.wire import encoding as codec
 from fxis_shm.wire.endpoints import check_endpoint
 from fxis_shm.wire.security import ClientKeys
+
+if TYPE_CHECKING:
+    from typing_extensions import Self  # typing's from 3.11 on
 
 
 def checked_encoding(encoding: str, quality: int | None) -> tuple[str, int | None]:
@@ -25,16 +29,16 @@ def checked_encoding(encoding: str, quality: int | None) -> tuple[str, int | Non
 
 
 def connected_socket(
-    context: zmq.Context | None,
+    context: zmq.Context[Any] | None,
     kind: int,
     endpoint: str,
     keys: ClientKeys | None = None,
-    before_connect: Callable[[zmq.Socket], object] | None = None,
-) -> zmq.Socket:
+    before_connect: Callable[[zmq.Socket[bytes]], object] | None = None,
+) -> zmq.Socket[bytes]:
     """A client socket: LINGER 0 (closing never blocks), CURVE if keys are given; BadEndpoint
     for an endpoint ZeroMQ would refuse only as "Invalid argument", or never."""
     check_endpoint(endpoint)
-    sock = (context or zmq.Context.instance()).socket(kind)
+    sock: zmq.Socket[bytes] = (context or zmq.Context.instance()).socket(kind)
     sock.setsockopt(zmq.LINGER, 0)
     if keys is not None:
         keys.apply(sock)
@@ -44,19 +48,26 @@ def connected_socket(
     return sock
 
 
-class SocketOwner:
+class Closable:
+    """Closed (``close``) on leaving a ``with`` block."""
+
+    def close(self) -> None:
+        raise NotImplementedError
+
+    def __enter__(self) -> Self:
+        return self
+
+    def __exit__(self, *exc: object) -> None:
+        self.close()
+
+
+class SocketOwner(Closable):
     """Closes its one ZeroMQ socket (``self._sock``) on ``close`` and on leaving a ``with``."""
 
-    _sock: zmq.Socket
+    _sock: zmq.Socket[bytes]
 
     def close(self) -> None:
         self._sock.close()
-
-    def __enter__(self):
-        return self
-
-    def __exit__(self, *exc) -> None:
-        self.close()
 
 
 def reachable(endpoint: str, via: str) -> str:

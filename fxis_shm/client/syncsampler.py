@@ -15,8 +15,10 @@ import time
 from collections import Counter
 from collections.abc import Callable
 from dataclasses import dataclass, field
+from typing import Any
 
 import numpy as np
+from numpy.typing import NDArray
 
 from fxis_shm.client.api import ClientApi
 from fxis_shm.client.frames import FrameTuple
@@ -129,7 +131,7 @@ def row_of(tuple_: FrameTuple) -> Row:
     }
 
 
-def samples_of(cameras: list[str], slots: np.ndarray, rows: list[Row | None]) -> Samples:
+def samples_of(cameras: list[str], slots: NDArray[Any], rows: list[Row | None]) -> Samples:
     """The arrays of ``cameras`` from one row per slot (None: no tuple came for it)."""
     shape = (len(rows), len(cameras))
     frame_id, t_capture, generation = (np.zeros(shape, dtype=np.int64) for _ in range(3))

@@ -18,6 +18,7 @@ from __future__ import annotations
 import math
 import threading
 from collections.abc import Callable
+from typing import Any
 
 import zmq
 
@@ -27,6 +28,8 @@ from fxis_shm.client.requestoptions import RequestOptions
 from fxis_shm.client.single import SingleClient
 from fxis_shm.core.decimation import every_frame
 from fxis_shm.errors import Code, FxisError, RequestTimeout
+from fxis_shm.wire import protocol
+from fxis_shm.wire.headers import ReplyHeader
 from fxis_shm.wire.protocol import StreamTopic
 
 LAG_MARGIN_NS = 2_000_000  # after t* + period + delay, the frames around t* are stored
@@ -43,7 +46,7 @@ class TupleStream:
         topic: str,
         stream: StreamTopic,
         owner: dict[str, str],
-        options: dict,
+        options: dict[str, Any],  # each service's SingleClient's
         deliver: Callable[[Message], None],
         bell: str,
         partial: bool = False,
@@ -90,7 +93,7 @@ class TupleStream:
         return max((c.period_ns + c.state(c.snapshot()).delay_ns for c in cams), default=0) + LAG_MARGIN_NS
 
     def _run(self) -> None:
-        bell = zmq.Context.instance().socket(zmq.PUSH)  # used by this thread only
+        bell: zmq.Socket[bytes] = zmq.Context.instance().socket(zmq.PUSH)  # used by this thread only
         bell.setsockopt(zmq.LINGER, 0)
         bell.setsockopt(zmq.SNDHWM, 1)  # one ring wakes the subscriber, however many messages wait
         bell.connect(self.bell)
@@ -99,7 +102,7 @@ class TupleStream:
         finally:
             bell.close()
 
-    def _schedule(self, bell: zmq.Socket) -> None:
+    def _schedule(self, bell: zmq.Socket[bytes]) -> None:
         t_star = self._clock()
         while not self._stop.is_set():
             message = self._tuple_at(t_star)
@@ -119,7 +122,8 @@ class TupleStream:
 
     def _tuple_at(self, t_star: int) -> Message:
         self.seq += 1
-        body = {"stream": self.topic[:-1], "seq": self.seq}
+        # a message as the service's own streams publish it (protocol.encode_reply: v, id None, ok)
+        body: ReplyHeader = {"v": protocol.VERSION, "id": None, "ok": True, "stream": self.topic[:-1], "seq": self.seq}
         if self.seq == 1 and self.stream.rate_hz:
             body["rate"] = {"asked_hz": self.stream.rate_hz}
         try:
@@ -129,4 +133,4 @@ class TupleStream:
             code = Code.TIMEOUT if isinstance(exc, RequestTimeout) else getattr(exc, "code", Code.INTERNAL)
             message = str(exc).removeprefix(f"{code}: ")
             return Message(self.topic, {**body, "ok": False, "error": {"code": code, "message": message}}, [])
-        return Message(self.topic, {**header, **body, "ok": True}, images)
+        return Message(self.topic, {**header, **body}, images)

@@ -143,6 +143,11 @@ class ReplyHeader(_ReplyBase, total=False):
     received: int  # time
     now: int  # time, status, frames
     boot_id: str | None
+    # a published stream message's (section 9): its stream, its number, and in a decimated
+    # stream's first message the rate note (asked_hz, camera_fps, every_frame, message)
+    stream: str
+    seq: int
+    rate: dict[str, object]
     # the client's own additions: t* in the service's clock when it moves the times into the
     # caller's, and the path the frames took ("local" or "network", fxis_shm.client.requestpaths)
     service_t_request: int
