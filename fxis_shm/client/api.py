@@ -9,7 +9,7 @@ one kind of client is there for the other; each kind fills in how a request is a
 from __future__ import annotations
 
 from abc import abstractmethod
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from typing import TYPE_CHECKING, Any, Literal, overload
 
 from fxis_shm.client import arguments, snapshot as snapshots
@@ -23,8 +23,6 @@ from fxis_shm.wire import encoding as image_encoding
 
 if TYPE_CHECKING:
     from typing_extensions import Unpack  # (typing's own from Python 3.11)
-
-    from fxis_shm.client.single import SingleClient  # (it imports this module)
 
 # The operations written once, here: ClientApi refuses a subclass that redefines one.
 SHARED_OPERATIONS = ("image", "tuple", "latest", "sequence", "snapshot", "subscribe", "frame_times")
@@ -247,7 +245,7 @@ class ClientApi(FrameRequests):
     # ---- what each kind of client fills in ----
 
     @abstractmethod
-    def _owners(self, cameras: list[str] | None) -> dict[str, SingleClient]:
+    def _owners(self, cameras: list[str] | None) -> Mapping[str, snapshots.ServiceClient]:
         """The single-service client that serves each of ``cameras`` (default: all)."""
 
     @abstractmethod

@@ -36,11 +36,14 @@ import sys
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Mapping
 from dataclasses import dataclass, field
-from typing import TYPE_CHECKING, Any
+from typing import TYPE_CHECKING, Any, Literal, Protocol
 
+from fxis_shm.client.frames import Frame
+from fxis_shm.client.requestkeywords import SequenceKeywords
 from fxis_shm.core import timebase
+from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.errors import (
     CameraDown,
     Code,
@@ -58,9 +61,24 @@ from fxis_shm.formats.videoencoder import StreamEncoder
 from fxis_shm.formats.videotracks import VideoPlan, VideoSettings, write_packets
 from fxis_shm.wire import encoding as codec, ranges
 
-if TYPE_CHECKING:  # the clients import this module
-    from fxis_shm.client.frames import Frame
-    from fxis_shm.client.single import SingleClient
+if TYPE_CHECKING:
+    from typing_extensions import Unpack  # (typing's own from Python 3.11)
+
+
+class ServiceClient(Protocol):
+    """What a snapshot asks of the client of a camera's service (a SingleClient: the clients
+    import this module, so it is named by what it does)."""
+
+    def frame_times(self, cameras: list[str] | None = None) -> dict[str, Any]: ...
+
+    def clock_estimate(self) -> ClockEstimate: ...
+
+    def status(self) -> dict[str, Any]: ...
+
+    def sequence(
+        self, kind: str, *, camera: str, copy: Literal[True] = True, **keywords: Unpack[SequenceKeywords]
+    ) -> list[Frame]: ...
+
 
 ID, T_CAPTURE, GENERATION = 0, 1, 4  # columns of a ``frames`` row
 CHUNK = 16  # frames copied per request: bounds the memory a long window takes at once
@@ -72,7 +90,7 @@ class _Camera:
     """One camera's part of a snapshot, in its service's clock."""
 
     name: str
-    client: SingleClient  # of the camera's service
+    client: ServiceClient  # of the camera's service
     start: int
     end: int
     last_t: int | None = None  # the newest capture time looked at
@@ -112,7 +130,7 @@ def lost_to_ring(oldest: list[int], start: int, end: int, period_ns: int) -> lis
 
 
 def take(
-    owners: dict[str, SingleClient],
+    owners: Mapping[str, ServiceClient],
     clock: Callable[[], int],
     out: str,
     at: int | None = None,
@@ -245,7 +263,7 @@ def _summary(cameras: dict[str, _Camera], written: Counter[str]) -> dict[str, di
     }
 
 
-def _in_service_clock(client: SingleClient, window: tuple[int, int]) -> tuple[int, int]:
+def _in_service_clock(client: ServiceClient, window: tuple[int, int]) -> tuple[int, int]:
     to_service = client.clock_estimate().to_service
     return to_service(window[0]), to_service(window[1])
 
@@ -323,7 +341,7 @@ def _disk_full(exc: DiskFull, lock: int, partial: str, out: str) -> DiskFull:
 DISK_FULL_FIELDS = ("folder", "reason", "kept", "seconds", "file_bytes", "valid")
 
 
-def _video_plan(owners: dict[str, SingleClient], video: VideoSettings | None) -> VideoPlan | None:
+def _video_plan(owners: Mapping[str, ServiceClient], video: VideoSettings | None) -> VideoPlan | None:
     if video is None:
         return None
     return VideoPlan.make(video, {name: c.status()["cameras"][name] for name, c in owners.items()})
@@ -351,7 +369,7 @@ def _check(
     check_out_folder(out)
 
 
-def _check_cameras(owners: dict[str, Any], before: float) -> None:
+def _check_cameras(owners: Mapping[str, ServiceClient], before: float) -> None:
     """UnknownCamera for a camera its service lacks; InvalidArgument if ``before`` is longer
     than any of the cameras' rings holds (their ``history_s``, as their services' status
     says: O(1), before a frame is looked at)."""
