@@ -2,6 +2,7 @@
 frame decoded with PyAV (FFmpeg's own decoders, not the encoder's)."""
 
 import csv
+import re
 from fractions import Fraction
 
 import av
@@ -110,8 +111,10 @@ def test_each_camera_is_a_compressed_video_topic_with_its_frame_ids_beside_it(h2
         assert all(b > a for a, b in zip(ids, ids[1:]))
         row = next(line.split() for line in result.stdout.splitlines() if line.startswith(cam))
         assert row[1:3] == [f"/{cam}/video", str(len(video))]
-        # each frame id absent is reported: missed by the recorder, dropped by the camera
-        assert ids[-1] - ids[0] + 1 - len(ids) <= int(row[3]) + int(row[4])
+        # each frame id absent is reported: missed by the recorder, dropped by the camera, skipped
+        # by an encoder that fell behind (a line of its own; on a loaded machine it was 2 frames)
+        skipped = re.search(rf"^{cam}: the encoder fell behind and skipped (\d+) frames", result.stdout, re.M)
+        assert ids[-1] - ids[0] + 1 - len(ids) <= int(row[3]) + int(row[4]) + (int(skipped[1]) if skipped else 0)
 
 
 def test_every_frame_decodes_as_the_frame_its_id_names_at_its_capture_time(h264_bag):
