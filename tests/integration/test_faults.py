@@ -42,9 +42,16 @@ def test_kill_9_of_a_camera_worker(start_service):
         assert partial.missing == ["a"] and set(partial) == {"b"}
         frame, _ = until_served(client, lambda c: c.image("a"))
         assert frame.generation == 2 and read_stamp(frame.image) == frame.frame_id
-        status = client.status()
+
+        # the supervisor notes "restarted" once it has read the worker's handshake, which may come
+        # after the worker's first frames were served: waited for, with a deadline
+        def restarted():
+            status = client.status()
+            events = status["supervisor"]["events"]
+            return status if any("camera:a" == e["process"] and "restarted" in e["what"] for e in events) else None
+
+        status = wait_until(restarted, what="the supervisor's 'restarted' event of camera a")
         assert status["cameras"]["a"]["restarts"] == 1
-        assert any("camera:a" == e["process"] and "restarted" in e["what"] for e in status["supervisor"]["events"])
 
 
 def test_kill_9_of_the_coordinator(start_service):
