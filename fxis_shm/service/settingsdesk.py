@@ -67,9 +67,18 @@ class SettingsDesk:
                 f"unknown camera {camera!r}; this service has {sorted(self.cameras)}", Code.UNKNOWN_CAMERA
             )
         if request["set"] is not None or request["features"]:
+            self._check_up(camera)
             self._change(camera, request, respond)
         else:
             self._read(camera, request, respond)
+
+    def _check_up(self, camera: str) -> None:
+        """CAMERA_DOWN now for a camera whose worker is not running, as its ring shows: the
+        link's own disconnect comes later (ZeroMQ notes it in its I/O thread), and a command
+        queued on it meanwhile would wait out its timeout."""
+        down = self.cameras[camera].down_reason(self.clock.now_ns())
+        if down is not None:
+            raise ProtocolError(down, Code.CAMERA_DOWN)
 
     def ask(self, camera: str) -> None:
         """Have the camera's worker report its settings (once: a report already asked for is
@@ -108,12 +117,9 @@ class SettingsDesk:
     # ---- reads ----
 
     def _read(self, camera: str, request: Message, respond: Respond) -> None:
-        handle = self.cameras[camera]
-        down = handle.down_reason(self.clock.now_ns())
-        if down is not None:
-            raise ProtocolError(down, Code.CAMERA_DOWN)
+        self._check_up(camera)
         known = self._known[camera]
-        ring = handle.reader
+        ring = self.cameras[camera].reader
         if known.report is not None and ring is not None and known.report["generation"] == ring.field("generation"):
             self._answer(respond, request, {"op": "settings", "camera": camera, **known.report})
             return
