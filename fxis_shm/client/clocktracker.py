@@ -8,13 +8,13 @@ is current. A service that stops answering leaves the last estimate in place.
 
 from __future__ import annotations
 
-import math
 import threading
 import time
 from collections.abc import Callable
 
 import zmq
 
+from fxis_shm.client.sockets import poll_ms
 from fxis_shm.core.clockmap import ClockEstimate, ClockEstimator, Exchange
 from fxis_shm.errors import ProtocolError, RequestTimeout
 from fxis_shm.wire import protocol
@@ -112,7 +112,7 @@ class ClockTracker:
         deadline = time.monotonic() + self.timeout
         while True:
             left = deadline - time.monotonic()
-            if self._sock.poll(math.ceil(max(0.0, min(left, STOP_CHECK_S)) * 1000), event):  # ms, whole
+            if self._sock.poll(poll_ms(min(left, STOP_CHECK_S)), event):
                 return True
             if left <= 0 or self._stop.is_set():
                 return False

@@ -11,7 +11,6 @@ sends each event request to the service of the cameras it names.
 from __future__ import annotations
 
 import collections
-import math
 import threading
 import time
 from typing import Any
@@ -20,7 +19,7 @@ import zmq
 
 from fxis_shm.client.pubsub import EventPublisher, Message, Receiver, Subscriber, stream_topic
 from fxis_shm.client.single import SingleClient
-from fxis_shm.client.sockets import Closable
+from fxis_shm.client.sockets import Closable, poll_ms
 from fxis_shm.client.tuplestream import TupleStream
 from fxis_shm.errors import InvalidArgument, RequestTimeout
 from fxis_shm.wire.encoding import RAW
@@ -113,7 +112,7 @@ class MultiSubscriber(Receiver, Closable):
             poller.register(subscriber.socket, zmq.POLLIN)
         found: Message | None = None
         while True:
-            wait_ms = 0 if found is not None else math.ceil(max(0.0, deadline - time.monotonic()) * 1000)
+            wait_ms = 0 if found is not None else poll_ms(deadline - time.monotonic())
             ready = dict(poller.poll(wait_ms))
             newest = self._take(ready, latest)
             if newest is not None:

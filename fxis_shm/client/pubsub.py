@@ -16,7 +16,6 @@ from __future__ import annotations
 
 import collections
 import itertools
-import math
 import secrets
 import time
 from collections.abc import Callable, Iterator
@@ -28,7 +27,7 @@ from numpy.typing import NDArray
 
 from fxis_shm.client.clocktracker import ClockTracker
 from fxis_shm.client.frames import Frame, FrameTuple, frames_of, in_caller_clock, sequence_of, tuple_of
-from fxis_shm.client.sockets import SocketOwner, checked_encoding, connected_socket
+from fxis_shm.client.sockets import SocketOwner, checked_encoding, connected_socket, poll_ms
 from fxis_shm.core import timebase
 from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.errors import InvalidArgument, ProtocolError, RequestTimeout, service_error
@@ -83,7 +82,8 @@ class Message:
     def raise_for_error(self) -> None:
         if not self.ok:
             err = self.header.get("error")  # a published header is not checked field by field
-            raise service_error(*((err.get("code", "UNKNOWN"), err.get("message", "")) if err else ("UNKNOWN", "")))
+            code, message = (err.get("code", "UNKNOWN"), err.get("message", "")) if err else ("UNKNOWN", "")
+            raise service_error(code, message)
 
     @property
     def frames(self) -> list[Frame]:
@@ -226,7 +226,7 @@ class Subscriber(Receiver, SocketOwner):
         deadline = time.monotonic() + timeout
         found: list[zmq.Frame] | None = None
         while found is None or (latest and self._sock.poll(0, zmq.POLLIN)):
-            wait_ms = 0 if found is not None else math.ceil(max(0.0, deadline - time.monotonic()) * 1000)
+            wait_ms = 0 if found is not None else poll_ms(deadline - time.monotonic())
             if not self._sock.poll(wait_ms, zmq.POLLIN):
                 if found is not None:
                     break

@@ -5,6 +5,7 @@ fxis_shm.wire.multipart, as the service sends them)."""
 
 from __future__ import annotations
 
+import math
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -26,6 +27,12 @@ def checked_encoding(encoding: str, quality: int | None) -> tuple[str, int | Non
     except ProtocolError as exc:
         raise InvalidArgument(exc.message) from None
     return encoding, quality
+
+
+def poll_ms(seconds: float) -> int:
+    """A wait of ``seconds`` (none if negative) as ZeroMQ's poll takes it: whole milliseconds,
+    rounded up, so that a wait for a deadline never ends before it."""
+    return math.ceil(max(0.0, seconds) * 1000)
 
 
 def connected_socket(
