@@ -6,7 +6,8 @@ exactly as ``Client([a, b]).tuple(at=t*)`` would choose it.
 Each tuple is asked for once its frames can all be stored (t* plus the slowest camera's
 period and delay), so the engine rarely waits and the rate is the schedule's. A stream a little
 behind (a busy host) catches up, so the long-run rate is the one asked; one further behind than
-a second (a stall, a host down) gives up the times it missed rather than send a burst. A
+a second (a stall, a host down), or so far behind that the times it missed are no longer held
+(the shortest ring's span), gives up those times rather than send a burst or fail. A
 tuple that cannot be made (a service down) is a message with its error, as ``message.tuple``
 raises it. The stream runs in a thread with clients of its own: the caller's
 sockets are not shared, and a subscriber slow to read holds up no one (its queue keeps the
@@ -35,6 +36,15 @@ from fxis_shm.wire.protocol import StreamTopic
 LAG_MARGIN_NS = 2_000_000  # after t* + period + delay, the frames around t* are stored
 FIRST_PERIOD_NS = 100_000_000  # the schedule's interval until the cameras' periods are known
 GIVE_UP_NS = 1_000_000_000  # times further behind than this are given up; nearer ones are caught up
+
+
+def catch_up_limit_ns(interval_ns: int, lag_ns: int, held_ns: int | None) -> int:
+    """How far behind its schedule (past t* plus ``lag_ns``) a stream may fall and still catch
+    up: a second at most, and not so far that a time it would ask for is older than what every
+    camera holds (``held_ns``, the shortest ring's span; None: not known yet): the time asked
+    next is then at most ``lag_ns`` plus one interval old. Never less than one interval."""
+    limit = GIVE_UP_NS if held_ns is None else min(GIVE_UP_NS, held_ns - lag_ns - interval_ns)
+    return max(interval_ns, limit)
 
 
 class TupleStream:
@@ -116,9 +126,14 @@ class TupleStream:
             interval, lag = self._interval_ns(), self._lag_ns()
             t_star += interval
             late = self._clock() - lag - t_star
-            if late > max(interval, GIVE_UP_NS):  # a stall (a host down): give up the times missed
+            if late > catch_up_limit_ns(interval, lag, self._held_ns()):  # give up the times missed
                 t_star += math.floor(late / interval) * interval
             self._stop.wait(max(0, t_star + lag - self._clock()) / 1e9)
+
+    def _held_ns(self) -> int | None:
+        """The span of frames every camera holds (the shortest ring's, as last described)."""
+        timelines = [c.snapshot().timeline for c in self._requests.cameras.values()]
+        return min((t.at(len(t) - 1) - t.at(0) for t in timelines if len(t) > 1), default=None)
 
     def _tuple_at(self, t_star: int) -> Message:
         self.seq += 1
