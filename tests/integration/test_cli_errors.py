@@ -288,6 +288,8 @@ def test_ctrl_c_or_sigterm_is_code_130_with_one_line(sig):
         proc = subprocess.Popen(
             [
                 sys.executable,
+                "-X",
+                "faulthandler",  # SIGABRT prints where each thread stands (below, if it does not end)
                 "-m",
                 "fxis_shm.cli",
                 "status",
@@ -307,7 +309,12 @@ def test_ctrl_c_or_sigterm_is_code_130_with_one_line(sig):
             listener.settimeout(30)
             peer, _ = listener.accept()  # the client is connected: in the command, past its imports
             proc.send_signal(sig)
-            _, err = proc.communicate(timeout=30)
+            try:
+                _, err = proc.communicate(timeout=30)
+            except subprocess.TimeoutExpired:
+                proc.send_signal(signal.SIGABRT)
+                stood = proc.communicate()[1]
+                raise AssertionError(f"not ended 30 s after {sig.name}; where it stood:\n{stood}") from None
             peer.close()
         finally:
             proc.kill()
