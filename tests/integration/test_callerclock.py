@@ -22,11 +22,15 @@ MEDIUM = "width=320,height=240"
 
 @pytest.fixture(scope="module")
 def medium(request):
-    """Two 320x240 cameras (large enough for the stamp to survive JPEG), one of them colour."""
+    """Two 320x240 cameras (large enough for the stamp to survive JPEG), one of them colour,
+    whose rings hold 3 s: a test asks for t* 100 ms ago, and on a loaded machine its process
+    may stall half a second before the ring is read (20 slots, 380 ms, then held too little)."""
     from .conftest import module_service
 
     yield from module_service(
         [
+            "--slots",
+            "150",
             "--camera",
             f"cam0=synthetic:fps=50,{MEDIUM}",
             "--camera",
