@@ -86,8 +86,8 @@ XDIST := $(if $(filter 0,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist 
 # exact whatever the load, and a failure there is a defect. The parallel pass reruns nothing: a
 # test of it that fails on a loaded machine has failed (issue 41).
 # The real-time tier: the tests marked `realtime` (pyproject.toml), which judge a real timer's
-# residuals, skews across real clocks, a file's playback rate and a DDS reader keeping up, 19 tests
-# today (tests/integration/test_realtime.py 4, tests/integration/test_ros2.py 4,
+# residuals, skews across real clocks, a file's playback rate and a DDS reader keeping up, 23 tests
+# today (tests/integration/test_realtime.py 4, tests/integration/test_ros2.py 8,
 # tests/integration/test_lockstep.py 3, tests/integration/test_capture_at.py 2,
 # tests/integration/test_lerobot.py 2, tests/integration/test_trigger.py 2, tests/backends/test_aravis.py 1,
 # tests/backends/test_opencv.py 1). They run after the parallel pass, alone, one at a time, their

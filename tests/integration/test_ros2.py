@@ -140,7 +140,10 @@ def ns_of(sample: dict) -> int:
     return sec * 1_000_000_000 + nanosec
 
 
-@pytest.mark.parametrize("profile", ["sensor_data", "default"])
+# reliable ("default") delivery of 300 kB frames at 20 fps judges a reader keeping up: in the
+# parallel pass a Fast DDS node fed over UDP took 3 of cam0's frames in 15 s (make test run 17);
+# it runs in the real-time tier, alone
+@pytest.mark.parametrize("profile", ["sensor_data", pytest.param("default", marks=pytest.mark.realtime)])
 def test_every_camera_topic_reaches_a_ros_reader_as_the_frames_were_captured(bridge, profile):
     topics = [
         (f"{NS}/cam0/image_raw", IMAGE),
