@@ -156,17 +156,17 @@ class ServiceProcess:
             while True:
                 if self.proc.poll() is not None:
                     code = self.proc.returncode
-                    raise ServiceNotStarted(f"fxis run exited with code {code} during start-up{self._said()}")
+                    raise ServiceNotStarted(f"fxis run exited with code {code} during start-up{self.said()}")
                 try:
                     client.status()
                     return self
                 except RequestTimeout:
                     if time.monotonic() > deadline:
                         self.stop()
-                        said = self._said()
+                        said = self.said()
                         raise ServiceNotStarted(f"service did not answer within {self.ready_timeout} s{said}") from None
 
-    def _said(self) -> str:
+    def said(self) -> str:
         """The end of what the service wrote to ``stderr``, when that is a file: the why of a failed start."""
         log = self.stderr
         name = getattr(log, "name", None)

@@ -73,11 +73,11 @@ def serve(start, folder: Path, *args: str, http: str, foxglove: str, **kwargs) -
     (after every viewer is ready): its ports, banner and printed token."""
     out = folder / f"stdout-{free_tcp_port()}.txt"
     svc = start(*CAMERAS, *args, "--foxglove", foxglove, http=http, wrapper=printing_to(out), **kwargs)
-    banner = wait_until(
-        lambda: (lambda text: "Ctrl-C stops" in text and text)(out.read_text() if out.exists() else ""),
-        timeout=30,
-        what="the start-up banner",
-    )
+    printed = lambda: out.read_text() if out.exists() else ""  # noqa: E731
+    try:
+        banner = wait_until(lambda: "Ctrl-C stops" in printed() and printed(), timeout=30, what="the start-up banner")
+    except AssertionError as exc:  # what it printed and logged says where its start stood
+        raise AssertionError(f"{exc}; it printed:\n{printed()}{svc.said()}") from None
     tokens = {match[3] for match in LINK.findall(banner)}
     assert len(tokens) <= 1, f"the viewers were given different tokens: {banner}"
     port = lambda address: int(address.rsplit(":", 1)[1])  # noqa: E731
