@@ -47,6 +47,16 @@ def catch_up_limit_ns(interval_ns: int, lag_ns: int, held_ns: int | None) -> int
     return max(interval_ns, limit)
 
 
+def next_time(t_star: int, interval_ns: int, lag_ns: int, held_ns: int | None, now: int) -> int:
+    """The schedule's t* after ``t_star``: one interval on, or, for a stream further behind at
+    ``now`` than catch_up_limit_ns, the times it missed given up (whole intervals: the grid stays)."""
+    t_next = t_star + interval_ns
+    late = now - lag_ns - t_next
+    if late > catch_up_limit_ns(interval_ns, lag_ns, held_ns):
+        t_next += math.floor(late / interval_ns) * interval_ns
+    return t_next
+
+
 class TupleStream:
     """Joint tuples of every camera of ``endpoints`` (camera -> endpoint in ``owner``), handed
     to ``deliver`` as Messages on ``topic``."""
@@ -123,11 +133,8 @@ class TupleStream:
                 bell.send(b"", zmq.NOBLOCK)
             except zmq.Again:
                 pass  # it rings already
-            interval, lag = self._interval_ns(), self._lag_ns()
-            t_star += interval
-            late = self._clock() - lag - t_star
-            if late > catch_up_limit_ns(interval, lag, self._held_ns()):  # give up the times missed
-                t_star += math.floor(late / interval) * interval
+            lag = self._lag_ns()
+            t_star = next_time(t_star, self._interval_ns(), lag, self._held_ns(), self._clock())
             self._stop.wait(max(0, t_star + lag - self._clock()) / 1e9)
 
     def _held_ns(self) -> int | None:

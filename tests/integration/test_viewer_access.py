@@ -75,7 +75,9 @@ def serve(start, folder: Path, *args: str, http: str, foxglove: str, **kwargs) -
     svc = start(*CAMERAS, *args, "--foxglove", foxglove, http=http, wrapper=printing_to(out), **kwargs)
     printed = lambda: out.read_text() if out.exists() else ""  # noqa: E731
     try:
-        banner = wait_until(lambda: "Ctrl-C stops" in printed() and printed(), timeout=30, what="the start-up banner")
+        banner = wait_until(
+            lambda: (lambda text: "Ctrl-C stops" in text and text)(printed()), timeout=30, what="the start-up banner"
+        )
     except AssertionError as exc:  # what it printed and logged says where its start stood
         raise AssertionError(f"{exc}; it printed:\n{printed()}{svc.said()}") from None
     tokens = {match[3] for match in LINK.findall(banner)}

@@ -2,11 +2,9 @@
 catch up: never so far that the time it asks next is older than what the cameras hold (a
 stream a ring behind failed OUT_OF_RANGE instead of giving up the times it missed)."""
 
-import math
-
 import pytest
 
-from fxis_shm.client.tuplestream import GIVE_UP_NS, catch_up_limit_ns
+from fxis_shm.client.tuplestream import GIVE_UP_NS, catch_up_limit_ns, next_time
 
 MS = 1_000_000
 
@@ -30,8 +28,7 @@ def test_the_next_time_asked_is_still_held(late_ms):
     """The schedule's rule (TupleStream._schedule): late past the limit gives up whole intervals."""
     interval, lag, held = 80 * MS, 45 * MS, 380 * MS
     late = late_ms * MS
-    t_star = -lag - late  # now is 0: t* + lag is ``late`` behind
-    if late > catch_up_limit_ns(interval, lag, held):
-        t_star += math.floor(late / interval) * interval
+    # now is 0, and the t* one interval on from the last is ``late`` behind (t* + lag)
+    t_star = next_time(-lag - late - interval, interval, lag, held, now=0)
     assert -t_star <= held  # what it asks next is no older than the ring's span
     assert (t_star + lag + late) % interval == 0  # still on the schedule's grid
