@@ -24,7 +24,8 @@ The definitions, per slot k of the schedule (one tuple asked for at t_k, every 1
 - a camera that captures on request (trigger=software, not on a lockstep grid) has no rate of
   its own: the report asks it to capture at each t_k (capture at T), and it is judged on those
   moments: a slot whose frame was not captured for t_k (a frame of an earlier request read
-  again) counts as a repeat, and so as dropped; its frame ids are not judged by a period.
+  again) counts as a repeat, and so as dropped; one captured for t_k but late is the slot's
+  frame (its lateness is in the gap and residual); its frame ids are not judged by a period.
 
 Pure: arrays in, figures out; no I/O.
 """
@@ -55,6 +56,7 @@ WHOLE = 1e-3
 # a frame's t_target within this of t_k was captured for slot k (both mapped through the
 # caller's clock estimate, which may round by a few ns)
 TARGET_SLACK_NS = 1_000
+_TRIGGERED = [CAPTURE_METHODS.index("scheduled"), CAPTURE_METHODS.index("late")]  # captured for their t_target
 
 
 @dataclass(frozen=True)
@@ -195,10 +197,12 @@ def advance_faults(
 
 def missed_moments(samples: Samples, c: int) -> npt.NDArray[np.bool_]:
     """Camera ``c``'s slots whose frame was not captured for the slot's moment t_k (a camera that
-    captures on request, asked to capture at each t_k)."""
+    captures on request, asked to capture at each t_k). A frame triggered for t_k that landed
+    beyond the camera's tolerance (``late``) was captured for it: its lateness is in the gap and
+    the residual, not a repeat."""
     target = samples.t_capture[:, c].astype(np.float64) - samples.residual_ns[:, c]
-    scheduled = samples.capture[:, c] == CAPTURE_METHODS.index("scheduled")
-    captured_for_slot = scheduled & (np.abs(np.nan_to_num(target - samples.slots, nan=np.inf)) <= TARGET_SLACK_NS)
+    triggered = np.isin(samples.capture[:, c], _TRIGGERED)
+    captured_for_slot = triggered & (np.abs(np.nan_to_num(target - samples.slots, nan=np.inf)) <= TARGET_SLACK_NS)
     missed: npt.NDArray[np.bool_] = samples.present[:, c] & ~captured_for_slot
     return missed
 

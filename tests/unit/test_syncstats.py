@@ -17,7 +17,7 @@ from fxis_shm.core.syncstats import (
 
 MS = 1_000_000
 PERIOD = 50 * MS  # 20 fps
-FREE, SCHEDULED, LOCKSTEP = (CAPTURE_METHODS.index(m) for m in ("free", "scheduled", "lockstep"))
+FREE, SCHEDULED, LOCKSTEP, LATE = (CAPTURE_METHODS.index(m) for m in ("free", "scheduled", "lockstep", "late"))
 
 
 def schedule(n: int, offsets_ms: list[float], interval: int = PERIOD, period: int = PERIOD) -> dict:
@@ -178,6 +178,23 @@ def test_cameras_that_capture_on_request_are_judged_on_the_slots_moments_not_a_p
     assert (a.on_request, a.period_ms, a.repeated, a.skipped) == (True, None, 0, 0)
     assert (b.repeated, b.skipped) == (1, 0)
     assert report.dropped_pct == 10.0 and report.gap_ms["p50"] == pytest.approx(0.02)
+
+
+def test_a_capture_for_the_slots_moment_that_landed_late_is_late_not_a_repeat():
+    n = 10
+    parts = schedule(n, [0.0, 0.0])
+    parts["frame_id"] = np.stack([np.arange(n), np.arange(n) + 100], axis=1)
+    parts["t_capture"] = parts["slots"][:, None] + np.array([[10_000, 30_000]])
+    parts["capture"][:] = SCHEDULED
+    # b's trigger for slot 4 fired 3 ms late: its frame is slot 4's, marked late beyond the tolerance
+    parts["t_capture"][4, 1] = parts["slots"][4] + 3 * MS
+    parts["capture"][4, 1] = LATE
+    parts["residual_ns"] = (parts["t_capture"] - parts["slots"][:, None]).astype(float)
+    report = figures(samples(parts), on_request=["a", "b"])
+    b = report.cameras["b"]
+    assert (b.repeated, b.captures["late"], b.captures["scheduled"]) == (0, 1, 9)
+    assert b.residual_ms["max"] == pytest.approx(3.0)
+    assert report.dropped_pct == 0.0 and report.gap_ms["max"] == pytest.approx(2.99)
 
 
 def test_no_tuple_at_all_fails_every_check():
