@@ -83,22 +83,19 @@ PURE_INTEGRATION := tests/integration/test_ring.py tests/integration/test_localp
 TEST_WORKERS ?= 5
 XDIST := $(if $(filter 0,$(TEST_WORKERS)),-p no:xdist,-n $(TEST_WORKERS) --dist loadscope)
 # The sync logic is tested in virtual time (tests/virtualtime, tests/unit/test_virtual_sync.py),
-# exact whatever the load, and a failure there is a defect.
+# exact whatever the load, and a failure there is a defect. The parallel pass reruns nothing: a
+# test of it that fails on a loaded machine has failed (issue 41).
 # The real-time tier: the tests marked `realtime` (pyproject.toml), which judge a real timer's
-# residuals, skews across real clocks, a file's playback rate and a DDS reader keeping up, 23 tests
-# today (tests/integration/test_realtime.py 4, tests/integration/test_ros2.py 8,
+# residuals, skews across real clocks, a file's playback rate, a DDS reader and a camera keeping up,
+# 26 tests today (tests/integration/test_realtime.py 4, tests/integration/test_ros2.py 8,
 # tests/integration/test_lockstep.py 3, tests/integration/test_capture_at.py 2,
 # tests/integration/test_lerobot.py 2, tests/integration/test_trigger.py 2, tests/backends/test_aravis.py 1,
-# tests/backends/test_opencv.py 1). They run after the parallel pass, alone, one at a time, their
-# services at SCHED_FIFO (--realtime, as a cell that needs its cameras in step runs them); a failed
-# one runs once more, and every rerun is written to RERUN_LOG (tests/rerunlog.py), which the run
-# ends by listing (issue 41).
+# tests/backends/test_opencv.py 1, tests/integration/test_dashboard.py 1,
+# tests/integration/test_foxglove.py 1, tests/integration/test_localwaits.py 1). They run after
+# the parallel pass, alone, one at a time, their services at SCHED_FIFO (--realtime, as a cell
+# that needs its cameras in step runs them); a failed one runs once more, and every rerun is
+# written to RERUN_LOG (tests/rerunlog.py), which the run ends by listing (issue 41).
 RERUN_LOG := .pytest_cache/reruns.log
-# Until the parallel pass runs clean on a loaded machine (issue 41: runs 13-16 of the last stop ran
-# four times back to back without a failure; 3 of its last 8 runs had one, each a finding), a test
-# of it that fails runs once more; every such rerun is in RERUN_LOG too (its whole report in
-# RERUN_LOG.details), listed at the end of the run: a defect to find, in the product or the test.
-SAFETY_RERUN := --reruns 1 -p tests.rerunlog --rerun-log $(RERUN_LOG)
 REALTIME := -p no:xdist -m realtime -raR --reruns 1 -p tests.rerunlog --rerun-log $(RERUN_LOG) tests
 
 # Every process the suite starts (services, workers, `fxis` commands: over a thousand) imports the
@@ -123,7 +120,7 @@ test: setup lint docs mutation-changed $(ROS_VENVS) .venv-lerobot/.installed
 	( export FXIS_PURE_PYTHON=1; PURE="$(BIN)/python -m pytest -q -p no:xdist -o cache_dir=.pytest_cache/pure"; \
 	  $$PURE $(PURE_INTEGRATION); services=$$?; nice -n 19 $$PURE --timeout $(PURE_UNIT_TIMEOUT) tests/unit; exit $$((services || $$?)) \
 	) > $(PURE_LOG) 2>&1 & pure=$$!; trap 'kill $$pure 2>/dev/null' INT TERM; \
-	$(BIN)/python -m pytest $(XDIST) -m "not realtime" $(SAFETY_RERUN); main=$$?; \
+	$(BIN)/python -m pytest $(XDIST) -m "not realtime"; main=$$?; \
 	wait $$pure; pure_code=$$?; \
 	echo "== the pure-Python pass, beside the main one (FXIS_PURE_PYTHON=1; exit code $$pure_code):"; cat $(PURE_LOG); \
 	echo "== the real-time tier, alone:"; $(BIN)/python -m pytest $(REALTIME); realtime=$$?; \
