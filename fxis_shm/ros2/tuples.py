@@ -7,7 +7,9 @@ within half the tuple's skew of every frame's own capture time, which the per-ca
 keep. Tuples are asked for on a schedule of the service's clock, one every 1/rate, each
 waiting for frames still to come; a schedule time missed in a stall is given up, not caught
 up in a burst. A tuple goes out whole or not at all: every image is serialized and checked
-before the first is sent.
+before the first is sent. A tuple goes out only if it is newer than the last one: a camera
+whose worker is held up longer than a period gives the next times its frames from before
+the stall, the same tuple again, which is counted skipped, not published twice.
 """
 
 from __future__ import annotations
@@ -39,6 +41,7 @@ class TupleStream(threading.Thread):
         self.client, self.topics, self.ros_time, self.stop = client, topics, ros_time, stop
         self.period_ns = round(1e9 / rate_hz)
         self.counts = Counts()
+        self._last_middle: int | None = None  # the service-clock middle of the tuple published last
 
     def run(self) -> None:
         try:
@@ -64,7 +67,11 @@ class TupleStream(threading.Thread):
         except FxisError as exc:
             self._failed(exc)
             return
-        stamp = self.ros_time.to_ros(tuple_stamp([frames[c].t_capture for c in frames]))
+        middle = tuple_stamp([frames[c].t_capture for c in frames])
+        if self._last_middle is not None and middle <= self._last_middle:
+            self.counts.skipped += 1
+            return
+        stamp = self.ros_time.to_ros(middle)
         messages = {camera: self.topics[camera].serialize(frames[camera], stamp) for camera in frames}
         if not frames.still_valid():
             self.counts.skipped += 1
@@ -72,6 +79,7 @@ class TupleStream(threading.Thread):
         for camera, serialized in messages.items():
             self.topics[camera].write(serialized)
         self.counts.published += 1
+        self._last_middle = middle
 
     def _failed(self, exc: Exception) -> None:
         self.counts.failed("tuples", exc)
