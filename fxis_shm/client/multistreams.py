@@ -19,10 +19,11 @@ import zmq
 
 from fxis_shm.client.pubsub import EventPublisher, Message, Receiver, Subscriber, stream_topic
 from fxis_shm.client.single import SingleClient
-from fxis_shm.client.sockets import Closable, poll_ms
+from fxis_shm.client.sockets import Closable
 from fxis_shm.client.tuplestream import TupleStream
 from fxis_shm.errors import InvalidArgument, RequestTimeout
 from fxis_shm.wire.encoding import RAW
+from fxis_shm.wire.multipart import slice_ms
 
 
 class MultiSubscriber(Receiver, Closable):
@@ -112,7 +113,7 @@ class MultiSubscriber(Receiver, Closable):
             poller.register(subscriber.socket, zmq.POLLIN)
         found: Message | None = None
         while True:
-            wait_ms = 0 if found is not None else poll_ms(deadline - time.monotonic())
+            wait_ms = 0 if found is not None else slice_ms(deadline)
             ready = dict(poller.poll(wait_ms))
             newest = self._take(ready, latest)
             if newest is not None:

@@ -27,7 +27,7 @@ from numpy.typing import NDArray
 
 from fxis_shm.client.clocktracker import ClockTracker
 from fxis_shm.client.frames import Frame, FrameTuple, frames_of, in_caller_clock, sequence_of, tuple_of
-from fxis_shm.client.sockets import SocketOwner, checked_encoding, connected_socket, poll_ms
+from fxis_shm.client.sockets import SocketOwner, checked_encoding, connected_socket
 from fxis_shm.core import timebase
 from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.errors import InvalidArgument, ProtocolError, RequestTimeout, service_error
@@ -35,6 +35,7 @@ from fxis_shm.wire import defaults, protocol
 from fxis_shm.wire.encoding import JPEG, RAW
 from fxis_shm.wire.endpoints import check_endpoint
 from fxis_shm.wire.headers import ReplyHeader
+from fxis_shm.wire.multipart import slice_ms
 from fxis_shm.wire.protocol import StreamTopic
 from fxis_shm.wire.security import ClientKeys
 
@@ -226,10 +227,9 @@ class Subscriber(Receiver, SocketOwner):
         deadline = time.monotonic() + timeout
         found: list[zmq.Frame] | None = None
         while found is None or (latest and self._sock.poll(0, zmq.POLLIN)):
-            wait_ms = 0 if found is not None else poll_ms(deadline - time.monotonic())
-            if not self._sock.poll(wait_ms, zmq.POLLIN):
-                if found is not None:
-                    break
+            if found is None and not self._sock.poll(slice_ms(deadline), zmq.POLLIN):
+                if time.monotonic() < deadline:
+                    continue
                 raise RequestTimeout(f"no message from {self.endpoint} within {timeout:.3g} s")
             frames = self._sock.recv_multipart(copy=False)
             if frames and frames[0].bytes.decode(errors="replace") in self._topics:

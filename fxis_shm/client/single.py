@@ -19,7 +19,6 @@ reads the same clock.
 from __future__ import annotations
 
 import itertools
-import math
 import time
 from collections.abc import Callable
 from typing import Any, cast
@@ -37,7 +36,7 @@ from fxis_shm.client.pubsub import EventPublisher, Subscriber
 from fxis_shm.client.requestoptions import RequestOptions
 from fxis_shm.client.requestpaths import RequestPaths
 from fxis_shm.client.requesttimes import fixed_mapping, last_needed
-from fxis_shm.client.sockets import SocketOwner, checked_encoding, connected_socket, reachable
+from fxis_shm.client.sockets import SocketOwner, checked_encoding, connected_socket, reachable, writable
 from fxis_shm.core import timebase
 from fxis_shm.core.clockmap import ClockEstimate
 from fxis_shm.errors import InvalidArgument, RequestTimeout, service_error
@@ -302,9 +301,7 @@ class SingleClient(RequestPaths, SocketOwner, ClientApi):
         # A DEALER with no connected peer (service down, or our keys refused) would
         # block in send: wait for it to become writable within our own deadline.
         # (EVENTS is an int option: pyzmq types every option's value as int | bytes)
-        if not cast(int, sock.getsockopt(_EVENTS)) & _POLLOUT and not sock.poll(
-            math.ceil(self.timeout * 1000), zmq.POLLOUT
-        ):
+        if not cast(int, sock.getsockopt(_EVENTS)) & _POLLOUT and not writable(sock, time.monotonic() + self.timeout):
             raise RequestTimeout(self._handshake.problem(self.endpoint, self._keys is not None) or self._unsendable(op))
         try:
             send_parts(sock, [b"", *protocol.encode_request(op, id=request_id, **fields)])

@@ -6,6 +6,7 @@ fxis_shm.wire.multipart, as the service sends them)."""
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Callable
 from typing import TYPE_CHECKING, Any
 
@@ -14,6 +15,7 @@ import zmq
 from fxis_shm.errors import InvalidArgument, ProtocolError
 from fxis_shm.wire import encoding as codec
 from fxis_shm.wire.endpoints import check_endpoint
+from fxis_shm.wire.multipart import slice_ms
 from fxis_shm.wire.security import ClientKeys
 
 if TYPE_CHECKING:
@@ -33,6 +35,15 @@ def poll_ms(seconds: float) -> int:
     """A wait of ``seconds`` (none if negative) as ZeroMQ's poll takes it: whole milliseconds,
     rounded up, so that a wait for a deadline never ends before it."""
     return math.ceil(max(0.0, seconds) * 1000)
+
+
+def writable(sock: zmq.Socket[bytes], deadline: float) -> bool:
+    """Whether ``sock`` can send before ``deadline`` (time.monotonic()), waited for in slices
+    (wire.multipart.slice_ms: Ctrl-C is not held for the whole wait)."""
+    while not sock.poll(slice_ms(deadline), zmq.POLLOUT):
+        if time.monotonic() >= deadline:
+            return False
+    return True
 
 
 def connected_socket(

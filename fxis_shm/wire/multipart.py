@@ -4,6 +4,7 @@ wire do it: the coordinator's replies and publications, the client's requests an
 from __future__ import annotations
 
 import math
+import time
 from collections.abc import Sequence
 from typing import TYPE_CHECKING, cast
 
@@ -16,6 +17,13 @@ if TYPE_CHECKING:
 
 # plain ints: their arithmetic is far cheaper than that of pyzmq's enums
 _MORE, _LAST, _RCVTIMEO = int(zmq.NOBLOCK | zmq.SNDMORE), int(zmq.NOBLOCK), int(zmq.RCVTIMEO)
+WAIT_SLICE_S = 0.1  # how long a pending signal may wait for its handler in a receive
+
+
+def slice_ms(deadline: float) -> int:
+    """The next slice of a wait until ``deadline`` (time.monotonic()) in whole ms, rounded up
+    (0 once it is past): at most WAIT_SLICE_S, so that a signal's handler runs between slices."""
+    return math.ceil(max(0.0, min(deadline - time.monotonic(), WAIT_SLICE_S)) * 1000)
 
 
 def send_parts(sock: zmq.Socket[bytes], parts: Sequence[Part]) -> None:
@@ -37,12 +45,21 @@ def send_parts(sock: zmq.Socket[bytes], parts: Sequence[Part]) -> None:
 def recv_parts(sock: zmq.Socket[bytes], timeout_s: float) -> list[zmq.Frame] | None:
     """The next message's parts (uncopied), waiting at most ``timeout_s``; None if none came.
     (A receive with a timeout of its own: pyzmq's poll makes a Poller in Python every call,
-    a quarter of the cold cost of a small round trip's client side.)"""
-    sock.setsockopt(_RCVTIMEO, max(1, math.ceil(timeout_s * 1000)))
-    try:
-        parts = [sock.recv(copy=False)]
-    except zmq.Again:
-        return None
+    a quarter of the cold cost of a small round trip's client side.)
+
+    The wait is cut into slices of at most WAIT_SLICE_S: a signal that is not delivered into
+    the wait itself (it lands just before it, or in another thread) only flags its handler,
+    which Python runs between slices; in one long wait Ctrl-C or SIGTERM would be held for
+    the whole timeout."""
+    deadline = time.monotonic() + timeout_s
+    while True:
+        sock.setsockopt(_RCVTIMEO, max(1, slice_ms(deadline)))
+        try:
+            parts = [sock.recv(copy=False)]
+            break
+        except zmq.Again:
+            if time.monotonic() >= deadline:
+                return None
     while parts[-1].more:  # ZeroMQ delivers a message whole: the rest is there
         parts.append(sock.recv(copy=False))
     return parts

@@ -51,7 +51,11 @@ def cell():
 
 def start(*args: str) -> subprocess.Popen:
     return subprocess.Popen(
-        [sys.executable, "-m", "fxis_shm.cli", *args], stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True
+        # faulthandler: an abort (a native library's) prints where each thread stood
+        [sys.executable, "-X", "faulthandler", "-m", "fxis_shm.cli", *args],
+        stdout=subprocess.PIPE,
+        stderr=subprocess.PIPE,
+        text=True,
     )
 
 
@@ -86,7 +90,7 @@ def interrupted_bag(proc, begun, sig, within: tuple[float, float], line: str):
     checks exit 130 and the last line (a regex of the frames kept of a and b); the bag read
     back, its counts in the line, and stdout."""
     wait_until(begun.exists, timeout=30, what="the bag begun")
-    command = proc.args[3]
+    command = proc.args[proc.args.index("fxis_shm.cli") + 1]
     stdout, stderr = stop_with(proc, sig, moment(*within, f"{command} {sig.name}"))
     assert proc.returncode == 130, (SEED, stderr)
     said = re.fullmatch(f"fxis {command}: interrupted by {sig.name}: {line}", stderr.strip().splitlines()[-1])
@@ -177,15 +181,16 @@ def test_kill_9_leaves_a_partial_snapshot_that_a_rerun_keeps_and_recover_repairs
 
 def test_a_second_snapshot_to_the_same_out_refuses_and_the_first_keeps_its_bag(cell, tmp_path):
     out = tmp_path / "twice"
-    first = start("snapshot", "--endpoint", cell.endpoint, "--out", str(out), "--before", "0.5", "--after", "2")
+    # the first runs until stopped: the second's start, however slow on a loaded machine, finds it writing
+    first = start("snapshot", "--endpoint", cell.endpoint, "--out", str(out), "--before", "0.5", "--after", "60")
     wait_until(lambda: (tmp_path / "twice.partial").exists(), timeout=30, what="the first snapshot begun")
     second = start("snapshot", "--endpoint", cell.endpoint, "--out", str(out), "--before", "0.5", "--after", "0")
     _, stderr = second.communicate(timeout=30)
     assert second.returncode == 2 and "another snapshot is writing it now" in stderr, stderr
-    stdout, stderr = first.communicate(timeout=30)
-    assert first.returncode in (0, 1), stderr  # 1: the camera dropped a frame of the window
+    _, stderr = stop_with(first, signal.SIGINT, 0.0)
+    assert first.returncode == 130, stderr
     bag = read_bag(out)
-    assert bag.custom_data["ended"] == "complete" and len(stamps_in_order(bag, "a")) >= 40
+    assert bag.custom_data["ended"] == "interrupted by SIGINT" and len(stamps_in_order(bag, "a")) >= 10  # 0.5 s before
 
 
 def test_frames_the_ring_lost_before_the_first_look_are_named_missing():
