@@ -58,6 +58,37 @@ def newest_id(svc, camera: str) -> int:
             return -1
 
 
+def assert_each_frame_sent_is_stored_or_dropped_once(svc, camera: str) -> None:
+    """Every frame the emulator sent (ids FIRST_ID on) up to the newest stored was stored or
+    counted as dropped, none twice. The counts and the newest frame are separate requests while
+    the emulator sends on, and the worker may be held up anywhere, so each bound reads the
+    counts at a moment it can be exact at (workers/backends/aravis.py, workers/camera.py):
+    - an incomplete frame is counted when Aravis hands its buffer over, before the next complete
+      one is stored (so ahead of the newest stored); buffers come in id order, so the newest is
+      read once a frame was stored after the counts: it is past every frame counted in them;
+    - the drops before a stored frame are added to the ring's count after it is stored, before
+      the next is stored: the counts are read once a frame after the newest was stored."""
+    before = status_of(svc, camera)
+    wait_until(
+        lambda: status_of(svc, camera)["frames_stored"] > before["frames_stored"],
+        what="a frame stored after the counts were read",
+    )
+    newest = newest_id(svc, camera)
+    wait_until(lambda: newest_id(svc, camera) > newest, what="a frame stored after the newest")
+    after = status_of(svc, camera)
+    # frames lost before the first one stored are no gap in its ids (blockids.FrameCounter): a
+    # worker held up while it starts loses them uncounted (Aravis holds 12 buffers, 240 ms at
+    # 50 fps), so the frames that must all be there start at the first one stored
+    with svc.client() as client:
+        times = client.frame_times([camera])
+    column = times["columns"].index("frame_id")
+    rows = times["cameras"][camera]["frames"]
+    assert len(rows) >= after["frames_stored"], "the ring wrapped: its oldest frame is not the first stored"
+    first = min(row[column] for row in rows)
+    assert before["frames_stored"] + before["frames_dropped"] <= newest - FIRST_ID + 1, (newest, before)
+    assert newest - first + 1 <= after["frames_stored"] + after["frames_dropped"], (first, newest, after)
+
+
 def stored_frames(svc, camera: str) -> list:
     """Most of the frames stored so far, consecutive up to now (not quite all: the
     service checks that a sequence's count fits in the ring with the measured period)."""
@@ -120,12 +151,7 @@ def test_a_free_running_camera_stores_complete_frames_across_the_id_wrap_and_cou
     assert all(b > a for a, b in zip(ids, ids[1:])), ids  # in the order the camera sent them
     assert [f.frame_id for f in frames if not is_frame(f)] == []  # each complete, the frame it names
     assert all(b.t_capture > a.t_capture for a, b in zip(frames, frames[1:]))  # periods are positive
-    # every frame the emulator sent (ids FIRST_ID..newest) was stored or counted as dropped,
-    # exactly once (give or take the frames sent between the two requests)
-    newest = newest_id(svc, "a")
-    status = status_of(svc, "a")
-    sent = newest - FIRST_ID + 1
-    assert sent <= status["frames_stored"] + status["frames_dropped"] <= sent + 5, (sent, status)
+    assert_each_frame_sent_is_stored_or_dropped_once(svc, "a")
 
 
 def test_status_shows_the_cameras_ptp_state_the_fake_camera_has_none(emulator, start_service):
@@ -210,12 +236,7 @@ def test_incomplete_frames_from_packet_loss_are_dropped_and_counted(emulator, st
     assert all(is_frame(f) for f in frames)  # not one incomplete frame reached the client
     ids = [f.frame_id for f in frames]
     assert ids[-1] - ids[0] + 1 > len(ids)  # some are missing...
-    newest = newest_id(svc, "a")
-    status = status_of(svc, "a")
-    # ...and every frame the emulator sent (ids FIRST_ID..newest) was stored or counted as
-    # dropped, exactly once (give or take the frames sent between the two requests)
-    sent = newest - FIRST_ID + 1
-    assert sent <= status["frames_stored"] + status["frames_dropped"] <= sent + 5
+    assert_each_frame_sent_is_stored_or_dropped_once(svc, "a")  # ...and counted, once
 
 
 def test_a_camera_that_vanishes_is_reported_lost_and_resumes_with_a_new_generation(emulator, start_service):

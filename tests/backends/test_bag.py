@@ -11,13 +11,17 @@ from fxis_shm.formats.videochoice import DEFAULT_CRF, Choice
 from fxis_shm.formats.videodecoder import COLOUR, MONO, TrackDecoder, pixels_of
 from fxis_shm.formats.videoencoder import StreamEncoder
 from fxis_shm.formats.videotracks import VideoSettings
+from fxis_shm.service.launch import ServiceProcess
 from fxis_shm.workers.backends.bag import LEAD_NS, BagCamera
 
 from ..conftest import fxis, fxis_run_alone, wait_until
-from ..integration.bags import read_bag, record, start_cameras, stop
+from ..integration.bags import CAMERAS, read_bag, record, start_cameras, stop
 from ..virtualtime.clock import VirtualClock
 
 pytestmark = pytest.mark.integration
+# A bag played once plays for over 2 s, longer than a loaded machine holds a worker up (up to
+# 1.5 s): a worker held up past a frame's interval drops it (counted), and a bag played in
+# half a second could lose every frame, leaving none to check
 
 
 @pytest.fixture(scope="module")
@@ -55,6 +59,46 @@ def replayed(client, count: int, cameras=("left", "right")) -> None:
     )
 
 
+def paired_run(client, count: int) -> int | None:
+    """The capture time of the newest left frame that ends ``count`` left frames in a row (as
+    stored) whose partners right stored too, or None. Frames of one bag time play at one time
+    (workers/backends/bag.py), so a partner is a right frame of the same capture time.
+
+    Why: a worker held up past a frame interval (50 ms here) drops that frame, counted, to stay
+    in step, and a tuple whose partner was dropped pairs the least skewed neighbour instead: the
+    tuples asked for are of frames both cameras stored, whatever the load."""
+    times = client.frame_times(["left", "right"])
+    column = times["columns"].index("t_capture")
+    left, right = ([row[column] for row in times["cameras"][cam]["frames"]] for cam in ("left", "right"))
+    partners, run, newest = set(right), 0, None
+    for t in left:
+        run = run + 1 if t in partners else 0
+        if run >= count:
+            newest = t
+    return newest
+
+
+def paired_tuples(client, count: int) -> list:
+    """``count`` consecutive tuples of frames both cameras stored (paired_run): those before the
+    newest such run's end, which are that run's."""
+    end = wait_until(
+        lambda: paired_run(client, count), timeout=30, what=f"{count} frames in a row stored by both cameras"
+    )
+    tuples = client.sequence("consecutive", cameras=["left", "right"], count=count, at=end)
+    assert tuples[-1]["left"].t_capture == end
+    return tuples
+
+
+def assert_recorded_spacing(tuples, recorded: list[int], all_recorded) -> None:
+    """Consecutive tuples played as far apart as their frames were recorded (at ``recorded``):
+    play time minus recorded stamp is the same for each, to rounding. The bag loops, and the
+    tuples may span its end: a later pass plays a loop later, more than the recorded span."""
+    span = max(all_recorded) - min(all_recorded)
+    offsets = [t["left"].t_capture - stamp for t, stamp in zip(tuples, recorded)]
+    for a, b in zip(offsets, offsets[1:]):
+        assert abs(b - a) <= 1_000 or b - a > span, offsets  # ns: rounding only, or the next pass
+
+
 def recorded_gap(stamps, a, b) -> int:
     """The recorded time between the frames whose pixels two replayed frames show."""
     return stamps[a.camera][read_stamp(b.image)] - stamps[a.camera][read_stamp(a.image)]
@@ -64,16 +108,14 @@ def test_tuples_of_a_replayed_bag_are_the_recorded_frames_at_the_recorded_spacin
     path, stamps = recorded
     svc = start_service(*bag_cameras(path), "--slots", "64")
     with svc.client(timeout=5) as client:
-        replayed(client, 12)
-        tuples = client.sequence("consecutive", cameras=["left", "right"], count=10)
+        tuples = paired_tuples(client, 10)
     for t in tuples:
         ids = {cam: read_stamp(f.image) for cam, f in t.items()}
         assert ids["left"] in stamps["left"] and ids["left"] == ids["right"]  # recorded together, replayed together
         assert t["left"].image.shape == (120, 160) and t["right"].image.shape == (120, 160, 3)
         assert t.skew_ns == 0
-    for a, b in zip(tuples, tuples[1:]):
-        gap = recorded_gap(stamps, a["left"], b["left"])
-        assert abs((b["left"].t_capture - a["left"].t_capture) - gap) <= 1_000  # ns: rounding only
+    recorded = [stamps["left"][read_stamp(t["left"].image)] for t in tuples]
+    assert_recorded_spacing(tuples, recorded, stamps["left"].values())
 
 
 def test_speed_scales_the_spacing(start_service, recorded):
@@ -99,7 +141,7 @@ def test_stamps_recorded_keeps_the_recorded_stamps(start_service, recorded):
 
 def test_a_bag_played_once_ends_after_its_last_frame_and_says_so(start_service, recorded):
     path, stamps = recorded
-    svc = start_service("--camera", f"v=bag:path={path},topic=/left/image_raw,loop=false,speed=4", "--slots", "64")
+    svc = start_service("--camera", f"v=bag:path={path},topic=/left/image_raw,loop=false", "--slots", "64")
     with svc.client(timeout=5) as client:
         status = wait_until(
             lambda: (s := client.status()["cameras"]["v"])["note"] and s, timeout=30, what="the end of the bag"
@@ -129,7 +171,7 @@ def test_a_jpeg_bag_replays_decoded(start_service, recorded, tmp_path):
         for m in bag.messages[topic]
     ]
     assert len(recorded_ids) == 10 and None not in recorded_ids
-    svc = start_service("--camera", f"v=bag:path={tmp_path / 'j'},loop=false")  # its only image topic
+    svc = start_service("--camera", f"v=bag:path={tmp_path / 'j'},loop=false,speed=0.2")  # its only image topic
     with svc.client(timeout=5) as client:
         status = wait_until(
             lambda: "end of bag" in (s := client.status()["cameras"]["v"])["note"] and s,
@@ -180,7 +222,10 @@ def video_bags(tmp_path_factory):
     """A recording in h264 (20 frames a camera) and a one-second h264 snapshot of the same cell,
     each with the stamps and ids its /NAME/video/frames topics give."""
     tmp = tmp_path_factory.mktemp("video")
-    svc = start_cameras(tmp / "service.log")
+    # rings of 10 s: the snapshot copies its 0.8 s out of them, and a test process held up for
+    # a while (a loaded machine) finds a ring of the default 20 slots (1 s) come round past them
+    cameras = [arg for camera in CAMERAS for arg in ("--camera", camera)]
+    svc = ServiceProcess([*cameras, "--history", "10"], stderr=open(tmp / "service.log", "w")).start()
     try:
         record(svc, tmp / "rec", "--frames", "20", "--codec", "h264", "--gop", "0.3")
         with Client(svc.endpoint) as client:
@@ -207,22 +252,19 @@ def test_a_video_bag_replays_its_frames_decoded_with_their_ids_at_the_recorded_s
     ]
     svc = start_service(*cameras, "--slots", "64")
     with svc.client(timeout=5) as client:
-        replayed(client, 12)
-        tuples = client.sequence("consecutive", cameras=["left", "right"], count=10)
+        tuples = paired_tuples(client, 10)
     for t in tuples:
         assert t["left"].image.shape == (120, 160) and t["right"].image.shape == (120, 160, 3)  # mono8, bgr8 again
         shown = {cam: read_stamp(f.image) for cam, f in t.items()}
         assert shown["left"] in stamp_of["left"] and shown["left"] == shown["right"]  # each a recorded frame
-    for a, b in zip(tuples, tuples[1:]):
-        first, then = read_stamp(a["left"].image), read_stamp(b["left"].image)
-        gap = stamp_of["left"][then] - stamp_of["left"][first]
-        assert abs((b["left"].t_capture - a["left"].t_capture) - gap) <= 1_000  # ns: rounding only
+    recorded = [stamp_of["left"][read_stamp(t["left"].image)] for t in tuples]
+    assert_recorded_spacing(tuples, recorded, stamp_of["left"].values())
 
 
 def test_a_video_snapshot_replays_with_its_recorded_stamps_and_ids(start_service, video_bags):
     path, bag = video_bags["snap"]
     ids = recorded_ids(bag, "left")
-    svc = start_service("--camera", f"v=bag:path={path},stamps=recorded,loop=false", "--slots", "64")
+    svc = start_service("--camera", f"v=bag:path={path},stamps=recorded,loop=false,speed=0.4", "--slots", "64")
     with svc.client(timeout=5) as client:
         status = wait_until(
             lambda: "end of bag" in (s := client.status()["cameras"]["v"])["note"] and s,

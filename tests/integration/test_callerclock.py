@@ -14,6 +14,7 @@ from fxis_shm import Client, InvalidArgument, Subscriber, read_stamp
 from fxis_shm.core.clockmap import ESTIMATED, SAME_CLOCK
 
 from ..conftest import wait_until
+from .frozen import frozen, newest_of_all
 
 pytestmark = pytest.mark.integration
 MS = 1_000_000
@@ -63,7 +64,9 @@ def test_a_caller_in_wall_clock_time_gives_and_gets_wall_clock_times(medium, loc
         wall_minus_mono = time.time_ns() - time.monotonic_ns()
         assert clock.method == ESTIMATED
         assert abs(-clock.offset_ns - wall_minus_mono) < clock.uncertainty_ns + 2 * MS
-        t_star = time.time_ns() - 100 * MS
+        # 100 ms before the newest frame both cameras have stored (in the caller's clock), not
+        # before now: a worker held up that long (a loaded machine) has not stored its frames of t*
+        t_star = newest_of_all(client) - 100 * MS
         pair = client.tuple(at=t_star, wait="none")
         assert pair.t_request == pytest.approx(t_star, abs=1000)
         for frame in pair.values():
@@ -111,8 +114,10 @@ def test_a_frame_is_encoded_once_for_every_client_that_asks(medium):
         Client(medium.endpoint, local="off", encoding="jpeg", quality=41) as b,
     ):
         _ready(a)
+        # before the newest frame both cameras have stored (not before now: a worker held up on a
+        # loaded machine may store a nearer one between the requests): every request picks the same frames
+        t_star = newest_of_all(a, encoding="raw") - 100 * MS
         before = a.status()["encoded"]
-        t_star = time.monotonic_ns() - 100 * MS  # in the past: every request picks the same frames
         a.tuple(at=t_star, wait="none")
         b.tuple(at=t_star, wait="none")
         b.tuple(at=t_star, wait="none", quality=43)  # another quality is another encoding
@@ -180,12 +185,16 @@ def test_a_service_in_realtime_serves_callers_of_either_clock(start_service):
         assert wall.status()["clock"] == "CLOCK_REALTIME"
         assert wall.clocks[svc.endpoint].method == SAME_CLOCK
         assert mono.clocks[svc.endpoint].method == ESTIMATED
-        t_star = time.time_ns() - 50 * MS
-        frame = wall.image("a", at=t_star)
+        # a's worker stopped for the request and the read of its ring after it: a frame stored in
+        # between (a worker held up, catching up) may be nearer to t*, or overwrite the one answered.
+        # wait="none": a frame of t* the stopped worker had not stored yet is not coming.
+        with frozen(wall, "a"):
+            t_star = time.time_ns() - 50 * MS
+            frame = wall.image("a", at=t_star, wait="none")
+            ring = wall.frame_times(["a"])
         assert frame.path == "local"  # CLOCK_REALTIME is the same in every time namespace
         assert frame.t_capture == frame.service_t_capture  # the service's times are the caller's
         # the frame nearest to t* of those in the ring, in wall-clock time
-        ring = wall.frame_times(["a"])
         i_t = ring["columns"].index("t_capture")
         nearest = min((row[i_t] for row in ring["cameras"]["a"]["frames"]), key=lambda t: abs(t - t_star))
         assert frame.t_capture == nearest
@@ -273,11 +282,13 @@ def test_a_caller_in_tai_time_against_a_monotonic_service(medium, tai_apart_from
         tai_minus_mono = time.clock_gettime_ns(time.CLOCK_TAI) - time.monotonic_ns()
         assert clock.method == ESTIMATED
         assert abs(-clock.offset_ns - tai_minus_mono) < clock.uncertainty_ns + 2 * MS
-        t_star = time.clock_gettime_ns(time.CLOCK_TAI) - 100 * MS
-        frame = client.image("cam0", at=t_star, wait="none")
+        with frozen(client, "cam0"):  # no frame stored between the answer and the ring's frames read after it
+            t_star = time.clock_gettime_ns(time.CLOCK_TAI) - 100 * MS
+            frame = client.image("cam0", at=t_star, wait="none")
+            nearest = _nearest_in_ring(client, "cam0", clock.to_service(t_star))
         # in TAI, right within the estimate's uncertainty; the frame nearest to t* in the service's clock
         assert abs(frame.t_capture - frame.service_t_capture - tai_minus_mono) < clock.uncertainty_ns + 2 * MS
-        assert frame.service_t_capture == _nearest_in_ring(client, "cam0", clock.to_service(t_star))
+        assert frame.service_t_capture == nearest
         assert frame.t_capture <= time.clock_gettime_ns(time.CLOCK_TAI)
         assert read_stamp(frame.image) == frame.frame_id
 
@@ -289,10 +300,12 @@ def test_a_service_and_a_caller_both_on_tai(start_service, tai_apart_from_realti
         assert client.status()["clock"] == "CLOCK_TAI"
         (clock,) = client.clocks.values()
         assert clock.method == SAME_CLOCK and clock.offset_ns == 0
-        t_star = time.clock_gettime_ns(time.CLOCK_TAI) - 50 * MS
-        frame = client.image("a", at=t_star)
+        with frozen(client, "a"):  # no frame stored between the answer and the ring's frames read after it
+            t_star = time.clock_gettime_ns(time.CLOCK_TAI) - 50 * MS
+            frame = client.image("a", at=t_star, wait="none")
+            nearest = _nearest_in_ring(client, "a", t_star)
         assert frame.path == "local"  # CLOCK_TAI is the same in every time namespace
-        assert frame.t_capture == frame.service_t_capture == _nearest_in_ring(client, "a", t_star)
+        assert frame.t_capture == frame.service_t_capture == nearest
         now_tai = time.clock_gettime_ns(time.CLOCK_TAI)
         # TAI, not the wall clock it is 37 s ahead of: captured within the ring's 400 ms before now
         assert now_tai - 5 * 10**9 < frame.t_capture <= now_tai
@@ -325,8 +338,10 @@ def test_the_drift_of_a_caller_clock_that_runs_fast_is_estimated_from_the_exchan
         for _ in range(3):
             caller, service = fast_clock(), time.monotonic_ns()  # the same moment, on either clock
             assert abs(estimate.to_service(caller) - service) < estimate.uncertainty_ns + 1 * MS
-            t_star = fast_clock() - 100 * MS
-            frame = client.image("cam0", at=t_star, wait="none")
-            mapped = client.clocks[medium.endpoint].to_service(t_star)
+            with frozen(client, "cam0"):  # no frame stored between the answer and the ring's frames read after it
+                t_star = fast_clock() - 100 * MS
+                frame = client.image("cam0", at=t_star, wait="none")
+                mapped = client.clocks[medium.endpoint].to_service(t_star)
+                nearest = _nearest_in_ring(client, "cam0", mapped)
             assert abs(mapped - round(t_star / (1 + DRIFT_PPM * 1e-6))) < estimate.uncertainty_ns + 1 * MS
-            assert frame.service_t_capture == _nearest_in_ring(client, "cam0", mapped)
+            assert frame.service_t_capture == nearest

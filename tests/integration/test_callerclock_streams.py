@@ -17,10 +17,14 @@ from .test_hosts import FPS, MARGIN_NS, PERIOD_NS, _client, _estimated, _true_ca
 
 pytestmark = pytest.mark.integration
 
+# 10 s of frames: each test asks for a moment it saw or chose earlier, and on a loaded machine its
+# process may stall a second before the ring is read (the default 20 slots hold 1 s at 20 fps)
+HELD = ("--history", "10")
+
 
 def test_a_stream_and_a_request_give_the_same_time_for_the_same_frame(emulated_hosts):
     host = emulated_hosts.host(clock_offset_s=1000)
-    svc = host.service("--camera", f"cam=synthetic:fps={FPS},{SMALL}")
+    svc = host.service("--camera", f"cam=synthetic:fps={FPS},{SMALL}", *HELD)
     with _client(emulated_hosts, svc.endpoint) as client:
         estimate = _estimated(client, svc.endpoint)
         with client.subscribe(timeout=10) as sub:
@@ -36,7 +40,7 @@ def test_a_stream_and_a_request_give_the_same_time_for_the_same_frame(emulated_h
 
 def test_an_event_request_at_a_moment_of_the_callers_clock_answers_the_frames_nearest_it(emulated_hosts):
     host = emulated_hosts.host(clock_offset_s=1000)
-    svc = host.service("--camera", f"cam=synthetic:fps={FPS},{SMALL}")
+    svc = host.service("--camera", f"cam=synthetic:fps={FPS},{SMALL}", *HELD)
     with _client(emulated_hosts, svc.endpoint) as client:
         estimate = _estimated(client, svc.endpoint)
         with client.events() as events, client.subscribe(timeout=10) as answers:

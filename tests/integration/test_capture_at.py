@@ -24,7 +24,11 @@ pytestmark = pytest.mark.integration
 MS = 1_000_000
 LATENCY_MS = 3.0  # the synthetic camera's modelled trigger latency (trigger -> exposure)
 FREE_FPS = 20
-AHEAD_NS = 300 * MS  # far enough that a loaded machine still delivers the command in time
+AHEAD_NS = 300 * MS  # the real-time tier's lead: its tests run alone, at FIFO
+# the lead of the other tests: in the parallel pass a process may be held up 1.5 s before the
+# request reaches the camera's worker, and a T then past is refused (OUT_OF_RANGE); well within
+# the request engine's 10 s horizon (MAX_AHEAD_NS)
+LOADED_AHEAD_NS = 2_000 * MS
 # what a learned latency may miss by: the trigger call's own time varies between triggers
 # (the worker stamps the trigger, then calls the camera, which stamps it again)
 LATENCY_NOISE_NS = MS // 2
@@ -73,13 +77,19 @@ def test_a_capture_at_t_triggers_the_camera_for_t_and_a_free_camera_answers_near
 def test_an_image_captured_at_t_and_a_free_cameras_image(start_service):
     svc = start_service("--camera", f"trig={TRIGGERED}", "--camera", f"free=synthetic:fps={FREE_FPS},{SMALL}")
     with svc.client() as client:
-        at = time.monotonic_ns() + AHEAD_NS
+        at = time.monotonic_ns() + LOADED_AHEAD_NS
         frame = client.image("trig", at=at, capture=True)
         assert (frame.capture, frame.t_target) == (captured_as(frame), at) and frame.residual_ns >= -LATENCY_NOISE_NS
-        at = time.monotonic_ns() + AHEAD_NS
+        at = time.monotonic_ns() + LOADED_AHEAD_NS
         free = client.image("free", at=at, capture=True)
         assert (free.capture, free.t_target) == ("free", None)
-        assert abs(free.t_capture - at) <= 10**9 // FREE_FPS // 2 + MS
+        # its frame nearest T; or, when that frame came late (its worker held up in the parallel
+        # pass), an earlier one once the service had waited for the nearest past its period and
+        # taken it for dropped (fxis_shm/core/waitpolicy.py, overdue_time and give_up_time)
+        period = 10**9 // FREE_FPS
+        nearest = free.t_capture + round((at - free.t_capture) / period) * period  # its frames: one a period
+        on_time = abs(free.t_capture - at) <= period // 2 + MS
+        assert on_time or free.timing["waited"] >= nearest + period // 2, (at, free, free.timing)
         now = client.image("trig")  # a trigger for "now" is not a capture for a moment
         assert (now.capture, now.t_target) == ("free", None)
 
@@ -91,7 +101,7 @@ def test_a_frame_that_missed_t_says_late_with_its_residual_never_scheduled(start
     slow = f"synthetic:trigger=software,trigger_latency_ms=20,{SMALL}"
     svc = start_service("--camera", f"strict={slow}", "--camera", f"lenient={slow},capture_tolerance_ms=50")
     with svc.client() as client:
-        at = time.monotonic_ns() + AHEAD_NS
+        at = time.monotonic_ns() + LOADED_AHEAD_NS
         frames = client.tuple(["strict", "lenient"], at=at, capture=True)
     strict, lenient = frames["strict"], frames["lenient"]
     assert (strict.capture, strict.t_target) == ("late", at) and strict.residual_ns >= 20 * MS
@@ -110,7 +120,7 @@ def test_a_moment_that_cannot_be_kept_gets_a_clear_error_and_the_service_runs_on
         assert past.value.code == near.code == far.value.code == "OUT_OF_RANGE"
         with pytest.raises((InvalidArgument, ProtocolError, ServiceError), match="'capture' needs 'at'"):
             client.image("trig", capture=True)
-        at = time.monotonic_ns() + AHEAD_NS
+        at = time.monotonic_ns() + LOADED_AHEAD_NS
         assert client.image("trig", at=at, capture=True).t_target == at  # still serving
         assert client.status()["cameras"]["trig"]["alive"]
 
@@ -132,7 +142,7 @@ def test_an_event_request_captures_at_t_too(start_service):
     with svc.client() as client, client.events() as events, client.subscribe(timeout=10) as answers:
         answers.topic("robot")
         handshake(events, answers, "robot", timeout=20)
-        at = time.monotonic_ns() + AHEAD_NS
+        at = time.monotonic_ns() + LOADED_AHEAD_NS
         events.request("image", "robot", camera="trig", at=at, capture=True)
         frame = answers.receive().frames[0]
     assert (frame.capture, frame.t_target) == (captured_as(frame), at) and frame.residual_ns >= -LATENCY_NOISE_NS
@@ -141,7 +151,7 @@ def test_an_event_request_captures_at_t_too(start_service):
 def test_two_requests_for_one_moment_share_its_frame(start_service):
     svc = start_service("--camera", f"trig={TRIGGERED}")
     with svc.client() as first, svc.client() as second, ThreadPoolExecutor(1) as pool:
-        at = time.monotonic_ns() + 300 * MS
+        at = time.monotonic_ns() + LOADED_AHEAD_NS  # both requests must arrive before T
         other = pool.submit(second.image, "trig", at=at, capture=True)
         frame = first.image("trig", at=at, capture=True)
         shared = other.result(timeout=10)

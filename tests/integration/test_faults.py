@@ -57,8 +57,9 @@ def test_kill_9_of_a_camera_worker(start_service):
 def test_kill_9_of_the_coordinator(start_service):
     svc = start_service("--camera", f"a=synthetic:fps=50,{SMALL}")
     (coordinator,) = child_pids(svc, "coordinator")  # on record before the service answered
-    with svc.client(timeout=0.3) as client:
+    with svc.client(timeout=5.0) as client:
         before = client.image("a").frame_id
+        client.timeout = 0.3  # the outage's own requests: short, as nobody will answer
         os.kill(coordinator, signal.SIGKILL)
         with pytest.raises(RequestTimeout):  # nobody answers during the outage; nothing hangs
             client.status()
@@ -75,12 +76,14 @@ def test_kill_9_of_the_coordinator(start_service):
 def test_same_host_reads_go_on_while_the_coordinator_hangs(start_service):
     svc = start_service("--camera", f"a=synthetic:fps=50,{SMALL}")
     (coordinator,) = child_pids(svc, "coordinator")  # on record before the service answered
-    with svc.client(timeout=0.5) as client:
+    with svc.client(timeout=5.0) as client:
         before = client.image("a").frame_id  # learns the rings
         os.kill(coordinator, signal.SIGSTOP)
         try:
+            client.timeout = 0.5  # nobody answers: the status times out soon
             with pytest.raises(RequestTimeout):
                 client.status()
+            client.timeout = 5.0  # the same-host wait needs no coordinator, only the camera
             later = client.image("a", at=client.image("a").t_capture + 100_000_000)  # a wait, too
         finally:
             os.kill(coordinator, signal.SIGCONT)

@@ -274,6 +274,9 @@ def test_without_the_sdk_the_message_names_the_extra(tmp_path):
     assert "foxglove-sdk" in result.stderr and "fxis-shm[foxglove]" in result.stderr, result.stderr
 
 
+# Real time: "no frame dropped" holds while the camera's worker gets the CPU; one held up longer
+# than its driver's buffers (12 frames; the parallel pass, 2 cores) drops frames, viewers or not.
+@pytest.mark.realtime
 def test_a_viewer_that_stops_reading_holds_up_nobody(start_service, wait):
     port = free_tcp_port()
     svc = start_service(

@@ -12,16 +12,30 @@ from fxis_shm import CameraDown, Client, read_stamp
 
 from ..conftest import run_in_threads, wait_until
 from .conftest import SMALL
+from .frozen import held_by_every_ring_ns, newest_of_all
 
 pytestmark = pytest.mark.integration
 
 
-def test_local_and_network_answers_agree_frame_for_frame(two_cameras):
+def test_local_and_network_answers_agree_frame_for_frame(start_service):
+    # Rings of 10 s (two_cameras' hold 400 ms), and each t* at least a period before the newest
+    # frame every camera has stored: the frames nearest it are all stored when the local path
+    # answers, and none is overwritten before the network path does. A frame stored in between
+    # (a worker held up on a loaded machine catching up) is newer, never nearer.
+    svc = start_service(
+        "--camera",
+        f"cam0=synthetic:fps=50,{SMALL}",
+        "--camera",
+        f"cam1=synthetic:fps=50,phase_ms=1,{SMALL}",
+        "--history",
+        "10",
+    )
     rng = random.Random(12)
-    with Client(two_cameras.endpoint, local="require") as local, Client(two_cameras.endpoint, local="off") as remote:
-        wait_until(lambda: local.status()["cameras"]["cam1"].get("frames_stored", 0) > 30, what="600 ms of frames")
+    with Client(svc.endpoint, local="require") as local, Client(svc.endpoint, local="off") as remote:
+        wait_until(lambda: held_by_every_ring_ns(local) > 400_000_000, what="400 ms of frames in every ring")
         for _ in range(25):
-            t_star = time.monotonic_ns() - rng.randrange(20_000_000, 300_000_000)  # the ring holds 400 ms
+            newest = newest_of_all(local)
+            t_star = newest - rng.randrange(20_000_000, 300_000_000)
             by_ring, by_wire = local.tuple(at=t_star), remote.tuple(at=t_star)
             assert by_ring.path == "local" and by_wire.path == "network"
             assert {c: f.frame_id for c, f in by_ring.items()} == {c: f.frame_id for c, f in by_wire.items()}, t_star
@@ -29,6 +43,9 @@ def test_local_and_network_answers_agree_frame_for_frame(two_cameras):
             assert frame_ring.frame_id == frame_wire.frame_id
 
 
+# Real time: the frame each waits for comes while cam0's worker gets the CPU; one held up past a
+# period and its delay (the parallel pass, 2 cores) has it taken for dropped, and an older answered
+@pytest.mark.realtime
 def test_many_local_readers_wait_for_the_next_frame_at_once(two_cameras):
     results, errors = [], []
 

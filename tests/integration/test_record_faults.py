@@ -35,16 +35,26 @@ def counts_in_metadata(out) -> dict:
     return {t["topic_metadata"]["name"]: t["message_count"] for t in info["topics_with_message_count"]}
 
 
-def assert_every_frame_in_order(bag, cams=CAMS) -> None:
+def camera_drops(svc) -> dict[str, int]:
+    with svc.client() as client:
+        return {cam: info["frames_dropped"] for cam, info in client.status()["cameras"].items()}
+
+
+def assert_every_frame_in_order(bag, dropped: dict[str, int], cams=CAMS) -> None:
+    """Each camera's images in order, and none lost in between but the frames its camera
+    dropped meanwhile (``dropped``: counted in its status; a worker held up past its driver's
+    buffers on a busy machine drops some, and the recorder cannot record those)."""
     for cam in cams:
         stamps = [m.stamp for m in bag.messages[f"/{cam}/image_raw"]]
         assert all(b > a for a, b in zip(stamps, stamps[1:]))
-        ids = frame_ids(bag, cam)  # the pixels name the frame: none lost in between
-        assert ids == list(range(ids[0], ids[0] + len(ids))), ids
+        ids = frame_ids(bag, cam)  # the pixels name the frame
+        assert all(b > a for a, b in zip(ids, ids[1:])), ids
+        assert ids[-1] - ids[0] + 1 - len(ids) <= dropped[cam], (ids, dropped)
 
 
 def test_a_full_disk_stops_the_recording_with_a_valid_bag_and_says_what_it_kept(cell, small_disk):
     out = small_disk / "bag"
+    before = camera_drops(cell)
     result = fxis("record", "--endpoint", cell.endpoint, "--out", str(out), timeout=120)
     assert result.returncode == 4, result.stderr  # failed at run time, the bag kept (docs/cli.md)
     assert "Traceback" not in result.stderr
@@ -57,7 +67,8 @@ def test_a_full_disk_stops_the_recording_with_a_valid_bag_and_says_what_it_kept(
     bag = read_bag(out)
     assert len(bag.messages["/left/image_raw"]) == left and len(bag.messages["/right/image_raw"]) == right
     assert counts_in_metadata(out) == {"/left/image_raw": left, "/right/image_raw": right}
-    assert_every_frame_in_order(bag)
+    after = camera_drops(cell)
+    assert_every_frame_in_order(bag, {cam: after[cam] - before[cam] for cam in CAMS})
     assert bag.custom_data["ended"] == "the disk was full (No space left on device): closed with what fitted"
     every = sorted(m.log_time for msgs in bag.messages.values() for m in msgs)
     assert abs((every[-1] - every[0]) / 1e9 - seconds) < 0.06
@@ -67,6 +78,7 @@ def test_a_full_disk_stops_the_recording_with_a_valid_bag_and_says_what_it_kept(
 
 def test_kill_9_then_recover_makes_the_bag_readable_up_to_its_last_complete_message(cell, tmp_path):
     out = tmp_path / "k"
+    before = camera_drops(cell)
     with open(tmp_path / "record.log", "w") as log:
         proc = subprocess.Popen(
             [sys.executable, "-m", "fxis_shm.cli", "record", "--endpoint", cell.endpoint, "--out", str(out)],
@@ -74,6 +86,7 @@ def test_kill_9_then_recover_makes_the_bag_readable_up_to_its_last_complete_mess
             stderr=log,
         )
         kill_9_once_written(proc, out / "k_0.mcap", 3_000_000)
+    after = camera_drops(cell)
     assert not (out / "metadata.yaml").exists()
     with pytest.raises(FileNotFoundError, match="metadata"):  # rosbags refuses it as it is
         read_bag(out)
@@ -82,7 +95,7 @@ def test_kill_9_then_recover_makes_the_bag_readable_up_to_its_last_complete_mess
     bag = read_bag(out)
     counts = {t: len(m) for t, m in bag.messages.items()}
     assert counts_in_metadata(out) == counts and all(n > 10 for n in counts.values()), counts
-    assert_every_frame_in_order(bag)
+    assert_every_frame_in_order(bag, {cam: after[cam] - before[cam] for cam in CAMS})
     total = sum(counts.values())
     assert f"recovered {total} messages over" in result.stdout
     for topic, n in counts.items():
@@ -116,10 +129,11 @@ def test_recover_keeps_exactly_the_complete_messages_of_a_bag_cut_at_any_byte(wh
             expected[topic] = expected.get(topic, 0) + 1
     bag = read_bag(tmp_path / "cut")
     assert {t: len(m) for t, m in bag.messages.items() if m} == expected
-    assert_every_frame_in_order(bag, [c for c in CAMS if f"/{c}/image_raw" in expected])
     whole = read_bag(out)
-    for topic, n in expected.items():  # the first n messages, as recorded
+    for topic, n in expected.items():  # the first n messages, as recorded, each the frame it was
         assert [m.log_time for m in bag.messages[topic]] == [m.log_time for m in whole.messages[topic][:n]]
+        cam = topic.split("/")[1]
+        assert frame_ids(bag, cam) == frame_ids(whole, cam)[:n]
     assert os.path.getsize(str(mcap) + ".damaged") == at  # the original, untouched
     assert "torn record at byte" in result.stdout or "nothing cut" in result.stdout
 

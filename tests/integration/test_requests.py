@@ -155,6 +155,7 @@ def test_client_survives_a_timeout(two_cameras):
                 client.time()
         finally:
             os.kill(coordinator, signal.SIGCONT)
+        client.timeout = 5.0  # the coordinator just resumed, on a machine that may be busy
         assert client.status()["service"] == two_cameras.name
         assert_stamps_match(client.latest())
 

@@ -1,42 +1,48 @@
 """Sequence requests at every edge, against a real service."""
 
-import os
-import subprocess
-
 import pytest
 
 from fxis_shm import FrameTimeout, ServiceError, read_stamp
-from fxis_shm.service.launch import ServiceProcess
 
 from ..conftest import wait_until
-from .conftest import SMALL
+from .conftest import SMALL, module_service
+from .frozen import frozen, held_by_every_ring_ns, newest_of_all
 
 pytestmark = pytest.mark.integration
 
 PERIOD = 20_000_000  # 50 fps
 SLOTS = 20
+# buffers=250: a worker held up on a loaded machine stores every frame it missed, late, where the
+# default 12 (240 ms) would lose some and break the runs of frame ids these tests assert
+CAMERAS = [
+    "--camera",
+    f"a=synthetic:fps=50,buffers=250,{SMALL}",
+    "--camera",
+    f"b=synthetic:fps=50,phase_ms=1,buffers=250,{SMALL}",
+]
 
 
 @pytest.fixture(scope="module")
 def full_rings():
-    svc = ServiceProcess(
-        [
-            "--camera",
-            f"a=synthetic:fps=50,{SMALL}",
-            "--camera",
-            f"b=synthetic:fps=50,phase_ms=1,{SMALL}",
-            "--slots",
-            str(SLOTS),
-        ],
-        stderr=subprocess.DEVNULL,
-    ).start()
-    with svc.client() as client:
-        wait_until(
-            lambda: all(c["frames_stored"] > 2 * SLOTS for c in client.status()["cameras"].values()),
-            what="the rings to wrap around",
-        )
-    yield svc
-    svc.stop()
+    """Rings of SLOTS slots that have wrapped around: for the whole ring and more than it holds."""
+    for svc in module_service([*CAMERAS, "--slots", str(SLOTS)]):
+        with svc.client() as client:
+            wait_until(
+                lambda: all(c["frames_stored"] > 2 * SLOTS for c in client.status()["cameras"].values()),
+                what="the rings to wrap around",
+            )
+        yield svc
+
+
+@pytest.fixture(scope="module")
+def long_rings():
+    """Rings that hold 10 s, for the tests that reach a few periods back from the newest frames:
+    held up (a loaded machine) between reading those and asking, a test finds its frames still
+    held, where SLOTS slots (380 ms) would have moved on past them."""
+    for svc in module_service([*CAMERAS, "--history", "10"]):
+        with svc.client() as client:
+            wait_until(lambda: held_by_every_ring_ns(client) > 20 * PERIOD, what="400 ms of frames in every ring")
+        yield svc
 
 
 def assert_consecutive(frames):
@@ -46,8 +52,8 @@ def assert_consecutive(frames):
         assert read_stamp(f.image) == f.frame_id
 
 
-def test_consecutive_before_after_and_around_one_camera(full_rings):
-    with full_rings.client() as client:
+def test_consecutive_before_after_and_around_one_camera(long_rings):
+    with long_rings.client() as client:
         t_star = client.latest(["a"])["a"].t_capture - 5 * PERIOD - PERIOD // 4
         before = client.sequence("consecutive", camera="a", count=4, at=t_star)
         after = client.sequence("consecutive", camera="a", count=4, direction="after", at=t_star)
@@ -61,41 +67,54 @@ def test_consecutive_before_after_and_around_one_camera(full_rings):
 
 def test_the_whole_ring_across_the_wrap(full_rings):
     with full_rings.client() as client:
-        t_star = client.latest(["a"])["a"].t_capture
-        frames = client.sequence("consecutive", camera="a", count=SLOTS - 1, at=t_star)
+        # a's worker stopped while the ring is read: a frame or two stored between reading the
+        # newest and asking for the SLOTS - 1 up to it would overwrite the oldest of them
+        with frozen(client, "a"):
+            t_star = client.latest(["a"])["a"].t_capture
+            frames = client.sequence("consecutive", camera="a", count=SLOTS - 1, at=t_star)
     assert len(frames) == SLOTS - 1
     assert_consecutive(frames)
 
 
-def test_tuples_follow_the_first_camera(full_rings):
-    with full_rings.client() as client:
-        tuples = client.sequence("consecutive", cameras=["b", "a"], count=6)
+def test_tuples_follow_the_first_camera(long_rings):
+    with long_rings.client() as client:
+        # up to a moment both cameras have stored: a worker held up at the moment of the call
+        # would have a's frame for b's newest taken as dropped (overdue), and an older one paired
+        t_star = newest_of_all(client)
+        tuples = client.sequence("consecutive", cameras=["b", "a"], count=6, at=t_star)
     assert [t["b"].frame_id for t in tuples] == list(range(tuples[0]["b"].frame_id, tuples[0]["b"].frame_id + 6))
     assert all(t.skew_ns <= 1_000_000 for t in tuples)
     assert all(t.t_request == t["b"].t_capture for t in tuples)
 
 
-def test_interval_sequences_backwards_and_forwards(full_rings):
-    with full_rings.client() as client:
-        t_star = client.latest()["a"].t_capture - 10 * PERIOD
+def test_interval_sequences_backwards_and_forwards(long_rings):
+    with long_rings.client() as client:
+        # back from b's newest frame too: were b's worker behind a's, b would have no frame near
+        # the targets, and each joint tuple would take a frame of a near b's instead
+        t_star = newest_of_all(client) - 10 * PERIOD
         back = client.sequence("interval", cameras=["a", "b"], count=4, interval_ms=-40, at=t_star)
         ahead = client.sequence("interval", camera="a", count=3, interval_ms=60, at=t_star)
     assert [t["a"].frame_id - back[0]["a"].frame_id for t in back] == [0, -2, -4, -6]
     assert [f.frame_id - ahead[0].frame_id for f in ahead] == [0, 3, 6]
 
 
-def test_range(full_rings):
-    with full_rings.client() as client:
+def test_range(long_rings):
+    with long_rings.client() as client:
         end = client.latest(["a"])["a"].t_capture
         frames = client.sequence("range", camera="a", start=end - 5 * PERIOD, end=end)
     assert len(frames) == 6 and frames[-1].t_capture == end
     assert_consecutive(frames)
 
 
-def test_future_frames_are_waited_for(full_rings):
-    with full_rings.client() as client:
+def test_future_frames_are_waited_for(long_rings):
+    with long_rings.client() as client:
         t_star = client.time() + 3 * PERIOD
-        frames = client.sequence("consecutive", camera="b", count=3, direction="after", at=t_star)
+        # b's 3 frames after t* are waited for until they are stored: up to 5 s, not the default
+        # 1, as b's worker may be held up a second on a loaded machine
+        frames = client.sequence("consecutive", camera="b", count=3, direction="after", at=t_star, timeout=5.0)
+        # A range takes a frame a period overdue as dropped: were a's worker held up then, the
+        # tuples would miss some of the window. Its frames are stored first (b's are, by now).
+        wait_until(lambda: newest_of_all(client) >= t_star + 2 * PERIOD, what="both cameras' frames of the window")
         tuples = client.sequence("range", cameras=["a", "b"], start=t_star, end=t_star + 2 * PERIOD)
     assert all(f.t_capture >= t_star for f in frames)
     assert_consecutive(frames)
@@ -117,14 +136,14 @@ def test_too_much_history_says_what_is_held(full_rings, kwargs, message):
     assert err.value.code == "OUT_OF_RANGE"
 
 
-def test_too_many_frames_is_refused(start_service):
+def test_too_many_frames_is_refused(start_service, tmp_path):
     svc = start_service(
         "--camera",
         f"a=synthetic:{SMALL}",
         "--camera",
         f"b=synthetic:{SMALL}",
         "--config",
-        _config_with(max_sequence_frames=10),
+        _config_with(tmp_path, max_sequence_frames=10),
     )
     with svc.client() as client:
         with pytest.raises(ServiceError, match="limit is 10") as err:
@@ -152,8 +171,8 @@ def test_partly_filled_and_empty_rings(start_service):
         assert client.status()["cameras"]["slow"]["frames_stored"] == 0  # it was empty all along
 
 
-def _config_with(**settings) -> str:
-    path = f"/tmp/fxis-test-{os.getpid()}-{'-'.join(settings)}.toml"
+def _config_with(directory, **settings) -> str:
+    path = f"{directory}/{'-'.join(settings)}.toml"
     with open(path, "w") as f:
         f.writelines(f"{k} = {v}\n" for k, v in settings.items())
     return path

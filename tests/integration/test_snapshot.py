@@ -73,11 +73,13 @@ def test_an_event_that_arrives_late_keeps_the_seconds_around_it(history3, tmp_pa
     dropped = drops(history3)
     with Client(history3.endpoint) as client:
         t = client.clock()
-        wait_until(lambda: client.clock() > t + 1_500_000_000, what="the event, 1.5 s late")
-        result = client.snapshot(at=t, before=1.0, after=1.0, out=str(tmp_path / "event"))
+        wait_until(lambda: client.clock() > t + 1_200_000_000, what="the event, 1.2 s late")
+        # its window ends before it arrives and starts 1.7 s back in 3 s rings: 1.3 s to spare
+        # for a process held up on a busy machine
+        result = client.snapshot(at=t, before=0.5, after=1.0, out=str(tmp_path / "event"))
     for name, kept in result["cameras"].items():
         assert kept["complete"] and not kept["gone_before_ms"], (name, kept)
-    check_window(read_bag(tmp_path / "event"), t, 1.0, 1.0, dropped_since(history3, dropped))
+    check_window(read_bag(tmp_path / "event"), t, 0.5, 1.0, dropped_since(history3, dropped))
     assert not (tmp_path / "event.partial").exists()
 
 

@@ -7,12 +7,17 @@ import time
 import pytest
 
 from fxis_shm import read_stamp
+from fxis_shm.core.requestdefaults import REQUEST_DEFAULTS
 from fxis_shm.errors import ServiceError
 
 from ..conftest import fxis, wait_until
 from .conftest import SMALL
 
 MS = 1_000_000
+# how far ahead a capture at T is asked outside the real-time tier: in the parallel pass a process
+# may be held up 1.5 s before the request reaches the camera's worker, and a T then past is refused
+# (OUT_OF_RANGE); well within the request engine's 10 s horizon (fxis_shm/core/schedule.py)
+AHEAD_NS = 2_000 * MS
 
 pytestmark = pytest.mark.integration
 
@@ -40,7 +45,8 @@ def test_a_tuple_request_triggers_every_camera_and_returns_those_frames(start_se
         past = client.tuple(at=max(f.t_capture for f in previous.values()), sync="independent")
         assert {c: f.frame_id for c, f in past.items()} == {c: f.frame_id for c, f in previous.items()}
         joint = client.tuple(at=max(f.t_capture for f in previous.values()))
-        assert joint.skew_ns <= past.skew_ns + 1_000_000  # the default tolerance of the least skew
+        # the joint selection's tuple is within its tolerance of the least skew, which is at most past's
+        assert joint.skew_ns <= past.skew_ns + REQUEST_DEFAULTS["sync_tolerance_ms"] * MS
 
 
 @pytest.mark.realtime  # half a period holds only while the free camera's timer keeps its 20 ms: alone, at FIFO
@@ -95,7 +101,7 @@ def test_a_past_moment_is_answered_from_what_is_stored_and_never_waits_for_a_tri
         with pytest.raises(ServiceError, match=r"\['a', 'b'\] capture only on a trigger") as refused:
             client.tuple(at=time.monotonic_ns() - MS)
         assert refused.value.code == "NO_FRAMES" and "capture=True" in str(refused.value)
-        captured = [client.tuple(at=time.monotonic_ns() + 200 * MS, capture=True) for _ in range(3)]
+        captured = [client.tuple(at=time.monotonic_ns() + AHEAD_NS, capture=True) for _ in range(3)]
         status = client.status()["cameras"]
         spacing = 1e9 / (status["a"]["measured_fps"] or 1)  # what the rings measured as the "period"
         newest = max(f.t_capture for f in captured[-1].values())
@@ -115,7 +121,7 @@ def test_a_past_moment_is_answered_from_what_is_stored_and_never_waits_for_a_tri
         assert re.search(rf"^{name} .* 20, captures on request ", shown, re.M), shown
 
 
-@pytest.mark.realtime  # every one of its 40 captures must land on its moment: real timers, alone, at FIFO
+@pytest.mark.realtime  # its 40 captures are asked on a real schedule, 100 ms ahead: alone, at FIFO
 def test_sync_report_asks_cameras_that_capture_on_request_at_its_own_moments(start_service, tmp_path):
     svc = start_service(
         "--realtime",
@@ -134,9 +140,13 @@ def test_sync_report_asks_cameras_that_capture_on_request_at_its_own_moments(sta
     assert report["complete"] > 0, out.stdout
     for cam in report["cameras"].values():
         assert cam["on_request"] and cam["period_ms"] is None
-        # every frame it gave was captured for its own slot's moment: none read again from an
-        # earlier request (a slot asked too late on a loaded machine is refused: missing, not a repeat)
-        assert cam["captures"]["scheduled"] == report["slots"] - cam["missing"] and cam["repeated"] == 0
+        # every frame it gave was captured for its own slot's moment, none read again from an
+        # earlier request (a slot asked too late on a loaded machine is refused: missing, not a
+        # repeat); on time or marked late (this VM wakes a timer some ms late about once in 1000:
+        # a frame of its slot all the same, counted late, not repeated; CI's failure of stop 52)
+        captures = cam["captures"]
+        assert captures["scheduled"] + captures["late"] == report["slots"] - cam["missing"], out.stdout
+        assert cam["repeated"] == 0 and captures["free"] == captures["lockstep"] == 0, out.stdout
         assert cam["residual_ms"] is not None
 
 
