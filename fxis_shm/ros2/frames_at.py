@@ -37,7 +37,7 @@ from typing import Any
 
 from fxis_shm.client.frames import FrameTuple
 from fxis_shm.client.single import SingleClient
-from fxis_shm.errors import FxisError
+from fxis_shm.errors import Code, FxisError
 from fxis_shm.formats import cdr, rosnames
 from fxis_shm.ros2.endpoints import Participant, Writer
 from fxis_shm.ros2.follow import Counts
@@ -137,6 +137,9 @@ class FramesAt(HeaderRequests):
 
     def _answer(self, client: SingleClient, name: str, header: cdr.Header, capture: bool) -> None:
         t_star = self.ros_time.to_service(header.sec * 1_000_000_000 + header.nanosec)
+        if t_star < 0:  # before the service clock's zero (its host's boot, for CLOCK_MONOTONIC): no frame is that old
+            self._refuse(name, f"{Code.OUT_OF_RANGE}: t* lies {-t_star / 1e9:.3f} s before the service clock began")
+            return
         try:
             frames = client.tuple(at=t_star, timeout=REQUEST_TIMEOUT_S, copy=False, capture=capture)
         except FxisError as exc:  # a service error says its code first: "OUT_OF_RANGE: ..."
