@@ -4,17 +4,25 @@ and ``frame(timeout)`` pops what arrived. The action-command responder fires ``t
 
 from __future__ import annotations
 
+import threading
+import time
+
 from fxis_shm.workers.backends.aravis_library import load_aravis
 from fxis_shm.workers.backends.aravis_ptp import camera_ptp
 
 N_BUFFERS = 8
+CONTROL_TIMEOUT_S = 20.0
 
 
 class TriggeredCamera:
     def __init__(self, device_id: str):
         self.Aravis, self.GLib = load_aravis()
         Aravis = self.Aravis
-        self.cam = Aravis.Camera.new(device_id)
+        self.cam = self._open_with_control(device_id)
+        device = self.cam.get_device()
+        self.control_lost = threading.Event()  # set on Aravis' heartbeat thread
+        lost = self.control_lost
+        device.connect("control-lost", lambda *_: lost.set())
         self.cam.set_region(0, 0, 64, 48)
         self.cam.set_pixel_format_from_string("Mono8")
         self.cam.set_acquisition_mode(Aravis.AcquisitionMode.CONTINUOUS)
@@ -26,6 +34,22 @@ class TriggeredCamera:
         for _ in range(N_BUFFERS):
             self.stream.push_buffer(Aravis.Buffer.new_allocate(payload))
         self.cam.start_acquisition()
+
+    def _open_with_control(self, device_id: str):
+        """The camera, opened once its control is ours: Aravis opens it without control when another
+        application has it (an `fxis cameras` of another test, for a moment), and then each write
+        times out."""
+        deadline = time.monotonic() + CONTROL_TIMEOUT_S
+        while True:
+            cam = self.Aravis.Camera.new(device_id)
+            if cam.get_device().is_controller():
+                return cam
+            del cam
+            if time.monotonic() > deadline:
+                raise RuntimeError(
+                    f"{device_id}: no control of the camera within {CONTROL_TIMEOUT_S} s (another application has it)"
+                )
+            time.sleep(0.2)
 
     def feature(self, name: str) -> str:
         return self.cam.get_device().get_string_feature_value(name)

@@ -101,9 +101,11 @@ class Emulator:
         if self.loss:
             args += ["-r", str(self.loss)]
         log = open(self.log_path, "ab") if self.log_path else subprocess.DEVNULL
+        # its warnings in the log: a command it ignored says why ("not controller", "Heartbeat timeout")
+        env = {**os.environ, "ARV_DEBUG": "device:1"}
         try:
             self.proc = subprocess.Popen(
-                args, stdout=log, stderr=log, stdin=subprocess.DEVNULL, preexec_fn=die_with_parent
+                args, stdout=log, stderr=log, stdin=subprocess.DEVNULL, preexec_fn=die_with_parent, env=env
             )
         finally:
             if self.log_path:
@@ -117,6 +119,13 @@ class Emulator:
                 raise RuntimeError(f"{EMULATOR} on {self.address} did not answer within {START_TIMEOUT_S} s")
             time.sleep(0.02)
         return self
+
+    def warnings(self) -> list[str]:
+        """What the emulator logged so far (its warnings: ARV_DEBUG above)."""
+        if not self.log_path or not os.path.exists(self.log_path):
+            return []
+        with open(self.log_path, errors="replace") as log:
+            return [line.rstrip() for line in log if line.strip()]
 
     def kill(self) -> None:
         """SIGKILL: the camera vanishes as if unplugged."""

@@ -36,7 +36,9 @@ def addresses():
 
 @pytest.fixture
 def camera(addresses, emulator):
-    cam = TriggeredCamera(emulator(CAMERA_ADDRESS).device_id)
+    emu = emulator(CAMERA_ADDRESS)
+    cam = TriggeredCamera(emu.device_id)
+    cam.emulator = emu  # its log, for a failure's message
     yield cam
     cam.close()
 
@@ -80,7 +82,8 @@ def test_a_scheduled_action_fires_the_camera_at_the_device_clocks_time_and_its_f
     assert outcome.status == gvcp.STATUS_SUCCESS
     [fired] = device.wait_fired(1, timeout=FIRE_TIMEOUT_S)
     assert fired.action_time == at and fired.called_ns >= at  # never early, on the device's clock
-    assert device.errors == []
+    said = {"control lost": camera.control_lost.is_set(), "emulator": camera.emulator.warnings()}
+    assert device.errors == [], said
     frame = camera.frame(timeout=5)
     assert frame is not None, "the triggered frame never arrived"
     arrived_host_ns, _block = frame
