@@ -23,6 +23,7 @@ from fxis_shm.workers.backends.aravis_library import load_aravis
 from fxis_shm.workers.backends.aravis_settings import PIXEL_FORMATS
 from fxis_shm.workers.backends.blockids import FrameCounter
 
+from ..aravis_trigger import TriggeredCamera
 from ..conftest import fxis_run_alone, wait_until
 from .conftest import fxis
 from .tuning_helpers import latest_of, newest_after, refusal
@@ -285,6 +286,24 @@ def test_fxis_cameras_lists_the_emulator(emulator):
     entry = found[cam.device_id]
     assert entry["kind"] == "aravis" and entry["model"] == "Fake"
     assert entry["format"].startswith("512x512 Mono8")  # the emulator's start-up format
+
+
+def test_fxis_cameras_leaves_a_camera_another_application_controls_to_it(emulator):
+    """It does not open a camera in use: opening it tries to take control, and a service whose
+    heartbeat came late (a loaded machine) would lose its camera to the listing."""
+    emu = emulator()
+    holder = TriggeredCamera(emu.device_id)
+    try:
+        before = len(emu.warnings())
+        result = fxis("cameras", "--json")
+        assert result.returncode == 0, result.stderr
+        entry = {c["id"]: c for c in json.loads(result.stdout)["cameras"]}[emu.device_id]
+        assert entry["format"] == "? (in use: another application controls it)", entry
+        assert emu.warnings()[before:] == []  # no command of the listing ignored: it sent none
+        holder.trigger()
+        assert holder.frame(timeout=5) is not None and not holder.control_lost.is_set()
+    finally:
+        holder.close()
 
 
 def test_device_timestamps_land_on_the_host_clock(emulator, start_service):

@@ -52,6 +52,7 @@ from fxis_shm.core.clocks import wall_to_monotonic
 from fxis_shm.core.ptp import PtpState
 from fxis_shm.service.camerakinds import DRIVER_BUFFERS
 from fxis_shm.shm.ring import FrameLayout
+from fxis_shm.wire import gvcp_register
 
 from . import aravis_tuning
 from .aravis_library import devices, load_aravis
@@ -66,8 +67,6 @@ log = logging.getLogger("camera")
 
 N_BUFFERS = DRIVER_BUFFERS  # frames Aravis can hold for us; ~0.6 s at 20 fps if the worker stalls
 MIN_SOCKET_BUFFER = 1 << 20  # bytes; the kernel caps it at net.core.rmem_max
-GV_CCP_REGISTER = 0x0A00  # GigE Vision bootstrap: control channel privilege
-GV_CCP_CONTROL_BITS = 0x3  # exclusive | control
 PROBE_IDLE_S = 0.5  # probe the camera after this long without a frame (at least 4 periods)
 
 
@@ -378,8 +377,8 @@ class AravisCamera(Camera):
             return
         try:
             if self._gv:
-                ccp = device.read_register(GV_CCP_REGISTER)
-                if not ccp & GV_CCP_CONTROL_BITS:
+                ccp = device.read_register(gvcp_register.CCP_REGISTER)
+                if not ccp & gvcp_register.CCP_CONTROL_BITS:
                     self._probe_error = (
                         f"no frame for {idle:.1f} s and the camera has no controlling host any more (it restarted)"
                     )

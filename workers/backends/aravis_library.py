@@ -3,6 +3,16 @@
 
 from __future__ import annotations
 
+import itertools
+import socket
+import time
+
+from fxis_shm.wire import gvcp_action, gvcp_register
+
+PROBE_TIMEOUT_S = 0.3  # per READREG of the control register; a device on the network answers in ms
+PROBE_TRIES = 3
+_probe_ids = itertools.count(1)
+
 EXTRA_HINT = (
     "the aravis backend needs PyGObject and Aravis' introspection data: "
     "pip install 'fxis-shm[aravis]' and, on Debian/Ubuntu, apt-get install gir1.2-aravis-0.8 "
@@ -37,6 +47,11 @@ def devices() -> list[dict]:
             "protocol": Aravis.get_device_protocol(i),
             "address": Aravis.get_device_address(i),
         }
+        if entry["protocol"] == "GigEVision" and controlled_elsewhere(entry["address"]):
+            # opening it would try to take it over: a service's camera could lose its controller
+            entry["format"] = "? (in use: another application controls it)"
+            found.append(entry)
+            continue
         try:
             cam = Aravis.Camera.new(device_id)
             _, _, w, h = cam.get_region()
@@ -49,3 +64,33 @@ def devices() -> list[dict]:
         entry["format"] = fmt
         found.append(entry)
     return found
+
+
+def controlled_elsewhere(address: str) -> bool | None:
+    """Whether an application controls the GigE Vision device at ``address`` (its control
+    channel privilege register, read with one GVCP READREG, which needs no control); True also
+    when it refuses the read (exclusive access), None when it does not answer."""
+    with socket.socket(socket.AF_INET, socket.SOCK_DGRAM) as sock:
+        for _ in range(PROBE_TRIES):
+            req_id = next(_probe_ids) % 0xFFFF + 1
+            try:
+                sock.sendto(
+                    gvcp_register.encode_readreg(gvcp_register.CCP_REGISTER, req_id), (address, gvcp_action.GVCP_PORT)
+                )
+            except OSError:
+                return None
+            deadline = time.monotonic() + PROBE_TIMEOUT_S
+            while (left := deadline - time.monotonic()) > 0:
+                sock.settimeout(left)
+                try:
+                    answer = gvcp_register.decode_readreg_ack(sock.recv(64), req_id)
+                except (TimeoutError, OSError):
+                    break
+                if answer is not None:
+                    status, value = answer
+                    if status == gvcp_action.STATUS_ACCESS_DENIED:
+                        return True
+                    return (
+                        bool(value & gvcp_register.CCP_CONTROL_BITS) if status == gvcp_action.STATUS_SUCCESS else None
+                    )
+    return None
