@@ -12,6 +12,8 @@ from fxis_shm.wire import gvcp_action, gvcp_register
 PROBE_TIMEOUT_S = 0.3  # per READREG of the control register; a device on the network answers in ms
 PROBE_TRIES = 3
 _probe_ids = itertools.count(1)
+IN_USE = "? (in use: another application controls it)"
+SILENT = "? (it did not answer a register read: not opened)"
 
 EXTRA_HINT = (
     "the aravis backend needs PyGObject and Aravis' introspection data: "
@@ -47,11 +49,14 @@ def devices() -> list[dict]:
             "protocol": Aravis.get_device_protocol(i),
             "address": Aravis.get_device_address(i),
         }
-        if entry["protocol"] == "GigEVision" and controlled_elsewhere(entry["address"]):
-            # opening it would try to take it over: a service's camera could lose its controller
-            entry["format"] = "? (in use: another application controls it)"
-            found.append(entry)
-            continue
+        if entry["protocol"] == "GigEVision":
+            # opening it tries to take control: a service's camera silent for its heartbeat's timeout
+            # (3 s) would go to the listing, and a camera that does not answer would hold it for seconds
+            controlled = controlled_elsewhere(entry["address"])
+            if controlled is not False:
+                entry["format"] = IN_USE if controlled else SILENT
+                found.append(entry)
+                continue
         try:
             cam = Aravis.Camera.new(device_id)
             _, _, w, h = cam.get_region()
