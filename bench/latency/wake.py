@@ -5,11 +5,16 @@ wait for a frame, it sleeps until just before the frame is due, then watches the
 counter. Measured here, per request that had to wait: from the moment the frame it waited
 for was stored (t_stored, the service's CLOCK_MONOTONIC, which is this process's on one host)
 to the moment the call returned (time.monotonic_ns() right after it). For "next" that is the
-last camera's first frame stored after the request was made (read from the rings' frame
+last camera's first frame stored after the request arrived (read from the rings' frame
 times after the call: the paper's policy then chooses the frame nearest to t*, which may be
-the one before); for "future", the last returned frame stored after the request. A request
-that found every frame it needed already stored did not wait and is left out; the table says
-how many waited.
+the one before). "Arrived" is the reply's timing.received, the moment the request engine took
+it: `next` waits while a camera "has stored no frame since the request arrived"
+(docs/protocol.md 8.1), so a frame stored between the call and that moment (about 0.2 ms of the
+client's own work) was there already and is not the one it waited for. Counted from the call
+instead, such a frame (4 requests in 600) made the request look a whole period late, though it
+woke within a millisecond of the frame it did wait for. For "future", the last returned frame stored after
+the request was made. A request that found every frame it needed already stored did not wait and
+is left out; the table says how many waited.
 
 Requests, --wake-requests of each kind, interleaved, each after a random sleep U[0, tau_ia]
 so that they fall at every phase of the frame period:
@@ -69,31 +74,33 @@ def measure(client, kind: str, copy_name: str, names: list[str], period_ns: int,
     if not COPIES[copy_name]:  # the views of the slots just stored: what a copied reply would copy
         rec["copy_ms"] = copy_time([reply[cam].image for cam in names])
     reply.release()
-    if kind == "next":  # what it waited for: each camera's first frame after the request
-        stored = first_stored_after(client.frame_times(names), names, t_send)
+    since = t_send
+    if kind == "next":  # what it waited for: each camera's first frame after the request arrived
+        since = reply.timing["received"]
+        stored = first_stored_after(client.frame_times(names), names, since)
     rec.update(
         t_send=t_send,
         t_return=t_return,
         t_stored=stored,
         came_by=reply.path,
-        **wake_of(t_send, t_return, stored.values()),
+        **wake_of(since, t_return, stored.values()),
     )
     return rec
 
 
-def first_stored_after(listing: dict, names: list[str], t_send: int) -> dict:
-    """Each camera's first storage time after ``t_send``, from a ``frames`` reply."""
+def first_stored_after(listing: dict, names: list[str], since: int) -> dict:
+    """Each camera's first storage time after ``since``, from a ``frames`` reply."""
     column = listing["columns"].index("t_stored")
     return {
-        cam: min((row[column] for row in listing["cameras"][cam]["frames"] if row[column] > t_send), default=t_send)
+        cam: min((row[column] for row in listing["cameras"][cam]["frames"] if row[column] > since), default=since)
         for cam in names
     }
 
 
-def wake_of(t_send: int, t_return: int, t_stored) -> dict:
-    """Whether a request waited (a frame it returns was stored after it was made) and, if so,
-    the ms from the last such frame's storage to the return."""
-    after = [t for t in t_stored if t > t_send]
+def wake_of(since: int, t_return: int, t_stored) -> dict:
+    """Whether a request waited (a frame it returns was stored after ``since``: it was made, or
+    arrived) and, if so, the ms from the last such frame's storage to the return."""
+    after = [t for t in t_stored if t > since]
     return {"waited": bool(after), "wake_ms": common.ms(t_return - max(after)) if after else None}
 
 
