@@ -127,16 +127,17 @@ class ServiceProcess:
         for _ in range(_PORT_DRAWS - 1):
             try:
                 return self._start_once()
-            except ServiceNotStarted:
-                if not self._drew_a_taken_port():
+            except ServiceNotStarted as exc:
+                if not self._drew_a_taken_port(str(exc)):
                     raise
         return self._start_once()
 
-    def _drew_a_taken_port(self) -> bool:
-        """Whether a port this launcher drew is taken now (another process bound it first: the
-        service stopped on it); if so, those drawn are drawn again."""
+    def _drew_a_taken_port(self, said: str) -> bool:
+        """Whether a port this launcher drew was taken (another process bound it first: the
+        service stopped on it, saying so, or it is taken now); if so, those drawn are drawn
+        again. Taken now is not enough: another process may have held it only for a moment."""
         drawn = {key: int(getattr(self, key).rsplit(":", 1)[1]) for key in self._drawn}
-        if all(_bindable(port) for port in drawn.values()):
+        if not any(f"port {port} is in use" in said or not _bindable(port) for port in drawn.values()):
             return False
         for key, port in zip(drawn, free_tcp_ports(len(drawn))):
             setattr(self, key, f"tcp://127.0.0.1:{port}")

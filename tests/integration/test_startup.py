@@ -15,10 +15,10 @@ from contextlib import contextmanager
 import pytest
 
 from fxis_shm import Client, RequestTimeout
-from fxis_shm.errors import ConfigError
+from fxis_shm.errors import ConfigError, ServiceNotStarted
 from fxis_shm.service.addresses import check_free
 from fxis_shm.service.config import HTTP_OFF, build_config
-from fxis_shm.service.launch import free_tcp_port
+from fxis_shm.service.launch import ServiceProcess, free_tcp_port
 from fxis_shm.shm import naming
 from fxis_shm.wire import defaults
 
@@ -48,6 +48,24 @@ def test_a_port_in_use_stops_the_start_before_anything_runs(option):
     (line,) = result.stderr.strip().splitlines()  # one line, no traceback
     assert option in line and str(port) in line and "in use" in line and "--port-base" in line
     assert naming.leftovers(name) == []  # no camera worker was started
+
+
+def test_a_launcher_whose_drawn_port_another_process_held_for_a_moment_draws_again(tmp_path):
+    """The service stopped on a drawn port another process bound first; by the time the
+    launcher looks, that process let it go (make test: another test's service, port 30577). The
+    service's own line says the port was taken: the launcher draws again."""
+    with open(tmp_path / "service.log", "w") as log:
+        svc = ServiceProcess(["--camera", f"a=synthetic:{SMALL}"], stderr=log)
+        events = int(svc.events.rsplit(":", 1)[1])
+        with listening(events):
+            with pytest.raises(ServiceNotStarted, match=f"port {events} is in use") as stopped:
+                svc._start_once()
+        assert svc._drew_a_taken_port(str(stopped.value))  # free again now, and yet drawn again
+        assert svc.events != f"tcp://127.0.0.1:{events}"
+        try:
+            svc.start()
+        finally:
+            svc.stop()
 
 
 def test_an_endpoint_without_a_port_is_refused_with_what_it_needs():
