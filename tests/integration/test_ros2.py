@@ -521,13 +521,16 @@ def test_a_snapshot_asked_for_on_a_codec_topic_keeps_the_window_as_video(bridge)
     from .test_record_video import decoded
 
     result, request = f"{NS}/snapshot/result", f"{NS}/snapshot/h264"
-    with bridge.svc.client() as client:  # the window starts 1.5 s back
+    with bridge.svc.client() as client:  # the window starts 3 s back; 2 s of it stored at least
         wait_until(lambda: client.status()["cameras"]["cam1"]["frames_stored"] > 40, what="2 s of frames stored")
     with requester(bridge, [(result, STRING)], request) as peer:
         t = timebase.reader("realtime")() - 1_000_000_000  # an event a second ago, in ROS time
         peer.publish_header(request, *divmod(t, 1_000_000_000), "grasp_18")
         (answer,) = [json.loads(s["data"]) for s in peer.wait_for_samples(result, 1, timeout=20)]
     assert answer["name"] == "grasp_18" and answer["encoding"] == "h264", answer
+    # the answer says what the snapshot kept of each camera: a bag of None kept nothing (make test
+    # run 41 found no bag here once, unexplained: this shows why next time)
+    assert answer["bag"] == str(bridge.snapshots / "grasp_18"), answer
     bag = read_bag(bridge.snapshots / "grasp_18")
     assert bag.custom_data["encoding"] == "h264"
     for cam, pixels in (("cam0", "gray"), ("cam1", "bgr24")):
