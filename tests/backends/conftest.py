@@ -26,6 +26,8 @@ from ..conftest import fxis, start_service  # noqa: F401  (shared with the integ
 from ..hosts import loopback_address
 
 EMULATOR = "arv-fake-gv-camera-0.8"
+# how Aravis marks a warning's and an error's line in its log
+WARNING, ERROR = "\N{NEGATIVE SQUARED LATIN CAPITAL LETTER W}", "\N{NEGATIVE SQUARED LATIN CAPITAL LETTER E}"
 SECOND_ADDRESS = "127.0.0.2"
 START_TIMEOUT_S = 10.0
 
@@ -80,9 +82,16 @@ def gvcp_serial(address: str, timeout: float = 0.2) -> str | None:
 class Emulator:
     """One ``arv-fake-gv-camera-0.8`` process: a GigE Vision camera on ``address``."""
 
-    def __init__(self, address: str, serial: str, loss_per_thousand: int = 0, log_path: str | None = None):
+    def __init__(
+        self,
+        address: str,
+        serial: str,
+        loss_per_thousand: int = 0,
+        log_path: str | None = None,
+        debug: str = "device:1",
+    ):
         self.address, self.serial, self.loss = address, serial, loss_per_thousand
-        self.log_path = log_path
+        self.log_path, self.debug = log_path, debug
         self.proc: subprocess.Popen | None = None
 
     @property
@@ -101,8 +110,9 @@ class Emulator:
         if self.loss:
             args += ["-r", str(self.loss)]
         log = open(self.log_path, "ab") if self.log_path else subprocess.DEVNULL
-        # its warnings in the log: a command it ignored says why ("not controller", "Heartbeat timeout")
-        env = {**os.environ, "ARV_DEBUG": "device:1"}
+        # its warnings in the log: a command it ignored says why ("not controller", "Heartbeat timeout");
+        # device:3 adds each control command it handled, with its time
+        env = {**os.environ, "ARV_DEBUG": self.debug}
         try:
             self.proc = subprocess.Popen(
                 args, stdout=log, stderr=log, stdin=subprocess.DEVNULL, preexec_fn=die_with_parent, env=env
@@ -121,11 +131,32 @@ class Emulator:
         return self
 
     def warnings(self) -> list[str]:
-        """What the emulator logged so far (its warnings: ARV_DEBUG above)."""
+        """The warnings and errors the emulator logged so far (Aravis marks their lines)."""
+        return [line for line in self.log() if WARNING in line or ERROR in line]
+
+    def log(self) -> list[str]:
+        """Every line the emulator logged so far (what ARV_DEBUG above lets through)."""
         if not self.log_path or not os.path.exists(self.log_path):
             return []
         with open(self.log_path, errors="replace") as log:
             return [line.rstrip() for line in log if line.strip()]
+
+    def scheduling(self) -> dict:
+        """The emulator's state (R running, S sleeping, T stopped), and over its threads the CPU
+        time it had and the time it waited, runnable, for a CPU (s): a camera that did not answer
+        was either starved (waited grows), stopped, or given the CPU and silent."""
+        pid = self.proc.pid if self.proc is not None else None
+        try:
+            with open(f"/proc/{pid}/stat") as stat:
+                state = stat.read().rsplit(")", 1)[1].split()[0]
+            ran = waited = 0
+            for task in os.listdir(f"/proc/{pid}/task"):
+                with open(f"/proc/{pid}/task/{task}/schedstat") as schedstat:
+                    cpu_ns, wait_ns, _ = (int(n) for n in schedstat.read().split())
+                ran, waited = ran + cpu_ns, waited + wait_ns
+        except (OSError, ValueError):
+            return {"state": "gone"}
+        return {"state": state, "ran_s": round(ran / 1e9, 3), "waited_s": round(waited / 1e9, 3)}
 
     def kill(self) -> None:
         """SIGKILL: the camera vanishes as if unplugged."""
@@ -152,9 +183,9 @@ def emulator(aravis_available, tmp_path):
     of the one a test killed) and is killed at teardown."""
     started: list[Emulator] = []
 
-    def start(address: str = "127.0.0.1", loss_per_thousand: int = 0) -> Emulator:
+    def start(address: str = "127.0.0.1", loss_per_thousand: int = 0, debug: str = "device:1") -> Emulator:
         serial = f"G{os.getpid() % 100000:05d}{next(_serials):02d}"
-        emu = Emulator(address, serial, loss_per_thousand, str(tmp_path / f"emulator-{serial}.log"))
+        emu = Emulator(address, serial, loss_per_thousand, str(tmp_path / f"emulator-{serial}.log"), debug)
         started.append(emu)
         return emu.start()
 

@@ -6,6 +6,7 @@ Addresses of their own (127.0.0.34 the camera, 127.0.0.35 the responder), so tha
 emulators on 127.0.0.1 and 127.0.0.2, port 3956, are not disturbed."""
 
 import socket
+import time
 
 import pytest
 
@@ -36,7 +37,7 @@ def addresses():
 
 @pytest.fixture
 def camera(addresses, emulator):
-    emu = emulator(CAMERA_ADDRESS)
+    emu = emulator(CAMERA_ADDRESS, debug="device:3")  # each control command it handled, timed, in its log
     cam = TriggeredCamera(emu.device_id)
     cam.emulator = emu  # its log, for a failure's message
     yield cam
@@ -73,16 +74,34 @@ def patient_sender():
         yield s
 
 
+def timed(camera, calls: list):
+    """``camera.trigger``, each call's moment, length and the emulator's scheduling around it
+    kept in ``calls``: make test run 48 and stop 52's CI saw the trigger's write time out (Aravis'
+    5 tries of 500 ms) with nothing in the emulator's warnings; this says which side was silent."""
+
+    def trigger():
+        started, before = time.time(), camera.emulator.scheduling()
+        try:
+            camera.trigger()
+        finally:
+            clock = time.strftime("%H:%M:%S", time.gmtime(started)) + f".{int(started * 1000) % 1000:03d}"
+            took = round(time.time() - started, 3)
+            calls.append({"started": clock, "took_s": took, "emulator": [before, camera.emulator.scheduling()]})
+
+    return trigger
+
+
 def test_a_scheduled_action_fires_the_camera_at_the_device_clocks_time_and_its_frame_arrives(
     camera, responder, patient_sender
 ):
-    device = responder(fire=camera.trigger)
+    calls: list[dict] = []
+    device = responder(fire=timed(camera, calls))
     at = device.now() + LEAD_NS
     outcome = check(patient_sender.fire([DEVICE_ADDRESS], action_time=at))[DEVICE_ADDRESS]
     assert outcome.status == gvcp.STATUS_SUCCESS
     [fired] = device.wait_fired(1, timeout=FIRE_TIMEOUT_S)
     assert fired.action_time == at and fired.called_ns >= at  # never early, on the device's clock
-    said = {"control lost": camera.control_lost.is_set(), "emulator": camera.emulator.warnings()}
+    said = {"control lost": camera.control_lost.is_set(), "trigger": calls, "emulator": camera.emulator.log()[-40:]}
     assert device.errors == [], said
     frame = camera.frame(timeout=5)
     assert frame is not None, "the triggered frame never arrived"
