@@ -20,6 +20,7 @@ READREG_CMD = 0x0080
 READREG_ACK = 0x0081
 CCP_REGISTER = 0x0A00  # bootstrap: control channel privilege
 CCP_CONTROL_BITS = 0x3  # exclusive | control: some application controls the device
+HEARTBEAT_TIMEOUT_REGISTER = 0x0938  # bootstrap: heartbeat timeout (ms); only the controller may write it
 
 
 def encode_readreg(address: int, req_id: int) -> bytes:

@@ -10,6 +10,8 @@ it is the frame its metadata names.
 """
 
 import json
+import os
+import signal
 import sys
 import threading
 import time
@@ -304,6 +306,63 @@ def test_fxis_cameras_leaves_a_camera_another_application_controls_to_it(emulato
         assert holder.frame(timeout=5) is not None and not holder.control_lost.is_set()
     finally:
         holder.close()
+
+
+def test_fxis_run_on_a_camera_another_application_controls_says_so_at_once(emulator):
+    """Aravis opens such a camera without control: each setting's write would then time out."""
+    emu = emulator()
+    holder = TriggeredCamera(emu.device_id)
+    try:
+        result = fxis_run_alone("--camera", f"cam=aravis:device={emu.device_id},{SMALL}")
+        assert result.returncode != 0
+        assert f"another application controls camera 'cam' ({emu.device_id})" in result.stderr, result.stderr
+        assert "timeout" not in result.stderr  # no setting was tried
+        holder.trigger()
+        assert holder.frame(timeout=5) is not None and not holder.control_lost.is_set()
+    finally:
+        holder.close()
+
+
+def test_a_camera_another_application_takes_after_a_silence_is_lost_and_taken_back(emulator, start_service):
+    """A GigE Vision camera gives control to another host once its controller has been silent
+    past the heartbeat timeout (the emulator's: 3 s). The worker stopped that long, a viewer
+    (a TriggeredCamera) takes the camera; continued, the worker finds the control bits set,
+    so Aravis' heartbeat notices nothing, but the camera refuses its writes: the camera is
+    lost, saying why, until the viewer lets go, and then taken back."""
+    emu = emulator()
+    svc = start_service("--camera", f"a=aravis:device={emu.device_id},trigger=software,{SMALL},pixel_format=Mono8")
+    with svc.client() as client:
+        client.image("a", timeout=10)  # triggered: the worker controls the camera
+        status = client.status()
+    generation, worker = status["cameras"]["a"]["generation"], status["supervisor"]["processes"]["camera:a"]["pid"]
+    os.kill(worker, signal.SIGSTOP)
+    try:
+        holder = TriggeredCamera(emu.device_id)  # has it once the worker's heartbeat is 3 s overdue
+    finally:
+        os.kill(worker, signal.SIGCONT)
+    try:
+        wait_until(
+            lambda: "another application took control of the camera" in status_of(svc, "a")["note"],
+            timeout=30,
+            what=f"the camera reported taken (status now: {status_of(svc, 'a')})",
+        )
+        wait_until(  # the retries meanwhile: refused at once, saying why
+            lambda: "another application controls camera 'a'" in status_of(svc, "a")["note"],
+            timeout=30,
+            what=f"a retry refused (status now: {status_of(svc, 'a')})",
+        )
+        holder.trigger()  # the viewer's camera, undisturbed by the retries
+        assert holder.frame(timeout=5) is not None and not holder.control_lost.is_set()
+    finally:
+        holder.close()
+    status = wait_until(
+        lambda: (s := status_of(svc, "a"))["generation"] > generation and s["note"] == "" and s,
+        timeout=45,  # the retries' backoff doubles while the camera is taken
+        what=f"the camera taken back (status now: {status_of(svc, 'a')})",
+    )
+    with svc.client() as client:
+        frame = client.image("a", timeout=10)
+    assert frame.generation == status["generation"] and is_frame(frame)
 
 
 def test_device_timestamps_land_on_the_host_clock(emulator, start_service):

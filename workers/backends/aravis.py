@@ -80,6 +80,7 @@ class AravisCamera(Camera):
         self._period_ns = 0
         self._lost = threading.Event()
         self._probe_error: str | None = None
+        self._probe: threading.Thread | None = None
         self._opened = False  # has open() ever succeeded?
         self._control = threading.RLock()  # one thread at a time uses the camera object (above)
 
@@ -108,12 +109,22 @@ class AravisCamera(Camera):
         lost = self._lost  # the handler must not hold self: it runs on Aravis' heartbeat thread
         self._lost_handler = self._device.connect("control-lost", lambda *_: lost.set())
         try:
+            self._check_control()
             self._configure()
             self._start_stream()
         except BaseException:
             self.close()
             raise
         self._opened = True
+
+    def _check_control(self) -> None:
+        """A GigE Vision camera takes commands from one host: Aravis opens a camera another
+        application controls without control, and every write would then time out (seconds
+        per setting). Refused here, at once; the lost camera's retries take it once it is free."""
+        if self._cam.is_gv_device() and not self._device.is_controller():
+            # close() then releases it on a helper thread: Aravis' leave-control write waits out its timeouts
+            self._probe_error = f"another application controls camera {self.name!r} ({self.device_id})"
+            raise RuntimeError(f"{self._probe_error}; fxis takes it once that application lets go")
 
     def _first_device(self) -> str:
         Aravis = self._Aravis
@@ -228,6 +239,7 @@ class AravisCamera(Camera):
             try:
                 cam.software_trigger()  # executes TriggerSoftware
             except self._GLib.Error as exc:
+                self._start_probe(None)  # why: the camera gone, or its control taken?
                 raise RuntimeError(f"TriggerSoftware failed: {exc.message}") from None
 
     def ptp(self) -> PtpState:
@@ -248,6 +260,7 @@ class AravisCamera(Camera):
             try:
                 aravis_tuning.set_live(self._cam, values, self._Aravis)
             except self._GLib.Error as exc:
+                self._start_probe(None)  # a refused value, or a camera gone or taken
                 raise ValueError(exc.message) from None
             self.options.update({k: v for k, v in values.items() if k in self.options})
             if self.options["trigger"] == "free" and self._cam.is_frame_rate_available():
@@ -265,6 +278,8 @@ class AravisCamera(Camera):
         while True:
             if self._lost.is_set():
                 raise CameraLost("Aravis lost the control channel (control-lost)")
+            if self._probe_error is not None:  # also while frames still come: a taken camera streams on
+                raise CameraLost(self._probe_error)
             remaining = deadline - time.monotonic()
             buffer = self._stream.timeout_pop_buffer(max(0, int(remaining * 1e6)))
             mono_before = timebase.now()
@@ -351,27 +366,27 @@ class AravisCamera(Camera):
         return max(PROBE_IDLE_S, 4 * self._period_ns / 1e9)
 
     def _check_alive(self) -> None:
-        """No frame came: after a while, probe the control channel (in a thread, as a dead
-        camera makes a read block for seconds); raise CameraLost once the probe failed."""
-        if self._probe_error is not None:
-            raise CameraLost(self._probe_error)
-        if self._probe is not None:
-            if not self._probe.is_alive():
-                self._probe = None
-            return
+        """No frame came: after a while, probe the control channel; grab raises CameraLost
+        once a probe failed."""
         idle = self._silence.check_due(self._idle_limit())
-        if idle is None:
+        if idle is not None:
+            self._start_probe(idle)
+
+    def _start_probe(self, idle: float | None) -> None:
+        """Probe in a thread (a dead camera makes a read block for seconds), one at a time;
+        ``idle`` is the silence that asked for it, None for a command the camera failed."""
+        if self._probe is not None and self._probe.is_alive():
             return
         self._probe = threading.Thread(
             target=self._run_probe, args=(idle,), daemon=True, name=f"aravis-probe-{self.name}"
         )
         self._probe.start()
 
-    def _run_probe(self, idle: float) -> None:
+    def _run_probe(self, idle: float | None) -> None:
         with self._control:  # a dead camera holds it for the GVCP timeouts: close() waits for them
-            self._probe_once(idle)
+            self._probe_once("a command failed" if idle is None else f"no frame for {idle:.1f} s")
 
-    def _probe_once(self, idle: float) -> None:
+    def _probe_once(self, why: str) -> None:
         cam, device, GLib = self._cam, self._device, self._GLib
         if cam is None:
             return
@@ -379,13 +394,26 @@ class AravisCamera(Camera):
             if self._gv:
                 ccp = device.read_register(gvcp_register.CCP_REGISTER)
                 if not ccp & gvcp_register.CCP_CONTROL_BITS:
-                    self._probe_error = (
-                        f"no frame for {idle:.1f} s and the camera has no controlling host any more (it restarted)"
-                    )
+                    self._probe_error = f"{why} and the camera has no controlling host any more (it restarted)"
+                    return
+                heartbeat_ms = device.read_register(gvcp_register.HEARTBEAT_TIMEOUT_REGISTER)
             else:
                 cam.get_integer("Width")
+                return
         except GLib.Error as exc:
-            self._probe_error = f"no frame for {idle:.1f} s and the camera does not answer ({exc.message})"
+            self._probe_error = f"{why} and the camera does not answer ({exc.message})"
+            return
+        # Some host controls it; this one? The control bits do not say who (Aravis' heartbeat reads
+        # them and so never notices a camera taken after a silence past its heartbeat timeout).
+        # As Pylon does, write the heartbeat timeout back: a camera refuses a write from a host
+        # that is not its controller (the emulator ignores it), and answers every host's read.
+        try:
+            device.write_register(gvcp_register.HEARTBEAT_TIMEOUT_REGISTER, heartbeat_ms)
+        except GLib.Error as exc:
+            self._probe_error = (
+                f"{why}: another application took control of the camera (it answers reads but refuses"
+                f" this host's writes: {exc.message})"
+            )
 
     # ---- close -----------------------------------------------------------------------------
 
