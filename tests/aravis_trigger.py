@@ -19,6 +19,10 @@ class TriggeredCamera:
         self.Aravis, self.GLib = load_aravis()
         Aravis = self.Aravis
         self.cam = self._open_with_control(device_id)
+        # Another application may have left it acquiring: the emulator then goes on streaming to
+        # that application's address, which it looked up when it started, whatever address this
+        # one sets (make test run 49: a camera taken from a stopped service never sent a frame here)
+        self.cam.stop_acquisition()
         device = self.cam.get_device()
         self.control_lost = threading.Event()  # set on Aravis' heartbeat thread
         lost = self.control_lost

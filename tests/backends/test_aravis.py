@@ -352,7 +352,8 @@ def test_a_camera_another_application_takes_after_a_silence_is_lost_and_taken_ba
             what=f"a retry refused (status now: {status_of(svc, 'a')})",
         )
         holder.trigger()  # the viewer's camera, undisturbed by the retries
-        assert holder.frame(timeout=5) is not None and not holder.control_lost.is_set()
+        said = {"emulator": emu.warnings(), "control lost": holder.control_lost.is_set()}
+        assert holder.frame(timeout=5) is not None and not holder.control_lost.is_set(), said
     finally:
         holder.close()
     status = wait_until(
