@@ -56,12 +56,14 @@ def test_a_launcher_whose_drawn_port_another_process_held_for_a_moment_draws_aga
     service's own line says the port was taken: the launcher draws again."""
     with open(tmp_path / "service.log", "w") as log:
         svc = ServiceProcess(["--camera", f"a=synthetic:{SMALL}"], stderr=log)
-        events = int(svc.events.rsplit(":", 1)[1])
-        with listening(events):
-            with pytest.raises(ServiceNotStarted, match=f"port {events} is in use") as stopped:
+        # the port the service checks first: any other drawn port may be taken meanwhile by another
+        # test's service, as here (make test run 51: its --pub), and the service names the first taken
+        endpoint = int(svc.endpoint.rsplit(":", 1)[1])
+        with listening(endpoint):
+            with pytest.raises(ServiceNotStarted, match=f"port {endpoint} is in use") as stopped:
                 svc._start_once()
         assert svc._drew_a_taken_port(str(stopped.value))  # free again now, and yet drawn again
-        assert svc.events != f"tcp://127.0.0.1:{events}"
+        assert svc.endpoint != f"tcp://127.0.0.1:{endpoint}"
         try:
             svc.start()
         finally:
