@@ -41,9 +41,12 @@ def medium(request):
 
 
 def _ready(client):
+    """Frames enough in every ring for the oldest t* a test asks about, 150 ms before the newest
+    frame: 16 frames at 50 fps span at least 300 ms. (More than 5 was too few: make test run 54
+    asked 30 ms before the oldest of 8 frames, a service started 150 ms before.)"""
     wait_until(
-        lambda: all(c.get("frames_stored", 0) > 5 for c in client.status()["cameras"].values()),
-        what="frames in every ring",
+        lambda: all(c.get("frames_stored", 0) >= 16 for c in client.status()["cameras"].values()),
+        what="300 ms of frames in every ring",
     )
 
 
