@@ -5,6 +5,7 @@ camera (arv-fake-gv-camera-0.8, software-triggered) at the time of its own devic
 Addresses of their own (127.0.0.34 the camera, 127.0.0.35 the responder), so that the suite's
 emulators on 127.0.0.1 and 127.0.0.2, port 3956, are not disturbed."""
 
+import json
 import socket
 import time
 
@@ -80,13 +81,17 @@ def timed(camera, calls: list):
     5 tries of 500 ms) with nothing in the emulator's warnings; this says which side was silent."""
 
     def trigger():
-        started, before = time.time(), camera.emulator.scheduling()
+        started, before, raised = time.time(), camera.emulator.scheduling(), None
         try:
             camera.trigger()
+        except Exception as exc:
+            raised = str(exc)
+            raise
         finally:
             clock = time.strftime("%H:%M:%S", time.gmtime(started)) + f".{int(started * 1000) % 1000:03d}"
             took = round(time.time() - started, 3)
-            calls.append({"started": clock, "took_s": took, "emulator": [before, camera.emulator.scheduling()]})
+            emulator = [before, camera.emulator.scheduling()]
+            calls.append({"started": clock, "took_s": took, "raised": raised, "emulator": emulator})
 
     return trigger
 
@@ -102,7 +107,7 @@ def test_a_scheduled_action_fires_the_camera_at_the_device_clocks_time_and_its_f
     [fired] = device.wait_fired(1, timeout=FIRE_TIMEOUT_S)
     assert fired.action_time == at and fired.called_ns >= at  # never early, on the device's clock
     said = {"control lost": camera.control_lost.is_set(), "trigger": calls, "emulator": camera.emulator.log()[-40:]}
-    assert device.errors == [], said
+    assert device.errors == [], json.dumps(said, indent=1)  # a string: pytest shortens the repr of a dict
     frame = camera.frame(timeout=5)
     assert frame is not None, "the triggered frame never arrived"
     arrived_host_ns, _block = frame
