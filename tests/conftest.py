@@ -8,7 +8,7 @@ import warnings
 import pytest
 from hypothesis import settings
 
-from fxis_shm.service.launch import ServiceProcess
+from fxis_shm.service.launch import ServiceProcess, draw_from_part
 from fxis_shm.service.servicelock import lock_path, service_running
 from fxis_shm.shm import naming
 
@@ -20,6 +20,22 @@ collect_ignore = ["rclpy_peer.py"]
 # in bench/. The properties and their example counts are unchanged.
 settings.register_profile("suite", deadline=None)
 settings.load_profile("suite")
+
+
+PORT_PARTS = 8  # the parallel pass's workers (up to 6), the pure-Python pass, any other run
+
+
+def port_part() -> int:
+    """The part of the port span this pytest process draws from: each worker of the parallel
+    pass its own, the pure-Python pass beside them its own, any other run (the real-time tier,
+    which runs alone; a run by hand) the last."""
+    worker = os.environ.get("PYTEST_XDIST_WORKER")
+    if worker:
+        return int(worker.removeprefix("gw")) % (PORT_PARTS - 2)
+    return PORT_PARTS - 2 if os.environ.get("FXIS_PURE_PYTHON") == "1" else PORT_PARTS - 1
+
+
+draw_from_part(port_part(), PORT_PARTS)
 
 
 def wait_until(predicate, timeout: float = 10.0, interval: float = 0.02, what: str = "condition"):

@@ -8,6 +8,7 @@ and scripts: ready when it answers ``status``, stopped with SIGTERM on exit.
 
 from __future__ import annotations
 
+import collections
 import json
 import os
 import random
@@ -40,16 +41,20 @@ def free_tcp_port() -> int:
     """A TCP port free on every interface now, drawn below the kernel's ephemeral range: the
     ports the kernel gives outgoing connections (ZeroMQ's, a browser's) are drawn from that
     range, so none of them can take this one before the caller binds it (a port the kernel
-    chose for a bind to port 0 could be)."""
-    below = _ephemeral_start()
+    chose for a bind to port 0 could be). Drawn from this process's part of that span
+    (``draw_from_part``), and not one it drew lately (its service may not have bound it yet)."""
+    low, high = _part_bounds()
     for _ in range(500):
-        port = _DRAW.randrange(max(1024, below - _SPAN), below)
+        port = _DRAW.randrange(low, high)
+        if port in _recent:
+            continue
         with socket.socket() as s:
             try:
                 s.bind(("", port))
             except OSError:  # in use (or in TIME_WAIT): another
                 continue
-            return port
+        _recent.append(port)
+        return port
     with socket.socket() as s:  # that part of the range is taken: let the kernel choose
         s.bind(("127.0.0.1", 0))
         chosen: int = s.getsockname()[1]
@@ -57,6 +62,30 @@ def free_tcp_port() -> int:
 
 
 _SPAN = 12_000  # ports drawn from, just below the ephemeral range
+_part = (0, 1)  # which part of the span this process draws from: (index, parts)
+_recent: collections.deque[int] = collections.deque(maxlen=256)  # drawn by this process lately
+
+
+def draw_from_part(index: int, parts: int) -> None:
+    """This process draws its ports from part ``index`` of ``parts`` equal parts of the span.
+    Processes that launch services at once (a test suite's workers) each take a part of their
+    own: a port one of them drew is free until its service binds it, and another drawing from
+    the whole span could draw it meanwhile (make test runs 38, 51, 54)."""
+    if not 0 <= index < parts:
+        raise ValueError(f"part {index} of {parts}: expected 0 <= index < parts")
+    global _part
+    _part = (index, parts)
+
+
+def _part_bounds() -> tuple[int, int]:
+    """[low, high) of this process's part of the span."""
+    below = _ephemeral_start()
+    low = max(1024, below - _SPAN)
+    index, parts = _part
+    width = (below - low) // parts
+    return low + index * width, low + (index + 1) * width
+
+
 _PORT_DRAWS = 3  # starts of a service whose drawn port another process took first
 
 
