@@ -195,9 +195,14 @@ def test_two_emulated_cameras_answer_a_tuple(emulator, second_address, start_ser
         cam: [row[capture] for row in info["frames"] if row[stored] <= frames.timing["searched"]]
         for cam, info in times["cameras"].items()
     }
-    near = {cam: [t for t in ts if abs(t - frames.t_request) <= 50_000_000] for cam, ts in near.items()}
+    # within a period of t*, and the frames chosen, which were candidates wherever they lay (make
+    # test run 60: a worker held up past a period left a camera no other frame that near)
+    near = {
+        cam: [t for t in ts if abs(t - frames.t_request) <= 50_000_000] + [frames[cam].t_capture]
+        for cam, ts in near.items()
+    }
     least = min(abs(a - b) for a in near["left"] for b in near["right"])
-    assert frames.skew_ns <= least + 1_000_000, (frames.skew_ns, least)
+    assert frames.skew_ns <= least + 1_000_000, (frames.skew_ns, least, near)
 
 
 def test_a_tuple_request_software_triggers_both_cameras(emulator, second_address, start_service):
