@@ -20,6 +20,7 @@ import time
 import pytest
 
 from fxis_shm.service.tether import die_with_parent
+from fxis_shm.shm import procstat
 from fxis_shm.wire.gvcp_action import GVCP_PORT
 
 from ..conftest import fxis, start_service  # noqa: F401  (shared with the integration tests)
@@ -145,18 +146,18 @@ class Emulator:
         """The emulator's state (R running, S sleeping, T stopped), and over its threads the CPU
         time it had and the time it waited, runnable, for a CPU (s): a camera that did not answer
         was either starved (waited grows), stopped, or given the CPU and silent."""
-        pid = self.proc.pid if self.proc is not None else None
+        stat = procstat.read(self.proc.pid) if self.proc is not None else None
+        if stat is None:
+            return {"state": "gone"}
+        ran = waited = 0
         try:
-            with open(f"/proc/{pid}/stat") as stat:
-                state = stat.read().rsplit(")", 1)[1].split()[0]
-            ran = waited = 0
-            for task in os.listdir(f"/proc/{pid}/task"):
-                with open(f"/proc/{pid}/task/{task}/schedstat") as schedstat:
+            for task in os.listdir(f"/proc/{stat.pid}/task"):
+                with open(f"/proc/{stat.pid}/task/{task}/schedstat") as schedstat:
                     cpu_ns, wait_ns, _ = (int(n) for n in schedstat.read().split())
                 ran, waited = ran + cpu_ns, waited + wait_ns
         except (OSError, ValueError):
             return {"state": "gone"}
-        return {"state": state, "ran_s": round(ran / 1e9, 3), "waited_s": round(waited / 1e9, 3)}
+        return {"state": stat.state, "ran_s": round(ran / 1e9, 3), "waited_s": round(waited / 1e9, 3)}
 
     def kill(self) -> None:
         """SIGKILL: the camera vanishes as if unplugged."""
